@@ -1,0 +1,13 @@
+"""Errors that reach the user as one line (what, where, what would be valid)."""
+
+
+class InputError(Exception):
+    """Bad input from the user (scene, mesh file, design, PROM file): exit code 2, no traceback."""
+
+    exit_code = 2
+
+
+class SolverError(Exception):
+    """A solver that stopped (divergence, non-finite values): exit code 3, results kept so far."""
+
+    exit_code = 3
