@@ -1,0 +1,21 @@
+# Every target installs what is missing first (scripts/setup.sh is idempotent).
+PYTHON := .venv/bin/python
+AQUAROM := .venv/bin/aquarom
+OUT ?= results/demo
+
+.PHONY: setup demo test bench validate study clean
+
+setup:
+	@bash scripts/setup.sh
+
+demo: setup
+	$(PYTHON) scripts/demo.py --out $(OUT)
+
+test: setup
+	$(PYTHON) -m pytest -q -ra tests
+
+bench: setup
+	$(PYTHON) scripts/bench_fom.py
+
+clean:
+	rm -rf results meshes/cache .pytest_cache

@@ -1,0 +1,304 @@
+"""Full-order model of the swimmer (SPEC §5): the validation reference.
+
+    M ü + C u̇ + f_int(u) = f_thrust(u, u̇, ü) + f_drag(u̇) + f_act(u, t)
+
+on a distributed P1 mesh with PETSc. The elastic, muscle, mass and drag terms are the UFL forms
+of ``forms/``; the Lighthill thrust acts on the spine nodes (``thrust.py``). A design ξ is either
+pulled back (forms on the nominal mesh with u_ξ = U ξ) or meshed directly (``moved_mesh``).
+"""
+from __future__ import annotations
+
+import numpy as np
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from . import dolfinx_adapter as fx
+from .fish import Fish
+from .forms.drag import drag_direction_form
+from .forms.elasticity import strain_energy
+from .forms.inertia import mass_form, mass_moment_x, total_mass
+from .forms.muscle import muscle_energy
+from .newmark import NewmarkScheme
+from .scene import Scene
+from .thrust import SpineGeometry, thrust_force, thrust_jacobians, virtual_mass
+
+LEFT, RIGHT = 0, 1
+
+
+class FullOrderModel:
+    """One design of a scene, ready to be integrated in time (implements ``NewtonSystem``)."""
+
+    def __init__(self, scene: Scene, fish: Fish, xi=None, moved_mesh: bool = False,
+                 comm: MPI.Comm = MPI.COMM_WORLD):
+        self.scene, self.fish, self.comm = scene, fish, comm
+        self.xi = fish.parameter_vector(xi)
+        rest_points = fish.design(self.xi)
+        shape_displacement = np.zeros_like(rest_points) if moved_mesh else rest_points - fish.mesh.points
+        mesh_points = rest_points if moved_mesh else fish.mesh.points
+        self.rest_points = rest_points
+
+        self.mesh = fx.create_tet_mesh(comm, mesh_points, fish.mesh.cells)
+        self.space = fx.vector_p1_space(self.mesh)
+        self.layout = fx.dof_layout(self.space)
+        self.n_owned_dofs = 3 * self.layout.n_owned_blocks
+        self.n_global_dofs = 3 * self.space.dofmap.index_map.size_global
+        self.n_cells = fish.mesh.cells.shape[0]
+
+        self.displacement = fx.new_function(self.space, "displacement")
+        self.shape_displacement = fx.new_function(self.space, "shape_displacement")
+        fx.set_nodal_values(self.shape_displacement, self.layout, shape_displacement)
+        self._build_forms()
+        self._build_spine(rest_points)
+        self._build_boundary_conditions()
+        self._build_constant_matrices()
+        self._work_in = PETSc.Vec().createMPI((self.n_owned_dofs, self.n_global_dofs), comm=comm)
+        self._work_out = self._work_in.duplicate()
+        self._solver = None
+        self.scheme = NewmarkScheme.with_damping(scene.solver.time_step, scene.solver.newmark_alpha)
+        self.set_time_step(self.scheme)
+
+    # ------------------------------------------------------------------ set-up
+    def _cell_field(self, values_by_cell: np.ndarray, name: str):
+        field = fx.new_function(fx.cellwise_constant_space(self.mesh), name)
+        fx.set_cell_values(field, values_by_cell)
+        return field
+
+    def _build_forms(self):
+        scene, tags = self.scene, self.fish.tags
+        material = scene.material
+        stiffness_by_cell = np.full(self.n_cells, material.young_modulus)
+        stiffness_by_cell[tags.head_cells] *= material.head_stiffness_factor
+        young_modulus = self._cell_field(stiffness_by_cell, "young_modulus")
+        muscles = []
+        for cells, name in ((tags.left_muscle_cells, "left_muscle"), (tags.right_muscle_cells, "right_muscle")):
+            indicator = np.zeros(self.n_cells)
+            indicator[cells] = 1.0
+            muscles.append(self._cell_field(indicator, name))
+        self.activations = [fx.constant(self.mesh, 0.0), fx.constant(self.mesh, 0.0)]
+
+        u, u_xi = self.displacement, self.shape_displacement
+        test, trial = ufl.TestFunction(self.space), ufl.TrialFunction(self.space)
+        elastic_energy = strain_energy(u, u_xi, young_modulus, material.poisson_ratio)
+        internal_force = ufl.derivative(elastic_energy, u, test)
+        self.actuation_on = scene.actuation.stiffness > 0 and scene.actuation.amplitude > 0
+        tangent = ufl.derivative(internal_force, u, trial)
+        forms = {"internal_force": internal_force, "elastic_energy": elastic_energy,
+                 "elastic_tangent": tangent}
+        if self.actuation_on:
+            energy = muscle_energy(u, u_xi, scene.actuation.stiffness, self.activations, muscles,
+                                   nominal_volume=scene.actuation.muscle_volume == "nominal")
+            negative_actuation = ufl.derivative(energy, u, test)
+            forms["negative_actuation_force"] = negative_actuation
+            tangent = tangent + ufl.derivative(negative_actuation, u, trial)
+        forms["tangent"] = tangent
+        forms["mass"] = mass_form(trial, test, u_xi, material.density)
+        forms["mass_moment_x"] = mass_moment_x(test, u_xi, material.density)
+        forms["total_mass"] = total_mass(u_xi, material.density, self.mesh)
+        if scene.fluid.drag:
+            forms["drag_direction"] = drag_direction_form(test, u_xi, scene.fluid.density, self.mesh)
+        self.forms = {name: fx.compile_form(form) for name, form in forms.items()}
+        self._vectors = {name: fx.create_vector(self.forms[name])
+                         for name in ("internal_force", "negative_actuation_force") if name in self.forms}
+        self.tangent_matrix = fx.create_matrix(self.forms["tangent"])
+        self.tangent_matrix.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+
+    def _owned_positions(self, nodes: np.ndarray):
+        """(owned local blocks, index into ``nodes``) of the given input nodes owned by this rank."""
+        lookup = np.full(self.fish.mesh.points.shape[0], -1)
+        lookup[nodes] = np.arange(nodes.size)
+        position = lookup[self.layout.owned_nodes]
+        blocks = np.flatnonzero(position >= 0)
+        return blocks, position[blocks]
+
+    def _build_spine(self, rest_points):
+        tags = self.fish.tags
+        self.spine_nodes = tags.spine_nodes
+        self._spine_blocks, self._spine_index = self._owned_positions(self.spine_nodes)
+        global_blocks = np.zeros(self.spine_nodes.size, dtype=np.int64)
+        global_blocks[self._spine_index] = self.layout.global_block[self._spine_blocks]
+        self._spine_global_blocks = self.comm.allreduce(global_blocks, op=MPI.SUM)
+        dorsal_z = rest_points[tags.dorsal_nodes, 2] - tags.box.z_axis
+        self.spine = SpineGeometry(rest_points[self.spine_nodes, :2],
+                                   virtual_mass(dorsal_z, self.scene.fluid.density))
+        self.thrust_on = self.scene.fluid.thrust
+
+    def _build_boundary_conditions(self):
+        """Head nodes fixed in y and z, free in x (SPEC §5)."""
+        head = self.fish.tags.head_nodes
+        local = np.concatenate([fx.sub_space_dofs_of_nodes(self.space, self.layout, head, c) for c in (1, 2)])
+        self.fixed_dofs = np.sort(local)
+        self._fixed_global_dofs = (3 * self.layout.global_block[self.fixed_dofs // 3] + self.fixed_dofs % 3).astype(np.int32)
+
+    def _build_constant_matrices(self):
+        material = self.scene.material
+        self.mass_matrix = fx.assemble_matrix_into(fx.create_matrix(self.forms["mass"]), self.forms["mass"])
+        if material.mass == "lumped":
+            row_sums = self.mass_matrix.getRowSum()
+            self.mass_matrix.zeroEntries()
+            self.mass_matrix.setDiagonal(row_sums)
+            self.mass_matrix.assemble()
+        self.displacement.x.array[:] = 0.0
+        self.rest_stiffness = fx.assemble_matrix_into(fx.create_matrix(self.forms["elastic_tangent"]),
+                                                      self.forms["elastic_tangent"])
+        self.damping_matrix = self.mass_matrix.copy()
+        self.damping_matrix.scale(material.rayleigh_alpha)
+        self.damping_matrix.axpy(material.rayleigh_beta, self.rest_stiffness)
+        moment = fx.create_vector(self.forms["mass_moment_x"])
+        self._com_weights = fx.assemble_vector_into(moment, self.forms["mass_moment_x"]).copy()
+        self.total_mass = fx.assemble_scalar(self.forms["total_mass"], self.comm)
+        if self.scene.fluid.drag:
+            drag = fx.create_vector(self.forms["drag_direction"])
+            self._drag_direction = fx.assemble_vector_into(drag, self.forms["drag_direction"]).copy()
+            self._drag_rows = np.flatnonzero(self._drag_direction)
+        head = self._owned_positions(np.array([self.fish.tags.head_spine_node]))[0]
+        self._head_x_owned = 3 * head  # empty on ranks that do not own the head node
+
+    def set_time_step(self, scheme: NewmarkScheme) -> None:
+        """Newmark constants enter S = K_t + (γ/(βh)) C_t + (1/(βh²)) M_t."""
+        self.scheme = scheme
+        self._inertia_damping = self.mass_matrix.copy()
+        self._inertia_damping.scale(scheme.acceleration_factor)
+        self._inertia_damping.axpy(scheme.velocity_factor, self.damping_matrix)
+
+    # ------------------------------------------------------------------ evaluations
+    def _set_state(self, time: float, u: np.ndarray) -> None:
+        fx.set_owned_values(self.displacement, u)
+        actuation = self.scene.actuation
+        activation = actuation.amplitude * np.sin(2.0 * np.pi * actuation.frequency * time)
+        self.activations[LEFT].value = activation
+        self.activations[RIGHT].value = -activation
+
+    def _matvec(self, matrix: PETSc.Mat, x: np.ndarray) -> np.ndarray:
+        self._work_in.array[:] = x
+        matrix.mult(self._work_in, self._work_out)
+        return self._work_out.array.copy()
+
+    def spine_values(self, owned: np.ndarray) -> np.ndarray:
+        """(n_spine, 3) nodal values of an owned dof array at the spine nodes, on every rank."""
+        local = np.zeros((self.spine_nodes.size, 3))
+        local[self._spine_index] = owned.reshape(-1, 3)[self._spine_blocks]
+        return self.comm.allreduce(local, op=MPI.SUM)
+
+    def head_velocity_x(self, v: np.ndarray) -> float:
+        return self.comm.allreduce(float(v[self._head_x_owned].sum()), op=MPI.SUM)
+
+    def internal_force(self, u: np.ndarray) -> np.ndarray:
+        """f_int(u) = ∂Π/∂u, owned entries [N]."""
+        fx.set_owned_values(self.displacement, u)
+        return fx.assemble_vector_into(self._vectors["internal_force"], self.forms["internal_force"]).copy()
+
+    def actuation_force(self, time: float, u: np.ndarray) -> np.ndarray:
+        """f_act(u, t) = -∂Π_act/∂u [N]."""
+        if not self.actuation_on:
+            return np.zeros(self.n_owned_dofs)
+        self._set_state(time, u)
+        return -fx.assemble_vector_into(self._vectors["negative_actuation_force"],
+                                        self.forms["negative_actuation_force"])
+
+    def thrust_force(self, u, v, a) -> np.ndarray:
+        """Lighthill thrust scattered to the owned spine dofs (x, y) [N]."""
+        force = np.zeros(self.n_owned_dofs)
+        if self.thrust_on:
+            nodal = thrust_force(self.spine, *(self.spine_values(x)[:, :2] for x in (u, v, a)))
+            for component in (0, 1):
+                force[3 * self._spine_blocks + component] = nodal[self._spine_index, component]
+        return force
+
+    def drag_force(self, v) -> np.ndarray:
+        """f_drag = g(ξ) v_x² with v_x the head's x-velocity [N]."""
+        if not self.scene.fluid.drag:
+            return np.zeros(self.n_owned_dofs)
+        return self._drag_direction * self.head_velocity_x(v) ** 2
+
+    def residual(self, time, u, v, a):
+        """r = M ü + C u̇ + f_int - f_act - f_thrust - f_drag (zero on fixed dofs), and the force scale."""
+        self._set_state(time, u)
+        inertia = self._matvec(self.mass_matrix, a)
+        internal = self.internal_force(u)
+        external = self.actuation_force(time, u) + self.thrust_force(u, v, a) + self.drag_force(v)
+        residual = inertia + self._matvec(self.damping_matrix, v) + internal - external
+        residual[self.fixed_dofs] = 0.0
+        scale = max(self.norm(internal), self.norm(external), self.norm(inertia))
+        return residual, scale
+
+    def assemble_newton_matrix(self, time, u, v, a) -> PETSc.Mat:
+        """S = K_t + (γ/(βh)) C_t + (1/(βh²)) M_t with the exact thrust and drag Jacobians."""
+        self._set_state(time, u)
+        matrix = fx.assemble_matrix_into(self.tangent_matrix, self.forms["tangent"])
+        matrix.axpy(1.0, self._inertia_damping, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+        if self.thrust_on:
+            self._add_thrust_jacobian(matrix, u, v, a)
+        if self.scene.fluid.drag:
+            self._add_drag_jacobian(matrix, v)
+        matrix.assemble()
+        matrix.zeroRowsColumns(self._fixed_global_dofs, diag=1.0)
+        return matrix
+
+    def _add_thrust_jacobian(self, matrix, u, v, a):
+        jacobians = thrust_jacobians(self.spine, *(self.spine_values(x)[:, :2] for x in (u, v, a)))
+        scheme = self.scheme
+        # S gets -(∂f/∂u + γ/(βh) ∂f/∂u̇ + 1/(βh²) ∂f/∂ü) since f_thrust is on the right-hand side.
+        block = -(jacobians[0] + scheme.velocity_factor * jacobians[1] + scheme.acceleration_factor * jacobians[2])
+        n_spine = self.spine_nodes.size
+        spine_dofs = (3 * self._spine_global_blocks[:, None] + np.arange(2)).astype(np.int32)
+        for index in self._spine_index:
+            neighbours = np.arange(max(index - 1, 0), min(index + 2, n_spine))
+            rows = spine_dofs[index]
+            columns = spine_dofs[neighbours].ravel()
+            values = block[np.ix_(2 * index + np.arange(2), (2 * neighbours[:, None] + np.arange(2)).ravel())]
+            matrix.setValues(rows, columns, values, addv=PETSc.InsertMode.ADD_VALUES)
+
+    def _add_drag_jacobian(self, matrix, v):
+        """∂(-g v_x²)/∂u = -2 g v_x (γ/(βh)) e_head_xᵀ: a column at the head's x dof."""
+        head_global = int(3 * self._spine_global_blocks[-1])
+        factor = -2.0 * self.head_velocity_x(v) * self.scheme.velocity_factor
+        rows = (3 * self.layout.global_block[self._drag_rows // 3] + self._drag_rows % 3).astype(np.int32)
+        for row, value in zip(rows, factor * self._drag_direction[self._drag_rows]):
+            matrix.setValue(row, head_global, value, addv=PETSc.InsertMode.ADD_VALUES)
+
+    def factorize(self, time, u, v, a) -> None:
+        matrix = self.assemble_newton_matrix(time, u, v, a)
+        if self._solver is None:
+            self._solver = PETSc.KSP().create(self.comm)
+            self._solver.setType("preonly")
+            preconditioner = self._solver.getPC()
+            preconditioner.setType("lu")
+            preconditioner.setFactorSolverType("mumps")
+        self._solver.setOperators(matrix)
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        self._work_in.array[:] = rhs
+        self._solver.solve(self._work_in, self._work_out)
+        return self._work_out.array.copy()
+
+    def norm(self, vector: np.ndarray) -> float:
+        return float(np.sqrt(self.comm.allreduce(float(vector @ vector), op=MPI.SUM)))
+
+    # ------------------------------------------------------------------ observables
+    def owned_from_nodal(self, nodal: np.ndarray) -> np.ndarray:
+        """Owned dof array of an (n_input_nodes, 3) field, zero on fixed dofs."""
+        owned = nodal[self.layout.owned_nodes].ravel().copy()
+        owned[self.fixed_dofs] = 0.0
+        return owned
+
+    def observables(self, u: np.ndarray) -> dict[str, float]:
+        """Head x, tail y and centre-of-mass x displacements [m]."""
+        spine = self.spine_values(u)
+        com_x = self.comm.allreduce(float(self._com_weights @ u), op=MPI.SUM) / self.total_mass
+        return {"head_x": float(spine[-1, 0]), "tail_y": float(spine[0, 1]), "com_x": com_x}
+
+    def kinetic_energy(self, v: np.ndarray) -> float:
+        """½ u̇ᵀ M u̇ [J]."""
+        return 0.5 * self.comm.allreduce(float(v @ self._matvec(self.mass_matrix, v)), op=MPI.SUM)
+
+    def elastic_energy(self, u: np.ndarray) -> float:
+        """Π(u) [J]."""
+        fx.set_owned_values(self.displacement, u)
+        return fx.assemble_scalar(self.forms["elastic_energy"], self.comm)
+
+    def nodal_displacement(self, u: np.ndarray) -> np.ndarray:
+        """(n_input_nodes, 3) on every rank (for renders and checks)."""
+        nodal = np.zeros((self.fish.mesh.points.shape[0], 3))
+        nodal[self.layout.owned_nodes] = u.reshape(-1, 3)
+        return self.comm.allreduce(nodal, op=MPI.SUM)

@@ -1,0 +1,236 @@
+"""Shape variations: the catalog of nodal displacement fields of SPEC §4.
+
+A design is ``x_ξ = x_0 + U ξ`` (SPEC §1), ``U = [U_1 … U_p]`` with one column per shape
+variation. Every field is a pure function of the *relative* coordinates of the nominal shape,
+
+    x ∈ [-L, 0]  (head face at 0, tail face at -L),   y, z measured from the body axis,
+
+and of the box dimensions L (``box.length``), W (``box.width``), H (``box.height``). It takes the
+three coordinate arrays separately and returns ``(dx, dy, dz)`` of the same shape, so the same
+function serves a numpy point array and a dolfinx interpolation (which passes a (3, N) array).
+Every field vanishes outside its region. "Collapse" fields bring their coordinate to 0 at the
+extreme for ξ = 1; negative ξ enlarges.
+
+Nodal arrays are (n_nodes, 3); ``U`` is (3 n_nodes, p) in node-major order (x0, y0, z0, x1, …).
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Mapping, Protocol, Sequence
+
+import numpy as np
+
+from .errors import InputError
+
+
+class BoxDimensions(Protocol):
+    """Anything with the nominal block's length L (x), width W (y) and height H (z) [m]."""
+
+    length: float
+    width: float
+    height: float
+
+
+ShapeField = Callable[
+    [np.ndarray, np.ndarray, np.ndarray, BoxDimensions], tuple[np.ndarray, np.ndarray, np.ndarray]
+]
+"""(x, y, z) relative coordinates, box -> (dx, dy, dz) nodal displacement [m]."""
+
+MIN_VOLUME_RATIO = 0.1
+"""A design may shrink no cell below this fraction of its nominal volume (SPEC §4)."""
+
+
+def _zero(x: np.ndarray) -> np.ndarray:
+    return np.zeros(np.shape(x))
+
+
+def _inside(region: np.ndarray, value: np.ndarray) -> np.ndarray:
+    """``value`` in the region, 0 outside."""
+    return np.where(region, value, 0.0)
+
+
+def _rounding(s: np.ndarray) -> np.ndarray:
+    """√(1 - s²) - 1, with 1 - s² clipped at 0 so |s| = 1 + rounding error gives -1, not NaN."""
+    return np.sqrt(np.clip(1.0 - s**2, 0.0, None)) - 1.0
+
+
+def _tail_rounding(x: np.ndarray, box: BoxDimensions) -> np.ndarray:
+    """√(1 - s²) - 1 for x ≤ -0.7L, s = (x + 0.7L)/(0.3L) ∈ [-1, 0]; 0 elsewhere."""
+    length = box.length
+    s = (x + 0.7 * length) / (0.3 * length)
+    return _inside(x <= -0.7 * length, _rounding(s))
+
+
+def _head_rounding(x: np.ndarray, box: BoxDimensions) -> np.ndarray:
+    """√(1 - s²) - 1 for x ≥ -0.3L, s = (x + 0.3L)/(0.3L) ∈ [0, 1]; 0 elsewhere."""
+    length = box.length
+    s = (x + 0.3 * length) / (0.3 * length)
+    return _inside(x >= -0.3 * length, _rounding(s))
+
+
+def _long_tail_ramp(x: np.ndarray, box: BoxDimensions) -> np.ndarray:
+    """(-x - 0.3L)/(0.7L) for x ≤ -0.3L (0 at -0.3L, 1 at -L); 0 elsewhere."""
+    length = box.length
+    return _inside(x <= -0.3 * length, (-x - 0.3 * length) / (0.7 * length))
+
+
+def _notch(x: np.ndarray, box: BoxDimensions) -> np.ndarray:
+    """f(x) for -0.9L ≤ x ≤ -0.3L, piecewise linear: 0 at -0.3L, 1 at -0.7L, 0 at -0.9L."""
+    length = box.length
+    f = np.interp(x, [-0.9 * length, -0.7 * length, -0.3 * length], [0.0, 1.0, 0.0])
+    return _inside((x >= -0.9 * length) & (x <= -0.3 * length), f)
+
+
+def z_tail(x, y, z, box):
+    # Δz = z(√(1-s²) - 1), s = (x + 0.7L)/(0.3L), x ≤ -0.7L
+    return _zero(x), _zero(x), z * _tail_rounding(x, box)
+
+
+def z_head(x, y, z, box):
+    # Δz = z(√(1-s²) - 1), s = (x + 0.3L)/(0.3L), x ≥ -0.3L
+    return _zero(x), _zero(x), z * _head_rounding(x, box)
+
+
+def y_thin(x, y, z, box):
+    # Δy = -y, everywhere
+    return _zero(x), -y, _zero(x)
+
+
+def y_lin_long_tail(x, y, z, box):
+    # Δy = -y(-x - 0.3L)/(0.7L), x ≤ -0.3L
+    return _zero(x), -y * _long_tail_ramp(x, box), _zero(x)
+
+
+def y_head(x, y, z, box):
+    # Δy = y(√(1-s²) - 1), s = (x + 0.3L)/(0.3L), x ≥ -0.3L
+    return _zero(x), y * _head_rounding(x, box), _zero(x)
+
+
+def y_ellipse(x, y, z, box):
+    # Δy = y(√(1 - (2z/H)²) - 1), everywhere
+    return _zero(x), y * _rounding(2.0 * z / box.height), _zero(x)
+
+
+def z_small(x, y, z, box):
+    # Δz = -z, everywhere
+    return _zero(x), _zero(x), -z
+
+
+def z_notch(x, y, z, box):
+    # Δz = -z f(x), -0.9L ≤ x ≤ -0.3L; f piecewise linear: 0 at -0.3L, 1 at -0.7L, 0 at -0.9L
+    return _zero(x), _zero(x), -z * _notch(x, box)
+
+
+def xz_concave_tail(x, y, z, box):
+    # Δx = -|z| b(x), Δz = 0.4 z b(x), b = (-0.9L - x)/(0.1L), x ≤ -0.9L
+    length = box.length
+    b = _inside(x <= -0.9 * length, (-0.9 * length - x) / (0.1 * length))
+    return -np.abs(z) * b, _zero(x), 0.4 * z * b
+
+
+def y_fin(x, y, z, box):
+    # Δy = y h(x), -0.9L ≤ x ≤ -0.7L; h a hat: 0 at -0.9L, 1 at -0.8L, 0 at -0.7L
+    length = box.length
+    h = np.interp(x, [-0.9 * length, -0.8 * length, -0.7 * length], [0.0, 1.0, 0.0])
+    region = (x >= -0.9 * length) & (x <= -0.7 * length)
+    return _zero(x), y * _inside(region, h), _zero(x)
+
+
+def y_notch(x, y, z, box):
+    # Δy = -y f(x), f and region as z_notch
+    return _zero(x), -y * _notch(x, box), _zero(x)
+
+
+def z_tail_step(x, y, z, box):
+    # Δz = -z g(x), x ≤ -0.45L; g = 1 for x ≤ -0.55L, linear to 0 at -0.45L
+    length = box.length
+    g = np.interp(x, [-0.55 * length, -0.45 * length], [1.0, 0.0])
+    return _zero(x), _zero(x), -z * _inside(x <= -0.45 * length, g)
+
+
+def z_tail_lin(x, y, z, box):
+    # Δz = -z(-x - 0.3L)/(0.7L), x ≤ -0.3L
+    return _zero(x), _zero(x), -z * _long_tail_ramp(x, box)
+
+
+def y_tail(x, y, z, box):
+    # Δy = y(√(1-s²) - 1), s = (x + 0.7L)/(0.3L), x ≤ -0.7L (z_tail with y and z swapped)
+    return _zero(x), y * _tail_rounding(x, box), _zero(x)
+
+
+CATALOG: dict[str, ShapeField] = {
+    "z_tail": z_tail,
+    "z_head": z_head,
+    "y_thin": y_thin,
+    "y_lin_long_tail": y_lin_long_tail,
+    "y_head": y_head,
+    "y_ellipse": y_ellipse,
+    "z_small": z_small,
+    "z_notch": z_notch,
+    "xz_concave_tail": xz_concave_tail,
+    "y_fin": y_fin,
+    "y_notch": y_notch,
+    "z_tail_step": z_tail_step,
+    "z_tail_lin": z_tail_lin,
+    "y_tail": y_tail,
+}
+"""Every shape variation by the name scenes use, in the order of SPEC §4 (paper numbers 1-13)."""
+
+
+def shape_names() -> list[str]:
+    return list(CATALOG)
+
+
+def shape_field(name: str) -> ShapeField:
+    if name not in CATALOG:
+        raise InputError(f"unknown shape variation '{name}'; valid names: {', '.join(CATALOG)}")
+    return CATALOG[name]
+
+
+def shape_displacement(name: str, relative_points: np.ndarray, box: BoxDimensions) -> np.ndarray:
+    """The field ``name`` at (n, 3) relative coordinates: (n, 3) displacements [m]."""
+    points = np.asarray(relative_points, dtype=float)
+    field = shape_field(name)
+    return np.stack(field(points[:, 0], points[:, 1], points[:, 2], box), axis=1)
+
+
+def shape_matrix(names: Sequence[str], relative_points: np.ndarray, box: BoxDimensions) -> np.ndarray:
+    """U (3 n_nodes, p): column k is field ``names[k]``, node i component c at row 3 i + c."""
+    n_nodes = len(relative_points)
+    matrix = np.empty((3 * n_nodes, len(names)))
+    for k, name in enumerate(names):
+        matrix[:, k] = shape_displacement(name, relative_points, box).ravel()
+    return matrix
+
+
+def design_points(points: np.ndarray, U: np.ndarray, xi: np.ndarray) -> np.ndarray:
+    """x_ξ = x_0 + U ξ as (n_nodes, 3)."""
+    points = np.asarray(points, dtype=float)
+    return points + (U @ np.asarray(xi, dtype=float)).reshape(points.shape)
+
+
+def check_design(points: np.ndarray, cells: np.ndarray, moved_points: np.ndarray,
+                 xi_by_name: Mapping[str, float], label: str = "design") -> None:
+    """Raise InputError if the moved mesh inverts, flattens or shrinks a cell below 10%.
+
+    Volumes are compared with the nominal cell's signed volume, so the check holds for
+    either orientation of the nominal cells.
+    """
+    from .mesh import signed_cell_volumes
+
+    nominal = signed_cell_volumes(points, cells)
+    volume_ratio = signed_cell_volumes(moved_points, cells) / nominal
+    inverted = volume_ratio <= 0.0
+    shrunk = ~inverted & (volume_ratio < MIN_VOLUME_RATIO)
+    if not (inverted.any() or shrunk.any()):
+        return
+    worst = int(np.argmin(volume_ratio))
+    centroid = np.asarray(points, dtype=float)[np.asarray(cells)[worst]].mean(axis=0)
+    parameters = ", ".join(f"{name}={value:g}" for name, value in xi_by_name.items())
+    raise InputError(
+        f"{label} {parameters} inverts or flattens {int(inverted.sum())} and shrinks "
+        f"{int(shrunk.sum())} more of {len(nominal)} cells below {MIN_VOLUME_RATIO:g} of their "
+        f"nominal volume (worst: volume ratio {volume_ratio[worst]:.3g} in the cell at "
+        f"x={centroid[0]:.4g}, y={centroid[1]:.4g}, z={centroid[2]:.4g} of the nominal mesh); "
+        f"reduce the parameters"
+    )

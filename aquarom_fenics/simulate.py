@@ -1,0 +1,159 @@
+"""Run a model over the scene's horizon and write its outputs (trajectory, summary, plot, XDMF)."""
+from __future__ import annotations
+
+import logging
+import resource
+import time as clock
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from .errors import InputError, SolverError
+from .fish import Fish, load_fish
+from .fom import FullOrderModel
+from .newmark import NewmarkScheme, NewtonSettings, StepReport, integrate
+from .outputs import TrajectoryCSV, plot_trajectory, software_versions, write_json_atomic
+from .scene import Scene
+from .trajectory import DISTANCE_WINDOW, Trajectory, swimming_distance, tail_amplitude
+
+log = logging.getLogger("aquarom")
+
+
+@dataclass
+class SimulationResult:
+    """What one simulation produced; ``error`` says why it stopped early, if it did."""
+
+    trajectory: Trajectory
+    distance: float | None
+    tail_amplitude: float | None
+    completed: bool
+    wall_time: float
+    n_cells: int
+    n_dofs: int
+    error: str | None = None
+    timings: dict = field(default_factory=dict)
+    states: list = field(default_factory=list)    # owned u per stored sample, when asked for
+    model: FullOrderModel | None = None
+
+    def summary(self) -> dict:
+        iterations = np.asarray(self.trajectory.newton_iterations[1:])
+        return {"distance": self.distance, "tail_amplitude": self.tail_amplitude, "completed": self.completed,
+                "error": self.error, "wall_time": self.wall_time, "cells": self.n_cells, "dofs": self.n_dofs,
+                "steps": len(self.trajectory) - 1,
+                "mean_newton_iterations": float(iterations.mean()) if iterations.size else None,
+                "timings": self.timings}
+
+
+def check_time_grid(scene: Scene) -> int:
+    """Number of steps; the horizon must be a whole number of steps and cover the 0.1 s window."""
+    solver = scene.solver
+    steps = solver.duration / solver.time_step
+    if abs(steps - round(steps)) > 1e-9 * max(steps, 1.0):
+        raise InputError(f"scene {scene.source}: [solver] duration = {solver.duration} is not a whole number "
+                         f"of time steps h = {solver.time_step}")
+    if solver.duration < DISTANCE_WINDOW - 1e-12:
+        raise InputError(f"scene {scene.source}: [solver] duration = {solver.duration} s is shorter than the "
+                         f"{DISTANCE_WINDOW} s averaging window of the swimming distance")
+    return int(round(steps))
+
+
+def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bool = False,
+                 out_dir: Path | None = None, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True,
+                 initial_velocity: np.ndarray | None = None, keep_states: bool = False) -> SimulationResult:
+    """Integrate the FOM of design ξ over [0, T]; outputs go to ``out_dir`` (rank 0 writes).
+
+    A solver failure is reported in the result (``completed`` False, ``error`` the message) after
+    the converged steps have been written; :class:`InputError` propagates.
+    """
+    n_steps = check_time_grid(scene)
+    started = clock.perf_counter()
+    fish = fish or load_fish(scene, comm)
+    model = FullOrderModel(scene, fish, xi, moved_mesh=moved_mesh, comm=comm)
+    setup_time = clock.perf_counter() - started
+    log.info("FOM: %d cells, %d dofs, %d steps of %g s (set-up %.2f s)", model.n_cells, model.n_global_dofs,
+             n_steps, scene.solver.time_step, setup_time)
+    is_writer = comm.rank == 0 and out_dir is not None
+    csv = TrajectoryCSV(Path(out_dir) / "trajectory.csv") if is_writer else None
+    xdmf = _open_xdmf(model, out_dir, comm) if out_dir is not None and scene.output.xdmf else None
+    trajectory = Trajectory()
+    states = []
+
+    def record(report: StepReport, u, v, a):
+        values = model.observables(u)
+        trajectory.append(report.time, values["head_x"], values["tail_y"], values["com_x"], report.iterations)
+        if csv:
+            csv.write(report.time, values["head_x"], values["tail_y"], values["com_x"], report.iterations)
+        if xdmf:
+            fx_write(model, xdmf, u, report.time)
+        if keep_states:
+            states.append(u.copy())
+        if bar:
+            bar.update(1)
+
+    bar = _progress_bar(n_steps, "FOM", progress and comm.rank == 0)
+    velocity = np.zeros(model.n_owned_dofs) if initial_velocity is None else model.owned_from_nodal(initial_velocity)
+    zero = np.zeros(model.n_owned_dofs)
+    record(StepReport(0, 0.0, 0, 0), zero, velocity, zero)
+    settings = NewtonSettings(tolerance=scene.solver.tolerance, max_iterations=scene.solver.max_iterations)
+    error = None
+    try:
+        integrate(model, model.scheme, n_steps, (zero, velocity, zero), settings, record)
+    except SolverError as failure:
+        error = str(failure)
+    finally:
+        if bar:
+            bar.close()
+        if csv:
+            csv.close()
+        if xdmf:
+            xdmf.close()
+    arrays = trajectory.arrays()
+    completed = error is None
+    result = SimulationResult(
+        trajectory=trajectory,
+        distance=swimming_distance(arrays["time"], arrays["com_x"]) if completed else None,
+        tail_amplitude=tail_amplitude(arrays["time"], arrays["tail_y"]) if completed else None,
+        completed=completed, wall_time=clock.perf_counter() - started, n_cells=model.n_cells,
+        n_dofs=model.n_global_dofs, error=error,
+        timings={"setup": setup_time, "time_integration": clock.perf_counter() - started - setup_time},
+        states=states, model=model)
+    if is_writer:
+        write_run_outputs(Path(out_dir), scene, result, "fom", fish.parameter_vector(xi), fish.shape_names, comm)
+    return result
+
+
+def write_run_outputs(out_dir: Path, scene: Scene, result: SimulationResult, model_name: str, xi, shape_names, comm):
+    summary = result.summary() | {
+        "model": model_name, "scene": scene.name, "scene_hash": scene.hash, "scene_values": scene.to_dict(),
+        "xi": dict(zip(shape_names, map(float, xi))), "mpi_ranks": comm.size,
+        "peak_memory_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "versions": software_versions()}
+    write_json_atomic(out_dir / "summary.json", summary)
+    if scene.output.plots and len(result.trajectory) > 1:
+        title = f"{scene.name} ({model_name}): distance " + (
+            f"{100 * result.distance:.2f} cm" if result.completed else "n/a (stopped early)")
+        plot_trajectory(out_dir / "trajectory.png", result.trajectory.arrays(), title)
+
+
+def _progress_bar(total: int, label: str, enabled: bool):
+    if not enabled:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=label, unit="step", leave=False, disable=None)
+
+
+def _open_xdmf(model: FullOrderModel, out_dir, comm):
+    from .dolfinx_adapter import XDMFTimeSeries
+
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    return XDMFTimeSeries(comm, Path(out_dir) / "displacement.xdmf", model.mesh)
+
+
+def fx_write(model: FullOrderModel, xdmf, u, time):
+    from .dolfinx_adapter import set_owned_values
+
+    set_owned_values(model.displacement, u)
+    xdmf.write(model.displacement, time)

@@ -1,0 +1,252 @@
+"""Lighthill thrust on the spine nodes and its exact Jacobians (SPEC §5, "Thrust").
+
+Large-amplitude elongated-body theory in the x-y plane. The spine nodes are sorted tail -> head
+(node 0 is the tail node); segment i joins its rear node r = i and its front node f = i + 1.
+For a segment with rest length ℓ_0 [m] and virtual mass per length m̃ [kg/m]:
+
+    t = (x_f - x_r) / ℓ_0        (not normalised)
+    n = R t,   ṅ = R (u̇_f - u̇_r) / ℓ_0,   R = [[0, -1], [1, 0]]  (+90° about z)
+
+    f_tail  = ½ m̃ (v·n)² t                               at the tail node, segment 0, v = u̇_0
+    f_spine = -m̃ ℓ_0 [ (a·n) n + (v·ṅ) n + (v·n) ṅ ]     at the rear node, v = u̇_r, a = ü_r
+            = -m̃ ℓ_0 d/dt[ (v·n) n ]
+
+    f_thrust = f_tail + Σ_segments f_spine   [N]
+
+Every array is plain numpy; nodal vectors are (n_nodes, 2) in (x, y), and matrices use the dof
+order (x0, y0, x1, y1, ...).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+ROTATION_90 = np.array([[0.0, -1.0], [1.0, 0.0]])
+"""R: rotation by +90° about z, R (a, b) = (-b, a)."""
+
+_IDENTITY_2 = np.eye(2)
+
+
+@dataclass(frozen=True)
+class SpineGeometry:
+    """The spine of one design at rest.
+
+    rest_xy: (n_nodes, 2) x-y positions [m] of the spine nodes in the shape-varied configuration
+        at rest, sorted tail -> head.
+    virtual_mass: (n_nodes - 1,) virtual mass per length m̃ [kg/m] of each segment.
+    """
+
+    rest_xy: np.ndarray
+    virtual_mass: np.ndarray
+
+    def __post_init__(self) -> None:
+        rest_xy = np.asarray(self.rest_xy, dtype=float)
+        segment_mass = np.asarray(self.virtual_mass, dtype=float)
+        if rest_xy.ndim != 2 or rest_xy.shape[1] != 2 or rest_xy.shape[0] < 2:
+            raise ValueError(f"rest_xy must be (n_nodes >= 2, 2), got {rest_xy.shape}")
+        if segment_mass.shape != (rest_xy.shape[0] - 1,):
+            raise ValueError(
+                f"virtual_mass must be ({rest_xy.shape[0] - 1},) (one per segment), got {segment_mass.shape}"
+            )
+        object.__setattr__(self, "rest_xy", rest_xy)
+        object.__setattr__(self, "virtual_mass", segment_mass)
+        if np.any(self.rest_length <= 0.0):
+            raise ValueError("spine nodes must be distinct (a segment has zero rest length)")
+
+    @property
+    def n_nodes(self) -> int:
+        return self.rest_xy.shape[0]
+
+    @property
+    def rest_length(self) -> np.ndarray:
+        """(n_segments,) ℓ_0 = |x_f - x_r| at rest [m]."""
+        return np.linalg.norm(np.diff(self.rest_xy, axis=0), axis=1)
+
+
+def virtual_mass(dorsal_z, fluid_density: float) -> np.ndarray:
+    """Virtual mass per length m̃ = (π/4) ρ_w d², d = 2 z_dorsal [kg/m].
+
+    dorsal_z: z [m] of each segment's dorsal node in the shape-varied configuration.
+    fluid_density: ρ_w [kg/m³].
+    """
+    depth = 2.0 * np.asarray(dorsal_z, dtype=float)
+    return 0.25 * np.pi * fluid_density * depth**2
+
+
+def segment_frame(geometry: SpineGeometry, displacement: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Tangent t and normal n of every segment, each (n_segments, 2) [dimensionless].
+
+    t = (x_f - x_r)/ℓ_0 (not normalised), n = R t; for a straight spine along +x, n = +y.
+    """
+    positions = geometry.rest_xy + displacement
+    # t = (x_f - x_r) / ℓ_0
+    tangent = np.diff(positions, axis=0) / geometry.rest_length[:, None]
+    # n = R t  (row vectors: n = t Rᵀ)
+    normal = tangent @ ROTATION_90.T
+    return tangent, normal
+
+
+@dataclass(frozen=True)
+class _SegmentState:
+    """Per-segment quantities entering the Lighthill forces, (n_segments, ...) arrays."""
+
+    rest_length: np.ndarray
+    tangent: np.ndarray
+    normal: np.ndarray
+    normal_rate: np.ndarray
+    rear_velocity: np.ndarray
+    rear_acceleration: np.ndarray
+
+
+def _segment_state(geometry, displacement, velocity, acceleration) -> _SegmentState:
+    displacement, velocity, acceleration = _check_nodal(geometry, displacement, velocity, acceleration)
+    rest_length = geometry.rest_length
+    tangent, normal = segment_frame(geometry, displacement)
+    # ṅ = R (u̇_f - u̇_r) / ℓ_0
+    normal_rate = (np.diff(velocity, axis=0) / rest_length[:, None]) @ ROTATION_90.T
+    return _SegmentState(
+        rest_length=rest_length,
+        tangent=tangent,
+        normal=normal,
+        normal_rate=normal_rate,
+        rear_velocity=velocity[:-1],
+        rear_acceleration=acceleration[:-1],
+    )
+
+
+def _check_nodal(geometry, *nodal_fields):
+    expected = (geometry.n_nodes, 2)
+    fields = tuple(np.asarray(field, dtype=float) for field in nodal_fields)
+    for field in fields:
+        if field.shape != expected:
+            raise ValueError(f"spine nodal field must be {expected}, got {field.shape}")
+    return fields
+
+
+def _row_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.einsum("ij,ij->i", a, b)
+
+
+def _outer(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return a[:, :, None] * b[:, None, :]
+
+
+def _tail_force_per_mass(state: _SegmentState) -> np.ndarray:
+    """f_tail / m̃_0 = ½ (v·n)² t with segment 0's t, n and the tail node's v, (2,) [m²/s²]."""
+    normal_velocity = state.rear_velocity[0] @ state.normal[0]
+    # f_tail / m̃ = ½ (v·n)² t
+    return 0.5 * normal_velocity**2 * state.tangent[0]
+
+
+def _spine_force_per_mass(state: _SegmentState) -> np.ndarray:
+    """f_spine / m̃ = -ℓ_0 [(a·n) n + (v·ṅ) n + (v·n) ṅ] per segment, (n_segments, 2) [m²/s²]."""
+    a_dot_n = _row_dot(state.rear_acceleration, state.normal)
+    v_dot_ndot = _row_dot(state.rear_velocity, state.normal_rate)
+    v_dot_n = _row_dot(state.rear_velocity, state.normal)
+    # f_spine / m̃ = -ℓ_0 [ (a·n + v·ṅ) n + (v·n) ṅ ]
+    bracket = (a_dot_n + v_dot_ndot)[:, None] * state.normal + v_dot_n[:, None] * state.normal_rate
+    return -state.rest_length[:, None] * bracket
+
+
+def thrust_force(geometry: SpineGeometry, displacement, velocity, acceleration) -> np.ndarray:
+    """Lighthill thrust f = f_tail + Σ f_spine on the spine nodes, (n_nodes, 2) [N].
+
+    displacement [m], velocity [m/s], acceleration [m/s²]: (n_nodes, 2) x-y fields of the spine
+    nodes, tail -> head. The head node (the last one) is never a rear node and receives nothing.
+    """
+    state = _segment_state(geometry, displacement, velocity, acceleration)
+    mass = geometry.virtual_mass
+    force = np.zeros((geometry.n_nodes, 2))
+    # f_r += m̃ f_spine/m̃ at each segment's rear node r
+    force[:-1] = mass[:, None] * _spine_force_per_mass(state)
+    # f_0 += m̃_0 f_tail/m̃_0
+    force[0] += mass[0] * _tail_force_per_mass(state)
+    return force
+
+
+def thrust_force_per_virtual_mass(
+    geometry: SpineGeometry, displacement, velocity, acceleration
+) -> np.ndarray:
+    """∂f/∂m̃_i of the thrust, (n_segments, n_nodes, 2) [N m/kg].
+
+    f is linear in each segment's m̃, so f = Σ_i m̃_i ∂f/∂m̃_i. Row i holds f_spine,i / m̃_i at node
+    i, plus f_tail / m̃_0 at node 0 for i = 0.
+    """
+    state = _segment_state(geometry, displacement, velocity, acceleration)
+    n_segments = geometry.n_nodes - 1
+    segments = np.arange(n_segments)
+    per_mass = np.zeros((n_segments, geometry.n_nodes, 2))
+    # ∂f_r/∂m̃_i = δ_ri f_spine,i / m̃_i
+    per_mass[segments, segments] = _spine_force_per_mass(state)
+    # ∂f_0/∂m̃_0 += f_tail / m̃_0
+    per_mass[0, 0] += _tail_force_per_mass(state)
+    return per_mass
+
+
+def thrust_jacobians(
+    geometry: SpineGeometry, displacement, velocity, acceleration
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact Jacobians (∂f/∂u [N/m], ∂f/∂u̇ [N s/m], ∂f/∂ü [kg]) of `thrust_force`.
+
+    Each is (2 n_nodes, 2 n_nodes) in the dof order (x0, y0, x1, y1, ...). The force on node r
+    depends only on nodes r and r + 1 (its segment's rear and front nodes), so the matrices are
+    block-tridiagonal with 2x2 blocks; in fact only the diagonal and the first upper block
+    diagonal are non-zero (block upper-bidiagonal). ∂f/∂ü is the added-mass block, non-zero on
+    the block diagonal only: -m̃ ℓ_0 n nᵀ.
+    """
+    state = _segment_state(geometry, displacement, velocity, acceleration)
+    mass = geometry.virtual_mass[:, None, None]
+    length = state.rest_length[:, None, None]
+    n, n_rate = state.normal, state.normal_rate
+    v, a = state.rear_velocity, state.rear_acceleration
+    a_dot_n = _row_dot(a, n)
+    v_dot_ndot = _row_dot(v, n_rate)
+    v_dot_n = _row_dot(v, n)
+
+    # Spine force, B = (a·n) n + (v·ṅ) n + (v·n) ṅ, f_spine = -m̃ ℓ_0 B.
+    # ∂B/∂n = (a·n + v·ṅ) I + n aᵀ + ṅ vᵀ;  ∂n/∂u_f = -∂n/∂u_r = R/ℓ_0
+    # => ∂f_spine/∂u_f = -m̃ (∂B/∂n) R,  ∂f_spine/∂u_r = +m̃ (∂B/∂n) R
+    db_dn = (a_dot_n + v_dot_ndot)[:, None, None] * _IDENTITY_2 + _outer(n, a) + _outer(n_rate, v)
+    stiffness_front = -mass * (db_dn @ ROTATION_90)
+    stiffness_rear = -stiffness_front
+
+    # ∂B/∂ṅ = n vᵀ + (v·n) I;  ∂ṅ/∂u̇_f = -∂ṅ/∂u̇_r = R/ℓ_0;  ∂B/∂v (explicit) = n ṅᵀ + ṅ nᵀ
+    # => ∂f_spine/∂u̇_f = -m̃ (∂B/∂ṅ) R
+    #    ∂f_spine/∂u̇_r = -m̃ ℓ_0 (n ṅᵀ + ṅ nᵀ) + m̃ (∂B/∂ṅ) R
+    db_dndot = _outer(n, v) + v_dot_n[:, None, None] * _IDENTITY_2
+    damping_front = -mass * (db_dndot @ ROTATION_90)
+    damping_rear = -mass * length * (_outer(n, n_rate) + _outer(n_rate, n)) - damping_front
+
+    # ∂f_spine/∂ü_r = -m̃ ℓ_0 n nᵀ  (added mass)
+    added_mass_rear = -mass * length * _outer(n, n)
+
+    # Tail force, f_tail = ½ m̃ (v·n)² t, segment 0, v = u̇_0; ∂t/∂u_1 = -∂t/∂u_0 = I/ℓ_0,
+    # ∂(v·n)/∂t = Rᵀ v
+    # => ∂f_tail/∂u_1 = -∂f_tail/∂u_0 = (m̃/ℓ_0) [ (v·n) t (Rᵀ v)ᵀ + ½ (v·n)² I ]
+    #    ∂f_tail/∂u̇_0 = m̃ (v·n) t nᵀ
+    tail_mass, tail_length = geometry.virtual_mass[0], state.rest_length[0]
+    tail_t, tail_n, tail_v, tail_v_dot_n = state.tangent[0], n[0], v[0], v_dot_n[0]
+    tail_stiffness_front = (tail_mass / tail_length) * (
+        tail_v_dot_n * np.outer(tail_t, ROTATION_90.T @ tail_v) + 0.5 * tail_v_dot_n**2 * _IDENTITY_2
+    )
+    stiffness_front[0] += tail_stiffness_front
+    stiffness_rear[0] -= tail_stiffness_front
+    damping_rear[0] += tail_mass * tail_v_dot_n * np.outer(tail_t, tail_n)
+
+    n_nodes = geometry.n_nodes
+    return (
+        _assemble_upper_bidiagonal(stiffness_rear, stiffness_front, n_nodes),
+        _assemble_upper_bidiagonal(damping_rear, damping_front, n_nodes),
+        _assemble_upper_bidiagonal(added_mass_rear, np.zeros_like(added_mass_rear), n_nodes),
+    )
+
+
+def _assemble_upper_bidiagonal(rear_blocks: np.ndarray, front_blocks: np.ndarray, n_nodes: int) -> np.ndarray:
+    """(2 n_nodes, 2 n_nodes) matrix with block (r, r) = rear_blocks[r], (r, r+1) = front_blocks[r]."""
+    blocks = np.zeros((n_nodes, 2, n_nodes, 2))
+    rear = np.arange(n_nodes - 1)
+    blocks[rear, :, rear, :] = rear_blocks
+    blocks[rear, :, rear + 1, :] = front_blocks
+    return blocks.reshape(2 * n_nodes, 2 * n_nodes)

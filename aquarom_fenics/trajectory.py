@@ -1,0 +1,48 @@
+"""Sampled swimming trajectories and the measures of SPEC §10."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+DISTANCE_WINDOW = 0.1    # s, the centre-of-mass x is averaged over the last 0.1 s
+AMPLITUDE_WINDOW = 1.0   # s, the tail amplitude is the max |y_tail| over the last second
+COLUMNS = ("time", "head_x", "tail_y", "com_x", "newton_iterations")
+
+
+@dataclass
+class Trajectory:
+    """One sample per stored time (t = 0 included); displacements in metres."""
+
+    time: list = field(default_factory=list)
+    head_x: list = field(default_factory=list)
+    tail_y: list = field(default_factory=list)
+    com_x: list = field(default_factory=list)
+    newton_iterations: list = field(default_factory=list)
+
+    def append(self, time: float, head_x: float, tail_y: float, com_x: float, iterations: int) -> None:
+        for name, value in zip(COLUMNS, (time, head_x, tail_y, com_x, iterations)):
+            getattr(self, name).append(value)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {name: np.asarray(getattr(self, name)) for name in COLUMNS}
+
+    def __len__(self) -> int:
+        return len(self.time)
+
+
+def window_mask(time: np.ndarray, window: float) -> np.ndarray:
+    """Samples with t ≥ T - window (with a tolerance of a thousandth of the step)."""
+    time = np.asarray(time)
+    step = time[1] - time[0] if time.size > 1 else 1.0
+    return time >= time[-1] - window - 1e-3 * step
+
+
+def swimming_distance(time, com_x) -> float:
+    """d = mean of the centre-of-mass x-displacement over the last 0.1 s [m]."""
+    return float(np.mean(np.asarray(com_x)[window_mask(time, DISTANCE_WINDOW)]))
+
+
+def tail_amplitude(time, tail_y) -> float:
+    """max |y_tail| over the last second [m]."""
+    return float(np.max(np.abs(np.asarray(tail_y)[window_mask(time, AMPLITUDE_WINDOW)])))

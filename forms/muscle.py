@@ -1,0 +1,26 @@
+"""Muscle energy (SPEC §5): a > 0 contracts the fibres m = e_x.
+
+Π_act = Σ_j ½ k a_j(t) ∫_muscle_j |F_2 m|² dV_ξ,  f_act = -∂Π_act/∂u.
+"""
+import ufl
+
+from .kinematics import relative_gradient, total_gradient, volume_ratio
+
+FIBRE = ufl.as_vector((1.0, 0.0, 0.0))
+
+
+def muscle_energy(displacement, shape_displacement, stiffness, activations, indicators,
+                  nominal_volume=False):
+    """Σ_j ½ k a_j ∫ χ_j |F_2 m|² det F_1 dV_0  [J].
+
+    ``activations`` a_j and ``indicators`` χ_j (cell indicator of muscle j) are paired.
+    With ``nominal_volume`` the source's variant Σ_j ½ k a_j ∫ χ_j |F m|² dV_0 is used.
+    """
+    if nominal_volume:
+        stretch = total_gradient(displacement, shape_displacement) * FIBRE
+        volume = 1.0
+    else:
+        stretch = relative_gradient(displacement, shape_displacement) * FIBRE
+        volume = volume_ratio(shape_displacement)
+    activation_field = sum(a * chi for a, chi in zip(activations, indicators))
+    return 0.5 * stiffness * activation_field * ufl.inner(stretch, stretch) * volume * ufl.dx
