@@ -18,7 +18,8 @@ from .errors import InputError, SolverError
 EXAMPLES = {
     "mesh": "aquarom mesh scenes/nominal.toml",
     "shapes": "aquarom shapes so1 --xi y_thin=0.1 --xi z_tail=-0.3 --out results/shapes",
-    "simulate": "aquarom simulate nominal --model fom --out results/nominal-fom",
+    "simulate": "aquarom simulate nominal --model fom --level 1 --out results/nominal-fom\n"
+                "  mpirun -n 2 aquarom simulate so1 --xi y_thin=0.1 --out results/so1-thin",
 }
 
 
@@ -33,6 +34,8 @@ def build_parser() -> argparse.ArgumentParser:
         sub = commands.add_parser(name, help=help_text, description=help_text,
                                   epilog=f"example:\n  {EXAMPLES[name]}", formatter_class=argparse.RawDescriptionHelpFormatter)
         sub.add_argument("scene", help="scene file (.toml) or shipped scene name")
+        sub.add_argument("--level", type=int, choices=range(1, 6), metavar="{1..5}",
+                         help="override the scene's mesh level (1 is the coarsest)")
         return sub
 
     command("mesh", "report the scene's mesh: cells, nodes, tags, cell quality")
@@ -65,6 +68,16 @@ def main(argv=None) -> int:
         return SolverError.exit_code
 
 
+def load_scene(args):
+    """The scene named on the command line, with the --level override applied."""
+    from .scene import Scene
+
+    scene = Scene.load(args.scene)
+    if args.level is not None:
+        scene = scene.replace("mesh", level=args.level)
+    return scene
+
+
 def say(text: str) -> None:
     if MPI.COMM_WORLD.rank == 0:
         print(text, flush=True)
@@ -73,9 +86,8 @@ def say(text: str) -> None:
 def run_mesh(args) -> int:
     from .fish import load_fish
     from .mesh import cell_quality
-    from .scene import Scene
 
-    scene = Scene.load(args.scene)
+    scene = load_scene(args)
     fish = load_fish(scene)
     mesh, tags = fish.mesh, fish.tags
     quality = cell_quality(mesh.points, mesh.cells)
@@ -97,9 +109,9 @@ def run_mesh(args) -> int:
 def run_shapes(args) -> int:
     from .render import render_design, render_shape_sheet
     from .fish import load_fish
-    from .scene import Scene, parse_xi_assignments
+    from .scene import parse_xi_assignments
 
-    scene = Scene.load(args.scene)
+    scene = load_scene(args)
     xi = parse_xi_assignments(args.xi, scene)
     fish = load_fish(scene)
     out = args.out or Path("results") / "shapes" / scene.name
@@ -116,10 +128,10 @@ def run_shapes(args) -> int:
 
 
 def run_simulate(args) -> int:
-    from .scene import Scene, parse_xi_assignments
+    from .scene import parse_xi_assignments
     from .simulate import simulate_fom
 
-    scene = Scene.load(args.scene)
+    scene = load_scene(args)
     xi = parse_xi_assignments(args.xi, scene)
     out = args.out or Path("results") / "simulate" / f"{scene.name}-{args.model}"
     result = simulate_fom(scene, xi=xi, out_dir=out, progress=not args.no_progress)

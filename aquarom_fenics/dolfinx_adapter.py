@@ -5,6 +5,7 @@ compiled forms; a migration to a newer dolfinx touches this module only.
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -93,7 +94,12 @@ def set_owned_values(function, owned: np.ndarray) -> None:
 
 
 def compile_form(form):
-    return fem.form(form)
+    """JIT-compile a UFL form (cached by FFCx); the C compiler's INFO log lines are silenced."""
+    logging.disable(logging.INFO)
+    try:
+        return fem.form(form)
+    finally:
+        logging.disable(logging.NOTSET)
 
 
 def create_vector(compiled_form) -> PETSc.Vec:

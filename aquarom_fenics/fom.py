@@ -20,10 +20,21 @@ from .forms.elasticity import strain_energy
 from .forms.inertia import mass_form, mass_moment_x, total_mass
 from .forms.muscle import muscle_energy
 from .newmark import NewmarkScheme
+from .errors import SolverError
 from .scene import Scene
 from .thrust import SpineGeometry, thrust_force, thrust_jacobians, virtual_mass
 
 LEFT, RIGHT = 0, 1
+
+
+def direct_solver(comm: MPI.Comm) -> PETSc.KSP:
+    """LU with MUMPS; the factors are kept until the operator changes."""
+    solver = PETSc.KSP().create(comm)
+    solver.setType("preonly")
+    preconditioner = solver.getPC()
+    preconditioner.setType("lu")
+    preconditioner.setFactorSolverType("mumps")
+    return solver
 
 
 class FullOrderModel:
@@ -77,26 +88,31 @@ class FullOrderModel:
             muscles.append(self._cell_field(indicator, name))
         self.activations = [fx.constant(self.mesh, 0.0), fx.constant(self.mesh, 0.0)]
 
+        # Values enter as constants so that one compiled form serves every scene and design.
+        poisson_ratio = fx.constant(self.mesh, material.poisson_ratio)
+        density = fx.constant(self.mesh, material.density)
+        muscle_stiffness = fx.constant(self.mesh, scene.actuation.stiffness)
+        fluid_density = fx.constant(self.mesh, scene.fluid.density)
         u, u_xi = self.displacement, self.shape_displacement
         test, trial = ufl.TestFunction(self.space), ufl.TrialFunction(self.space)
-        elastic_energy = strain_energy(u, u_xi, young_modulus, material.poisson_ratio)
+        elastic_energy = strain_energy(u, u_xi, young_modulus, poisson_ratio)
         internal_force = ufl.derivative(elastic_energy, u, test)
         self.actuation_on = scene.actuation.stiffness > 0 and scene.actuation.amplitude > 0
         tangent = ufl.derivative(internal_force, u, trial)
         forms = {"internal_force": internal_force, "elastic_energy": elastic_energy,
                  "elastic_tangent": tangent}
         if self.actuation_on:
-            energy = muscle_energy(u, u_xi, scene.actuation.stiffness, self.activations, muscles,
+            energy = muscle_energy(u, u_xi, muscle_stiffness, self.activations, muscles,
                                    nominal_volume=scene.actuation.muscle_volume == "nominal")
             negative_actuation = ufl.derivative(energy, u, test)
             forms["negative_actuation_force"] = negative_actuation
             tangent = tangent + ufl.derivative(negative_actuation, u, trial)
         forms["tangent"] = tangent
-        forms["mass"] = mass_form(trial, test, u_xi, material.density)
-        forms["mass_moment_x"] = mass_moment_x(test, u_xi, material.density)
-        forms["total_mass"] = total_mass(u_xi, material.density, self.mesh)
+        forms["mass"] = mass_form(trial, test, u_xi, density)
+        forms["mass_moment_x"] = mass_moment_x(test, u_xi, density)
+        forms["total_mass"] = total_mass(u_xi, density, self.mesh)
         if scene.fluid.drag:
-            forms["drag_direction"] = drag_direction_form(test, u_xi, scene.fluid.density, self.mesh)
+            forms["drag_direction"] = drag_direction_form(test, u_xi, fluid_density, self.mesh)
         self.forms = {name: fx.compile_form(form) for name, form in forms.items()}
         self._vectors = {name: fx.create_vector(self.forms[name])
                          for name in ("internal_force", "negative_actuation_force") if name in self.forms}
@@ -124,11 +140,18 @@ class FullOrderModel:
         self.thrust_on = self.scene.fluid.thrust
 
     def _build_boundary_conditions(self):
-        """Head nodes fixed in y and z, free in x (SPEC §5)."""
+        """Swimming: head nodes fixed in y and z, free in x (SPEC §5). Clamped: all head dofs."""
         head = self.fish.tags.head_nodes
-        local = np.concatenate([fx.sub_space_dofs_of_nodes(self.space, self.layout, head, c) for c in (1, 2)])
-        self.fixed_dofs = np.sort(local)
-        self._fixed_global_dofs = (3 * self.layout.global_block[self.fixed_dofs // 3] + self.fixed_dofs % 3).astype(np.int32)
+        self.fixed_dofs = self._head_dofs(head, (1, 2))
+        self.clamped_dofs = self._head_dofs(head, (0, 1, 2))
+
+    def _head_dofs(self, head_nodes, components) -> np.ndarray:
+        return np.sort(np.concatenate([fx.sub_space_dofs_of_nodes(self.space, self.layout, head_nodes, c)
+                                       for c in components]))
+
+    def global_dofs(self, owned_dofs: np.ndarray) -> np.ndarray:
+        """PETSc global indices of owned local dof indices."""
+        return (3 * self.layout.global_block[owned_dofs // 3] + owned_dofs % 3).astype(np.int32)
 
     def _build_constant_matrices(self):
         material = self.scene.material
@@ -190,9 +213,12 @@ class FullOrderModel:
 
     def actuation_force(self, time: float, u: np.ndarray) -> np.ndarray:
         """f_act(u, t) = -∂Π_act/∂u [N]."""
+        self._set_state(time, u)
+        return self._actuation_force_at_current_state()
+
+    def _actuation_force_at_current_state(self) -> np.ndarray:
         if not self.actuation_on:
             return np.zeros(self.n_owned_dofs)
-        self._set_state(time, u)
         return -fx.assemble_vector_into(self._vectors["negative_actuation_force"],
                                         self.forms["negative_actuation_force"])
 
@@ -215,8 +241,8 @@ class FullOrderModel:
         """r = M ü + C u̇ + f_int - f_act - f_thrust - f_drag (zero on fixed dofs), and the force scale."""
         self._set_state(time, u)
         inertia = self._matvec(self.mass_matrix, a)
-        internal = self.internal_force(u)
-        external = self.actuation_force(time, u) + self.thrust_force(u, v, a) + self.drag_force(v)
+        internal = fx.assemble_vector_into(self._vectors["internal_force"], self.forms["internal_force"]).copy()
+        external = self._actuation_force_at_current_state() + self.thrust_force(u, v, a) + self.drag_force(v)
         residual = inertia + self._matvec(self.damping_matrix, v) + internal - external
         residual[self.fixed_dofs] = 0.0
         scale = max(self.norm(internal), self.norm(external), self.norm(inertia))
@@ -232,7 +258,7 @@ class FullOrderModel:
         if self.scene.fluid.drag:
             self._add_drag_jacobian(matrix, v)
         matrix.assemble()
-        matrix.zeroRowsColumns(self._fixed_global_dofs, diag=1.0)
+        matrix.zeroRowsColumns(self.global_dofs(self.fixed_dofs), diag=1.0)
         return matrix
 
     def _add_thrust_jacobian(self, matrix, u, v, a):
@@ -253,24 +279,42 @@ class FullOrderModel:
         """∂(-g v_x²)/∂u = -2 g v_x (γ/(βh)) e_head_xᵀ: a column at the head's x dof."""
         head_global = int(3 * self._spine_global_blocks[-1])
         factor = -2.0 * self.head_velocity_x(v) * self.scheme.velocity_factor
-        rows = (3 * self.layout.global_block[self._drag_rows // 3] + self._drag_rows % 3).astype(np.int32)
+        rows = self.global_dofs(self._drag_rows)
         for row, value in zip(rows, factor * self._drag_direction[self._drag_rows]):
             matrix.setValue(row, head_global, value, addv=PETSc.InsertMode.ADD_VALUES)
 
     def factorize(self, time, u, v, a) -> None:
-        matrix = self.assemble_newton_matrix(time, u, v, a)
         if self._solver is None:
-            self._solver = PETSc.KSP().create(self.comm)
-            self._solver.setType("preonly")
-            preconditioner = self._solver.getPC()
-            preconditioner.setType("lu")
-            preconditioner.setFactorSolverType("mumps")
-        self._solver.setOperators(matrix)
+            self._solver = direct_solver(self.comm)
+        self._solver.setOperators(self.assemble_newton_matrix(time, u, v, a))
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
+        return self._solve_with(self._solver, rhs)
+
+    def _solve_with(self, solver: PETSc.KSP, rhs: np.ndarray) -> np.ndarray:
         self._work_in.array[:] = rhs
-        self._solver.solve(self._work_in, self._work_out)
+        solver.solve(self._work_in, self._work_out)
         return self._work_out.array.copy()
+
+    def static_response(self, left: float, right: float, tolerance: float = 1e-10,
+                        max_iterations: int = 30) -> np.ndarray:
+        """u solving f_int(u) = f_act(u) for fixed activations, head clamped (full Newton)."""
+        self.activations[LEFT].value, self.activations[RIGHT].value = left, right
+        solver = direct_solver(self.comm)
+        u = np.zeros(self.n_owned_dofs)
+        for _ in range(max_iterations):
+            internal = self.internal_force(u)
+            actuation = self._actuation_force_at_current_state()
+            residual = internal - actuation
+            residual[self.clamped_dofs] = 0.0
+            if self.norm(residual) <= tolerance * max(self.norm(internal), self.norm(actuation), 1e-30):
+                return u
+            tangent = fx.assemble_matrix_into(self.tangent_matrix, self.forms["tangent"])
+            tangent.zeroRowsColumns(self.global_dofs(self.clamped_dofs), diag=1.0)
+            solver.setOperators(tangent)
+            u = u - self._solve_with(solver, residual)
+        raise SolverError(f"static solve did not converge in {max_iterations} iterations "
+                          f"(activations left {left}, right {right})")
 
     def norm(self, vector: np.ndarray) -> float:
         return float(np.sqrt(self.comm.allreduce(float(vector @ vector), op=MPI.SUM)))

@@ -71,6 +71,7 @@ class NewtonSettings:
     tolerance: float = 1e-6
     max_iterations: int = 30
     contraction_to_refactor: float = 0.25
+    iterations_per_factorization: int = 4
     force_floor: float = 1e-12
 
 
@@ -86,11 +87,12 @@ Observer = Callable[[StepReport, np.ndarray, np.ndarray, np.ndarray], None]
 
 
 def integrate(system: NewtonSystem, scheme: NewmarkScheme, n_steps: int, state, settings: NewtonSettings,
-              observe: Observer, time_step_factor_reuse: bool = True):
+              observe: Observer):
     """Integrate from ``state = (u, u̇, ü)`` at t = 0 over ``n_steps`` steps.
 
     Modified Newton: the factors of S are kept across iterations and steps and refreshed when an
-    iteration contracts the residual by less than ``contraction_to_refactor``; the converged answer
+    iteration contracts the residual by less than ``contraction_to_refactor`` or when they have
+    served ``iterations_per_factorization`` iterations of the current step; the converged answer
     satisfies the same test ‖r‖ ≤ tol · scale whatever the factors. A step that does not converge
     in ``max_iterations`` or yields non-finite values raises :class:`SolverError` naming the time;
     ``observe`` has seen every converged step before that.
@@ -102,6 +104,7 @@ def integrate(system: NewtonSystem, scheme: NewmarkScheme, n_steps: int, state, 
         u_predicted, v_predicted = scheme.predict(u, v, a)
         u_new = u_predicted.copy()
         factorizations = 0
+        iterations_with_factors = 0
         previous_norm = np.inf
         history = []
         for iteration in range(settings.max_iterations + 1):
@@ -120,11 +123,14 @@ def integrate(system: NewtonSystem, scheme: NewmarkScheme, n_steps: int, state, 
                     f"{settings.max_iterations} iterations; relative residuals "
                     f"{', '.join(f'{value:.2e}' for value in history[-6:])}; "
                     f"results kept up to t = {time - scheme.time_step:.4g} s")
-            stale = not time_step_factor_reuse and iteration == 0
-            if not have_factors or stale or residual_norm > settings.contraction_to_refactor * previous_norm:
+            slow = residual_norm > settings.contraction_to_refactor * previous_norm
+            worn = iterations_with_factors >= settings.iterations_per_factorization
+            if not have_factors or slow or worn:
                 system.factorize(time, u_new, v_new, a_new)
                 have_factors = True
                 factorizations += 1
+                iterations_with_factors = 0
+            iterations_with_factors += 1
             previous_norm = residual_norm
             u_new = u_new - system.solve(residual)
         u, v, a = u_new, v_new, a_new

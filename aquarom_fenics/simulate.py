@@ -34,7 +34,7 @@ class SimulationResult:
     n_dofs: int
     error: str | None = None
     timings: dict = field(default_factory=dict)
-    states: list = field(default_factory=list)    # owned u per stored sample, when asked for
+    states: list = field(default_factory=list)    # owned (u, u̇) per stored sample, when asked for
     model: FullOrderModel | None = None
 
     def summary(self) -> dict:
@@ -88,7 +88,7 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
         if xdmf:
             fx_write(model, xdmf, u, report.time)
         if keep_states:
-            states.append(u.copy())
+            states.append((u.copy(), v.copy()))
         if bar:
             bar.update(1)
 

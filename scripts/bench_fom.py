@@ -1,0 +1,73 @@
+"""FOM benchmark: the 2 s reference simulation on every mesh level, serial and `mpirun -n 2`.
+
+Writes results/bench/fom.json: cells, dofs, wall time, mean Newton iterations, peak memory,
+distance and tail amplitude per level and rank count, and the -n 2 speed-up.
+"""
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+REPOSITORY = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPOSITORY))
+
+from aquarom_fenics.outputs import software_versions, write_json_atomic  # noqa: E402
+
+SCENE = """name = "bench-level{level}"
+[mesh]
+level = {level}
+"""
+
+
+def run_level(level: int, ranks: int, work: Path) -> dict:
+    scene = work / f"level{level}.toml"
+    scene.write_text(SCENE.format(level=level))
+    out = work / f"level{level}-n{ranks}"
+    shutil.rmtree(out, ignore_errors=True)
+    command = [str(Path(sys.executable).with_name("aquarom")), "simulate", str(scene), "--out", str(out), "--no-progress"]
+    if ranks > 1:
+        command = ["mpirun", "-n", str(ranks)] + command
+    environment = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", OMP_NUM_THREADS="1")
+    started = time.perf_counter()
+    completed = subprocess.run(command, capture_output=True, text=True, env=environment)
+    elapsed = time.perf_counter() - started
+    if completed.returncode != 0:
+        return {"level": level, "ranks": ranks, "failed": completed.stderr.strip().splitlines()[-1:]}
+    summary = json.loads((out / "summary.json").read_text())
+    return {"level": level, "ranks": ranks, "cells": summary["cells"], "dofs": summary["dofs"],
+            "wall_time_simulation": summary["wall_time"], "wall_time_process": elapsed,
+            "time_integration": summary["timings"]["time_integration"],
+            "mean_newton_iterations": summary["mean_newton_iterations"],
+            "peak_memory_mb_rank0": summary["peak_memory_mb"], "distance": summary["distance"],
+            "tail_amplitude": summary["tail_amplitude"]}
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3, 4, 5])
+    parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "bench" / "fom.json")
+    args = parser.parse_args()
+    work = args.out.parent / "fom-runs"
+    work.mkdir(parents=True, exist_ok=True)
+    runs = []
+    for level in args.levels:
+        for ranks in (1, 2):
+            runs.append(run_level(level, ranks, work))
+            print(json.dumps(runs[-1]), flush=True)
+    speedups = {}
+    for level in args.levels:
+        serial, parallel = (next(r for r in runs if r["level"] == level and r["ranks"] == n) for n in (1, 2))
+        if "failed" not in serial and "failed" not in parallel:
+            speedups[f"level{level}"] = serial["wall_time_simulation"] / parallel["wall_time_simulation"]
+    write_json_atomic(args.out, {"benchmark": "fom", "horizon_s": 2.0, "time_step_s": 0.02, "runs": runs,
+                                 "speedup_2_ranks": speedups, "cores": os.cpu_count(),
+                                 "versions": software_versions(), "date": time.strftime("%Y-%m-%d %H:%M:%S")})
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,22 @@
+"""Shared fixtures: the coarsest mesh level and short horizons keep the suite fast."""
+import os
+
+import pytest
+
+from aquarom_fenics.scene import scene_from_dict
+
+os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
+os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+
+
+def coarse_scene(**sections):
+    """A scene on mesh level 1; keyword arguments are TOML tables, e.g. solver={"duration": 0.2}."""
+    data = {"mesh": {"level": 1}}
+    for name, table in sections.items():
+        data[name] = {**data.get(name, {}), **table}
+    return scene_from_dict(data, source="<test>")
+
+
+@pytest.fixture
+def make_scene():
+    return coarse_scene

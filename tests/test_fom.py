@@ -1,0 +1,111 @@
+"""Full-order model on the coarsest mesh (SPEC §5–§6)."""
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from aquarom_fenics.fish import load_fish
+from aquarom_fenics.fom import FullOrderModel
+from aquarom_fenics.simulate import simulate_fom
+from conftest import coarse_scene
+
+DESIGN = {"y_thin": 0.1, "z_tail": 0.2}
+SHAPES = {"y_thin": {"bounds": [-0.15, 0.15]}, "z_tail": {"bounds": [-0.5, 0.5]}}
+
+
+@pytest.fixture(scope="module")
+def shaped_model():
+    scene = coarse_scene(shapes=SHAPES)
+    return FullOrderModel(scene, load_fish(scene), DESIGN)
+
+
+def relative_error(actual, expected):
+    return np.linalg.norm(np.asarray(actual) - np.asarray(expected)) / np.linalg.norm(expected)
+
+
+def free_dofs_mask(model):
+    mask = np.ones(model.n_owned_dofs, dtype=bool)
+    mask[model.fixed_dofs] = False
+    return mask
+
+
+@pytest.mark.parametrize("xi", [None, DESIGN])
+def test_rigid_motions_produce_no_elastic_force(xi):
+    scene = coarse_scene(shapes=SHAPES)
+    model = FullOrderModel(scene, load_fish(scene), xi)
+    rest = model.rest_points[model.layout.owned_nodes]
+    rotation = Rotation.from_rotvec([0.3, -0.5, 0.7]).as_matrix()
+    translation = np.tile([0.01, -0.02, 0.03], rest.shape[0])
+    rotated = (rest @ rotation.T - rest).ravel()
+    bending = np.zeros_like(rest)
+    bending[:, 1] = 0.01 * ((rest[:, 0] + 0.07) / 0.2) ** 2
+    reference = np.linalg.norm(model.internal_force(bending.ravel()))
+    assert np.linalg.norm(model.internal_force(translation)) < 1e-10 * reference
+    assert np.linalg.norm(model.internal_force(rotated)) < 1e-10 * reference
+
+
+def test_newton_matrix_is_the_derivative_of_the_residual(shaped_model):
+    """S du = d/dε r(u + ε du, u̇(ε), ü(ε)) with the Newmark rates (thrust, drag, muscles all on)."""
+    model, scheme = shaped_model, shaped_model.scheme
+    rng = np.random.default_rng(1)
+    free = free_dofs_mask(model)
+    u_predicted, v_predicted = (1e-3 * rng.standard_normal(model.n_owned_dofs) * free for _ in range(2))
+    u = u_predicted + 1e-4 * rng.standard_normal(model.n_owned_dofs) * free
+    time = 0.3
+
+    def residual(displacement):
+        return model.residual(time, displacement, *scheme.correct(displacement, u_predicted, v_predicted))[0]
+
+    matrix = model.assemble_newton_matrix(time, u, *scheme.correct(u, u_predicted, v_predicted))
+    for seed in range(3):
+        direction = np.random.default_rng(10 + seed).standard_normal(model.n_owned_dofs) * free
+        step = 1e-7
+        finite_difference = (residual(u + step * direction) - residual(u - step * direction)) / (2 * step)
+        assert relative_error(model._matvec(matrix, direction), finite_difference) < 1e-6
+
+
+def test_design_pulled_back_equals_design_meshed_directly():
+    scene = coarse_scene(shapes=SHAPES, solver={"duration": 0.2})
+    fish = load_fish(scene)
+    pulled_back = simulate_fom(scene, DESIGN, fish=fish, progress=False).trajectory.arrays()
+    moved = simulate_fom(scene, DESIGN, fish=fish, moved_mesh=True, progress=False).trajectory.arrays()
+    for name in ("head_x", "tail_y", "com_x"):
+        assert relative_error(moved[name], pulled_back[name]) < 1e-8, name
+
+
+def smooth_lateral_velocity(fish, speed):
+    """v_y = speed ((x + 0.35 L) / (0.65 L))² behind the head, zero on it [m/s]."""
+    relative, length = fish.tags.box.relative(fish.mesh.points), fish.tags.box.length
+    velocity = np.zeros_like(relative)
+    velocity[:, 1] = speed * np.clip(-(relative[:, 0] + 0.35 * length) / (0.65 * length), 0.0, None) ** 2
+    return velocity
+
+
+def test_energy_is_conserved_without_damping_and_forces():
+    """Trapezoidal Newmark (α_N = 0) conserves ½ u̇ᵀMu̇ + Π(u) in the linear regime."""
+    scene = coarse_scene(actuation={"amplitude": 0.0}, fluid={"thrust": False, "drag": False},
+                         material={"rayleigh_alpha": 0.0, "rayleigh_beta": 0.0},
+                         solver={"newmark_alpha": 0.0, "tolerance": 1e-7})
+    fish = load_fish(scene)
+    result = simulate_fom(scene, fish=fish, progress=False, keep_states=True,
+                          initial_velocity=smooth_lateral_velocity(fish, 1e-4))
+    assert result.completed and len(result.states) == 101
+    energy = np.array([result.model.kinetic_energy(v) + result.model.elastic_energy(u) for u, v in result.states])
+    assert np.abs(energy - energy[0]).max() < 1e-6 * energy[0]
+
+
+def test_reference_fish_swims_forward_with_a_plausible_tail_beat():
+    scene = coarse_scene()
+    result = simulate_fom(scene, progress=False)
+    assert result.completed
+    assert result.distance > 0
+    assert 0.005 < result.tail_amplitude < 0.04
+
+
+def test_left_and_right_muscles_bend_the_tail_to_opposite_sides():
+    scene = coarse_scene()
+    model = FullOrderModel(scene, load_fish(scene))
+    left_tail = model.spine_values(model.static_response(0.2, 0.0))[0]
+    right_tail = model.spine_values(model.static_response(0.0, 0.2))[0]
+    assert left_tail[1] > 1e-3 and right_tail[1] < -1e-3
+    assert abs(left_tail[1] + right_tail[1]) < 1e-8 * abs(left_tail[1])
+    assert abs(left_tail[0] - right_tail[0]) < 1e-8 * abs(left_tail[0])

@@ -1,0 +1,101 @@
+"""The `aquarom simulate` command: outputs, MPI agreement, clean stops (SPEC §5–§6)."""
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from aquarom_fenics.cli import main
+from aquarom_fenics.outputs import read_trajectory_csv
+from aquarom_fenics.simulate import simulate_fom
+from conftest import coarse_scene
+
+SHORT_SCENE = """
+[mesh]
+level = 1
+[solver]
+duration = {duration}
+{extra}
+"""
+
+
+def write_scene(directory: Path, duration=0.2, extra="") -> Path:
+    path = directory / "scene.toml"
+    path.write_text(SHORT_SCENE.format(duration=duration, extra=extra))
+    return path
+
+
+def test_simulate_writes_trajectory_summary_and_plot(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["simulate", str(write_scene(tmp_path)), "--out", str(out), "--no-progress"]) == 0
+    trajectory = read_trajectory_csv(out / "trajectory.csv")
+    assert trajectory["time"].size == 11 and trajectory["time"][-1] == pytest.approx(0.2)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["completed"] and summary["cells"] == 1232 and summary["steps"] == 10
+    assert summary["distance"] == pytest.approx(trajectory["com_x"][-6:].mean())
+    assert set(summary["versions"]) >= {"dolfinx", "petsc4py", "aquarom_fenics"}
+    assert (out / "trajectory.png").stat().st_size > 10_000
+    assert "distance" in capsys.readouterr().out
+
+
+@pytest.mark.mpi
+def test_two_ranks_reproduce_the_serial_trajectory(tmp_path):
+    if shutil.which("mpirun") is None:
+        pytest.skip("mpirun not installed")
+    scene = write_scene(tmp_path)
+    main(["simulate", str(scene), "--out", str(tmp_path / "serial"), "--no-progress"])
+    aquarom = Path(sys.executable).with_name("aquarom")
+    completed = subprocess.run(["mpirun", "-n", "2", str(aquarom), "simulate", str(scene), "--out",
+                                str(tmp_path / "parallel"), "--no-progress"],
+                               capture_output=True, text=True, timeout=600, env=os.environ)
+    assert completed.returncode == 0, completed.stderr
+    serial = read_trajectory_csv(tmp_path / "serial" / "trajectory.csv")
+    parallel = read_trajectory_csv(tmp_path / "parallel" / "trajectory.csv")
+    for name in ("head_x", "tail_y", "com_x"):
+        error = np.linalg.norm(parallel[name] - serial[name]) / np.linalg.norm(serial[name])
+        assert error < 1e-8, (name, error)
+    assert json.loads((tmp_path / "parallel" / "summary.json").read_text())["mpi_ranks"] == 2
+
+
+def test_diverging_actuation_stops_naming_the_step_and_keeps_the_trajectory(tmp_path, capsys):
+    out = tmp_path / "run"
+    scene = write_scene(tmp_path, duration=2.0, extra="[actuation]\nstiffness = 1e6")
+    assert main(["simulate", str(scene), "--out", str(out), "--no-progress"]) == 3
+    message = capsys.readouterr().err.strip()
+    assert len(message.splitlines()) == 1
+    assert "t = 0.08 s (step 4 of 100)" in message and "trajectory.csv" in message
+    trajectory = read_trajectory_csv(out / "trajectory.csv")
+    np.testing.assert_allclose(trajectory["time"], [0.0, 0.02, 0.04, 0.06])
+    summary = json.loads((out / "summary.json").read_text())
+    assert not summary["completed"] and "step 4" in summary["error"] and summary["distance"] is None
+
+
+@pytest.mark.parametrize("extra, named", [
+    ("time_step = 0.0", "time_step"),
+    ("time_step = -0.01", "time_step"),
+    ("time_step = 0.03", "whole number"),
+])
+def test_bad_time_grid_is_refused(tmp_path, capsys, extra, named):
+    scene = write_scene(tmp_path, duration=0.2, extra=extra)
+    assert main(["simulate", str(scene), "--out", str(tmp_path / "run"), "--no-progress"]) == 2
+    message = capsys.readouterr().err.strip()
+    assert len(message.splitlines()) == 1 and named in message
+    assert not (tmp_path / "run").exists()
+
+
+def test_horizon_shorter_than_the_distance_window_is_refused(tmp_path, capsys):
+    scene = write_scene(tmp_path, duration=0.06)
+    assert main(["simulate", str(scene), "--no-progress"]) == 2
+    assert "0.1 s" in capsys.readouterr().err
+
+
+def test_inverting_design_is_refused(tmp_path, capsys):
+    scene = write_scene(tmp_path, extra="[shapes]\ny_thin = { bounds = [-0.15, 0.15] }")
+    assert main(["simulate", str(scene), "--xi", "y_thin=1.5", "--out", str(tmp_path / "run"),
+                 "--no-progress"]) == 2
+    assert "y_thin=1.5" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
