@@ -113,6 +113,8 @@ class FullOrderModel:
         forms["total_mass"] = total_mass(u_xi, density, self.mesh)
         if scene.fluid.drag:
             forms["drag_direction"] = drag_direction_form(test, u_xi, fluid_density, self.mesh)
+        self.ufl_forms = forms
+        self.young_modulus, self.muscle_indicators = young_modulus, muscles
         self.forms = {name: fx.compile_form(form) for name, form in forms.items()}
         self._vectors = {name: fx.create_vector(self.forms[name])
                          for name in ("internal_force", "negative_actuation_force") if name in self.forms}

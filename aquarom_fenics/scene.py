@@ -309,7 +309,7 @@ def _coerce(value, default, where, variable_length=False):
             return value
         raise InputError(f"{where} must be a string, got {value!r}")
     if isinstance(default, tuple):
-        if not isinstance(value, list) or (not variable_length and len(value) != len(default)):
+        if not isinstance(value, (list, tuple)) or (not variable_length and len(value) != len(default)):
             size = "a list of numbers" if variable_length else f"a list of {len(default)} numbers"
             raise InputError(f"{where} must be {size}, got {value!r}")
         return tuple(_coerce(item, 0.0, where) for item in value)
@@ -380,7 +380,10 @@ def parse_xi_assignments(assignments: list[str] | None, scene: Scene) -> dict[st
             valid = ", ".join(scene.shape_names) or "none: the scene has no [shapes]"
             raise InputError(f"--xi {text}: '{name}' is not a shape variation of scene {scene.name} (valid: {valid})")
         try:
-            values[name] = float(number)
+            value = float(number)
         except ValueError:
             raise InputError(f"--xi {text}: '{number}' is not a number") from None
+        if not math.isfinite(value):
+            raise InputError(f"--xi {text}: '{number.strip()}' is not a finite number")
+        values[name] = value
     return values
