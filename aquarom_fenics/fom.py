@@ -121,7 +121,7 @@ class FullOrderModel:
         self.tangent_matrix = fx.create_matrix(self.forms["tangent"])
         self.tangent_matrix.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
 
-    def _owned_positions(self, nodes: np.ndarray):
+    def owned_positions(self, nodes: np.ndarray):
         """(owned local blocks, index into ``nodes``) of the given input nodes owned by this rank."""
         lookup = np.full(self.fish.mesh.points.shape[0], -1)
         lookup[nodes] = np.arange(nodes.size)
@@ -132,7 +132,7 @@ class FullOrderModel:
     def _build_spine(self, rest_points):
         tags = self.fish.tags
         self.spine_nodes = tags.spine_nodes
-        self._spine_blocks, self._spine_index = self._owned_positions(self.spine_nodes)
+        self._spine_blocks, self._spine_index = self.owned_positions(self.spine_nodes)
         global_blocks = np.zeros(self.spine_nodes.size, dtype=np.int64)
         global_blocks[self._spine_index] = self.layout.global_block[self._spine_blocks]
         self._spine_global_blocks = self.comm.allreduce(global_blocks, op=MPI.SUM)
@@ -176,7 +176,7 @@ class FullOrderModel:
             drag = fx.create_vector(self.forms["drag_direction"])
             self._drag_direction = fx.assemble_vector_into(drag, self.forms["drag_direction"]).copy()
             self._drag_rows = np.flatnonzero(self._drag_direction)
-        head = self._owned_positions(np.array([self.fish.tags.head_spine_node]))[0]
+        head = self.owned_positions(np.array([self.fish.tags.head_spine_node]))[0]
         self._head_x_owned = 3 * head  # empty on ranks that do not own the head node
 
     def set_time_step(self, scheme: NewmarkScheme) -> None:
@@ -194,7 +194,7 @@ class FullOrderModel:
         self.activations[LEFT].value = activation
         self.activations[RIGHT].value = -activation
 
-    def _matvec(self, matrix: PETSc.Mat, x: np.ndarray) -> np.ndarray:
+    def matvec(self, matrix: PETSc.Mat, x: np.ndarray) -> np.ndarray:
         self._work_in.array[:] = x
         matrix.mult(self._work_in, self._work_out)
         return self._work_out.array.copy()
@@ -242,10 +242,10 @@ class FullOrderModel:
     def residual(self, time, u, v, a):
         """r = M ü + C u̇ + f_int - f_act - f_thrust - f_drag (zero on fixed dofs), and the force scale."""
         self._set_state(time, u)
-        inertia = self._matvec(self.mass_matrix, a)
+        inertia = self.matvec(self.mass_matrix, a)
         internal = fx.assemble_vector_into(self._vectors["internal_force"], self.forms["internal_force"]).copy()
         external = self._actuation_force_at_current_state() + self.thrust_force(u, v, a) + self.drag_force(v)
-        residual = inertia + self._matvec(self.damping_matrix, v) + internal - external
+        residual = inertia + self.matvec(self.damping_matrix, v) + internal - external
         residual[self.fixed_dofs] = 0.0
         scale = max(self.norm(internal), self.norm(external), self.norm(inertia))
         return residual, scale
@@ -291,9 +291,9 @@ class FullOrderModel:
         self._solver.setOperators(self.assemble_newton_matrix(time, u, v, a))
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
-        return self._solve_with(self._solver, rhs)
+        return self.solve_with(self._solver, rhs)
 
-    def _solve_with(self, solver: PETSc.KSP, rhs: np.ndarray) -> np.ndarray:
+    def solve_with(self, solver: PETSc.KSP, rhs: np.ndarray) -> np.ndarray:
         self._work_in.array[:] = rhs
         solver.solve(self._work_in, self._work_out)
         return self._work_out.array.copy()
@@ -314,7 +314,7 @@ class FullOrderModel:
             tangent = fx.assemble_matrix_into(self.tangent_matrix, self.forms["tangent"])
             tangent.zeroRowsColumns(self.global_dofs(self.clamped_dofs), diag=1.0)
             solver.setOperators(tangent)
-            u = u - self._solve_with(solver, residual)
+            u = u - self.solve_with(solver, residual)
         raise SolverError(f"static solve did not converge in {max_iterations} iterations "
                           f"(activations left {left}, right {right})")
 
@@ -322,9 +322,13 @@ class FullOrderModel:
         return float(np.sqrt(self.comm.allreduce(float(vector @ vector), op=MPI.SUM)))
 
     # ------------------------------------------------------------------ observables
+    def owned_values(self, nodal: np.ndarray) -> np.ndarray:
+        """Owned dof array of an (n_input_nodes, 3) field."""
+        return nodal[self.layout.owned_nodes].ravel().copy()
+
     def owned_from_nodal(self, nodal: np.ndarray) -> np.ndarray:
-        """Owned dof array of an (n_input_nodes, 3) field, zero on fixed dofs."""
-        owned = nodal[self.layout.owned_nodes].ravel().copy()
+        """Owned dof array of an (n_input_nodes, 3) state field, zero on fixed dofs."""
+        owned = self.owned_values(nodal)
         owned[self.fixed_dofs] = 0.0
         return owned
 
@@ -336,7 +340,7 @@ class FullOrderModel:
 
     def kinetic_energy(self, v: np.ndarray) -> float:
         """½ u̇ᵀ M u̇ [J]."""
-        return 0.5 * self.comm.allreduce(float(v @ self._matvec(self.mass_matrix, v)), op=MPI.SUM)
+        return 0.5 * self.comm.allreduce(float(v @ self.matvec(self.mass_matrix, v)), op=MPI.SUM)
 
     def elastic_energy(self, u: np.ndarray) -> float:
         """Π(u) [J]."""

@@ -60,7 +60,7 @@ def test_newton_matrix_is_the_derivative_of_the_residual(shaped_model):
         direction = np.random.default_rng(10 + seed).standard_normal(model.n_owned_dofs) * free
         step = 1e-7
         finite_difference = (residual(u + step * direction) - residual(u - step * direction)) / (2 * step)
-        assert relative_error(model._matvec(matrix, direction), finite_difference) < 1e-6
+        assert relative_error(model.matvec(matrix, direction), finite_difference) < 1e-6
 
 
 def test_design_pulled_back_equals_design_meshed_directly():

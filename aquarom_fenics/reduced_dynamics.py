@@ -1,0 +1,229 @@
+"""Reduced Newmark-Newton integration of a PROM at a design ξ, with sensitivities dη/dξ (SPEC §8–§9).
+
+Direct differentiation of the Newmark scheme: after each converged step,
+
+    S η'_{n+1} = -∂r/∂ξ - C_t (u̇'_pred - (γ/(βh)) η'_pred) + M_t η'_pred / (βh²),
+
+with the same S = K_t + (γ/(βh)) C_t + (1/(βh²)) M_t, and u̇', ü' from the Newmark kinematics.
+"""
+from __future__ import annotations
+
+import time as clock
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+
+from .newmark import NewmarkScheme, NewtonSettings, StepReport, integrate
+from .prom import ReducedModel
+from .scene import Scene
+from .thrust import SpineGeometry, thrust_force, thrust_force_per_virtual_mass, thrust_jacobians, virtual_mass
+from .trajectory import Trajectory, swimming_distance, tail_amplitude, window_mask, DISTANCE_WINDOW
+
+
+class ReducedSystem:
+    """The PROM's tensors evaluated at one design ξ (implements ``NewtonSystem``)."""
+
+    def __init__(self, prom: ReducedModel, scene: Scene, xi, scheme: NewmarkScheme):
+        self.prom, self.scheme = prom, scheme
+        self.delta = prom.delta(xi)
+        d = self.delta
+        self.mass = prom.mass.at(d)
+        self.k1, self.k2, self.k3 = (t.at(d) for t in (prom.stiffness_linear, prom.stiffness_quadratic, prom.stiffness_cubic))
+        alpha, beta = prom.rayleigh
+        self.damping = alpha * self.mass + beta * self.k1
+        self.actuation_constant = prom.actuation_constant.at(d)
+        self.actuation_linear = prom.actuation_linear.at(d)
+        self.drag = prom.drag.at(d)
+        self.amplitude, self.frequency = scene.actuation.amplitude, scene.actuation.frequency
+        self.dorsal_z = prom.dorsal_z + prom.dorsal_z_gradient @ d if d.size else prom.dorsal_z
+        self.spine = SpineGeometry(prom.spine_rest_xy, virtual_mass(self.dorsal_z, prom.fluid_density))
+        self.spine_rows = prom.spine_rows.reshape(-1, prom.size)            # (2 n_spine, m)
+        self.com_weights = prom.mass_moment_x.at(d) / float(prom.total_mass.at(d))
+        self._factors = None
+
+    # ------------------------------------------------------------------ forces
+    def activations(self, time: float) -> np.ndarray:
+        """(a_left, a_right) = A sin(2π f t) (1, -1)."""
+        value = self.amplitude * np.sin(2 * np.pi * self.frequency * time)
+        return np.array([value, -value])
+
+    def internal_force(self, eta):
+        """K1 η + K2 η η + K3 η η η."""
+        quadratic = self.k2 @ eta
+        cubic = (self.k3 @ eta) @ eta
+        return self.k1 @ eta + quadratic @ eta + cubic @ eta
+
+    def internal_tangent(self, eta):
+        """K1 + 2 K2 η + 3 K3 η η (symmetric tensors)."""
+        return self.k1 + 2.0 * (self.k2 @ eta) + 3.0 * ((self.k3 @ eta) @ eta)
+
+    def actuation_force(self, time, eta):
+        """f_act,r = -Σ_j a_j (b_j + B_j η)."""
+        a = self.activations(time)
+        return -(a @ self.actuation_constant + np.einsum("j,jab,b->a", a, self.actuation_linear, eta))
+
+    def _spine_states(self, eta, eta_dot, eta_ddot):
+        return [(self.spine_rows @ x).reshape(-1, 2) for x in (eta, eta_dot, eta_ddot)]
+
+    def thrust_force(self, eta, eta_dot, eta_ddot):
+        if not self.prom.thrust:
+            return np.zeros_like(eta)
+        return self.spine_rows.T @ thrust_force(self.spine, *self._spine_states(eta, eta_dot, eta_ddot)).ravel()
+
+    def drag_force(self, eta_dot):
+        """g_r v_x², v_x the head's x-velocity."""
+        return self.drag * (self.prom.head_x_row @ eta_dot) ** 2
+
+    def residual(self, time, eta, eta_dot, eta_ddot):
+        inertia = self.mass @ eta_ddot
+        internal = self.internal_force(eta)
+        external = self.actuation_force(time, eta) + self.thrust_force(eta, eta_dot, eta_ddot) + self.drag_force(eta_dot)
+        residual = inertia + self.damping @ eta_dot + internal - external
+        return residual, max(self.norm(internal), self.norm(external), self.norm(inertia))
+
+    def tangents(self, time, eta, eta_dot, eta_ddot):
+        """(K_t, C_t, M_t) = ∂r/∂(η, η̇, η̈)."""
+        a = self.activations(time)
+        stiffness = self.internal_tangent(eta) + np.einsum("j,jab->ab", a, self.actuation_linear)
+        damping = self.damping.copy()
+        mass = self.mass.copy()
+        if self.prom.thrust:
+            jacobians = thrust_jacobians(self.spine, *self._spine_states(eta, eta_dot, eta_ddot))
+            rows = self.spine_rows
+            stiffness -= rows.T @ jacobians[0] @ rows
+            damping -= rows.T @ jacobians[1] @ rows
+            mass -= rows.T @ jacobians[2] @ rows
+        head = self.prom.head_x_row
+        damping -= 2.0 * (head @ eta_dot) * np.outer(self.drag, head)
+        return stiffness, damping, mass
+
+    def newton_matrix(self, time, eta, eta_dot, eta_ddot):
+        stiffness, damping, mass = self.tangents(time, eta, eta_dot, eta_ddot)
+        return stiffness + self.scheme.velocity_factor * damping + self.scheme.acceleration_factor * mass
+
+    def factorize(self, time, eta, eta_dot, eta_ddot):
+        self._factors = scipy.linalg.lu_factor(self.newton_matrix(time, eta, eta_dot, eta_ddot))
+
+    def solve(self, rhs):
+        return scipy.linalg.lu_solve(self._factors, rhs)
+
+    def norm(self, vector):
+        return float(np.linalg.norm(vector))
+
+    # ------------------------------------------------------------------ ξ-derivatives
+    def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
+        """∂r/∂ξ_k at fixed (η, η̇, η̈), shape (m, p)."""
+        prom, d = self.prom, self.delta
+        p = prom.n_parameters
+        if p == 0 or prom.mass.first is None:
+            return np.zeros((eta.size, p))
+        alpha, beta = prom.rayleigh
+        mass_k = prom.mass.gradient(d)
+        k1_k, k2_k, k3_k = (t.gradient(d) for t in (prom.stiffness_linear, prom.stiffness_quadratic, prom.stiffness_cubic))
+        a = self.activations(time)
+        columns = (mass_k @ eta_ddot + (alpha * mass_k + beta * k1_k) @ eta_dot + k1_k @ eta
+                   + np.einsum("kabc,b,c->ka", k2_k, eta, eta) + np.einsum("kabcd,b,c,d->ka", k3_k, eta, eta, eta)
+                   + np.einsum("j,kja->ka", a, prom.actuation_constant.gradient(d))
+                   + np.einsum("j,kjab,b->ka", a, prom.actuation_linear.gradient(d), eta)
+                   - prom.drag.gradient(d) * (prom.head_x_row @ eta_dot) ** 2)
+        if prom.thrust:
+            per_mass = thrust_force_per_virtual_mass(self.spine, *self._spine_states(eta, eta_dot, eta_ddot))
+            # m̃ = (π/4) ρ_w (2 z_d)² ⇒ ∂m̃/∂ξ_k = 2π ρ_w z_d ∂z_d/∂ξ_k
+            mass_gradient = 2 * np.pi * prom.fluid_density * self.dorsal_z[:, None] * prom.dorsal_z_gradient
+            thrust_k = np.einsum("snc,sk->knc", per_mass, mass_gradient).reshape(p, -1)
+            columns -= thrust_k @ self.spine_rows
+        return columns.T
+
+    def observables(self, eta) -> tuple[float, float, float]:
+        """(head x, tail y, centre-of-mass x) [m]."""
+        return float(self.prom.head_x_row @ eta), float(self.prom.tail_y_row @ eta), float(self.com_weights @ eta)
+
+    def com_weights_gradient(self) -> np.ndarray:
+        """∂(c(ξ))/∂ξ_k for com_x = c(ξ)·η, c = n(ξ)/mass(ξ); shape (p, m)."""
+        prom, d = self.prom, self.delta
+        if prom.n_parameters == 0 or prom.mass_moment_x.first is None:
+            return np.zeros((prom.n_parameters, prom.size))
+        total = float(prom.total_mass.at(d))
+        return (prom.mass_moment_x.gradient(d) - np.outer(prom.total_mass.gradient(d), self.com_weights * total) / total) / total
+
+
+@dataclass
+class ReducedResult:
+    trajectory: Trajectory
+    distance: float | None
+    tail_amplitude: float | None
+    completed: bool
+    wall_time: float
+    error: str | None = None
+    states: np.ndarray | None = None              # (n_samples, m) η
+    sensitivities: np.ndarray | None = None       # (n_samples, m, p) dη/dξ
+    distance_gradient: np.ndarray | None = None   # (p,) dd/dξ
+    timings: dict = field(default_factory=dict)
+
+
+def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: bool = False) -> ReducedResult:
+    """Integrate the PROM at design ξ over the scene's horizon (optionally with dη/dξ)."""
+    from .errors import SolverError
+    from .simulate import check_time_grid
+
+    started = clock.perf_counter()
+    n_steps = check_time_grid(scene)
+    xi = prom.xi_center if xi is None else np.asarray(xi, dtype=float)
+    scheme = NewmarkScheme.with_damping(scene.solver.time_step, scene.solver.newmark_alpha)
+    system = ReducedSystem(prom, scene, xi, scheme)
+    m, p = prom.size, prom.n_parameters
+    trajectory = Trajectory()
+    states = [np.zeros(m)]
+    zero = np.zeros(m)
+    trajectory.append(0.0, *system.observables(zero), 0)
+    sensitivity = [np.zeros((m, p))] * 3
+    sensitivity_history = [np.zeros((m, p))]
+
+    def record(report: StepReport, eta, eta_dot, eta_ddot):
+        nonlocal sensitivity
+        trajectory.append(report.time, *system.observables(eta), report.iterations)
+        states.append(eta.copy())
+        if sensitivities and p:
+            sensitivity = propagate_sensitivity(system, report.time, (eta, eta_dot, eta_ddot), sensitivity)
+            sensitivity_history.append(sensitivity[0].copy())
+
+    settings = NewtonSettings(tolerance=scene.solver.tolerance, max_iterations=scene.solver.max_iterations)
+    error = None
+    try:
+        integrate(system, scheme, n_steps, (zero, zero, zero), settings, record)
+    except SolverError as failure:
+        error = str(failure)
+    arrays = trajectory.arrays()
+    completed = error is None
+    result = ReducedResult(
+        trajectory=trajectory, completed=completed, error=error, states=np.array(states),
+        distance=swimming_distance(arrays["time"], arrays["com_x"]) if completed else None,
+        tail_amplitude=tail_amplitude(arrays["time"], arrays["tail_y"]) if completed else None,
+        wall_time=clock.perf_counter() - started)
+    if sensitivities and p and completed:
+        result.sensitivities = np.array(sensitivity_history)
+        result.distance_gradient = distance_gradient(system, arrays["time"], result.states, result.sensitivities)
+    return result
+
+
+def propagate_sensitivity(system: ReducedSystem, time: float, state, previous):
+    """(η', η̇', η̈') at t_{n+1} from those at t_n by direct differentiation of Newmark."""
+    scheme = system.scheme
+    stiffness, damping, mass = system.tangents(time, *state)
+    matrix = stiffness + scheme.velocity_factor * damping + scheme.acceleration_factor * mass
+    u_predicted, v_predicted = scheme.predict(*previous)
+    rhs = (-system.parameter_derivative(time, *state)
+           - damping @ (v_predicted - scheme.velocity_factor * u_predicted)
+           + scheme.acceleration_factor * (mass @ u_predicted))
+    u_new = np.linalg.solve(matrix, rhs)
+    v_new, a_new = scheme.correct(u_new, u_predicted, v_predicted)
+    return u_new, v_new, a_new
+
+
+def distance_gradient(system: ReducedSystem, time, states, sensitivities) -> np.ndarray:
+    """dd/dξ of d = mean_window c(ξ)·η: mean of (∂c/∂ξ) η + c S over the last 0.1 s."""
+    mask = window_mask(time, DISTANCE_WINDOW)
+    weights_gradient = system.com_weights_gradient()
+    per_sample = states[mask] @ weights_gradient.T + np.einsum("m,smk->sk", system.com_weights, sensitivities[mask])
+    return per_sample.mean(axis=0)
