@@ -55,10 +55,12 @@ class ReducedModel:
 
     scene_hash: str
     software_version: str
-    shape_names: list[str]
+    shape_names: list[str]               # the PROM's parameters (none for a plain ROM)
+    design_point: dict                   # the scene's shape parameters at the building point
     xi_center: np.ndarray               # ξ_c, the design the basis and tensors were built on
     validity_radius: np.ndarray          # per parameter, |ξ - ξ_c|_k inside which the PROM is trusted
     labels: list[str]                    # basis vector names
+    basis: np.ndarray                    # V at the input-mesh nodes, (n_nodes, 3, m), Vᵀ M V = I
     dropped: list[str]                   # candidate vectors dropped as dependent
     frequencies: np.ndarray              # Hz, vibration modes of the basis
     mass: Taylor                         # M_r (m, m)

@@ -120,10 +120,9 @@ class ReducedSystem:
             return np.zeros((eta.size, p))
         alpha, beta = prom.rayleigh
         mass_k = prom.mass.gradient(d)
-        k1_k, k2_k, k3_k = (t.gradient(d) for t in (prom.stiffness_linear, prom.stiffness_quadratic, prom.stiffness_cubic))
         a = self.activations(time)
-        columns = (mass_k @ eta_ddot + (alpha * mass_k + beta * k1_k) @ eta_dot + k1_k @ eta
-                   + np.einsum("kabc,b,c->ka", k2_k, eta, eta) + np.einsum("kabcd,b,c,d->ka", k3_k, eta, eta, eta)
+        columns = (mass_k @ eta_ddot + (alpha * mass_k + beta * prom.stiffness_linear.gradient(d)) @ eta_dot
+                   + self.internal_force_gradient(eta)
                    + np.einsum("j,kja->ka", a, prom.actuation_constant.gradient(d))
                    + np.einsum("j,kjab,b->ka", a, prom.actuation_linear.gradient(d), eta)
                    - prom.drag.gradient(d) * (prom.head_x_row @ eta_dot) ** 2)
@@ -134,6 +133,14 @@ class ReducedSystem:
             thrust_k = np.einsum("snc,sk->knc", per_mass, mass_gradient).reshape(p, -1)
             columns -= thrust_k @ self.spine_rows
         return columns.T
+
+    def internal_force_gradient(self, eta) -> np.ndarray:
+        """∂f_int,r/∂ξ_k = K1_k η + K2_k η η + K3_k η η η, shape (p, m)."""
+        d = self.delta
+        k1_k, k2_k, k3_k = (t.gradient(d) for t in (self.prom.stiffness_linear, self.prom.stiffness_quadratic,
+                                                     self.prom.stiffness_cubic))
+        return (k1_k @ eta + np.einsum("kabc,b,c->ka", k2_k, eta, eta)
+                + np.einsum("kabcd,b,c,d->ka", k3_k, eta, eta, eta))
 
     def observables(self, eta) -> tuple[float, float, float]:
         """(head x, tail y, centre-of-mass x) [m]."""

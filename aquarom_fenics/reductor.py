@@ -151,15 +151,18 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
     dorsal_z = rest[tags.dorsal_nodes, 2] - tags.box.z_axis
     dorsal_gradient = nodal_rows(fish)[tags.dorsal_nodes, 2, :p]
     timings["total"] = time.perf_counter() - started
-    radius = np.full(len(fish.shape_names), scene.reduction.validity_radius) if parametric else np.zeros(len(fish.shape_names))
+    names = list(fish.shape_names[:p])
+    radius = np.full(p, scene.reduction.validity_radius)
     if comm.rank == 0:
         log.info("PROM: m = %d (%s), p = %d, Taylor order %d; built %s; skipped %s; %.2f s (basis %.2f s, "
                  "internal force %.2f s, other tensors %.2f s)", m, ", ".join(basis.labels), p, order,
                  ", ".join(built), ", ".join(skipped) or "nothing", timings["total"], timings["basis_total"],
                  timings["internal_force_tensors"], timings["other_tensors"])
     return ReducedModel(
-        scene_hash=scene.hash, software_version=__version__, shape_names=list(fish.shape_names),
-        xi_center=xi_center, validity_radius=radius, labels=basis.labels, dropped=basis.dropped,
+        scene_hash=scene.hash, software_version=__version__, shape_names=names,
+        design_point=dict(zip(fish.shape_names, map(float, xi_center))),
+        xi_center=xi_center[:p], validity_radius=radius, labels=basis.labels,
+        basis=np.stack([fom.nodal_displacement(vectors[:, j]) for j in range(m)], axis=-1), dropped=basis.dropped,
         frequencies=basis.frequencies, mass=mass,
         stiffness_linear=Taylor(*(t[0] if t is not None else None for t in _pad(internal))),
         stiffness_quadratic=Taylor(*(t[1] if t is not None else None for t in _pad(internal))),
