@@ -99,10 +99,10 @@ class CellSampler:
         return moduli
 
     def strain_coefficients(self, vectors: np.ndarray, expression) -> tuple[np.ndarray, np.ndarray]:
-        """(e, q) of E(V η) = e η + ½ q η η: shapes (n_cells, m, 6) and (n_cells, m, m, 6).
+        """(e, q) of E(V η) = e η + ½ q η η: shapes (m, n_cells, 6) and (n_pairs, n_cells, 6).
 
-        Sampled at u = ±V_j and u = V_j + V_k; exact because E is quadratic in u (also for the
-        ξ-derivative expressions, which are quadratic in u as well).
+        q is stored for the pairs j ≤ k of :func:`pair_index`. Sampled at u = ±V_j and
+        u = V_j + V_k; exact because E is quadratic in u (the ξ-derivative expressions as well).
         """
         m = vectors.shape[1]
 
@@ -112,28 +112,56 @@ class CellSampler:
 
         plus = [strain_of(vectors[:, j]) for j in range(m)]
         minus = [strain_of(-vectors[:, j]) for j in range(m)]
-        linear = np.stack([(p - n) / 2.0 for p, n in zip(plus, minus)], axis=1)
-        quadratic = np.empty((self.cells.size, m, m, 6))
-        for j in range(m):
-            quadratic[:, j, j] = plus[j] + minus[j]
-        for j, k in itertools.combinations(range(m), 2):
-            both = strain_of(vectors[:, j] + vectors[:, k])
-            mixed = both - linear[:, j] - linear[:, k] - 0.5 * (quadratic[:, j, j] + quadratic[:, k, k])
-            quadratic[:, j, k] = quadratic[:, k, j] = mixed
+        linear = np.stack([(p - n) / 2.0 for p, n in zip(plus, minus)])
+        diagonal = [p + n for p, n in zip(plus, minus)]
+        pairs = pair_list(m)
+        quadratic = np.empty((len(pairs), self.cells.size, 6))
+        for number, (j, k) in enumerate(pairs):
+            if j == k:
+                quadratic[number] = diagonal[j]
+            else:
+                both = strain_of(vectors[:, j] + vectors[:, k])
+                quadratic[number] = both - linear[j] - linear[k] - 0.5 * (diagonal[j] + diagonal[k])
         return linear, quadratic
 
 
-def energy_tensors(weight, moduli, linear, quadratic):
-    """(P2, P3, P4) = Σ_c w (e·ℂ·e, e·ℂ·q, q·ℂ·q) for one set of factors (local cells only)."""
-    m = linear.shape[1]
-    weighted_moduli = weight[:, None, None] * moduli
-    stressed_linear = np.einsum("cab,cjb->cja", weighted_moduli, linear)            # (c, m, 6)
-    stressed_quadratic = np.einsum("cab,cjkb->cjka", weighted_moduli, quadratic)    # (c, m, m, 6)
-    p2 = np.einsum("cia,cja->ij", linear, stressed_linear)
-    p3 = np.einsum("cia,cjka->ijk", linear, stressed_quadratic)
-    flat_q = quadratic.transpose(1, 2, 0, 3).reshape(m * m, -1)
-    flat_stressed = stressed_quadratic.transpose(1, 2, 0, 3).reshape(m * m, -1)
-    p4 = (flat_q @ flat_stressed.T).reshape(m, m, m, m)
+def pair_list(m: int) -> list[tuple[int, int]]:
+    return [(j, k) for j in range(m) for k in range(j, m)]
+
+
+def pair_index(m: int) -> np.ndarray:
+    """(m, m) → position of the pair (min, max) in :func:`pair_list`."""
+    index = np.empty((m, m), dtype=np.int64)
+    for number, (j, k) in enumerate(pair_list(m)):
+        index[j, k] = index[k, j] = number
+    return index
+
+
+def whitening(weight: np.ndarray, moduli: np.ndarray) -> np.ndarray:
+    """R_c with w_c ℂ_c = R_c R_cᵀ (Cholesky), so that w x:ℂ:y = (R_cᵀ x)·(R_cᵀ y)."""
+    return np.sqrt(weight)[:, None, None] * np.linalg.cholesky(moduli)
+
+
+def whiten(factor: np.ndarray, transform: np.ndarray) -> np.ndarray:
+    """R_cᵀ x for every cell of an (n, n_cells, 6) array, flattened to (n, 6 n_cells)."""
+    whitened = np.matmul(factor.transpose(1, 0, 2), transform)        # (c, n, 6): x R = (Rᵀ x)ᵀ
+    return np.ascontiguousarray(whitened.transpose(1, 0, 2)).reshape(factor.shape[0], -1)
+
+
+def energy_tensors(left, right, m: int):
+    """Symmetrised Σ_c w (e_l·ℂ·e_r, ½(e_l·ℂ·q_r + e_r·ℂ·q_l), q_l·ℂ·q_r) from whitened factors.
+
+    ``left`` and ``right`` are (ẽ, q̃) pairs; P3 and P4 are expanded from the pairs j ≤ k.
+    """
+    (e_left, q_left), (e_right, q_right) = left, right
+    p2 = e_left @ e_right.T
+    p3_pairs = 0.5 * (e_left @ q_right.T + e_right @ q_left.T)
+    p4_pairs = q_left @ q_right.T
+    index = pair_index(m)
+    p2 = 0.5 * (p2 + p2.T)
+    p3 = p3_pairs[:, index]
+    p4_pairs = 0.5 * (p4_pairs + p4_pairs.T)
+    p4 = p4_pairs[index[:, :, None, None], index[None, None, :, :]]
     return p2, p3, p4
 
 
@@ -144,82 +172,60 @@ def force_tensors(p2, p3, p4):
     return p2, 1.5 * p3_sym, 0.5 * p4_sym
 
 
-def _product_terms(factors_by_order, derivative_indices):
-    """Leibniz rule: every way to distribute the ξ-derivative indices among the three factors."""
-    count = len(derivative_indices)
-    for assignment in itertools.product(range(3), repeat=count):
-        picked = [tuple(derivative_indices[i] for i in range(count) if assignment[i] == slot) for slot in range(3)]
-        yield [factors_by_order[slot](indices) for slot, indices in enumerate(picked)]
-
-
 def internal_force_taylor(sampler: CellSampler, vectors: np.ndarray, shape_fields: list[np.ndarray],
                           order: int, comm: MPI.Comm):
-    """Taylor coefficients in Δξ of (K1, K2, K3): lists [constant, first (p, ...), second (p, p, ...)]."""
-    moduli = sampler.elasticity()
-    weight0 = sampler.evaluate(sampler.weight[0])[:, 0]
-    strain0 = sampler.strain_coefficients(vectors, sampler.strain[0])
-    p = len(shape_fields) if order >= 1 else 0
-    first_strain, first_weight = [], []
-    for k in range(p):
-        sampler.set_shape_directions(shape_fields[k])
-        first_strain.append(sampler.strain_coefficients(vectors, sampler.strain[1]))
-        first_weight.append(sampler.evaluate(sampler.weight[1])[:, 0])
+    """Taylor coefficients in Δξ of (K1, K2, K3): lists [constant, first (p, ...), second (p, p, ...)].
 
-    def weight(indices):
-        if not indices:
-            return weight0
-        if len(indices) == 1:
-            return first_weight[indices[0]]
-        sampler.set_shape_directions(*(shape_fields[i] for i in indices))
-        return sampler.evaluate(sampler.weight[2])[:, 0]
+    Π = ½ Σ_c w_c E_c:ℂ_c:E_c; its ξ-derivatives follow Leibniz' rule over the three factors
+    (w, E, E). The weight enters as w_I / w_0 on the left factor of strains whitened with w_0.
+    """
+    m = vectors.shape[1]
+    moduli = sampler.elasticity()
+    base_weight = sampler.evaluate(sampler.weight[0])[:, 0]
+    transform = whitening(base_weight, moduli)
+    p = len(shape_fields) if order >= 1 else 0
+    whitened, weight_ratio = {}, {}
 
     def strain(indices):
-        if not indices:
-            return strain0
-        if len(indices) == 1:
-            return first_strain[indices[0]]
-        sampler.set_shape_directions(*(shape_fields[i] for i in indices))
-        return sampler.strain_coefficients(vectors, sampler.strain[2])
+        if indices not in whitened:
+            sampler.set_shape_directions(*(shape_fields[i] for i in indices))
+            linear, quadratic = sampler.strain_coefficients(vectors, sampler.strain[len(indices)])
+            whitened[indices] = (whiten(linear, transform), whiten(quadratic, transform))
+        return whitened[indices]
+
+    def weight(indices):
+        if indices not in weight_ratio:
+            sampler.set_shape_directions(*(shape_fields[i] for i in indices))
+            ratio = sampler.evaluate(sampler.weight[len(indices)])[:, 0] / base_weight
+            weight_ratio[indices] = np.repeat(ratio, 6)
+        return weight_ratio[indices]
 
     def tensors_for(derivative_indices):
-        total = None
-        factors = (weight, strain, strain)
-        for w, (e_left, q_left), (e_right, q_right) in _product_terms(factors, derivative_indices):
-            contribution = _mixed_energy_tensors(w, moduli, e_left, q_left, e_right, q_right)
-            total = contribution if total is None else tuple(a + b for a, b in zip(total, contribution))
-        total = tuple(comm.allreduce(t, op=MPI.SUM) for t in total)
-        return force_tensors(*total)
+        totals = [np.zeros((m, m)), np.zeros((m, m, m)), np.zeros((m, m, m, m))]
+        for weight_indices, left_indices, right_indices in _leibniz(derivative_indices):
+            left = strain(left_indices)
+            if weight_indices:
+                left = tuple(part * weight(weight_indices) for part in left)
+            for total, part in zip(totals, energy_tensors(left, strain(right_indices), m)):
+                total += part
+        return force_tensors(*(comm.allreduce(total, op=MPI.SUM) for total in totals))
 
-    constant = tensors_for(())
-    taylor = [constant]
+    taylor = [tensors_for(())]
     if p:
-        taylor.append(tuple(np.stack(t) for t in zip(*(tensors_for((k,)) for k in range(p)))))
+        first = [tensors_for((k,)) for k in range(p)]
+        taylor.append(tuple(np.stack(parts) for parts in zip(*first)))
     if order >= 2 and p:
-        second = [[tensors_for((k, l)) for l in range(p)] for k in range(p)]
-        taylor.append(tuple(np.stack([np.stack([second[k][l][i] for l in range(p)]) for k in range(p)])
+        second = {}
+        for k in range(p):
+            for l in range(k, p):
+                second[k, l] = second[l, k] = tensors_for((k, l))
+        taylor.append(tuple(np.stack([np.stack([second[k, l][i] for l in range(p)]) for k in range(p)])
                             for i in range(3)))
     return taylor
 
 
-def _mixed_energy_tensors(weight, moduli, e_left, q_left, e_right, q_right):
-    """Σ_c w (e_l·ℂ·e_r, ½(e_l·ℂ·q_r + e_r·ℂ·q_l), q_l·ℂ·q_r) symmetrised in the two strain factors.
-
-    With identical left and right factors this is :func:`energy_tensors`; the Leibniz terms of the
-    ξ-derivatives use different ones (the factor ψ = ½ E:ℂ:E is bilinear in its two strains).
-    """
-    if e_left is e_right:
-        return energy_tensors(weight, moduli, e_left, q_left)
-    m = e_left.shape[1]
-    weighted_moduli = weight[:, None, None] * moduli
-    stressed_e_right = np.einsum("cab,cjb->cja", weighted_moduli, e_right)
-    stressed_q_right = np.einsum("cab,cjkb->cjka", weighted_moduli, q_right)
-    stressed_q_left = np.einsum("cab,cjkb->cjka", weighted_moduli, q_left)
-    p2 = np.einsum("cia,cja->ij", e_left, stressed_e_right)
-    p2 = 0.5 * (p2 + p2.T)
-    p3 = 0.5 * (np.einsum("cia,cjka->ijk", e_left, stressed_q_right)
-                + np.einsum("cia,cjka->ijk", e_right, stressed_q_left))
-    flat_left = q_left.transpose(1, 2, 0, 3).reshape(m * m, -1)
-    flat_stressed_right = stressed_q_right.transpose(1, 2, 0, 3).reshape(m * m, -1)
-    p4 = (flat_left @ flat_stressed_right.T).reshape(m, m, m, m)
-    p4 = 0.5 * (p4 + p4.transpose(2, 3, 0, 1))
-    return p2, p3, p4
+def _leibniz(derivative_indices):
+    """Every way to distribute the ξ-derivative indices among the factors (w, E_left, E_right)."""
+    count = len(derivative_indices)
+    for assignment in itertools.product(range(3), repeat=count):
+        yield tuple(tuple(derivative_indices[i] for i in range(count) if assignment[i] == slot) for slot in range(3))
