@@ -11,6 +11,7 @@ import sys
 import textwrap
 from pathlib import Path
 
+import numpy as np
 from mpi4py import MPI
 
 from .errors import InputError, SolverError
@@ -19,7 +20,10 @@ EXAMPLES = {
     "mesh": "aquarom mesh scenes/nominal.toml",
     "shapes": "aquarom shapes so1 --xi y_thin=0.1 --xi z_tail=-0.3 --out results/shapes",
     "simulate": "aquarom simulate nominal --model fom --level 1 --out results/nominal-fom\n"
-                "  mpirun -n 2 aquarom simulate so1 --xi y_thin=0.1 --out results/so1-thin",
+                "  mpirun -n 2 aquarom simulate so1 --xi y_thin=0.1 --out results/so1-thin\n"
+                "  aquarom simulate so1 --model prom --prom results/so1-prom.npz --xi y_thin=0.05",
+    "build": "aquarom build so1 --out results/so1-prom.npz",
+    "compare": "aquarom compare so1 --xi y_thin=0.05 --level 1 --out results/so1-compare",
 }
 
 
@@ -43,10 +47,21 @@ def build_parser() -> argparse.ArgumentParser:
     shapes.add_argument("--xi", action="append", metavar="NAME=VALUE", help="shape parameter (repeatable)")
     shapes.add_argument("--out", type=Path, help="output directory (default results/shapes/SCENE)")
     simulate = command("simulate", "simulate the swimmer over the scene's horizon")
-    simulate.add_argument("--model", choices=["fom"], default="fom", help="model to integrate")
+    simulate.add_argument("--model", choices=["fom", "rom", "prom"], default="fom",
+                          help="full-order model, ROM of the design, or PROM of the scene (default fom)")
     simulate.add_argument("--xi", action="append", metavar="NAME=VALUE", help="shape parameter (repeatable)")
+    simulate.add_argument("--prom", type=Path, help="PROM file from `aquarom build` (model prom; built if absent)")
     simulate.add_argument("--out", type=Path, help="output directory (default results/simulate/SCENE-MODEL)")
     simulate.add_argument("--no-progress", action="store_true", help="no progress bar")
+    build = command("build", "build the scene's PROM (basis and reduced tensors) and save it to one file")
+    build.add_argument("--xi", action="append", metavar="NAME=VALUE", help="building point (default: start values)")
+    build.add_argument("--out", type=Path, help="PROM file (default results/build/SCENE-prom.npz)")
+    compare = command("compare", "run the FOM and the reduced model at one design and report their errors")
+    compare.add_argument("--model", choices=["rom", "prom"], default="prom", help="reduced model to check")
+    compare.add_argument("--xi", action="append", metavar="NAME=VALUE", help="shape parameter (repeatable)")
+    compare.add_argument("--prom", type=Path, help="PROM file from `aquarom build` (built if absent)")
+    compare.add_argument("--out", type=Path, help="output directory (default results/compare/SCENE)")
+    compare.add_argument("--no-progress", action="store_true", help="no progress bar")
     return parser
 
 
@@ -54,8 +69,7 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     rank = MPI.COMM_WORLD.rank
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(message)s")
-    for noisy in ("ffcx", "UFL", "FFCX", "root"):
-        logging.getLogger(noisy).setLevel(logging.WARNING)
+    logging.getLogger("aquarom").setLevel(logging.INFO if rank == 0 else logging.ERROR)
     try:
         return COMMANDS[args.command](args)
     except InputError as error:
@@ -134,17 +148,96 @@ def run_simulate(args) -> int:
     scene = load_scene(args)
     xi = parse_xi_assignments(args.xi, scene)
     out = args.out or Path("results") / "simulate" / f"{scene.name}-{args.model}"
-    result = simulate_fom(scene, xi=xi, out_dir=out, progress=not args.no_progress)
+    if args.model == "fom":
+        result = simulate_fom(scene, xi=xi, out_dir=out, progress=not args.no_progress)
+    else:
+        result = run_reduced_model(scene, xi, args.model, args.prom, out)
     if not result.completed:
         raise SolverError(f"{result.error}; partial trajectory in {out / 'trajectory.csv'}")
     say(f"{scene.name} ({args.model}): distance {100 * result.distance:.3f} cm, tail amplitude "
-        f"{100 * result.tail_amplitude:.3f} cm, {result.n_cells} cells, {result.n_dofs} dofs, "
-        f"{result.wall_time:.1f} s on {MPI.COMM_WORLD.size} rank(s)")
+        f"{100 * result.tail_amplitude:.3f} cm, {result.wall_time:.2f} s on {MPI.COMM_WORLD.size} rank(s)")
     say(f"outputs in {out}/ (trajectory.csv, summary.json, trajectory.png)")
     return 0
 
 
-COMMANDS = {"mesh": run_mesh, "shapes": run_shapes, "simulate": run_simulate}
+def reduced_model(scene, xi: dict, model: str, prom_file: Path | None):
+    """A ROM built at the design, or the scene's PROM (loaded from ``prom_file`` or built at the start values)."""
+    from .fish import load_fish
+    from .prom import ReducedModel
+    from .reductor import build_prom
+
+    if model == "rom":
+        return build_prom(scene, xi_center=xi, parametric=False)
+    if prom_file is not None:
+        return ReducedModel.load(prom_file, scene_hash=scene.hash)
+    fish = load_fish(scene)
+    return build_prom(scene, xi_center={s.name: s.start for s in scene.shapes}, fish=fish)
+
+
+def run_reduced_model(scene, xi: dict, model: str, prom_file: Path | None, out: Path):
+    from .outputs import write_trajectory_csv
+    from .reduced_dynamics import simulate_reduced
+    from .simulate import write_run_outputs
+
+    reduced = reduced_model(scene, xi, model, prom_file)
+    xi_vector = np.array([xi.get(name, reduced.design_point.get(name, 0.0)) for name in reduced.shape_names])
+    result = simulate_reduced(reduced, scene, xi_vector)
+    if MPI.COMM_WORLD.rank == 0:
+        out.mkdir(parents=True, exist_ok=True)
+        write_trajectory_csv(out / "trajectory.csv", result.trajectory.arrays())
+        design = reduced.design_point | xi
+        write_run_outputs(out, scene, result, model, list(design.values()), list(design), MPI.COMM_WORLD,
+                          extra={"cells": reduced.cells, "dofs": reduced.dofs, "reduced_size": reduced.size,
+                                 "basis": reduced.labels, "basis_dropped": reduced.dropped,
+                                 "build_timings": reduced.timings})
+    return result
+
+
+def run_build(args) -> int:
+    from .reductor import build_prom
+    from .scene import parse_xi_assignments
+
+    scene = load_scene(args)
+    xi = {s.name: s.start for s in scene.shapes} | parse_xi_assignments(args.xi, scene)
+    out = args.out or Path("results") / "build" / f"{scene.name}-prom.npz"
+    prom = build_prom(scene, xi_center=xi)
+    if MPI.COMM_WORLD.rank == 0:
+        prom.save(out)
+    say(f"PROM of {scene.name}: m = {prom.size} ({', '.join(prom.labels)}), p = {prom.n_parameters}, "
+        f"built in {prom.timings['total']:.2f} s; wrote {out}")
+    return 0
+
+
+def run_compare(args) -> int:
+    from .compare import model_errors
+    from .outputs import plot_comparison, write_json_atomic
+    from .scene import parse_xi_assignments
+    from .simulate import simulate_fom
+
+    scene = load_scene(args)
+    xi = parse_xi_assignments(args.xi, scene)
+    out = args.out or Path("results") / "compare" / scene.name
+    reduced = run_reduced_model(scene, xi, args.model, args.prom, out / args.model)
+    full = simulate_fom(scene, xi=xi, out_dir=out / "fom", progress=not args.no_progress)
+    for name, result in (("fom", full), (args.model, reduced)):
+        if not result.completed:
+            raise SolverError(f"{name}: {result.error}")
+    errors = model_errors(full, reduced)
+    if MPI.COMM_WORLD.rank == 0:
+        write_json_atomic(out / "compare.json", {"xi": xi, "model": args.model, "errors": errors,
+                                                 "fom": full.summary(), args.model: reduced.summary(),
+                                                 "speedup": full.wall_time / reduced.wall_time})
+        plot_comparison(out / "compare.png", {"FOM": full.trajectory.arrays(),
+                                              args.model.upper(): reduced.trajectory.arrays()},
+                        f"{scene.name}: FOM against {args.model.upper()}")
+    say(f"{scene.name} at {xi or 'the start values'}: distance FOM {100 * full.distance:.3f} cm, "
+        f"{args.model.upper()} {100 * reduced.distance:.3f} cm ({100 * errors['distance_relative']:+.2f} %); "
+        f"tail amplitude {100 * errors['tail_amplitude_relative']:+.2f} %; outputs in {out}/")
+    return 0
+
+
+COMMANDS = {"mesh": run_mesh, "shapes": run_shapes, "simulate": run_simulate, "build": run_build,
+            "compare": run_compare}
 
 if __name__ == "__main__":
     sys.exit(main())

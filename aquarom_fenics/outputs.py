@@ -52,6 +52,14 @@ class TrajectoryCSV:
         self._stream.close()
 
 
+def write_trajectory_csv(path: Path, arrays: dict[str, np.ndarray]) -> None:
+    """A whole trajectory at once (reduced runs are fast enough not to stream)."""
+    table = TrajectoryCSV(path)
+    for row in zip(*(arrays[name] for name in COLUMNS)):
+        table.write(*row[:4], int(row[4]))
+    table.close()
+
+
 def read_trajectory_csv(path: Path) -> dict[str, np.ndarray]:
     data = np.genfromtxt(path, delimiter=",", names=True, ndmin=1)
     return {name: np.asarray(data[name]) for name in COLUMNS}
@@ -66,6 +74,28 @@ def software_versions() -> dict[str, str]:
 
     return {"aquarom_fenics": __version__, "dolfinx": dolfinx.__version__, "petsc4py": petsc4py.__version__,
             "ufl": ufl.__version__, "numpy": np.__version__, "python": platform.python_version()}
+
+
+def plot_comparison(path: Path, runs: dict[str, dict[str, np.ndarray]], title: str) -> None:
+    """Overlay of head x, centre-of-mass x and tail y [cm] of several models."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axes = plt.subplots(3, 1, figsize=(7, 7), sharex=True)
+    for (label, arrays), style in zip(runs.items(), ("-", "--", ":", "-.")):
+        for axis, name in zip(axes, ("head_x", "com_x", "tail_y")):
+            axis.plot(arrays["time"], 100 * arrays[name], style, label=label)
+    for axis, label in zip(axes, ("head x [cm]", "centre of mass x [cm]", "tail y [cm]")):
+        axis.set_ylabel(label)
+        axis.grid(alpha=0.3)
+    axes[0].legend(loc="upper left")
+    axes[-1].set_xlabel("time [s]")
+    axes[0].set_title(title)
+    figure.tight_layout()
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
 
 
 def plot_trajectory(path: Path, arrays: dict[str, np.ndarray], title: str) -> None:

@@ -168,6 +168,14 @@ class ReducedResult:
     distance_gradient: np.ndarray | None = None   # (p,) dd/dξ
     timings: dict = field(default_factory=dict)
 
+    def summary(self) -> dict:
+        iterations = np.asarray(self.trajectory.newton_iterations[1:])
+        return {"distance": self.distance, "tail_amplitude": self.tail_amplitude, "completed": self.completed,
+                "error": self.error, "wall_time": self.wall_time, "steps": len(self.trajectory) - 1,
+                "mean_newton_iterations": float(iterations.mean()) if iterations.size else None,
+                "distance_gradient": None if self.distance_gradient is None else self.distance_gradient.tolist(),
+                "timings": self.timings}
+
 
 def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: bool = False) -> ReducedResult:
     """Integrate the PROM at design ξ over the scene's horizon (optionally with dη/dξ)."""

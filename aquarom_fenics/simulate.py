@@ -124,8 +124,10 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
     return result
 
 
-def write_run_outputs(out_dir: Path, scene: Scene, result: SimulationResult, model_name: str, xi, shape_names, comm):
-    summary = result.summary() | {
+def write_run_outputs(out_dir: Path, scene: Scene, result, model_name: str, xi, shape_names, comm,
+                      extra: dict | None = None):
+    """summary.json (and trajectory.png) of a FOM or reduced run; ``extra`` adds model facts."""
+    summary = result.summary() | (extra or {}) | {
         "model": model_name, "scene": scene.name, "scene_hash": scene.hash, "scene_values": scene.to_dict(),
         "xi": dict(zip(shape_names, map(float, xi))), "mpi_ranks": comm.size,
         "peak_memory_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
