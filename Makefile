@@ -16,6 +16,7 @@ test: setup
 
 bench: setup
 	$(PYTHON) scripts/bench_fom.py
+	$(PYTHON) scripts/bench_prom.py
 
 clean:
 	rm -rf results meshes/cache .pytest_cache

@@ -1,0 +1,97 @@
+"""PROM benchmark: build and solve costs per mesh level and number of parameters, FOM in the same run.
+
+For each level and p ∈ {0, 3, 5, 8} (no shapes, SO1, SO2, SO3 shape sets): basis time, tensor
+time, number of form evaluations (vector/matrix assemblies and cell-wise expression evaluations),
+reduced solve time with and without sensitivities, and the FOM time on the same mesh.
+Writes results/bench/prom.json.
+"""
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+REPOSITORY = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPOSITORY))
+
+from dolfinx import fem  # noqa: E402
+
+from aquarom_fenics.fish import load_fish  # noqa: E402
+from aquarom_fenics.outputs import software_versions, write_json_atomic  # noqa: E402
+from aquarom_fenics.reduced_dynamics import simulate_reduced  # noqa: E402
+from aquarom_fenics.reductor import build_prom  # noqa: E402
+from aquarom_fenics.scene import Scene  # noqa: E402
+from aquarom_fenics.simulate import simulate_fom  # noqa: E402
+
+SHAPE_SETS = {0: "nominal", 3: "so1", 5: "so2", 8: "so3"}
+
+
+class EvaluationCounter:
+    """Counts form assemblies and expression evaluations by wrapping the dolfinx entry points."""
+
+    def __init__(self):
+        import dolfinx.fem.petsc as fem_petsc
+
+        self.counts = {"vector_assemblies": 0, "matrix_assemblies": 0, "expression_evaluations": 0}
+        self._patched = []
+        self._wrap(fem_petsc, "assemble_vector", "vector_assemblies")
+        self._wrap(fem_petsc, "assemble_matrix", "matrix_assemblies")
+        self._wrap(fem.Expression, "eval", "expression_evaluations")
+
+    def _wrap(self, owner, name, key):
+        original = getattr(owner, name)
+
+        def counted(*args, **kwargs):
+            self.counts[key] += 1
+            return original(*args, **kwargs)
+
+        setattr(owner, name, counted)
+        self._patched.append((owner, name, original))
+
+    def take(self) -> dict:
+        counts = dict(self.counts)
+        for key in self.counts:
+            self.counts[key] = 0
+        return counts
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3, 4, 5])
+    parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "bench" / "prom.json")
+    args = parser.parse_args()
+    counter = EvaluationCounter()
+    runs = []
+    for level in args.levels:
+        fom_scene = Scene.load("nominal").replace("mesh", level=level)
+        fom = simulate_fom(fom_scene, progress=False)
+        for p, name in SHAPE_SETS.items():
+            scene = Scene.load(name).replace("mesh", level=level)
+            fish = load_fish(scene)
+            build_prom(scene, fish=fish)          # compiles the forms once (JIT cache)
+            counter.take()
+            started = time.perf_counter()
+            prom = build_prom(scene, fish=fish)
+            build_time = time.perf_counter() - started
+            evaluations = counter.take()
+            plain = simulate_reduced(prom, scene)
+            with_sensitivities = simulate_reduced(prom, scene, sensitivities=True)
+            runs.append({
+                "level": level, "cells": prom.cells, "dofs": prom.dofs, "parameters": p, "scene": name,
+                "reduced_size": prom.size, "basis": prom.labels, "dropped": prom.dropped,
+                "build_time": build_time, "basis_time": prom.timings["basis_total"],
+                "tensor_time": prom.timings["internal_force_tensors"] + prom.timings["other_tensors"],
+                "form_evaluations": evaluations,
+                "solve_time": plain.wall_time, "solve_time_with_sensitivities": with_sensitivities.wall_time,
+                "distance": plain.distance, "fom_time": fom.wall_time, "fom_distance": fom.distance,
+                "fom_over_prom_total_time": fom.wall_time / (build_time + plain.wall_time)})
+            print({key: runs[-1][key] for key in ("level", "cells", "parameters", "reduced_size", "build_time",
+                                                  "solve_time", "solve_time_with_sensitivities", "fom_time")},
+                  flush=True)
+    write_json_atomic(args.out, {"benchmark": "prom", "runs": runs, "cores": os.cpu_count(),
+                                 "versions": software_versions(), "date": time.strftime("%Y-%m-%d %H:%M:%S")})
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
