@@ -3,7 +3,7 @@ PYTHON := .venv/bin/python
 AQUAROM := .venv/bin/aquarom
 OUT ?= results/demo
 
-.PHONY: setup demo test bench validate study clean
+.PHONY: setup demo test bench validate clean
 
 setup:
 	@bash scripts/setup.sh
@@ -17,6 +17,9 @@ test: setup
 bench: setup
 	$(PYTHON) scripts/bench_fom.py
 	$(PYTHON) scripts/bench_prom.py
+
+validate: setup
+	$(PYTHON) scripts/validate_prom_radius.py
 
 clean:
 	rm -rf results meshes/cache .pytest_cache

@@ -1,7 +1,7 @@
 """`make demo`: the main jobs on the built-in reference scenes, outputs under one folder.
 
 Reports the reference mesh, renders the SO1 shape catalog and one design, and simulates the
-nominal fish with the full-order model on the coarsest mesh.
+nominal fish with the full-order model on the coarsest mesh and checks its ROM against it.
 """
 import argparse
 import sys
@@ -25,6 +25,7 @@ def main():
     run(["shapes", "so1", "--out", str(out / "so1-shapes")])
     run(["shapes", "so1", "--xi", "z_tail=-0.4", "--xi", "y_thin=0.1", "--out", str(out / "so1-design")])
     run(["simulate", "nominal", "--model", "fom", "--level", "1", "--out", str(out / "nominal-fom")])
+    run(["compare", "nominal", "--model", "rom", "--level", "1", "--out", str(out / "nominal-compare")])
     print(f"\ndemo outputs in {out.resolve()}:")
     for path in sorted(out.rglob("*")):
         if path.is_file():

@@ -107,3 +107,31 @@ def test_order_one_prom_is_within_five_percent_at_an_eighth_of_the_so1_bounds():
             fom = simulate_fom(scene, xi, fish=fish, moved_mesh=True, progress=False)
             reduced = simulate_reduced(prom, scene, xi)
             assert abs(reduced.distance / fom.distance - 1) < 0.05, (shape.name, xi[index])
+
+
+@pytest.mark.mpi
+def test_two_ranks_build_the_same_prom(built, tmp_path):
+    import os
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from aquarom_fenics.prom import ReducedModel
+    from aquarom_fenics.scene import Scene
+
+    if shutil.which("mpirun") is None:
+        pytest.skip("mpirun not installed")
+    scene_file, serial_file = built
+    aquarom = Path(sys.executable).with_name("aquarom")
+    completed = subprocess.run(["mpirun", "-n", "2", str(aquarom), "build", str(scene_file), "--out",
+                                str(tmp_path / "parallel.npz")], capture_output=True, text=True, timeout=600,
+                               env=os.environ)
+    assert completed.returncode == 0, completed.stderr
+    scene = Scene.load(scene_file)
+    xi = np.array([-0.05, 0.0, 0.02])
+    serial = simulate_reduced(ReducedModel.load(serial_file, scene.hash), scene, xi)
+    parallel = simulate_reduced(ReducedModel.load(tmp_path / "parallel.npz", scene.hash), scene, xi)
+    for name in ("head_x", "tail_y", "com_x"):
+        a, b = serial.trajectory.arrays()[name], parallel.trajectory.arrays()[name]
+        assert np.linalg.norm(a - b) < 1e-8 * np.linalg.norm(a), name
