@@ -24,6 +24,8 @@ EXAMPLES = {
                 "  aquarom simulate so1 --model prom --prom results/so1-prom.npz --xi y_thin=0.05",
     "build": "aquarom build so1 --out results/so1-prom.npz",
     "compare": "aquarom compare so1 --xi y_thin=0.05 --level 1 --out results/so1-compare",
+    "optimize": "aquarom optimize so1 --level 1 --out results/so1-opt\n  aquarom optimize so1 --out results/so1-opt --resume",
+    "pareto": "aquarom pareto co --level 1 --out results/co-pareto",
 }
 
 
@@ -62,6 +64,14 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--prom", type=Path, help="PROM file from `aquarom build` (built if absent)")
     compare.add_argument("--out", type=Path, help="output directory (default results/compare/SCENE)")
     compare.add_argument("--no-progress", action="store_true", help="no progress bar")
+    optimize = command("optimize", "optimise the shape (and the amplitude, for co-optimisation scenes) with the PROM")
+    optimize.add_argument("--out", type=Path, help="output directory (default results/optimize/SCENE)")
+    optimize.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out")
+    optimize.add_argument("--method", choices=["paper", "trust-region"], help="override the scene's method")
+    optimize.add_argument("--weight", type=float, default=0.5,
+                          help="w_1 of L = w_1(-d) + (1-w_1) α A² for co-optimisation scenes (default 0.5)")
+    pareto = command("pareto", "co-optimisation weight sweep: Pareto front of distance against actuation energy")
+    pareto.add_argument("--out", type=Path, help="output directory (default results/pareto/SCENE)")
     return parser
 
 
@@ -236,8 +246,48 @@ def run_compare(args) -> int:
     return 0
 
 
+def run_optimize(args) -> int:
+    from .cost import CostWeights
+    from .study import run_optimization
+
+    scene = load_scene(args)
+    if args.method:
+        scene = scene.replace("optimizer", method=args.method)
+    if not scene.shapes:
+        raise InputError(f"scene {scene.source} has no [shapes] to optimise")
+    weights = CostWeights()
+    if scene.cooptimization.enabled:
+        if not 0.0 <= args.weight <= 1.0:
+            raise InputError(f"--weight {args.weight}: must be in [0, 1]")
+        weights = CostWeights(args.weight, 1.0 - args.weight, scene.cooptimization.energy_weight)
+    out = args.out or Path("results") / "optimize" / scene.name
+    result, check = run_optimization(scene, out, resume=args.resume, weights=weights)
+    space = result.space
+    say(f"{scene.name} ({scene.optimizer.method}): optimum "
+        + ", ".join(f"{n} = {v:.4g}" for n, v in zip(space.names, result.optimum))
+        + f"; {result.builds} PROM builds, {result.timings['total']:.1f} s ({result.stop_reason})")
+    say(f"FOM check: nominal {100 * check.nominal_distance:.3f} cm, optimal {100 * check.optimal_distance:.3f} cm "
+        f"(PROM {100 * check.prom_optimal_distance:.3f} cm), ratio {check.ratio:.2f}; outputs in {out}/")
+    return 0
+
+
+def run_pareto(args) -> int:
+    from .study import pareto_sweep
+
+    scene = load_scene(args)
+    if not scene.cooptimization.enabled:
+        raise InputError(f"scene {scene.source}: [cooptimization] enabled = true is needed for a Pareto sweep")
+    out = args.out or Path("results") / "pareto" / scene.name
+    points = pareto_sweep(scene, out)
+    for point in points:
+        say(f"w1 = {point['w1']:.2f}: amplitude {point['amplitude']:.3f}, energy {point['energy']:.4f}, "
+            f"FOM distance {100 * point['distance']:.3f} cm")
+    say(f"outputs in {out}/ (pareto.csv, pareto.png, one folder per weight)")
+    return 0
+
+
 COMMANDS = {"mesh": run_mesh, "shapes": run_shapes, "simulate": run_simulate, "build": run_build,
-            "compare": run_compare}
+            "compare": run_compare, "optimize": run_optimize, "pareto": run_pareto}
 
 if __name__ == "__main__":
     sys.exit(main())

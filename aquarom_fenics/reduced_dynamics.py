@@ -24,7 +24,7 @@ from .trajectory import Trajectory, swimming_distance, tail_amplitude, window_ma
 class ReducedSystem:
     """The PROM's tensors evaluated at one design ξ (implements ``NewtonSystem``)."""
 
-    def __init__(self, prom: ReducedModel, scene: Scene, xi, scheme: NewmarkScheme):
+    def __init__(self, prom: ReducedModel, scene: Scene, xi, scheme: NewmarkScheme, amplitude: float | None = None):
         self.prom, self.scheme = prom, scheme
         self.delta = prom.delta(xi)
         d = self.delta
@@ -35,7 +35,8 @@ class ReducedSystem:
         self.actuation_constant = prom.actuation_constant.at(d)
         self.actuation_linear = prom.actuation_linear.at(d)
         self.drag = prom.drag.at(d)
-        self.amplitude, self.frequency = scene.actuation.amplitude, scene.actuation.frequency
+        self.amplitude = scene.actuation.amplitude if amplitude is None else amplitude
+        self.frequency = scene.actuation.frequency
         self.dorsal_z = prom.dorsal_z + prom.dorsal_z_gradient @ d if d.size else prom.dorsal_z
         self.spine = SpineGeometry(prom.spine_rest_xy, virtual_mass(self.dorsal_z, prom.fluid_density))
         self.spine_rows = prom.spine_rows.reshape(-1, prom.size)            # (2 n_spine, m)
@@ -45,8 +46,17 @@ class ReducedSystem:
     # ------------------------------------------------------------------ forces
     def activations(self, time: float) -> np.ndarray:
         """(a_left, a_right) = A sin(2π f t) (1, -1)."""
-        value = self.amplitude * np.sin(2 * np.pi * self.frequency * time)
+        return self.amplitude * self.unit_activations(time)
+
+    def unit_activations(self, time: float) -> np.ndarray:
+        """∂(a_left, a_right)/∂A = sin(2π f t) (1, -1)."""
+        value = np.sin(2 * np.pi * self.frequency * time)
         return np.array([value, -value])
+
+    def amplitude_derivative(self, time, eta) -> np.ndarray:
+        """∂r/∂A = Σ_j (∂a_j/∂A) (b_j + B_j η)."""
+        a = self.unit_activations(time)
+        return a @ self.actuation_constant + np.einsum("j,jab,b->a", a, self.actuation_linear, eta)
 
     def internal_force(self, eta):
         """K1 η + K2 η η + K3 η η η."""
@@ -177,8 +187,13 @@ class ReducedResult:
                 "timings": self.timings}
 
 
-def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: bool = False) -> ReducedResult:
-    """Integrate the PROM at design ξ over the scene's horizon (optionally with dη/dξ)."""
+def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: bool = False,
+                     amplitude: float | None = None, amplitude_sensitivity: bool = False) -> ReducedResult:
+    """Integrate the PROM at design ξ over the scene's horizon.
+
+    With ``sensitivities`` the result carries dη/dξ (and dd/dξ); with ``amplitude_sensitivity``
+    one more column, d/dA of the actuation amplitude (``amplitude`` overrides the scene's A).
+    """
     from .errors import SolverError
     from .simulate import check_time_grid
 
@@ -186,21 +201,27 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
     n_steps = check_time_grid(scene)
     xi = prom.xi_center if xi is None else np.asarray(xi, dtype=float)
     scheme = NewmarkScheme.with_damping(scene.solver.time_step, scene.solver.newmark_alpha)
-    system = ReducedSystem(prom, scene, xi, scheme)
-    m, p = prom.size, prom.n_parameters
+    system = ReducedSystem(prom, scene, xi, scheme, amplitude)
+    m = prom.size
+    columns = (prom.n_parameters if sensitivities else 0) + (1 if amplitude_sensitivity else 0)
     trajectory = Trajectory()
     states = [np.zeros(m)]
     zero = np.zeros(m)
     trajectory.append(0.0, *system.observables(zero), 0)
-    sensitivity = [np.zeros((m, p))] * 3
-    sensitivity_history = [np.zeros((m, p))]
+    sensitivity = [np.zeros((m, columns))] * 3
+    sensitivity_history = [np.zeros((m, columns))]
 
     def record(report: StepReport, eta, eta_dot, eta_ddot):
         nonlocal sensitivity
         trajectory.append(report.time, *system.observables(eta), report.iterations)
         states.append(eta.copy())
-        if sensitivities and p:
-            sensitivity = propagate_sensitivity(system, report.time, (eta, eta_dot, eta_ddot), sensitivity)
+        if columns:
+            derivative = np.zeros((m, 0))
+            if sensitivities:
+                derivative = system.parameter_derivative(report.time, eta, eta_dot, eta_ddot)
+            if amplitude_sensitivity:
+                derivative = np.column_stack([derivative, system.amplitude_derivative(report.time, eta)])
+            sensitivity = propagate_sensitivity(system, report.time, (eta, eta_dot, eta_ddot), sensitivity, derivative)
             sensitivity_history.append(sensitivity[0].copy())
 
     settings = NewtonSettings(tolerance=scene.solver.tolerance, max_iterations=scene.solver.max_iterations)
@@ -216,19 +237,26 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
         distance=swimming_distance(arrays["time"], arrays["com_x"]) if completed else None,
         tail_amplitude=tail_amplitude(arrays["time"], arrays["tail_y"]) if completed else None,
         wall_time=clock.perf_counter() - started)
-    if sensitivities and p and completed:
+    if columns and completed:
         result.sensitivities = np.array(sensitivity_history)
-        result.distance_gradient = distance_gradient(system, arrays["time"], result.states, result.sensitivities)
+        weights_gradient = system.com_weights_gradient() if sensitivities else np.zeros((0, m))
+        if amplitude_sensitivity:
+            weights_gradient = np.vstack([weights_gradient, np.zeros(m)])
+        result.distance_gradient = distance_gradient(system, arrays["time"], result.states, result.sensitivities,
+                                                     weights_gradient)
     return result
 
 
-def propagate_sensitivity(system: ReducedSystem, time: float, state, previous):
-    """(η', η̇', η̈') at t_{n+1} from those at t_n by direct differentiation of Newmark."""
+def propagate_sensitivity(system: ReducedSystem, time: float, state, previous, parameter_derivative):
+    """(η', η̇', η̈') at t_{n+1} from those at t_n by direct differentiation of Newmark.
+
+    ``parameter_derivative`` is ∂r/∂(parameters) at the converged state, shape (m, columns).
+    """
     scheme = system.scheme
     stiffness, damping, mass = system.tangents(time, *state)
     matrix = stiffness + scheme.velocity_factor * damping + scheme.acceleration_factor * mass
     u_predicted, v_predicted = scheme.predict(*previous)
-    rhs = (-system.parameter_derivative(time, *state)
+    rhs = (-parameter_derivative
            - damping @ (v_predicted - scheme.velocity_factor * u_predicted)
            + scheme.acceleration_factor * (mass @ u_predicted))
     u_new = np.linalg.solve(matrix, rhs)
@@ -236,9 +264,8 @@ def propagate_sensitivity(system: ReducedSystem, time: float, state, previous):
     return u_new, v_new, a_new
 
 
-def distance_gradient(system: ReducedSystem, time, states, sensitivities) -> np.ndarray:
+def distance_gradient(system: ReducedSystem, time, states, sensitivities, weights_gradient) -> np.ndarray:
     """dd/dξ of d = mean_window c(ξ)·η: mean of (∂c/∂ξ) η + c S over the last 0.1 s."""
     mask = window_mask(time, DISTANCE_WINDOW)
-    weights_gradient = system.com_weights_gradient()
     per_sample = states[mask] @ weights_gradient.T + np.einsum("m,smk->sk", system.com_weights, sensitivities[mask])
     return per_sample.mean(axis=0)

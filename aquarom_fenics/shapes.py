@@ -218,6 +218,9 @@ def check_design(points: np.ndarray, cells: np.ndarray, moved_points: np.ndarray
     """
     from .mesh import signed_cell_volumes
 
+    if not np.all(np.isfinite(moved_points)):
+        names = ", ".join(f"{name}={value:g}" for name, value in xi_by_name.items())
+        raise InputError(f"{label} {names} has non-finite node coordinates; give finite parameters")
     nominal = signed_cell_volumes(points, cells)
     volume_ratio = signed_cell_volumes(moved_points, cells) / nominal
     inverted = volume_ratio <= 0.0

@@ -1,0 +1,131 @@
+"""Cost of a design and its gradient from the PROM (SPEC §10), and the feasible set.
+
+The design vector z is ξ (the scene's shape parameters), followed by the actuation amplitude A
+when co-optimisation is on. Cost L(z) = w_1 (-d(z)) + w_2 α A², d the swimming distance [m].
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linprog
+
+from .errors import InputError, SolverError
+from .prom import ReducedModel
+from .reduced_dynamics import simulate_reduced
+from .scene import Scene
+
+
+@dataclass(frozen=True)
+class DesignSpace:
+    """Names, box bounds and linear constraints A z ≤ b of the design vector z."""
+
+    names: tuple[str, ...]
+    lower: np.ndarray
+    upper: np.ndarray
+    start: np.ndarray
+    constraint_matrix: np.ndarray     # (n_rows, n) rows of A z ≤ b
+    constraint_bound: np.ndarray      # (n_rows,)
+    with_amplitude: bool
+
+    @property
+    def n_shapes(self) -> int:
+        return len(self.names) - int(self.with_amplitude)
+
+    def slacks(self, z: np.ndarray) -> np.ndarray:
+        """Every inequality as s(z) ≥ 0: z - lower, upper - z, b - A z."""
+        return np.concatenate([z - self.lower, self.upper - z, self.constraint_bound - self.constraint_matrix @ z])
+
+    def is_feasible(self, z: np.ndarray, tolerance: float = 1e-12) -> bool:
+        return bool(np.all(self.slacks(z) >= -tolerance))
+
+    def active_bounds(self, z: np.ndarray, tolerance: float = 1e-6) -> list[str]:
+        width = self.upper - self.lower
+        active = [f"{n} = lower" for n, v, lo, w in zip(self.names, z, self.lower, width) if v - lo <= tolerance * w]
+        active += [f"{n} = upper" for n, v, hi, w in zip(self.names, z, self.upper, width) if hi - v <= tolerance * w]
+        return active
+
+    def as_dict(self, z: np.ndarray) -> dict[str, float]:
+        return dict(zip(self.names, map(float, z)))
+
+
+def design_space(scene: Scene) -> DesignSpace:
+    """The scene's design space; refuses infeasible constraints and an infeasible start."""
+    names = list(scene.shape_names)
+    lower = [s.lower for s in scene.shapes]
+    upper = [s.upper for s in scene.shapes]
+    start = [s.start for s in scene.shapes]
+    co = scene.cooptimization
+    if co.enabled:
+        names.append("amplitude")
+        lower.append(co.amplitude_bounds[0])
+        upper.append(co.amplitude_bounds[1])
+        start.append(float(np.clip(scene.actuation.amplitude, *co.amplitude_bounds)))
+    rows, bounds = [], []
+    for constraint in scene.constraints:
+        row = np.zeros(len(names))
+        for name, coefficient in constraint.coefficients:
+            row[names.index(name)] = coefficient
+        if np.isfinite(constraint.upper):
+            rows.append(row)
+            bounds.append(constraint.upper)
+        if np.isfinite(constraint.lower):
+            rows.append(-row)
+            bounds.append(-constraint.lower)
+    space = DesignSpace(tuple(names), np.array(lower), np.array(upper), np.array(start),
+                        np.array(rows).reshape(-1, len(names)), np.array(bounds), co.enabled)
+    if space.constraint_matrix.size:
+        feasible = linprog(np.zeros(len(names)), A_ub=space.constraint_matrix, b_ub=space.constraint_bound,
+                           bounds=list(zip(space.lower, space.upper)), method="highs")
+        if feasible.status == 2:
+            raise InputError(f"scene {scene.source}: the linear constraints and the bounds leave no feasible design")
+    violated = np.flatnonzero(space.constraint_bound - space.constraint_matrix @ space.start < -1e-12)
+    if violated.size:
+        raise InputError(f"scene {scene.source}: the start point {space.as_dict(space.start)} violates linear "
+                         f"constraint row(s) {', '.join(str(i + 1) for i in violated)}; move the start values inside")
+    return space
+
+
+@dataclass
+class Evaluation:
+    """Cost, its gradient and the swimming distance at one design, as the PROM predicts them."""
+
+    z: np.ndarray
+    cost: float
+    gradient: np.ndarray
+    distance: float
+    distance_gradient: np.ndarray
+
+
+@dataclass(frozen=True)
+class CostWeights:
+    """L = w_1 (-d) + w_2 α A²."""
+
+    distance: float = 1.0
+    energy: float = 0.0
+    alpha: float = 1.0
+
+    def energy_term(self, amplitude: float) -> float:
+        return self.alpha * amplitude ** 2
+
+
+def evaluate(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarray, weights: CostWeights) -> Evaluation:
+    """PROM simulation with sensitivities at z; raises SolverError if it stops or turns non-finite."""
+    xi = z[: space.n_shapes]
+    amplitude = float(z[-1]) if space.with_amplitude else None
+    result = simulate_reduced(prom, scene, xi, sensitivities=True, amplitude=amplitude,
+                              amplitude_sensitivity=space.with_amplitude)
+    if not result.completed:
+        raise SolverError(f"PROM simulation at {space.as_dict(z)} stopped: {result.error}")
+    distance_gradient = result.distance_gradient
+    if distance_gradient is None:
+        distance_gradient = np.zeros(len(z))
+    cost = -weights.distance * result.distance
+    gradient = -weights.distance * distance_gradient
+    if space.with_amplitude:
+        cost += weights.energy * weights.energy_term(z[-1])
+        gradient = gradient.copy()
+        gradient[-1] += weights.energy * 2 * weights.alpha * z[-1]
+    if not (np.isfinite(cost) and np.all(np.isfinite(gradient))):
+        raise SolverError(f"non-finite cost or gradient at {space.as_dict(z)}: cost {cost}, gradient {gradient}")
+    return Evaluation(z.copy(), float(cost), gradient, float(result.distance), distance_gradient)

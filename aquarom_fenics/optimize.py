@@ -1,0 +1,333 @@
+"""Shape (and actuation) optimisation with PROM sensitivities (SPEC §10).
+
+Two algorithms over the same cost and design space (``cost.py``):
+
+* ``paper``: the source's gradient descent with a log-barrier, z ← z - γ W ∇L_b / ‖W ∇L_b‖_∞
+  (γ the largest parameter change per iteration), a diagonal W halved along a direction whose
+  gradient component changes sign or whose bound becomes active, the linearised trajectory
+  η ≈ η_c + S (ξ - ξ_c) between PROM builds (so d ≈ d_c + ∇d_c·(z - z_c)), and a new PROM when
+  any |z - z_c|_i exceeds ``rebuild_threshold`` or every ``n_rebuild`` iterations.
+* ``trust-region``: the PROM built at the centre is a nonlinear surrogate (simulated at any z in
+  the radius, with its own sensitivities); SciPy's SLSQP solves the surrogate problem with bounds
+  and linear constraints inside the radius; a PROM built at the candidate gives the actual
+  reduction, ρ = actual / predicted accepts or rejects the step and resizes the radius.
+
+The state after every iteration goes to an atomic checkpoint; a resumed run continues from it to
+the same result (PROM builds are deterministic).
+"""
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import LinearConstraint, minimize
+
+from .cost import CostWeights, DesignSpace, Evaluation, design_space, evaluate
+from .errors import InputError, SolverError
+from .fish import Fish, load_fish
+from .outputs import write_json_atomic
+from .prom import ReducedModel
+from .reductor import build_prom
+from .scene import Scene
+
+log = logging.getLogger("aquarom")
+
+
+@dataclass
+class OptimizationResult:
+    optimum: np.ndarray
+    evaluation: Evaluation                    # PROM prediction at the optimum (from a PROM built there)
+    history: list[dict]
+    builds: int
+    stop_reason: str
+    space: DesignSpace
+    timings: dict = field(default_factory=dict)
+
+
+class PromBuilder:
+    """Builds PROMs centred on designs, counting builds and their time."""
+
+    def __init__(self, scene: Scene, fish: Fish, space: DesignSpace):
+        self.scene, self.fish, self.space = scene, fish, space
+        self.builds = 0
+        self.build_time = 0.0
+        self.solve_time = 0.0
+
+    def build(self, z: np.ndarray) -> ReducedModel:
+        started = time.perf_counter()
+        prom = build_prom(self.scene, xi_center=z[: self.space.n_shapes], fish=self.fish)
+        self.build_time += time.perf_counter() - started
+        self.builds += 1
+        return prom
+
+    def evaluate(self, prom, z, weights) -> Evaluation:
+        started = time.perf_counter()
+        try:
+            return evaluate(prom, self.scene, self.space, z, weights)
+        finally:
+            self.solve_time += time.perf_counter() - started
+
+
+def history_row(space: DesignSpace, iteration: int, z, cost, gradient, distance, kind: str, started: float,
+                **extra) -> dict:
+    row = {"iteration": iteration}
+    row.update({f"xi_{name}": float(value) for name, value in zip(space.names, z)})
+    row["cost"] = float(cost)
+    row.update({f"grad_{name}": float(value) for name, value in zip(space.names, gradient)})
+    row.update({"distance": float(distance), "prom": kind, "wall_time": time.perf_counter() - started})
+    row.update(extra)
+    return row
+
+
+class Checkpoint:
+    """Optimiser state as JSON, written atomically after every iteration."""
+
+    def __init__(self, path: Path | None, scene: Scene, method: str):
+        self.path, self.scene_hash, self.method = path, scene.hash, method
+
+    def save(self, state: dict, history: list[dict], builder: PromBuilder) -> None:
+        if self.path is None:
+            return
+        write_json_atomic(self.path, {"scene_hash": self.scene_hash, "method": self.method, "state": state,
+                                      "history": history, "builds": builder.builds,
+                                      "build_time": builder.build_time, "solve_time": builder.solve_time})
+
+    def load(self) -> dict | None:
+        if self.path is None or not self.path.exists():
+            return None
+        try:
+            data = json.loads(self.path.read_text())
+        except json.JSONDecodeError as error:
+            raise InputError(f"checkpoint {self.path}: unreadable ({error}); start without --resume") from None
+        if data.get("scene_hash") != self.scene_hash or data.get("method") != self.method:
+            raise InputError(f"checkpoint {self.path}: written for scene hash {data.get('scene_hash')} with "
+                             f"method {data.get('method')}, not this scene ({self.scene_hash}, {self.method}); "
+                             "start without --resume")
+        return data
+
+
+def optimize(scene: Scene, fish: Fish | None = None, weights: CostWeights | None = None,
+             checkpoint_path: Path | None = None, resume: bool = False,
+             on_iteration=None) -> OptimizationResult:
+    """Run the scene's optimiser; ``on_iteration(row)`` sees every history row as it is made."""
+    space = design_space(scene)
+    fish = fish or load_fish(scene)
+    weights = weights or CostWeights()
+    method = scene.optimizer.method
+    builder = PromBuilder(scene, fish, space)
+    checkpoint = Checkpoint(checkpoint_path, scene, method)
+    saved = checkpoint.load() if resume else None
+    history = list(saved["history"]) if saved else []
+    if saved:
+        builder.builds, builder.build_time, builder.solve_time = saved["builds"], saved["build_time"], saved["solve_time"]
+    started = time.perf_counter() - (history[-1]["wall_time"] if history else 0.0)
+    algorithm = {"paper": _paper_method, "trust-region": _trust_region}[method]
+    optimum, evaluation, reason = algorithm(scene, space, builder, weights, history, checkpoint,
+                                            saved["state"] if saved else None, started, on_iteration or (lambda row: None))
+    timings = {"prom_builds": builder.build_time, "prom_solves": builder.solve_time,
+               "total": time.perf_counter() - started}
+    log.info("optimisation (%s) stopped: %s; %d PROM builds, %.1f s", method, reason, builder.builds, timings["total"])
+    return OptimizationResult(optimum, evaluation, history, builder.builds, reason, space, timings)
+
+
+def _record(history, row, on_iteration):
+    history.append(row)
+    on_iteration(row)
+
+
+# ---------------------------------------------------------------------- the source's method
+def barrier(space: DesignSpace, z: np.ndarray) -> tuple[float, np.ndarray]:
+    """B(z) = -Σ log s_i(z) and ∇B, over the box and linear inequalities s(z) ≥ 0."""
+    slacks = space.slacks(z)
+    if np.any(slacks <= 0):
+        return np.inf, np.full(z.size, np.nan)
+    n = z.size
+    jacobian = np.vstack([np.eye(n), -np.eye(n), -space.constraint_matrix])   # ∂s/∂z
+    return float(-np.log(slacks).sum()), -(jacobian / slacks[:, None]).sum(axis=0)
+
+
+def _paper_method(scene, space, builder, weights, history, checkpoint, state, started, on_iteration):
+    settings = scene.optimizer
+    interior = _strictly_inside(space, space.start)
+    if state is None:
+        state = {"z": interior.tolist(), "iteration": 0, "scaling": np.ones(space.names.__len__()).tolist(),
+                 "previous_gradient": None, "since_build": 0, "center": None}
+    z = np.array(state["z"])
+    scaling = np.array(state["scaling"])
+    prom = None
+    center = state["center"]
+    reason = "maximum number of iterations"
+    while state["iteration"] < settings.max_iterations:
+        iteration = state["iteration"]
+        drift = np.inf if center is None else np.abs(z - np.array(center["z"])).max()
+        rebuild = center is None or drift > settings.rebuild_threshold or state["since_build"] >= settings.n_rebuild
+        if rebuild:
+            prom = builder.build(z)
+            exact = builder.evaluate(prom, z, weights)
+            center = {"z": z.tolist(), "distance": exact.distance, "distance_gradient": exact.distance_gradient.tolist()}
+            state["since_build"] = 0
+        distance, distance_gradient = _linearised_distance(center, z)
+        cost, gradient = _weighted_cost(space, weights, z, distance, distance_gradient)
+        barrier_value, barrier_gradient = barrier(space, z)
+        barrier_scale = settings.barrier_weight * max(abs(cost), 1e-12)
+        total_gradient = gradient + barrier_scale * barrier_gradient
+        _record(history, history_row(space, iteration, z, cost, gradient, distance,
+                                     "built" if rebuild else "approximated", started), on_iteration)
+        previous = state["previous_gradient"]
+        if previous is not None:
+            scaling[np.sign(total_gradient) * np.sign(previous) < 0] *= 0.5
+        step = _scaled_step(total_gradient, scaling, settings.step_size)
+        fraction, blocking = _fraction_to_boundary(space, z, step)
+        if fraction < 1.0:
+            scaling[blocking] *= 0.5
+            step = fraction * step
+        previous_cost = history[-2]["cost"] if len(history) > 1 else None
+        z = z + step
+        state.update(z=z.tolist(), iteration=iteration + 1, scaling=scaling.tolist(),
+                     previous_gradient=total_gradient.tolist(), since_build=state["since_build"] + 1, center=center)
+        checkpoint.save(state, history, builder)
+        if np.linalg.norm(step) < settings.step_tolerance:
+            reason = f"step {np.linalg.norm(step):.2e} below the step tolerance"
+            break
+        if previous_cost is not None and abs(cost - previous_cost) < settings.cost_tolerance * abs(cost) and not rebuild:
+            reason = f"cost change below {settings.cost_tolerance:g} of the cost"
+            break
+    prom = builder.build(z)
+    final = builder.evaluate(prom, z, weights)
+    _record(history, history_row(space, state["iteration"], z, final.cost, final.gradient, final.distance,
+                                 "built", started), on_iteration)
+    return z, final, reason
+
+
+def _strictly_inside(space: DesignSpace, z: np.ndarray) -> np.ndarray:
+    """Move a start on a bound slightly inside (the barrier needs interior points)."""
+    margin = 1e-3 * (space.upper - space.lower)
+    return np.clip(z, space.lower + margin, space.upper - margin)
+
+
+def _linearised_distance(center: dict, z: np.ndarray) -> tuple[float, np.ndarray]:
+    """d(z) ≈ d_c + ∇d_c · (z - z_c), the first-order trajectory approximation between builds."""
+    gradient = np.array(center["distance_gradient"])
+    return center["distance"] + gradient @ (z - np.array(center["z"])), gradient
+
+
+def _weighted_cost(space, weights, z, distance, distance_gradient):
+    cost = -weights.distance * distance
+    gradient = -weights.distance * np.asarray(distance_gradient, dtype=float)
+    if space.with_amplitude:
+        cost += weights.energy * weights.energy_term(z[-1])
+        gradient = gradient.copy()
+        gradient[-1] += weights.energy * 2 * weights.alpha * z[-1]
+    return cost, gradient
+
+
+def _scaled_step(gradient, scaling, step_size):
+    """-γ W g / ‖W g‖_∞: the largest parameter change is γ."""
+    direction = scaling * gradient
+    largest = np.abs(direction).max()
+    return np.zeros_like(gradient) if largest == 0 else -step_size * direction / largest
+
+
+def _fraction_to_boundary(space: DesignSpace, z, step, keep: float = 0.1) -> tuple[float, np.ndarray]:
+    """Largest t ≤ 1 that keeps ``keep`` of every slack s(z) > 0, and the directions it blocks."""
+    slacks = space.slacks(z)
+    n = z.size
+    jacobian = np.vstack([np.eye(n), -np.eye(n), -space.constraint_matrix])
+    change = jacobian @ step
+    shrinking = change < 0
+    if not np.any(shrinking):
+        return 1.0, np.array([], dtype=int)
+    limits = np.full(slacks.size, np.inf)
+    limits[shrinking] = -slacks[shrinking] / change[shrinking]
+    limits *= 1.0 - keep
+    if limits.min() >= 1.0:
+        return 1.0, np.array([], dtype=int)
+    fraction = limits.min()
+    limiting = np.flatnonzero(limits < 1.0)
+    return fraction, np.flatnonzero(np.abs(jacobian[limiting]).sum(axis=0) * (step != 0) > 0)
+
+
+# ---------------------------------------------------------------------- trust region
+def _trust_region(scene, space, builder, weights, history, checkpoint, state, started, on_iteration):
+    settings = scene.optimizer
+    validity = scene.reduction.validity_radius
+    if state is None:
+        state = {"center": space.start.tolist(), "radius": min(settings.initial_radius, validity), "iteration": 0}
+    center = np.array(state["center"])
+    prom = _build_or_stop(builder, center)
+    current = builder.evaluate(prom, center, weights)
+    if not history:
+        _record(history, history_row(space, 0, center, current.cost, current.gradient, current.distance,
+                                     "built", started, radius=state["radius"]), on_iteration)
+    reason = "maximum number of iterations"
+    while state["iteration"] < settings.max_iterations:
+        radius = state["radius"]
+        candidate, predicted_cost = _surrogate_step(builder, prom, space, weights, center, radius, current)
+        predicted = current.cost - predicted_cost
+        step = candidate - center
+        iteration = state["iteration"] + 1
+        if np.abs(step).max() < settings.step_tolerance or predicted <= settings.cost_tolerance * abs(current.cost):
+            reason = "no predicted improvement inside the trust radius"
+            break
+        try:
+            candidate_prom = builder.build(candidate)
+            trial = builder.evaluate(candidate_prom, candidate, weights)
+            ratio = (current.cost - trial.cost) / predicted
+        except InputError as refused:          # the candidate design cannot be meshed: reject it
+            log.warning("trust region: candidate refused (%s)", refused)
+            trial, ratio = None, -np.inf
+        accepted = ratio > settings.accept_ratio
+        if trial is not None:
+            _record(history, history_row(space, iteration, candidate, trial.cost, trial.gradient, trial.distance,
+                                         "built" if accepted else "rejected", started, radius=radius,
+                                         ratio=float(ratio)), on_iteration)
+        if ratio < 0.25:
+            radius *= 0.5
+        elif ratio > 0.75 and np.abs(step).max() >= 0.9 * radius:
+            radius = min(2 * radius, settings.max_radius, validity)
+        if accepted:
+            center, prom, current = candidate, candidate_prom, trial
+        state.update(center=center.tolist(), radius=radius, iteration=iteration)
+        checkpoint.save(state, history, builder)
+        if radius < settings.step_tolerance:
+            reason = f"trust radius {radius:.2e} below the step tolerance"
+            break
+    return center, current, reason
+
+
+def _build_or_stop(builder: PromBuilder, z: np.ndarray) -> ReducedModel:
+    try:
+        return builder.build(z)
+    except InputError as refused:
+        raise InputError(f"the PROM cannot be built at {builder.space.as_dict(z)}: {refused}") from None
+
+
+def _surrogate_step(builder, prom, space, weights, center, radius, current) -> tuple[np.ndarray, float]:
+    """Minimise the surrogate cost (PROM at its centre, simulated at z) inside bounds, constraints and radius."""
+    cache = {}
+
+    lower = np.maximum(space.lower, center - radius)
+    upper = np.minimum(space.upper, center + radius)
+
+    def surrogate(z):
+        z = np.clip(np.asarray(z, dtype=float), lower, upper)
+        key = tuple(z)
+        if key not in cache:
+            cache[key] = builder.evaluate(prom, z, weights)
+        return cache[key]
+
+    constraints = []
+    if space.constraint_matrix.size:
+        constraints.append(LinearConstraint(space.constraint_matrix, -np.inf, space.constraint_bound))
+    solution = minimize(lambda z: surrogate(z).cost, center, jac=lambda z: surrogate(z).gradient, method="SLSQP",
+                        bounds=list(zip(lower, upper)), constraints=constraints,
+                        options={"maxiter": 30, "ftol": 1e-10})
+    candidate = np.clip(solution.x, lower, upper)
+    if not space.is_feasible(candidate, tolerance=1e-9):
+        raise SolverError(f"the surrogate step left the feasible set at {space.as_dict(candidate)}")
+    value = surrogate(candidate).cost
+    return candidate, value

@@ -1,0 +1,177 @@
+"""An optimisation study end to end: optimise with the PROM, verify with the FOM, write the report."""
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from .cost import CostWeights, design_space
+from .errors import InputError
+from .fish import Fish, load_fish
+from .optimize import OptimizationResult, optimize
+from .outputs import software_versions, write_json_atomic
+from .scene import REPOSITORY, Scene
+from .simulate import simulate_fom
+
+log = logging.getLogger("aquarom")
+FOM_CACHE = REPOSITORY / "results" / "cache" / "fom"
+
+
+@dataclass
+class FomCheck:
+    """FOM distances [m] of the nominal (start) and optimal designs and their ratio."""
+
+    nominal_distance: float
+    optimal_distance: float
+    prom_nominal_distance: float
+    prom_optimal_distance: float
+    time: float
+
+    @property
+    def ratio(self) -> float:
+        return self.optimal_distance / self.nominal_distance
+
+
+def fom_distance(scene: Scene, fish: Fish, design: dict[str, float], amplitude: float | None,
+                 cache_dir: Path = FOM_CACHE) -> float:
+    """Swimming distance of the FOM at a design, cached by scene hash, design and amplitude."""
+    if amplitude is not None:
+        scene = scene.replace("actuation", amplitude=amplitude)
+    key = hashlib.sha256(json.dumps([scene.hash, sorted(design.items())]).encode()).hexdigest()[:20]
+    path = Path(cache_dir) / f"{key}.json"
+    if path.exists():
+        log.info("FOM at %s: reused from %s", design, path)
+        return json.loads(path.read_text())["distance"]
+    result = simulate_fom(scene, design, fish=fish, progress=MPI.COMM_WORLD.rank == 0)
+    if not result.completed:
+        raise RuntimeError(f"FOM check at {design} stopped: {result.error}")
+    if MPI.COMM_WORLD.rank == 0:
+        write_json_atomic(path, {"design": design, "scene_hash": scene.hash, "distance": result.distance})
+    return result.distance
+
+
+def fom_check(scene: Scene, fish: Fish, result: OptimizationResult) -> FomCheck:
+    started = time.perf_counter()
+    space = result.space
+    shapes = space.n_shapes
+
+    def split(z):
+        return dict(zip(space.names[:shapes], map(float, z[:shapes]))), (float(z[-1]) if space.with_amplitude else None)
+
+    nominal = fom_distance(scene, fish, *split(space.start))
+    optimal = fom_distance(scene, fish, *split(result.optimum))
+    first_built = next(row for row in result.history if row["prom"] == "built")
+    return FomCheck(nominal, optimal, first_built["distance"], result.evaluation.distance,
+                    time.perf_counter() - started)
+
+
+def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights: CostWeights | None = None,
+                     fish: Fish | None = None, render: bool = True) -> tuple[OptimizationResult, FomCheck]:
+    """Optimise, check with the FOM and write history.csv, summary.json, plots, renders, XDMF."""
+    out_dir = Path(out_dir)
+    is_writer = MPI.COMM_WORLD.rank == 0
+    fish = fish or load_fish(scene)
+    space = design_space(scene)
+    checkpoint = out_dir / "checkpoint.json"
+    history_file = out_dir / "history.csv"
+    if is_writer:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    checkpoint_rows = json.loads(checkpoint.read_text())["history"] if resume and checkpoint.exists() else []
+    if resume and not checkpoint.exists():
+        raise InputError(f"--resume: no checkpoint in {out_dir}; run without --resume")
+    writer = HistoryWriter(history_file, checkpoint_rows) if is_writer else None
+    result = optimize(scene, fish=fish, weights=weights, checkpoint_path=checkpoint if is_writer else None,
+                      resume=resume, on_iteration=writer.write if writer else None)
+    check = fom_check(scene, fish, result)
+    if is_writer:
+        writer.close()
+        _write_summary(out_dir, scene, result, check, weights or CostWeights())
+        _write_figures(out_dir, scene, fish, result, render)
+    return result, check
+
+
+class HistoryWriter:
+    """history.csv, one row per iteration, flushed at once; a resumed run starts from the
+    checkpoint's rows (a row written after the last checkpoint is made again, not duplicated)."""
+
+    def __init__(self, path: Path, checkpoint_rows: list[dict]):
+        self.stream = open(path, "w", newline="")
+        self.header = None
+        for row in checkpoint_rows:
+            self.write(row)
+
+    def write(self, row: dict) -> None:
+        if self.header is None:
+            self.header = list(row)
+            csv.writer(self.stream).writerow(self.header)
+        csv.writer(self.stream).writerow([row.get(key, "") for key in self.header])
+        self.stream.flush()
+
+    def close(self) -> None:
+        self.stream.close()
+
+
+def _write_summary(out_dir, scene, result, check, weights):
+    space = result.space
+    summary = {
+        "scene": scene.name, "scene_hash": scene.hash, "method": scene.optimizer.method,
+        "optimum": space.as_dict(result.optimum), "start": space.as_dict(space.start),
+        "bounds": {n: [float(lo), float(hi)] for n, lo, hi in zip(space.names, space.lower, space.upper)},
+        "bounds_active": space.active_bounds(result.optimum), "stop_reason": result.stop_reason,
+        "iterations": result.history[-1]["iteration"], "prom_builds": result.builds,
+        "cost_weights": {"distance": weights.distance, "energy": weights.energy, "alpha": weights.alpha},
+        "prom_distance_optimal": result.evaluation.distance,
+        "fom_check": {"nominal_distance": check.nominal_distance, "optimal_distance": check.optimal_distance,
+                      "prom_nominal_distance": check.prom_nominal_distance,
+                      "prom_optimal_distance": check.prom_optimal_distance, "ratio": check.ratio},
+        "timings": result.timings | {"fom_check": check.time},
+        "time_per_build": result.timings["prom_builds"] / max(result.builds, 1),
+        "versions": software_versions()}
+    write_json_atomic(out_dir / "summary.json", summary)
+
+
+def _write_figures(out_dir, scene, fish, result, render):
+    from .report import plot_optimization_history, render_nominal_and_optimal
+
+    space = result.space
+    if scene.output.plots:
+        plot_optimization_history(result.history, list(space.names), list(zip(space.lower, space.upper)), out_dir)
+    shapes = space.n_shapes
+    optimal = dict(zip(space.names[:shapes], map(float, result.optimum[:shapes])))
+    if render and scene.output.render and shapes:
+        from .render import render_design
+
+        render_design(fish, fish.design(optimal), optimal, out_dir / "optimal")
+        nominal = dict(zip(space.names[:shapes], map(float, space.start[:shapes])))
+        render_nominal_and_optimal(fish, fish.design(nominal), fish.design(optimal), out_dir / "nominal_vs_optimal.png",
+                                   f"{scene.name}: nominal and optimal design")
+
+
+def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None) -> list[dict]:
+    """Co-optimisation over the scene's weights w_1 (w_2 = 1 - w_1): pareto.csv and pareto.png."""
+    fish = fish or load_fish(scene)
+    co = scene.cooptimization
+    points = []
+    for w1 in co.weights:
+        weights = CostWeights(distance=w1, energy=1.0 - w1, alpha=co.energy_weight)
+        result, check = run_optimization(scene, Path(out_dir) / f"w1_{w1:g}", weights=weights, fish=fish, render=False)
+        amplitude = float(result.optimum[-1])
+        points.append({"w1": w1, "amplitude": amplitude, "energy": weights.energy_term(amplitude),
+                       "distance": check.optimal_distance, "prom_distance": result.evaluation.distance,
+                       **{f"xi_{n}": float(v) for n, v in zip(result.space.names[:-1], result.optimum[:-1])}})
+    if MPI.COMM_WORLD.rank == 0:
+        with open(Path(out_dir) / "pareto.csv", "w", newline="") as stream:
+            writer = csv.DictWriter(stream, fieldnames=list(points[0]))
+            writer.writeheader()
+            writer.writerows(points)
+        from .report import plot_pareto
+
+        plot_pareto(points, Path(out_dir) / "pareto.png")
+    return points
