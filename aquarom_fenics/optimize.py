@@ -254,9 +254,11 @@ def _fraction_to_boundary(space: DesignSpace, z, step, keep: float = 0.1) -> tup
 # ---------------------------------------------------------------------- trust region
 def _trust_region(scene, space, builder, weights, history, checkpoint, state, started, on_iteration):
     settings = scene.optimizer
-    validity = scene.reduction.validity_radius
+    # The trust radius is a fraction of the PROM validity box; the amplitude enters the reduced
+    # actuation exactly (linearly), so its box is its whole range.
+    half_widths = np.array(scene.validity_radii() + ([space.upper[-1] - space.lower[-1]] if space.with_amplitude else []))
     if state is None:
-        state = {"center": space.start.tolist(), "radius": min(settings.initial_radius, validity), "iteration": 0}
+        state = {"center": space.start.tolist(), "radius": settings.initial_radius, "iteration": 0}
     center = np.array(state["center"])
     prom = _build_or_stop(builder, center)
     current = builder.evaluate(prom, center, weights)
@@ -266,7 +268,7 @@ def _trust_region(scene, space, builder, weights, history, checkpoint, state, st
     reason = "maximum number of iterations"
     while state["iteration"] < settings.max_iterations:
         radius = state["radius"]
-        candidate, predicted_cost = _surrogate_step(builder, prom, space, weights, center, radius, current)
+        candidate, predicted_cost = _surrogate_step(builder, prom, space, weights, center, radius * half_widths)
         predicted = current.cost - predicted_cost
         step = candidate - center
         iteration = state["iteration"] + 1
@@ -287,14 +289,14 @@ def _trust_region(scene, space, builder, weights, history, checkpoint, state, st
                                          ratio=float(ratio)), on_iteration)
         if ratio < 0.25:
             radius *= 0.5
-        elif ratio > 0.75 and np.abs(step).max() >= 0.9 * radius:
-            radius = min(2 * radius, settings.max_radius, validity)
+        elif ratio > 0.75 and np.any(np.abs(step) >= 0.9 * radius * half_widths):
+            radius = min(2 * radius, 1.0)
         if accepted:
             center, prom, current = candidate, candidate_prom, trial
         state.update(center=center.tolist(), radius=radius, iteration=iteration)
         checkpoint.save(state, history, builder)
-        if radius < settings.step_tolerance:
-            reason = f"trust radius {radius:.2e} below the step tolerance"
+        if np.all(radius * half_widths < settings.step_tolerance):
+            reason = f"trust radius {radius:.2e} of the validity box below the step tolerance"
             break
     return center, current, reason
 
@@ -306,7 +308,7 @@ def _build_or_stop(builder: PromBuilder, z: np.ndarray) -> ReducedModel:
         raise InputError(f"the PROM cannot be built at {builder.space.as_dict(z)}: {refused}") from None
 
 
-def _surrogate_step(builder, prom, space, weights, center, radius, current) -> tuple[np.ndarray, float]:
+def _surrogate_step(builder, prom, space, weights, center, radius) -> tuple[np.ndarray, float]:
     """Minimise the surrogate cost (PROM at its centre, simulated at z) inside bounds, constraints and radius."""
     cache = {}
 

@@ -152,7 +152,7 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
     dorsal_gradient = nodal_rows(fish)[tags.dorsal_nodes, 2, :p]
     timings["total"] = time.perf_counter() - started
     names = list(fish.shape_names[:p])
-    radius = np.full(p, scene.reduction.validity_radius)
+    radius = np.array(scene.validity_radii()[:p])
     if comm.rank == 0:
         log.info("PROM: m = %d (%s), p = %d, Taylor order %d; built %s; skipped %s; %.2f s (basis %.2f s, "
                  "internal force %.2f s, other tensors %.2f s)", m, ", ".join(basis.labels), p, order,

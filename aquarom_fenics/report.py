@@ -42,6 +42,10 @@ LEGEND_HEIGHT = 0.5
 VIEW_PANEL_SIZE = (720, 300)
 """Width and height [px] of one pyvista render of the nominal/optimal sheet."""
 
+VIEW_FIGURE_WIDTH = 11.0
+VIEW_FIGURE_FRAME = 1.6
+"""Width [inch] of the nominal/optimal sheet, and the height [inch] of its title, labels and legend."""
+
 VIEW_MARGIN = 0.08
 """Free border around the framed fish, as a fraction of its extent along each axis."""
 
@@ -242,19 +246,18 @@ def _compose_views(images: np.ndarray, design_names: list[str], low: np.ndarray,
 
     plt = _pyplot()
     centre = (low + high) / 2
-    extents = [high[vertical] - low[vertical] for _, vertical, _, _ in VIEWS]
-    width_inch = 11.0
-    axes_height = [width_inch / 2 * 0.85 * extent / (high[0] - low[0]) for extent in extents]
-    figure_height = sum(axes_height) + 1.6
-    figure, axes = plt.subplots(len(VIEWS), len(design_names), figsize=(width_inch, figure_height), sharex=True,
-                                sharey="row", squeeze=False, gridspec_kw=dict(height_ratios=axes_height))
+    axes_width = 0.85 * VIEW_FIGURE_WIDTH / len(design_names)
+    axes_heights = [axes_width * (high[vertical] - low[vertical]) / (high[0] - low[0]) for _, vertical, _, _ in VIEWS]
+    figure_height = sum(axes_heights) + VIEW_FIGURE_FRAME
+    figure, axes = plt.subplots(len(VIEWS), len(design_names), figsize=(VIEW_FIGURE_WIDTH, figure_height),
+                                sharex=True, sharey="row", squeeze=False, gridspec_kw=dict(height_ratios=axes_heights))
     width, height = VIEW_PANEL_SIZE
     half_width = scale * width / height
     for row, (view_name, vertical, _, _) in enumerate(VIEWS):
+        extent = 100 * np.array([centre[0] - half_width, centre[0] + half_width,
+                                 centre[vertical] - scale, centre[vertical] + scale])
         for column, design_name in enumerate(design_names):
             axis = axes[row, column]
-            extent = 100 * np.array([centre[0] - half_width, centre[0] + half_width,
-                                     centre[vertical] - scale, centre[vertical] + scale])
             axis.imshow(images[row, column], extent=extent, interpolation="antialiased")
             axis.set_xlim(100 * low[0], 100 * high[0])
             axis.set_ylim(100 * low[vertical], 100 * high[vertical])
@@ -267,7 +270,7 @@ def _compose_views(images: np.ndarray, design_names: list[str], low: np.ndarray,
     handles.append(Line2D([], [], color=render.NOMINAL_OUTLINE_COLOUR, linewidth=1.5, label=OUTLINE_LABEL))
     figure.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=9, frameon=False)
     figure.suptitle(title)
-    figure.tight_layout(rect=(0, 0.5 / figure_height, 1, 1), h_pad=2.0)
+    figure.tight_layout(rect=(0, LEGEND_HEIGHT / figure_height, 1, 1), h_pad=2.5)
     figure.savefig(path, dpi=DPI)
     plt.close(figure)
 

@@ -96,6 +96,7 @@ class ShapeSpec:
     lower: float
     upper: float
     start: float = 0.0
+    radius: float | None = None     # PROM validity radius; None: [reduction] validity_fraction × max |bound|
 
 
 @dataclass(frozen=True)
@@ -122,7 +123,7 @@ class ReductionSection:
     modal_derivatives: bool = _spec(True, None, "static modal derivatives θ_ij")
     taylor_order: int = _spec(1, _one_of(1, 2), "order of the PROM's Taylor expansion in ξ")
     drop_tolerance: float = _spec(1e-8, _positive, "basis vectors whose remaining mass-norm is below this are dropped")
-    validity_radius: float = _spec(0.15, _positive, "|ξ - ξ_c|_i inside which the PROM is trusted")
+    validity_fraction: float = _spec(0.25, _positive, "PROM validity radius of a parameter as a fraction of its largest |bound| (a shape's own `radius` overrides it)")
 
 
 @dataclass(frozen=True)
@@ -135,8 +136,7 @@ class OptimizerSection:
     n_rebuild: int = _spec(5, _positive, "rebuild the PROM every n iterations (paper)")
     step_tolerance: float = _spec(1e-3, _positive, "stop when ‖Δξ‖ falls below")
     cost_tolerance: float = _spec(1e-4, _positive, "stop when the relative cost change falls below")
-    initial_radius: float = _spec(0.15, _positive, "trust radius (trust-region)")
-    max_radius: float = _spec(0.5, _positive, "largest trust radius (trust-region)")
+    initial_radius: float = _spec(1.0, lambda v: None if 0 < v <= 1 else "must be in (0, 1]", "trust radius as a fraction of the PROM validity radius (trust-region)")
     accept_ratio: float = _spec(0.1, lambda v: None if 0 <= v < 1 else "must be in [0, 1)", "accept a step when actual/predicted reduction exceeds this")
 
 
@@ -203,6 +203,11 @@ class Scene:
     @property
     def shape_names(self) -> list[str]:
         return [shape.name for shape in self.shapes]
+
+    def validity_radii(self) -> list[float]:
+        """PROM validity radius per shape parameter (SPEC §8)."""
+        fraction = self.reduction.validity_fraction
+        return [s.radius if s.radius is not None else fraction * max(abs(s.lower), abs(s.upper)) for s in self.shapes]
 
     @property
     def mesh_file(self) -> Path | None:
@@ -327,8 +332,8 @@ def _shapes_from_dict(table: dict, where: str) -> tuple[ShapeSpec, ...]:
         if not isinstance(spec, dict):
             raise InputError(f"{where}: [shapes] {name} must be a table like {{ bounds = [-0.5, 0.5], start = 0.0 }}")
         for key in spec:
-            if key not in ("bounds", "start"):
-                raise InputError(f"{where}: unknown key [shapes.{name}] {key}; valid keys: bounds, start")
+            if key not in ("bounds", "start", "radius"):
+                raise InputError(f"{where}: unknown key [shapes.{name}] {key}; valid keys: bounds, start, radius")
         if "bounds" not in spec:
             raise InputError(f"{where}: [shapes] {name} needs bounds = [lower, upper]")
         lower, upper = _coerce(spec["bounds"], (0.0, 0.0), f"{where}: [shapes] {name} bounds")
@@ -337,7 +342,12 @@ def _shapes_from_dict(table: dict, where: str) -> tuple[ShapeSpec, ...]:
             raise InputError(f"{where}: [shapes] {name} bounds = [{lower}, {upper}]: lower bound above upper")
         if not lower <= start <= upper:
             raise InputError(f"{where}: [shapes] {name} start = {start} outside its bounds [{lower}, {upper}]")
-        shapes.append(ShapeSpec(name, lower, upper, start))
+        radius = None
+        if "radius" in spec:
+            radius = _coerce(spec["radius"], 0.0, f"{where}: [shapes] {name} radius")
+            if radius <= 0:
+                raise InputError(f"{where}: [shapes] {name} radius = {radius} must be > 0")
+        shapes.append(ShapeSpec(name, lower, upper, start, radius))
     return tuple(shapes)
 
 

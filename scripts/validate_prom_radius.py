@@ -34,7 +34,7 @@ def main():
     args = parser.parse_args()
     base = Scene.load(args.scene).replace("mesh", level=args.level)
     fish = load_fish(base)
-    wide = base.replace("reduction", validity_radius=10.0)
+    wide = base.replace("reduction", validity_fraction=10.0)
     proms = {order: build_prom(wide.replace("reduction", taylor_order=order), fish=fish) for order in (1, 2)}
     nominal = simulate_fom(base, fish=fish, progress=False)
     rows = []

@@ -17,11 +17,9 @@ level = 1
 [shapes]
 z_tail = {{ bounds = [-0.5, 0.5] }}
 z_head = {{ bounds = [-0.5, 0.5] }}
-y_thin = {{ bounds = [-0.15, 0.15] }}
+y_thin = {{ bounds = [-0.15, 0.15], radius = {radius} }}
 [actuation]
 stiffness = {stiffness}
-[reduction]
-validity_radius = {radius}
 """
 
 
