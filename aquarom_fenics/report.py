@@ -47,7 +47,7 @@ VIEW_FIGURE_FRAME = 1.6
 """Width [inch] of the nominal/optimal sheet, and the height [inch] of its title, labels and legend."""
 
 VIEW_MARGIN = 0.08
-"""Free border around the framed fish, as a fraction of its extent along each axis."""
+"""Free border around the framed fish on every side, as a fraction of its largest extent."""
 
 VIEWS = (
     ("from above", 1, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])),

@@ -1,0 +1,85 @@
+"""Optimisation benchmark: SO1 and SO3 with both methods, and the ROM grid search over SO1's box.
+
+Per run: wall time of the optimisation (PROM builds and solves), the FOM check timed separately
+(the nominal FOM comes from the cache when present), PROM builds, FOM-verified ratio. The grid
+search builds a ROM at every point of SO1's box at spacing 0.15 (designs the mesh check refuses
+are counted, not simulated) and reports its time and best point. Writes results/bench/optimize.json.
+"""
+import argparse
+import itertools
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPOSITORY = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPOSITORY))
+
+from aquarom_fenics.errors import InputError  # noqa: E402
+from aquarom_fenics.fish import load_fish  # noqa: E402
+from aquarom_fenics.outputs import software_versions, write_json_atomic  # noqa: E402
+from aquarom_fenics.reduced_dynamics import simulate_reduced  # noqa: E402
+from aquarom_fenics.reductor import build_prom  # noqa: E402
+from aquarom_fenics.scene import Scene  # noqa: E402
+from aquarom_fenics.study import run_optimization  # noqa: E402
+
+
+def grid_search(scene: Scene, fish, spacing: float = 0.15) -> dict:
+    axes = [np.arange(s.lower, s.upper + 1e-9, spacing) for s in scene.shapes]
+    started = time.perf_counter()
+    best, refused, evaluated = None, 0, 0
+    for point in itertools.product(*axes):
+        design = dict(zip(scene.shape_names, map(float, point)))
+        try:
+            rom = build_prom(scene, xi_center=design, fish=fish, parametric=False)
+        except InputError:
+            refused += 1
+            continue
+        result = simulate_reduced(rom, scene)
+        evaluated += 1
+        if result.completed and (best is None or result.distance > best[1]):
+            best = (design, result.distance)
+    return {"spacing": spacing, "points": int(np.prod([a.size for a in axes])), "evaluated": evaluated,
+            "refused_by_mesh_check": refused, "time": time.perf_counter() - started,
+            "best": best[0], "best_rom_distance": best[1]}
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--level", type=int, default=3)
+    parser.add_argument("--scenes", nargs="+", default=["so1", "so3"])
+    parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "bench" / "optimize.json")
+    args = parser.parse_args()
+    runs = []
+    for name in args.scenes:
+        base = Scene.load(name).replace("mesh", level=args.level)
+        fish = load_fish(base)
+        build_prom(base, fish=fish)        # compile the forms once, outside the timings
+        for method in ("paper", "trust-region"):
+            scene = base.replace("optimizer", method=method)
+            result, check = run_optimization(scene, args.out.parent / "optimize-runs" / f"{name}-{method}",
+                                             fish=fish, render=False)
+            runs.append({"scene": name, "method": method, "cells": fish.mesh.cells.shape[0],
+                         "parameters": len(base.shapes), "optimisation_time": result.timings["total"],
+                         "prom_build_time": result.timings["prom_builds"], "prom_builds": result.builds,
+                         "iterations": result.history[-1]["iteration"], "stop_reason": result.stop_reason,
+                         "optimum": result.space.as_dict(result.optimum),
+                         "prom_distance_optimal": result.evaluation.distance,
+                         "fom_nominal_distance": check.nominal_distance, "fom_optimal_distance": check.optimal_distance,
+                         "fom_ratio": check.ratio, "fom_check_time": check.time})
+            print(runs[-1], flush=True)
+    so1 = Scene.load("so1").replace("mesh", level=args.level)
+    grid = grid_search(so1, load_fish(so1))
+    print(grid, flush=True)
+    so1_runs = [r for r in runs if r["scene"] == "so1"]
+    speedups = {r["method"]: grid["time"] / r["optimisation_time"] for r in so1_runs}
+    write_json_atomic(args.out, {"benchmark": "optimize", "level": args.level, "runs": runs, "rom_grid_search_so1": grid,
+                                 "speedup_over_grid_search": speedups, "cores": os.cpu_count(),
+                                 "versions": software_versions(), "date": time.strftime("%Y-%m-%d %H:%M:%S")})
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

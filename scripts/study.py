@@ -1,0 +1,57 @@
+"""`make study`: SO1–SO3 and the CO Pareto sweep on the reference level, collected in one table.
+
+Writes every run under results/studies/ and results/studies/summary.md (case, parameters,
+cells, PROM dofs, builds, wall time, time per build, optimum, FOM distance nominal/optimal, ratio).
+"""
+import argparse
+import json
+import sys
+from pathlib import Path
+
+REPOSITORY = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPOSITORY))
+
+from aquarom_fenics.fish import load_fish  # noqa: E402
+from aquarom_fenics.outputs import software_versions  # noqa: E402
+from aquarom_fenics.reductor import build_prom  # noqa: E402
+from aquarom_fenics.scene import Scene  # noqa: E402
+from aquarom_fenics.study import pareto_sweep, run_optimization  # noqa: E402
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--level", type=int, default=3)
+    parser.add_argument("--cases", nargs="+", default=["so1", "so2", "so3", "co"])
+    parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "studies")
+    args = parser.parse_args()
+    lines = ["# Optimisation studies", "",
+             "| case | parameters | cells | PROM dofs | builds | wall time [s] | time per build [s] | optimum | "
+             "FOM nominal [cm] | FOM optimal [cm] | ratio |", "|---" * 11 + "|"]
+    for case in args.cases:
+        scene = Scene.load(case).replace("mesh", level=args.level)
+        fish = load_fish(scene)
+        if scene.cooptimization.enabled:
+            points = pareto_sweep(scene, args.out / case, fish=fish)
+            for point in points:
+                summary = json.loads((args.out / case / f"w1_{point['w1']:g}" / "summary.json").read_text())
+                lines.append(_row(f"{case} w1={point['w1']:g}", scene, fish, summary))
+            continue
+        run_optimization(scene, args.out / case, fish=fish)
+        lines.append(_row(case, scene, fish, json.loads((args.out / case / "summary.json").read_text())))
+    versions = software_versions()
+    lines += ["", f"Level {args.level}; aquarom_fenics {versions['aquarom_fenics']}, dolfinx {versions['dolfinx']}."]
+    (args.out / "summary.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+def _row(case, scene, fish, summary):
+    check = summary["fom_check"]
+    optimum = ", ".join(f"{n} {v:+.3f}" for n, v in summary["optimum"].items())
+    prom_size = build_prom(scene, xi_center=summary["optimum"], fish=fish).size if False else summary.get("prom_size", "")
+    return (f"| {case} | {len(summary['optimum'])} | {fish.mesh.cells.shape[0]} | {prom_size} | {summary['prom_builds']} | "
+            f"{summary['timings']['total']:.1f} | {summary['time_per_build']:.2f} | {optimum} | "
+            f"{100 * check['nominal_distance']:.3f} | {100 * check['optimal_distance']:.3f} | {check['ratio']:.2f} |")
+
+
+if __name__ == "__main__":
+    main()
