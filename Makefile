@@ -3,7 +3,7 @@ PYTHON := .venv/bin/python
 AQUAROM := .venv/bin/aquarom
 OUT ?= results/demo
 
-.PHONY: setup demo test bench validate clean
+.PHONY: setup demo test bench validate study clean
 
 setup:
 	@bash scripts/setup.sh
@@ -17,6 +17,10 @@ test: setup
 bench: setup
 	$(PYTHON) scripts/bench_fom.py
 	$(PYTHON) scripts/bench_prom.py
+	$(PYTHON) scripts/bench_optimize.py
+
+study: setup
+	$(PYTHON) scripts/study.py
 
 validate: setup
 	$(PYTHON) scripts/validate_prom_radius.py

@@ -45,6 +45,7 @@ class OptimizationResult:
     builds: int
     stop_reason: str
     space: DesignSpace
+    prom_size: int = 0                        # reduced dofs of the last PROM built
     timings: dict = field(default_factory=dict)
 
 
@@ -54,6 +55,7 @@ class PromBuilder:
     def __init__(self, scene: Scene, fish: Fish, space: DesignSpace):
         self.scene, self.fish, self.space = scene, fish, space
         self.builds = 0
+        self.last_size = 0
         self.build_time = 0.0
         self.solve_time = 0.0
 
@@ -62,6 +64,7 @@ class PromBuilder:
         prom = build_prom(self.scene, xi_center=z[: self.space.n_shapes], fish=self.fish)
         self.build_time += time.perf_counter() - started
         self.builds += 1
+        self.last_size = prom.size
         return prom
 
     def evaluate(self, prom, z, weights) -> Evaluation:
@@ -131,7 +134,7 @@ def optimize(scene: Scene, fish: Fish | None = None, weights: CostWeights | None
     timings = {"prom_builds": builder.build_time, "prom_solves": builder.solve_time,
                "total": time.perf_counter() - started}
     log.info("optimisation (%s) stopped: %s; %d PROM builds, %.1f s", method, reason, builder.builds, timings["total"])
-    return OptimizationResult(optimum, evaluation, history, builder.builds, reason, space, timings)
+    return OptimizationResult(optimum, evaluation, history, builder.builds, reason, space, builder.last_size, timings)
 
 
 def _record(history, row, on_iteration):
@@ -166,7 +169,17 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, st
         drift = np.inf if center is None else np.abs(z - np.array(center["z"])).max()
         rebuild = center is None or drift > settings.rebuild_threshold or state["since_build"] >= settings.n_rebuild
         if rebuild:
-            prom = builder.build(z)
+            try:
+                prom = builder.build(z)
+            except InputError as refused:      # the mesh check refuses the design: step back halfway
+                previous_z = np.array(state.get("previous_z", center["z"] if center else z))
+                if center is None or np.abs(z - previous_z).max() < settings.step_tolerance:
+                    raise
+                log.warning("paper method: %s; stepping back", refused)
+                z = previous_z + 0.5 * (z - previous_z)
+                scaling *= 0.5
+                state.update(z=z.tolist(), scaling=scaling.tolist())
+                continue
             exact = builder.evaluate(prom, z, weights)
             center = {"z": z.tolist(), "distance": exact.distance, "distance_gradient": exact.distance_gradient.tolist()}
             state["since_build"] = 0
@@ -187,7 +200,7 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, st
             step = fraction * step
         previous_cost = history[-2]["cost"] if len(history) > 1 else None
         z = z + step
-        state.update(z=z.tolist(), iteration=iteration + 1, scaling=scaling.tolist(),
+        state.update(z=z.tolist(), previous_z=(z - step).tolist(), iteration=iteration + 1, scaling=scaling.tolist(),
                      previous_gradient=total_gradient.tolist(), since_build=state["since_build"] + 1, center=center)
         checkpoint.save(state, history, builder)
         if np.linalg.norm(step) < settings.step_tolerance:
@@ -196,11 +209,24 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, st
         if previous_cost is not None and abs(cost - previous_cost) < settings.cost_tolerance * abs(cost) and not rebuild:
             reason = f"cost change below {settings.cost_tolerance:g} of the cost"
             break
-    prom = builder.build(z)
-    final = builder.evaluate(prom, z, weights)
+    if center is not None and np.allclose(z, center["z"]) and prom is not None:
+        final = builder.evaluate(prom, z, weights)
+    else:
+        final = _final_evaluation(builder, weights, z, np.array(state.get("previous_z", z)))
+        z = final.z
     _record(history, history_row(space, state["iteration"], z, final.cost, final.gradient, final.distance,
                                  "built", started), on_iteration)
     return z, final, reason
+
+
+def _final_evaluation(builder: PromBuilder, weights, z, previous_z) -> Evaluation:
+    """A PROM built at the last iterate (stepping back towards the previous one if it is refused)."""
+    for _ in range(20):
+        try:
+            return builder.evaluate(builder.build(z), z, weights)
+        except InputError:
+            z = previous_z + 0.5 * (z - previous_z)
+    return builder.evaluate(builder.build(previous_z), previous_z, weights)
 
 
 def _strictly_inside(space: DesignSpace, z: np.ndarray) -> np.ndarray:

@@ -125,7 +125,7 @@ def _write_summary(out_dir, scene, result, check, weights):
         "optimum": space.as_dict(result.optimum), "start": space.as_dict(space.start),
         "bounds": {n: [float(lo), float(hi)] for n, lo, hi in zip(space.names, space.lower, space.upper)},
         "bounds_active": space.active_bounds(result.optimum), "stop_reason": result.stop_reason,
-        "iterations": result.history[-1]["iteration"], "prom_builds": result.builds,
+        "iterations": result.history[-1]["iteration"], "prom_builds": result.builds, "prom_size": result.prom_size,
         "cost_weights": {"distance": weights.distance, "energy": weights.energy, "alpha": weights.alpha},
         "prom_distance_optimal": result.evaluation.distance,
         "fom_check": {"nominal_distance": check.nominal_distance, "optimal_distance": check.optimal_distance,
