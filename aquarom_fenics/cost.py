@@ -86,6 +86,38 @@ def design_space(scene: Scene) -> DesignSpace:
     return space
 
 
+def meshable_space(space: DesignSpace, fish) -> tuple[DesignSpace, list[str]]:
+    """The design space with each shape bound pulled in to where the design still meshes.
+
+    One parameter at a time (the others at their start values), bisection on the mesh check of
+    SPEC §4 between the start value and the bound. Returns the space and one note per change.
+    """
+    lower, upper, notes = space.lower.copy(), space.upper.copy(), []
+    for k in range(space.n_shapes):
+        for bounds, side in ((lower, "lower"), (upper, "upper")):
+            if _meshes(fish, space, k, bounds[k]):
+                continue
+            good, bad = space.start[k], bounds[k]
+            for _ in range(30):
+                middle = 0.5 * (good + bad)
+                good, bad = (middle, bad) if _meshes(fish, space, k, middle) else (good, middle)
+            notes.append(f"{space.names[k]} {side} bound {bounds[k]:g} → {good:.4g} (the mesh check refuses beyond)")
+            bounds[k] = good
+    restricted = DesignSpace(space.names, lower, upper, space.start, space.constraint_matrix, space.constraint_bound,
+                             space.with_amplitude)
+    return restricted, notes
+
+
+def _meshes(fish, space: DesignSpace, index: int, value: float) -> bool:
+    xi = space.start[: space.n_shapes].copy()
+    xi[index] = value
+    try:
+        fish.design(xi)
+        return True
+    except InputError:
+        return False
+
+
 @dataclass
 class Evaluation:
     """Cost, its gradient and the swimming distance at one design, as the PROM predicts them."""

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import LinearConstraint, minimize
 
-from .cost import CostWeights, DesignSpace, Evaluation, design_space, evaluate
+from .cost import CostWeights, DesignSpace, Evaluation, design_space, evaluate, meshable_space
 from .errors import InputError, SolverError
 from .fish import Fish, load_fish
 from .outputs import write_json_atomic
@@ -76,13 +76,15 @@ class PromBuilder:
 
 
 def history_row(space: DesignSpace, iteration: int, z, cost, gradient, distance, kind: str, started: float,
-                **extra) -> dict:
+                radius: float | None = None, ratio: float | None = None) -> dict:
+    """One iteration: ξ, cost, gradient, distance [m], how the PROM was used, and for the trust
+    region its radius (fraction of the validity box) and actual/predicted reduction."""
     row = {"iteration": iteration}
     row.update({f"xi_{name}": float(value) for name, value in zip(space.names, z)})
     row["cost"] = float(cost)
     row.update({f"grad_{name}": float(value) for name, value in zip(space.names, gradient)})
-    row.update({"distance": float(distance), "prom": kind, "wall_time": time.perf_counter() - started})
-    row.update(extra)
+    row.update({"distance": float(distance), "prom": kind, "wall_time": time.perf_counter() - started,
+                "radius": radius, "ratio": ratio})
     return row
 
 
@@ -117,8 +119,10 @@ def optimize(scene: Scene, fish: Fish | None = None, weights: CostWeights | None
              checkpoint_path: Path | None = None, resume: bool = False,
              on_iteration=None) -> OptimizationResult:
     """Run the scene's optimiser; ``on_iteration(row)`` sees every history row as it is made."""
-    space = design_space(scene)
     fish = fish or load_fish(scene)
+    space, notes = meshable_space(design_space(scene), fish)
+    for note in notes:
+        log.warning("design space: %s", note)
     weights = weights or CostWeights()
     method = scene.optimizer.method
     builder = PromBuilder(scene, fish, space)
@@ -172,11 +176,10 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, st
             try:
                 prom = builder.build(z)
             except InputError as refused:      # the mesh check refuses the design: step back halfway
-                previous_z = np.array(state.get("previous_z", center["z"] if center else z))
-                if center is None or np.abs(z - previous_z).max() < settings.step_tolerance:
+                if center is None or np.abs(z - np.array(center["z"])).max() < settings.step_tolerance:
                     raise
-                log.warning("paper method: %s; stepping back", refused)
-                z = previous_z + 0.5 * (z - previous_z)
+                log.warning("paper method: %s; stepping back towards the last built design", refused)
+                z = np.array(center["z"]) + 0.5 * (z - np.array(center["z"]))
                 scaling *= 0.5
                 state.update(z=z.tolist(), scaling=scaling.tolist())
                 continue
@@ -200,7 +203,7 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, st
             step = fraction * step
         previous_cost = history[-2]["cost"] if len(history) > 1 else None
         z = z + step
-        state.update(z=z.tolist(), previous_z=(z - step).tolist(), iteration=iteration + 1, scaling=scaling.tolist(),
+        state.update(z=z.tolist(), iteration=iteration + 1, scaling=scaling.tolist(),
                      previous_gradient=total_gradient.tolist(), since_build=state["since_build"] + 1, center=center)
         checkpoint.save(state, history, builder)
         if np.linalg.norm(step) < settings.step_tolerance:
@@ -212,21 +215,21 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, st
     if center is not None and np.allclose(z, center["z"]) and prom is not None:
         final = builder.evaluate(prom, z, weights)
     else:
-        final = _final_evaluation(builder, weights, z, np.array(state.get("previous_z", z)))
+        final = _final_evaluation(builder, weights, z, np.array(center["z"]))
         z = final.z
     _record(history, history_row(space, state["iteration"], z, final.cost, final.gradient, final.distance,
                                  "built", started), on_iteration)
     return z, final, reason
 
 
-def _final_evaluation(builder: PromBuilder, weights, z, previous_z) -> Evaluation:
-    """A PROM built at the last iterate (stepping back towards the previous one if it is refused)."""
+def _final_evaluation(builder: PromBuilder, weights, z, last_built) -> Evaluation:
+    """A PROM built at the last iterate (stepping back towards the last built design if refused)."""
     for _ in range(20):
         try:
             return builder.evaluate(builder.build(z), z, weights)
         except InputError:
-            z = previous_z + 0.5 * (z - previous_z)
-    return builder.evaluate(builder.build(previous_z), previous_z, weights)
+            z = last_built + 0.5 * (z - last_built)
+    return builder.evaluate(builder.build(last_built), last_built, weights)
 
 
 def _strictly_inside(space: DesignSpace, z: np.ndarray) -> np.ndarray:
@@ -301,13 +304,14 @@ def _trust_region(scene, space, builder, weights, history, checkpoint, state, st
         if np.abs(step).max() < settings.step_tolerance or predicted <= settings.cost_tolerance * abs(current.cost):
             reason = "no predicted improvement inside the trust radius"
             break
-        try:
-            candidate_prom = builder.build(candidate)
-            trial = builder.evaluate(candidate_prom, candidate, weights)
-            ratio = (current.cost - trial.cost) / predicted
-        except InputError as refused:          # the candidate design cannot be meshed: reject it
-            log.warning("trust region: candidate refused (%s)", refused)
+        candidate, candidate_prom = _meshable_candidate(builder, center, candidate)
+        if candidate_prom is None:
             trial, ratio = None, -np.inf
+        else:
+            step = candidate - center
+            predicted = current.cost - _surrogate_cost(builder, prom, weights, candidate)
+            trial = builder.evaluate(candidate_prom, candidate, weights)
+            ratio = (current.cost - trial.cost) / predicted if predicted > 0 else -np.inf
         accepted = ratio > settings.accept_ratio
         if trial is not None:
             _record(history, history_row(space, iteration, candidate, trial.cost, trial.gradient, trial.distance,
@@ -325,6 +329,21 @@ def _trust_region(scene, space, builder, weights, history, checkpoint, state, st
             reason = f"trust radius {radius:.2e} of the validity box below the step tolerance"
             break
     return center, current, reason
+
+
+def _meshable_candidate(builder: PromBuilder, center, candidate, attempts: int = 6):
+    """The candidate, or the point halfway back towards the centre, … that the mesh check accepts."""
+    for _ in range(attempts):
+        try:
+            return candidate, builder.build(candidate)
+        except InputError as refused:
+            log.warning("trust region: candidate refused (%s); trying halfway back", refused)
+            candidate = center + 0.5 * (candidate - center)
+    return candidate, None
+
+
+def _surrogate_cost(builder: PromBuilder, prom, weights, z) -> float:
+    return builder.evaluate(prom, z, weights).cost
 
 
 def _build_or_stop(builder: PromBuilder, z: np.ndarray) -> ReducedModel:
