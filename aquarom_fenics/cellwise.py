@@ -22,14 +22,11 @@ import itertools
 
 import numpy as np
 import ufl
-from dolfinx import fem
 from mpi4py import MPI
 
 from . import dolfinx_adapter as fx
 from .forms.elasticity import svk_energy_density
 from .forms.kinematics import green_lagrange_strain, volume_ratio
-
-MIDPOINT = np.array([[0.25, 0.25, 0.25]])
 
 # Orthonormal basis of symmetric 3×3 tensors: E = Σ_a s_a B_a with s_a = E:B_a.
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
@@ -48,7 +45,7 @@ class CellSampler:
 
     def __init__(self, fom, taylor_order: int):
         self.fom = fom
-        self.cells = np.arange(fom.mesh.topology.index_map(3).size_local, dtype=np.int32)
+        self.cells = fx.owned_cells(fom.mesh)
         self.direction = fx.new_function(fom.space, "direction")
         self.shape_directions = [fx.new_function(fom.space, f"shape_direction_{i}") for i in range(2)]
         u_xi = fom.shape_displacement
@@ -64,21 +61,15 @@ class CellSampler:
         if taylor_order >= 2:
             self.strain.append(self._compile(ufl.derivative(first_strain, u_xi, self.shape_directions[1])))
             self.weight.append(self._compile(ufl.derivative(first_weight, u_xi, self.shape_directions[1])))
-        self.unit_strain = fem.Constant(fom.mesh, np.zeros((3, 3)))
+        self.unit_strain = fx.tensor_constant(fom.mesh, (3, 3))
         self.energy_density = self._compile(svk_energy_density(
             self.unit_strain, fom.young_modulus, fx.constant(fom.mesh, fom.scene.material.poisson_ratio)))
 
     def _compile(self, expression):
-        import logging
-
-        logging.disable(logging.INFO)
-        try:
-            return fem.Expression(expression, MIDPOINT)
-        finally:
-            logging.disable(logging.NOTSET)
+        return fx.compile_midpoint_expression(expression)
 
     def evaluate(self, expression) -> np.ndarray:
-        return expression.eval(self.cells)
+        return fx.evaluate_expression(expression, self.cells)
 
     def set_shape_directions(self, *fields) -> None:
         for function, owned in zip(self.shape_directions, fields):

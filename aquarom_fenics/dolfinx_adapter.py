@@ -95,9 +95,32 @@ def set_owned_values(function, owned: np.ndarray) -> None:
 
 def compile_form(form):
     """JIT-compile a UFL form (cached by FFCx); the C compiler's INFO log lines are silenced."""
+    return _quietly(fem.form, form)
+
+
+def compile_midpoint_expression(expression):
+    """JIT-compile a UFL expression evaluated at the cell midpoint of a tetrahedron."""
+    return _quietly(fem.Expression, expression, np.array([[0.25, 0.25, 0.25]]))
+
+
+def evaluate_expression(compiled, cells: np.ndarray) -> np.ndarray:
+    """(n_cells, value size) values of a compiled midpoint expression."""
+    return compiled.eval(cells)
+
+
+def owned_cells(mesh) -> np.ndarray:
+    return np.arange(mesh.topology.index_map(3).size_local, dtype=np.int32)
+
+
+def tensor_constant(mesh, shape) -> fem.Constant:
+    """A constant tensor whose ``value`` can be set between evaluations."""
+    return fem.Constant(mesh, np.zeros(shape))
+
+
+def _quietly(compile_function, *args):
     logging.disable(logging.INFO)
     try:
-        return fem.form(form)
+        return compile_function(*args)
     finally:
         logging.disable(logging.NOTSET)
 

@@ -161,8 +161,9 @@ class ReducedSystem:
         prom, d = self.prom, self.delta
         if prom.n_parameters == 0 or prom.mass_moment_x.first is None:
             return np.zeros((prom.n_parameters, prom.size))
+        # c = n / m_total ⇒ ∂c/∂ξ_k = (∂n/∂ξ_k - c ∂m_total/∂ξ_k) / m_total
         total = float(prom.total_mass.at(d))
-        return (prom.mass_moment_x.gradient(d) - np.outer(prom.total_mass.gradient(d), self.com_weights * total) / total) / total
+        return (prom.mass_moment_x.gradient(d) - np.outer(prom.total_mass.gradient(d), self.com_weights)) / total
 
 
 @dataclass

@@ -86,7 +86,7 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
         if csv:
             csv.write(report.time, values["head_x"], values["tail_y"], values["com_x"], report.iterations)
         if xdmf:
-            fx_write(model, xdmf, u, report.time)
+            _write_xdmf_sample(model, xdmf, u, report.time)
         if keep_states:
             states.append((u.copy(), v.copy()))
         if bar:
@@ -154,7 +154,7 @@ def _open_xdmf(model: FullOrderModel, out_dir, comm):
     return XDMFTimeSeries(comm, Path(out_dir) / "displacement.xdmf", model.mesh)
 
 
-def fx_write(model: FullOrderModel, xdmf, u, time):
+def _write_xdmf_sample(model: FullOrderModel, xdmf, u, time):
     from .dolfinx_adapter import set_owned_values
 
     set_owned_values(model.displacement, u)

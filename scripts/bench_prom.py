@@ -14,8 +14,7 @@ from pathlib import Path
 REPOSITORY = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPOSITORY))
 
-from dolfinx import fem  # noqa: E402
-
+from aquarom_fenics import dolfinx_adapter as adapter  # noqa: E402
 from aquarom_fenics.fish import load_fish  # noqa: E402
 from aquarom_fenics.outputs import software_versions, write_json_atomic  # noqa: E402
 from aquarom_fenics.reduced_dynamics import simulate_reduced  # noqa: E402
@@ -27,26 +26,22 @@ SHAPE_SETS = {0: "nominal", 3: "so1", 5: "so2", 8: "so3"}
 
 
 class EvaluationCounter:
-    """Counts form assemblies and expression evaluations by wrapping the dolfinx entry points."""
+    """Counts form assemblies and expression evaluations at the dolfinx adapter's entry points."""
 
     def __init__(self):
-        import dolfinx.fem.petsc as fem_petsc
-
         self.counts = {"vector_assemblies": 0, "matrix_assemblies": 0, "expression_evaluations": 0}
-        self._patched = []
-        self._wrap(fem_petsc, "assemble_vector", "vector_assemblies")
-        self._wrap(fem_petsc, "assemble_matrix", "matrix_assemblies")
-        self._wrap(fem.Expression, "eval", "expression_evaluations")
+        self._wrap("assemble_vector_into", "vector_assemblies")
+        self._wrap("assemble_matrix_into", "matrix_assemblies")
+        self._wrap("evaluate_expression", "expression_evaluations")
 
-    def _wrap(self, owner, name, key):
-        original = getattr(owner, name)
+    def _wrap(self, name, key):
+        original = getattr(adapter, name)
 
         def counted(*args, **kwargs):
             self.counts[key] += 1
             return original(*args, **kwargs)
 
-        setattr(owner, name, counted)
-        self._patched.append((owner, name, original))
+        setattr(adapter, name, counted)
 
     def take(self) -> dict:
         counts = dict(self.counts)
