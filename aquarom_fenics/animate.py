@@ -21,7 +21,7 @@ import numpy as np
 from mpi4py import MPI
 
 from .errors import InputError
-from .render import EDGE_COLOUR, EDGE_OPACITY, _add_text, _frame_camera, _plotter, _save, tetra_grid
+from .render import EDGE_COLOUR, EDGE_OPACITY, _frame_camera, _plotter, _save, tetra_grid
 
 DISPLACEMENT_FILE = "displacement.npz"
 """Nodal displacement time series of a run, written next to trajectory.csv."""
@@ -52,7 +52,7 @@ DEFAULT_FPS = 20
 
 BASIS_PANEL_SIZE = (420, 300)
 BASIS_COLUMNS = 4
-BASIS_LABEL_SPACE = 0.2
+BASIS_LABEL_SPACE = 0.26
 """Panel size [px], panels per row and fraction of a panel's height kept for its label."""
 
 BASIS_PEAK_FRACTION = 0.15
@@ -67,6 +67,23 @@ TITLE_FONT_SIZE = 10
 CAPTION_FONT_SIZE = 8
 BASIS_LABEL_FONT_SIZE = 7
 """Font sizes [pt]; a rendered line is about twice as many pixels high."""
+
+COLOUR_BAR_FONT_SIZE = 12
+"""Font size [px] of the colour bars' title and labels."""
+
+
+@dataclass(frozen=True)
+class _View:
+    """One view of the animation: parallel projection, x to the right."""
+
+    caption: str
+    towards_camera: tuple[float, float, float]   # unit vector from the fish to the camera
+    up: tuple[float, float, float]               # unit vector pointing up in the picture
+
+
+VIEWS = (_View("from above; grey outline at t = 0", (0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
+         _View("from the right side; grey outline at t = 0", (0.0, -1.0, 0.0), (0.0, 0.0, 1.0)))
+"""The two views side by side: from above (+z, left of the fish up) and from its right flank (-y, z up)."""
 
 
 @dataclass(frozen=True)
@@ -187,10 +204,10 @@ def _load_run(run_dir: Path) -> tuple[DisplacementSeries, np.ndarray, str]:
     trajectory = read_trajectory_csv(run_dir / "trajectory.csv")
     com_x = np.interp(series.time, np.atleast_1d(trajectory["time"]), np.atleast_1d(trajectory["com_x"]))
     summary = json.loads((run_dir / "summary.json").read_text())
-    return series, com_x, run_title(summary)
+    return series, com_x, _run_title(summary)
 
 
-def run_title(summary: dict) -> str:
+def _run_title(summary: dict) -> str:
     """``scene (MODEL), mesh, design`` of a run's summary.json."""
     mesh = summary.get("scene_values", {}).get("mesh", {})
     mesh_text = f"mesh {Path(mesh['file']).name}" if mesh.get("file") else f"level {mesh.get('level', '?')}"
@@ -236,35 +253,22 @@ def _render_frames(series: DisplacementSeries, samples, com_x: np.ndarray, title
     The outline of the design at rest is drawn in front of the fish, so that the distance swum
     shows against it.
     """
-    plotter = _plotter((1, 2), VIEW_SIZE)
+    plotter = _plotter((1, len(VIEWS)), VIEW_SIZE)
     grid = tetra_grid(series.deformed(0), series.cells)
     magnitude_cm = 100 * np.linalg.norm(series.displacement[list(samples)], axis=2)
     grid.point_data["displacement"] = magnitude_cm[0]
     colour_range = (0.0, max(float(magnitude_cm.max()), 1e-6))
     swept = np.vstack([series.deformed(sample) for sample in samples])
     rest_outline = _feature_edges(tetra_grid(series.points, series.cells))
-    views = (("from above; grey outline at t = 0", np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])),
-             ("from the right side; grey outline at t = 0", np.array([0.0, -1.0, 0.0]), np.array([0.0, 0.0, 1.0])))
-    scale = max(_view_half_height(swept, up) for _, _, up in views)
-    depth = np.ptp(swept, axis=0).max()
-    for column, (caption, towards_camera, up) in enumerate(views):
+    scale = max(_view_half_height(swept, np.array(view.up)) for view in VIEWS)
+    for column, view in enumerate(VIEWS):
         plotter.subplot(0, column)
-        in_front = rest_outline.translate(depth * towards_camera, inplace=False)
-        plotter.add_mesh(in_front, color=REST_OUTLINE_COLOUR, line_width=1.5, lighting=False)
-        plotter.add_mesh(grid, scalars="displacement", cmap=COLOUR_MAP, clim=colour_range, show_edges=True,
-                         edge_color=EDGE_COLOUR, edge_opacity=EDGE_OPACITY, ambient=0.45, diffuse=0.65,
-                         show_scalar_bar=False)
-        _add_text(plotter, caption, (0.02, VIEW_BOTTOM_SPACE * 0.8), CAPTION_FONT_SIZE, "black")
-        _fix_axis_camera(plotter, swept, towards_camera, up, scale)
+        _add_view(plotter, view, grid, rest_outline, colour_range, swept, scale)
     plotter.subplot(0, 0)
-    _add_text(plotter, title, (0.02, 0.97), TITLE_FONT_SIZE, "black")
-    clock = plotter.add_text("", position=(0.02, 0.97 - 0.1), viewport=True, font_size=TITLE_FONT_SIZE,
-                             color="black")
-    clock.prop.SetVerticalJustificationToTop()
+    _add_text(plotter, title, (0.02, 0.97), TITLE_FONT_SIZE)
+    clock = _add_text(plotter, "", (0.02, 0.87), TITLE_FONT_SIZE)
     plotter.subplot(0, 1)
-    plotter.add_scalar_bar("displacement magnitude [cm]", n_labels=3, fmt="%.2f", color="black", title_font_size=14,
-                           label_font_size=12, vertical=False, position_x=0.55, position_y=0.02,
-                           width=0.4, height=0.1)
+    _add_colour_bar(plotter, "displacement magnitude [cm]", (0.55, 0.0), (0.42, 0.14))
     try:
         for index, sample in enumerate(samples):
             grid.points = series.deformed(sample)
@@ -275,6 +279,21 @@ def _render_frames(series: DisplacementSeries, samples, com_x: np.ndarray, title
             yield plotter.screenshot(return_img=True)[..., :3].copy()
     finally:
         plotter.close()
+
+
+def _add_view(plotter, view: _View, grid, rest_outline, colour_range: tuple[float, float], swept: np.ndarray,
+              scale: float) -> None:
+    """The fish ``grid`` coloured by its displacement [cm], the rest outline in front of it and
+    the caption, seen along ``view`` with a camera that frames the ``swept`` positions [m].
+    """
+    towards_camera, up = np.array(view.towards_camera), np.array(view.up)
+    in_front = rest_outline.translate(np.ptp(swept, axis=0).max() * towards_camera, inplace=False)
+    plotter.add_mesh(in_front, color=REST_OUTLINE_COLOUR, line_width=1.5, lighting=False)
+    plotter.add_mesh(grid, scalars="displacement", cmap=COLOUR_MAP, clim=colour_range, show_edges=True,
+                     edge_color=EDGE_COLOUR, edge_opacity=EDGE_OPACITY, ambient=0.45, diffuse=0.65,
+                     show_scalar_bar=False)
+    _add_text(plotter, view.caption, (0.02, VIEW_BOTTOM_SPACE * 0.8), CAPTION_FONT_SIZE)
+    _fix_axis_camera(plotter, swept, towards_camera, up, scale)
 
 
 def _view_half_height(points: np.ndarray, up: np.ndarray) -> float:
@@ -300,6 +319,40 @@ def _fix_axis_camera(plotter, points: np.ndarray, towards_camera: np.ndarray, up
     plotter.camera.parallel_projection = True
     plotter.camera.parallel_scale = scale
     plotter.renderer.reset_camera_clipping_range()
+
+
+def _add_text(plotter, text: str, anchor: tuple[float, float], font_size: int):
+    """Black text hanging below ``anchor`` (fractions of the current view's width and height)."""
+    actor = plotter.add_text(text, position=anchor, viewport=True, font_size=font_size, color="black",
+                             font_file=str(_font_file()))
+    actor.prop.SetVerticalJustificationToTop()
+    return actor
+
+
+def _add_colour_bar(plotter, title: str, corner: tuple[float, float], size: tuple[float, float]) -> None:
+    """Horizontal colour bar of the last added mesh: three labels below it, then the title.
+
+    ``corner`` (lower left) and ``size`` are fractions of the current view's width and height.
+    """
+    from vtkmodules.vtkCommonCore import VTK_FONT_FILE
+
+    bar = plotter.add_scalar_bar(title, n_labels=3, fmt="%.2f", color="black", vertical=False,
+                                 position_x=corner[0], position_y=corner[1], width=size[0], height=size[1],
+                                 title_font_size=COLOUR_BAR_FONT_SIZE, label_font_size=COLOUR_BAR_FONT_SIZE,
+                                 unconstrained_font_size=True)
+    bar.SetTextPositionToPrecedeScalarBar()
+    for text in (bar.GetTitleTextProperty(), bar.GetLabelTextProperty()):
+        text.SetFontFamily(VTK_FONT_FILE)
+        text.SetFontFile(str(_font_file()))
+        text.SetBold(False)
+        text.SetItalic(False)
+
+
+def _font_file() -> Path:
+    """DejaVu Sans, shipped with matplotlib: it has the Greek letters of the basis labels."""
+    import matplotlib
+
+    return Path(matplotlib.get_data_path()) / "fonts" / "ttf" / "DejaVuSans.ttf"
 
 
 def _feature_edges(grid):
@@ -387,11 +440,9 @@ def _render_basis_panels(rest: np.ndarray, cells: np.ndarray, displacements: lis
         plotter.add_mesh(rest_outline, color=REST_OUTLINE_COLOUR, line_width=1.5, lighting=False)
         plotter.add_mesh(grid, scalars="displacement", cmap=COLOUR_MAP, clim=colour_range, show_edges=True,
                          edge_color=EDGE_COLOUR, edge_opacity=EDGE_OPACITY, ambient=0.35, diffuse=0.75,
-                         show_scalar_bar=index == 0,
-                         scalar_bar_args=dict(title=f"|u| [cm], peak {BASIS_PEAK_FRACTION:.0%} of length",
-                                              n_labels=3, fmt="%.1f", color="black", vertical=False,
-                                              title_font_size=12, label_font_size=11, position_x=0.45,
-                                              position_y=0.02, width=0.5, height=0.12))
-        _add_text(plotter, label, (0.02, 0.97), BASIS_LABEL_FONT_SIZE, "black")
+                         show_scalar_bar=False)
+        _add_text(plotter, label, (0.02, 0.97), BASIS_LABEL_FONT_SIZE)
+        if index == 0:
+            _add_colour_bar(plotter, f"|u| [cm], peak {BASIS_PEAK_FRACTION:.0%} of length", (0.55, 0.74), (0.42, 0.2))
         _frame_camera(plotter, framed, BASIS_PANEL_SIZE, BASIS_LABEL_SPACE)
     _save(plotter, path)

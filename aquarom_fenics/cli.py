@@ -26,6 +26,8 @@ EXAMPLES = {
     "compare": "aquarom compare so1 --xi y_thin=0.05 --level 1 --out results/so1-compare",
     "optimize": "aquarom optimize so1 --level 1 --out results/so1-opt\n  aquarom optimize so1 --out results/so1-opt --resume",
     "pareto": "aquarom pareto co --level 1 --out results/co-pareto",
+    "animate": "aquarom animate results/nominal-fom --fps 20 --stride 2",
+    "basis": "aquarom basis so1 --level 1 --out results/so1-basis",
 }
 
 
@@ -72,6 +74,18 @@ def build_parser() -> argparse.ArgumentParser:
                           help="w_1 of L = w_1(-d) + (1-w_1) α A² for co-optimisation scenes (default 0.5)")
     pareto = command("pareto", "co-optimisation weight sweep: Pareto front of distance against actuation energy")
     pareto.add_argument("--out", type=Path, help="output directory (default results/pareto/SCENE)")
+    from .animate import DEFAULT_FPS
+
+    animate_help = "animate a simulation run (MP4 and GIF preview): the fish from above and from the side"
+    animate = commands.add_parser("animate", help=animate_help, description=animate_help,
+                                  epilog=f"example:\n  {EXAMPLES['animate']}",
+                                  formatter_class=argparse.RawDescriptionHelpFormatter)
+    animate.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="output directory of `aquarom simulate`")
+    animate.add_argument("--out", type=Path, help="MP4 file (default RUN_DIR/animation.mp4; the GIF goes next to it)")
+    animate.add_argument("--fps", type=int, default=DEFAULT_FPS, help=f"frames per second (default {DEFAULT_FPS})")
+    animate.add_argument("--stride", type=int, default=1, help="one frame every K stored samples (default 1)")
+    basis = command("basis", "build the scene's PROM and draw every basis vector on the fish (basis.png)")
+    basis.add_argument("--out", type=Path, help="output directory (default results/basis/SCENE)")
     return parser
 
 
@@ -266,6 +280,8 @@ def run_optimize(args) -> int:
     say(f"{scene.name} ({scene.optimizer.method}): optimum "
         + ", ".join(f"{n} = {v:.4g}" for n, v in zip(space.names, result.optimum))
         + f"; {result.builds} PROM builds, {result.timings['total']:.1f} s ({result.stop_reason})")
+    if check.error:
+        raise SolverError(f"FOM check: {check.error}; the optimisation outputs are in {out}/")
     say(f"FOM check: nominal {100 * check.nominal_distance:.3f} cm, optimal {100 * check.optimal_distance:.3f} cm "
         f"(PROM {100 * check.prom_optimal_distance:.3f} cm), ratio {check.ratio:.2f}; outputs in {out}/")
     return 0
@@ -286,8 +302,32 @@ def run_pareto(args) -> int:
     return 0
 
 
+def run_animate(args) -> int:
+    from .animate import animate_run
+
+    for path in animate_run(args.run_dir, out=args.out, fps=args.fps, stride=args.stride):
+        say(f"wrote {path}")
+    return 0
+
+
+def run_basis(args) -> int:
+    from .animate import render_basis_sheet
+    from .fish import load_fish
+    from .reductor import build_prom
+
+    scene = load_scene(args)
+    fish = load_fish(scene)
+    out = args.out or Path("results") / "basis" / scene.name
+    prom = build_prom(scene, xi_center={s.name: s.start for s in scene.shapes}, fish=fish)
+    files = render_basis_sheet(prom, fish, out)
+    dropped = f"; dropped as dependent: {', '.join(prom.dropped)}" if prom.dropped else ""
+    say(f"basis of {scene.name}: m = {prom.size} ({', '.join(prom.labels)}){dropped}; wrote {files[0]}")
+    return 0
+
+
 COMMANDS = {"mesh": run_mesh, "shapes": run_shapes, "simulate": run_simulate, "build": run_build,
-            "compare": run_compare, "optimize": run_optimize, "pareto": run_pareto}
+            "compare": run_compare, "optimize": run_optimize, "pareto": run_pareto, "animate": run_animate,
+            "basis": run_basis}
 
 if __name__ == "__main__":
     sys.exit(main())

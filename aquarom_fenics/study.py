@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import os
 import json
 import logging
 import time
@@ -13,7 +14,7 @@ import numpy as np
 from mpi4py import MPI
 
 from .cost import CostWeights, design_space
-from .errors import InputError
+from .errors import InputError, SolverError
 from .fish import Fish, load_fish
 from .optimize import OptimizationResult, optimize
 from .outputs import software_versions, write_json_atomic
@@ -21,37 +22,46 @@ from .scene import REPOSITORY, Scene
 from .simulate import simulate_fom
 
 log = logging.getLogger("aquarom")
-FOM_CACHE = REPOSITORY / "results" / "cache" / "fom"
+
+
+def fom_cache_dir() -> Path:
+    """Where FOM check results are cached: $AQUAROM_CACHE/fom, default results/cache/fom."""
+    return Path(os.environ.get("AQUAROM_CACHE", REPOSITORY / "results" / "cache")) / "fom"
 
 
 @dataclass
 class FomCheck:
-    """FOM distances [m] of the nominal (start) and optimal designs and their ratio."""
+    """FOM distances [m] of the nominal (start) and optimal designs and their ratio.
 
-    nominal_distance: float
-    optimal_distance: float
+    A FOM run that stops leaves its distance None and the reason in ``error``.
+    """
+
+    nominal_distance: float | None
+    optimal_distance: float | None
     prom_nominal_distance: float
     prom_optimal_distance: float
     time: float
+    error: str | None = None
 
     @property
-    def ratio(self) -> float:
+    def ratio(self) -> float | None:
+        if self.nominal_distance is None or self.optimal_distance is None:
+            return None
         return self.optimal_distance / self.nominal_distance
 
 
-def fom_distance(scene: Scene, fish: Fish, design: dict[str, float], amplitude: float | None,
-                 cache_dir: Path = FOM_CACHE) -> float:
+def fom_distance(scene: Scene, fish: Fish, design: dict[str, float], amplitude: float | None) -> float:
     """Swimming distance of the FOM at a design, cached by scene hash, design and amplitude."""
     if amplitude is not None:
         scene = scene.replace("actuation", amplitude=amplitude)
     key = hashlib.sha256(json.dumps([scene.hash, sorted(design.items())]).encode()).hexdigest()[:20]
-    path = Path(cache_dir) / f"{key}.json"
+    path = fom_cache_dir() / f"{key}.json"
     if path.exists():
         log.info("FOM at %s: reused from %s", design, path)
         return json.loads(path.read_text())["distance"]
     result = simulate_fom(scene, design, fish=fish, progress=MPI.COMM_WORLD.rank == 0)
     if not result.completed:
-        raise RuntimeError(f"FOM check at {design} stopped: {result.error}")
+        raise SolverError(f"FOM at {design} stopped: {result.error}")
     if MPI.COMM_WORLD.rank == 0:
         write_json_atomic(path, {"design": design, "scene_hash": scene.hash, "distance": result.distance})
     return result.distance
@@ -65,11 +75,16 @@ def fom_check(scene: Scene, fish: Fish, result: OptimizationResult) -> FomCheck:
     def split(z):
         return dict(zip(space.names[:shapes], map(float, z[:shapes]))), (float(z[-1]) if space.with_amplitude else None)
 
-    nominal = fom_distance(scene, fish, *split(space.start))
-    optimal = fom_distance(scene, fish, *split(result.optimum))
+    distances, errors = [], []
+    for z in (space.start, result.optimum):
+        try:
+            distances.append(fom_distance(scene, fish, *split(z)))
+        except SolverError as failure:
+            distances.append(None)
+            errors.append(str(failure))
     first_built = next(row for row in result.history if row["prom"] == "built")
-    return FomCheck(nominal, optimal, first_built["distance"], result.evaluation.distance,
-                    time.perf_counter() - started)
+    return FomCheck(*distances, first_built["distance"], result.evaluation.distance,
+                    time.perf_counter() - started, "; ".join(errors) or None)
 
 
 def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights: CostWeights | None = None,
@@ -130,7 +145,8 @@ def _write_summary(out_dir, scene, result, check, weights):
         "prom_distance_optimal": result.evaluation.distance,
         "fom_check": {"nominal_distance": check.nominal_distance, "optimal_distance": check.optimal_distance,
                       "prom_nominal_distance": check.prom_nominal_distance,
-                      "prom_optimal_distance": check.prom_optimal_distance, "ratio": check.ratio},
+                      "prom_optimal_distance": check.prom_optimal_distance, "ratio": check.ratio,
+                      "error": check.error},
         "timings": result.timings | {"fom_check": check.time},
         "time_per_build": result.timings["prom_builds"] / max(result.builds, 1),
         "versions": software_versions()}
@@ -164,7 +180,8 @@ def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None) -> list[
         result, check = run_optimization(scene, Path(out_dir) / f"w1_{w1:g}", weights=weights, fish=fish, render=False)
         amplitude = float(result.optimum[-1])
         points.append({"w1": w1, "amplitude": amplitude, "energy": weights.energy_term(amplitude),
-                       "distance": check.optimal_distance, "prom_distance": result.evaluation.distance,
+                       "distance": check.optimal_distance if check.optimal_distance is not None else float("nan"),
+                       "prom_distance": result.evaluation.distance,
                        **{f"xi_{n}": float(v) for n, v in zip(result.space.names[:-1], result.optimum[:-1])}})
     if MPI.COMM_WORLD.rank == 0:
         with open(Path(out_dir) / "pareto.csv", "w", newline="") as stream:

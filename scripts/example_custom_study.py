@@ -26,8 +26,11 @@ def main():
     print("| k [Pa] | " + " | ".join(names) + " | FOM nominal [cm] | FOM optimal [cm] | ratio | PROM builds |")
     print("|---" * (len(names) + 5) + "|")
     for stiffness, optimum, check, builds in rows:
+        nominal, optimal = (f"{100 * d:.3f}" if d is not None else "stopped"
+                            for d in (check.nominal_distance, check.optimal_distance))
+        ratio = f"{check.ratio:.2f}" if check.ratio is not None else "n/a"
         print(f"| {stiffness:g} | " + " | ".join(f"{optimum[n]:+.3f}" for n in names)
-              + f" | {100 * check.nominal_distance:.3f} | {100 * check.optimal_distance:.3f} | {check.ratio:.2f} | {builds} |")
+              + f" | {nominal} | {optimal} | {ratio} | {builds} |")
 
 
 if __name__ == "__main__":

@@ -39,19 +39,27 @@ def main():
             continue
         run_optimization(scene, args.out / case, fish=fish)
         lines.append(_row(case, scene, fish, json.loads((args.out / case / "summary.json").read_text())))
+    failures = [line for line in lines if "stopped" in line]
+    if failures:
+        lines += ["", "FOM runs marked 'stopped' did not converge: see each case's summary.json (fom_check.error)."]
     versions = software_versions()
     lines += ["", f"aquarom_fenics {versions['aquarom_fenics']}, dolfinx {versions['dolfinx']}."]
     (args.out / "summary.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
 
+def _centimetres(value):
+    return "stopped" if value is None else f"{100 * value:.3f}"
+
+
 def _row(case, scene, fish, summary):
     check = summary["fom_check"]
     optimum = ", ".join(f"{n} {v:+.3f}" for n, v in summary["optimum"].items())
+    ratio = "n/a" if check["ratio"] is None else f"{check['ratio']:.2f}"
     return (f"| {case} | {len(summary['optimum'])} | {fish.mesh.cells.shape[0]} | {summary['prom_size']} | "
             f"{summary['prom_builds']} | "
             f"{summary['timings']['total']:.1f} | {summary['time_per_build']:.2f} | {optimum} | "
-            f"{100 * check['nominal_distance']:.3f} | {100 * check['optimal_distance']:.3f} | {check['ratio']:.2f} |")
+            f"{_centimetres(check['nominal_distance'])} | {_centimetres(check['optimal_distance'])} | {ratio} |")
 
 
 if __name__ == "__main__":

@@ -9,6 +9,12 @@ os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
 os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
 
 
+@pytest.fixture(autouse=True, scope="session")
+def isolated_cache(tmp_path_factory):
+    """FOM-check results are cached per test session, never in the repository."""
+    os.environ["AQUAROM_CACHE"] = str(tmp_path_factory.mktemp("cache"))
+
+
 def coarse_scene(**sections):
     """A scene on mesh level 1; keyword arguments are TOML tables, e.g. solver={"duration": 0.2}."""
     data = {"mesh": {"level": 1}}

@@ -178,3 +178,26 @@ def test_prom_build_failing_mid_run_keeps_history_and_checkpoint(tmp_path, toy_f
         run_optimization(scene, tmp_path / "run", fish=toy_fish, render=False)
     checkpoint = json.loads((tmp_path / "run" / "checkpoint.json").read_text())
     assert checkpoint["builds"] == 2 and len(checkpoint["history"]) >= 2
+
+
+def test_fom_check_that_stops_is_reported_and_the_outputs_are_kept(tmp_path, capsys, monkeypatch):
+    from aquarom_fenics import study
+
+    original = study.simulate_fom
+
+    def diverging(scene, design, **options):
+        result = original(scene.replace("actuation", stiffness=1e6), design, **options)
+        assert not result.completed
+        return result
+
+    monkeypatch.setattr(study, "simulate_fom", diverging)
+    scene = tmp_path / "toy.toml"
+    scene.write_text('[mesh]\nlevel = 1\n[solver]\nduration = 1.0\n[optimizer]\nmax_iterations = 2\n'
+                     '[shapes]\nz_tail = { bounds = [-0.2, 0.2] }\n')
+    out = tmp_path / "run"
+    assert main(["optimize", str(scene), "--out", str(out)]) == 3
+    message = capsys.readouterr().err.strip()
+    assert len(message.splitlines()) == 1 and "FOM check" in message and "step 4" in message
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["fom_check"]["ratio"] is None and "stopped" in summary["fom_check"]["error"]
+    assert (out / "history.csv").exists()
