@@ -120,6 +120,7 @@ def write_displacement_series(path: Path, points, cells, time, nodal_displacemen
     with os.fdopen(handle, "wb") as stream:
         np.savez_compressed(stream, points=series.points, cells=series.cells, time=series.time,
                             displacement=series.displacement)
+    os.chmod(temporary, 0o644)
     os.replace(temporary, path)
     return path
 

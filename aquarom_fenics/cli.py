@@ -199,6 +199,8 @@ def reduced_model(scene, xi: dict, model: str, prom_file: Path | None):
 
 
 def run_reduced_model(scene, xi: dict, model: str, prom_file: Path | None, out: Path):
+    from .animate import DISPLACEMENT_FILE, write_displacement_series
+    from .fish import load_fish
     from .outputs import write_trajectory_csv
     from .reduced_dynamics import simulate_reduced
     from .simulate import write_run_outputs
@@ -206,10 +208,14 @@ def run_reduced_model(scene, xi: dict, model: str, prom_file: Path | None, out: 
     reduced = reduced_model(scene, xi, model, prom_file)
     xi_vector = np.array([xi.get(name, reduced.design_point.get(name, 0.0)) for name in reduced.shape_names])
     result = simulate_reduced(reduced, scene, xi_vector)
+    fish = load_fish(scene)
     if MPI.COMM_WORLD.rank == 0:
         out.mkdir(parents=True, exist_ok=True)
         write_trajectory_csv(out / "trajectory.csv", result.trajectory.arrays())
         design = reduced.design_point | xi
+        write_displacement_series(out / DISPLACEMENT_FILE, fish.design(design), fish.mesh.cells,
+                                  result.trajectory.arrays()["time"],
+                                  np.einsum("ndm,sm->snd", reduced.basis, result.states))
         write_run_outputs(out, scene, result, model, list(design.values()), list(design), MPI.COMM_WORLD,
                           extra={"cells": reduced.cells, "dofs": reduced.dofs, "reduced_size": reduced.size,
                                  "basis": reduced.labels, "basis_dropped": reduced.dropped,

@@ -21,6 +21,7 @@ def write_json_atomic(path: Path, data) -> None:
     with os.fdopen(handle, "w") as stream:
         json.dump(data, stream, indent=2, sort_keys=True, default=_json_default)
         stream.write("\n")
+    os.chmod(temporary, 0o644)
     os.replace(temporary, path)
 
 

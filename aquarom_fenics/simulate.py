@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from .animate import DISPLACEMENT_FILE, write_displacement_series
 from .errors import InputError, SolverError
 from .fish import Fish, load_fish
 from .fom import FullOrderModel
@@ -79,6 +80,7 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
     xdmf = _open_xdmf(model, out_dir, comm) if out_dir is not None and scene.output.xdmf else None
     trajectory = Trajectory()
     states = []
+    displacements = [] if out_dir is not None else None
 
     def record(report: StepReport, u, v, a):
         values = model.observables(u)
@@ -89,6 +91,8 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
             _write_xdmf_sample(model, xdmf, u, report.time)
         if keep_states:
             states.append((u.copy(), v.copy()))
+        if displacements is not None:
+            displacements.append(model.nodal_displacement(u))
         if bar:
             bar.update(1)
 
@@ -120,6 +124,8 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
         timings={"setup": setup_time, "time_integration": clock.perf_counter() - started - setup_time},
         states=states, model=model)
     if is_writer:
+        write_displacement_series(Path(out_dir) / DISPLACEMENT_FILE, model.rest_points, fish.mesh.cells,
+                                  arrays["time"], displacements)
         write_run_outputs(Path(out_dir), scene, result, "fom", fish.parameter_vector(xi), fish.shape_names, comm)
     return result
 
