@@ -292,6 +292,11 @@ def _generate_block(level: int, length: float, width: float, height: float):
     return points, cells
 
 
+def block_cache_path(level: int, length: float, width: float, height: float, cache_dir: Path | None = None) -> Path:
+    """Where :func:`block_mesh` caches a level (whether or not it exists yet)."""
+    return _block_cache_path(cache_dir or _default_cache_dir(), level, length, width, height)
+
+
 def _block_cache_path(cache_dir: Path, level: int, length: float, width: float, height: float):
     name = (
         f"block_level{level}_L{length:.9g}_W{width:.9g}_H{height:.9g}"

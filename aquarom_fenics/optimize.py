@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import LinearConstraint, minimize
 
+from .cache import cached_prom
 from .cost import CostWeights, DesignSpace, Evaluation, design_space, evaluate, meshable_space
 from .errors import InputError, SolverError
 from .fish import Fish, load_fish
@@ -61,7 +62,8 @@ class PromBuilder:
 
     def build(self, z: np.ndarray) -> ReducedModel:
         started = time.perf_counter()
-        prom = build_prom(self.scene, xi_center=z[: self.space.n_shapes], fish=self.fish)
+        center = z[: self.space.n_shapes]
+        prom = cached_prom(self.scene, center, lambda: build_prom(self.scene, xi_center=center, fish=self.fish))
         self.build_time += time.perf_counter() - started
         self.builds += 1
         self.last_size = prom.size

@@ -2,8 +2,6 @@
 from __future__ import annotations
 
 import csv
-import hashlib
-import os
 import json
 import logging
 import time
@@ -13,20 +11,16 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from .cache import cache_root, entry_key, is_intact, seal
 from .cost import CostWeights, design_space
 from .errors import InputError, SolverError
 from .fish import Fish, load_fish
 from .optimize import OptimizationResult, optimize
 from .outputs import software_versions, write_json_atomic
-from .scene import REPOSITORY, Scene
+from .scene import Scene
 from .simulate import simulate_fom
 
 log = logging.getLogger("aquarom")
-
-
-def fom_cache_dir() -> Path:
-    """Where FOM check results are cached: $AQUAROM_CACHE/fom, default results/cache/fom."""
-    return Path(os.environ.get("AQUAROM_CACHE", REPOSITORY / "results" / "cache")) / "fom"
 
 
 @dataclass
@@ -54,16 +48,18 @@ def fom_distance(scene: Scene, fish: Fish, design: dict[str, float], amplitude: 
     """Swimming distance of the FOM at a design, cached by scene hash, design and amplitude."""
     if amplitude is not None:
         scene = scene.replace("actuation", amplitude=amplitude)
-    key = hashlib.sha256(json.dumps([scene.hash, sorted(design.items())]).encode()).hexdigest()[:20]
-    path = fom_cache_dir() / f"{key}.json"
+    path = cache_root() / "fom" / f"{entry_key('fom', scene.hash, sorted(design.items()))}.json"
     if path.exists():
-        log.info("FOM at %s: reused from %s", design, path)
-        return json.loads(path.read_text())["distance"]
+        if is_intact(path):
+            log.info("FOM at %s: reused from the cache (%s)", design, path.name)
+            return json.loads(path.read_text())["distance"]
+        log.warning("FOM cache: entry %s does not match its checksum (corrupted); recomputing it", path.name)
     result = simulate_fom(scene, design, fish=fish, progress=MPI.COMM_WORLD.rank == 0)
     if not result.completed:
         raise SolverError(f"FOM at {design} stopped: {result.error}")
     if MPI.COMM_WORLD.rank == 0:
         write_json_atomic(path, {"design": design, "scene_hash": scene.hash, "distance": result.distance})
+        seal(path)
     return result.distance
 
 

@@ -14,6 +14,9 @@ from aquarom_fenics.cli import main as aquarom
 
 
 def run(arguments: list[str]) -> None:
+    """One CLI call; outputs of an earlier demo are replaced (--force)."""
+    if arguments[0] in ("shapes", "simulate", "compare", "optimize"):
+        arguments = arguments + ["--force"]
     print(f"\n$ aquarom {' '.join(arguments)}", flush=True)
     code = aquarom(arguments)
     if code != 0:

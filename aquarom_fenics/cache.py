@@ -1,0 +1,125 @@
+"""Content-addressed caches of offline work: PROMs, FOM checks and meshes.
+
+An entry's name is the hash of everything it depends on (scene values and mesh content through
+the scene hash, the building point, the model kind, the software versions); each file has a
+SHA-256 sidecar, and an entry whose content does not match it is reported and rebuilt, not used.
+Compiled forms are cached by FFCx itself (by form signature) in its own cache folder.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from .errors import InputError
+from .scene import REPOSITORY, Scene
+
+log = logging.getLogger("aquarom")
+KINDS = ("prom", "fom")
+
+
+def cache_root() -> Path:
+    """$AQUAROM_CACHE, default results/cache in the repository."""
+    return Path(os.environ.get("AQUAROM_CACHE", REPOSITORY / "results" / "cache"))
+
+
+def mesh_cache_dir() -> Path:
+    return REPOSITORY / "meshes" / "cache"
+
+
+def entry_key(*parts) -> str:
+    """SHA-256 (24 hex digits) of the JSON of what an entry depends on, plus the software versions."""
+    from .outputs import software_versions
+
+    text = json.dumps([parts, software_versions()], sort_keys=True, default=_plain)
+    return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+def _plain(value):
+    if isinstance(value, np.ndarray):
+        return [repr(float(v)) for v in value.ravel()]
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(type(value))
+
+
+def file_digest(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as stream:
+        for block in iter(lambda: stream.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def is_intact(path: Path) -> bool:
+    """The file exists and matches its SHA-256 sidecar."""
+    sidecar = path.with_name(path.name + ".sha256")
+    return path.exists() and sidecar.exists() and sidecar.read_text().strip() == file_digest(path)
+
+
+def seal(path: Path) -> None:
+    """Write the SHA-256 sidecar of a finished cache file."""
+    path.with_name(path.name + ".sha256").write_text(file_digest(path) + "\n")
+
+
+def discard(path: Path) -> None:
+    for victim in (path, path.with_name(path.name + ".sha256")):
+        victim.unlink(missing_ok=True)
+
+
+def cached_prom(scene: Scene, xi_center: np.ndarray, build, parametric: bool = True,
+                comm: MPI.Comm = MPI.COMM_WORLD):
+    """The PROM of ``scene`` at ``xi_center`` from the cache, or ``build()`` and store it."""
+    from .prom import ReducedModel
+
+    key = entry_key("prom", scene.hash, np.asarray(xi_center, dtype=float), parametric)
+    path = cache_root() / "prom" / f"{key}.npz"
+    if path.exists():
+        if is_intact(path):
+            try:
+                model = ReducedModel.load(path, scene_hash=scene.hash)
+                log.info("PROM cache: reused %s", path.name)
+                return model
+            except InputError as damaged:
+                log.warning("PROM cache: entry %s unusable (%s); rebuilding it", path.name, damaged)
+        else:
+            log.warning("PROM cache: entry %s does not match its checksum (corrupted); rebuilding it", path.name)
+        comm.barrier()
+        if comm.rank == 0:
+            discard(path)
+    model = build()
+    if comm.rank == 0:
+        model.save(path)
+        seal(path)
+        log.info("PROM cache: built and stored %s", path.name)
+    comm.barrier()
+    return model
+
+
+def listing() -> list[tuple[str, int, int]]:
+    """(kind, entries, bytes) for every cache: PROMs, FOM checks, meshes, compiled forms."""
+    folders = {kind: cache_root() / kind for kind in KINDS}
+    folders["mesh"] = mesh_cache_dir()
+    folders["compiled forms"] = Path.home() / ".cache" / "fenics"
+    rows = []
+    for kind, folder in folders.items():
+        files = [f for f in folder.rglob("*") if f.is_file() and not f.name.endswith(".sha256")] if folder.exists() else []
+        rows.append((kind, len(files), sum(f.stat().st_size for f in files)))
+    return rows
+
+
+def clear(kinds: list[str]) -> list[Path]:
+    """Remove the named caches ("prom", "fom", "mesh"); returns the folders removed."""
+    removed = []
+    for kind in kinds:
+        folder = mesh_cache_dir() if kind == "mesh" else cache_root() / kind
+        if folder.exists():
+            shutil.rmtree(folder)
+            removed.append(folder)
+    return removed

@@ -1,0 +1,86 @@
+"""Dry runs, safe outputs, manifests and content-addressed caches."""
+import json
+import logging
+import time
+
+from aquarom_fenics.cache import cache_root
+from aquarom_fenics.cli import main
+
+TOY = """
+[mesh]
+level = 1
+[solver]
+duration = 1.0
+[fluid]
+drag = false
+[optimizer]
+max_iterations = 6
+[shapes]
+z_tail = { bounds = [-0.2, 0.2] }
+y_thin = { bounds = [-0.1, 0.1] }
+"""
+
+
+def write_scene(directory):
+    path = directory / "toy.toml"
+    path.write_text(TOY)
+    return str(path)
+
+
+def test_dry_run_prints_a_plan_and_writes_nothing(tmp_path, capsys):
+    scene = write_scene(tmp_path)
+    for command in (["simulate", scene, "--model", "prom"], ["optimize", scene], ["build", scene], ["compare", scene]):
+        assert main([*command, "--dry-run", "--out", str(tmp_path / "out")]) == 0
+        text = capsys.readouterr().out
+        assert "dry run" in text and "estimate" in text
+        assert not (tmp_path / "out").exists()
+    main(["optimize", scene, "--dry-run"])
+    text = capsys.readouterr().out
+    assert "skipped: drag" in text and "xi_1_z_tail" in text and "FOM checks" in text
+
+
+def test_existing_outputs_are_kept_unless_forced_and_a_manifest_is_written(tmp_path, capsys):
+    scene = write_scene(tmp_path)
+    out = tmp_path / "run"
+    assert main(["simulate", scene, "--model", "rom", "--out", str(out)]) == 0
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["scene"]["hash"] and manifest["host_cores"] >= 1 and manifest["versions"]["dolfinx"]
+    assert manifest["timings"]["total"] > 0
+    (out / "notes.txt").write_text("mine")
+    capsys.readouterr()
+    assert main(["simulate", scene, "--model", "rom", "--out", str(out)]) == 2
+    assert "--force" in capsys.readouterr().err
+    assert (out / "notes.txt").read_text() == "mine"
+    assert main(["simulate", scene, "--model", "rom", "--out", str(out), "--force"]) == 0
+    assert not (out / "notes.txt").exists() and (out / "trajectory.csv").exists()
+
+
+def test_truncated_prom_cache_entry_is_detected_and_rebuilt(tmp_path, caplog):
+    scene = write_scene(tmp_path)
+    assert main(["simulate", scene, "--model", "prom", "--out", str(tmp_path / "a")]) == 0
+    entries = sorted((cache_root() / "prom").glob("*.npz"))
+    assert entries
+    newest = max(entries, key=lambda p: p.stat().st_mtime)
+    newest.write_bytes(newest.read_bytes()[:1000])
+    with caplog.at_level(logging.INFO, logger="aquarom"):
+        assert main(["simulate", scene, "--model", "prom", "--out", str(tmp_path / "b")]) == 0
+    assert "corrupted" in caplog.text and "built and stored" in caplog.text
+    first = json.loads((tmp_path / "a" / "summary.json").read_text())["distance"]
+    second = json.loads((tmp_path / "b" / "summary.json").read_text())["distance"]
+    assert first == second
+
+
+def test_second_identical_optimisation_reuses_every_prom(tmp_path, caplog):
+    scene = write_scene(tmp_path)
+    timings = []
+    for run in ("first", "second"):
+        caplog.clear()
+        started = time.perf_counter()
+        with caplog.at_level(logging.INFO, logger="aquarom"):
+            assert main(["optimize", scene, "--out", str(tmp_path / run)]) == 0
+        timings.append(time.perf_counter() - started)
+        builds = json.loads((tmp_path / run / "summary.json").read_text())["prom_builds"]
+        log = caplog.text
+    assert log.count("PROM cache: reused") == builds and "built and stored" not in log
+    assert "FOM at" in log and "reused from the cache" in log
+    assert timings[1] < timings[0]
