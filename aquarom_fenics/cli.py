@@ -260,17 +260,20 @@ def run_simulate(args) -> int:
 
 def reduced_model(scene, xi: dict, model: str, prom_file: Path | None):
     """A ROM built at the design, or the scene's PROM (loaded from ``prom_file`` or built at the start values)."""
+    from .cache import cached_prom
     from .fish import load_fish
     from .prom import ReducedModel
     from .reductor import build_prom
-
-    from .cache import cached_prom
 
     if prom_file is not None and model == "prom":
         return ReducedModel.load(prom_file, scene_hash=scene.hash)
     fish = load_fish(scene)
     center = {s.name: s.start for s in scene.shapes} | (xi if model == "rom" else {})
     vector = fish.parameter_vector(center)
+    if model == "prom":
+        # Refuse a design beyond the validity radius before spending time on the build.
+        ReducedModel.refuse_outside_radius(scene.shape_names, fish.parameter_vector(center | xi), vector,
+                                           np.array(scene.validity_radii()))
     return cached_prom(scene, vector, lambda: build_prom(scene, xi_center=vector, fish=fish,
                                                           parametric=model == "prom"), parametric=model == "prom")
 

@@ -47,7 +47,7 @@ class Fish:
         """Checked nodal positions x_0 + U ξ of the design (InputError if a cell inverts)."""
         xi = self.parameter_vector(xi)
         moved = design_points(self.mesh.points, self.shape_matrix, xi)
-        check_design(self.mesh.points, self.mesh.cells, moved, dict(zip(self.shape_names, xi)))
+        check_design(self.mesh.points, self.mesh.cells, moved, dict(zip(self.shape_names, xi)), regions=self.tags)
         return moved
 
 

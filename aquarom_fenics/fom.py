@@ -37,6 +37,25 @@ def direct_solver(comm: MPI.Comm) -> PETSc.KSP:
     return solver
 
 
+MUMPS_ERRORS = {-6: "structurally singular matrix", -9: "work array too small",
+                -10: "numerically singular matrix", -13: "out of memory"}
+"""Meaning of the negative INFOG(1) codes of a failed MUMPS factorisation."""
+
+
+def describe_linear_solve(solver: PETSc.KSP) -> str:
+    """KSP converged reason of the last solve and, for MUMPS, INFOG(1) of its factorisation."""
+    reasons = {value: name for name, value in vars(PETSc.KSP.ConvergedReason).items() if name.isupper()}
+    reason = solver.getConvergedReason()
+    text = f"KSP {reasons.get(reason, reason)}"
+    if solver.getPC().getFactorSolverType() != "mumps":
+        return text
+    try:
+        info = solver.getPC().getFactorMatrix().getMumpsInfog(1)
+    except PETSc.Error:
+        return text
+    return f"{text}, MUMPS INFOG(1) = {info}" + (f": {MUMPS_ERRORS[info]}" if info in MUMPS_ERRORS else "")
+
+
 class FullOrderModel:
     """One design of a scene, ready to be integrated in time (implements ``NewtonSystem``)."""
 
@@ -294,9 +313,19 @@ class FullOrderModel:
         return self.solve_with(self._solver, rhs)
 
     def solve_with(self, solver: PETSc.KSP, rhs: np.ndarray) -> np.ndarray:
+        """solver⁻¹ rhs; SolverError if PETSc fails or the solve diverges (a failed factorisation)."""
         self._work_in.array[:] = rhs
-        solver.solve(self._work_in, self._work_out)
+        try:
+            solver.solve(self._work_in, self._work_out)
+        except PETSc.Error as error:
+            raise SolverError(f"linear solve failed (PETSc {error}; {describe_linear_solve(solver)})") from None
+        if solver.getConvergedReason() < 0:
+            raise SolverError(f"linear solve failed ({describe_linear_solve(solver)})")
         return self._work_out.array.copy()
+
+    def linear_solve_status(self) -> str:
+        """KSP reason and MUMPS status of the Newton matrix's last solve ("" before the first)."""
+        return describe_linear_solve(self._solver) if self._solver is not None else ""
 
     def static_response(self, left: float, right: float, tolerance: float = 1e-10,
                         max_iterations: int = 30) -> np.ndarray:

@@ -87,15 +87,18 @@ Observer = Callable[[StepReport, np.ndarray, np.ndarray, np.ndarray], None]
 
 
 def integrate(system: NewtonSystem, scheme: NewmarkScheme, n_steps: int, state, settings: NewtonSettings,
-              observe: Observer):
+              observe: Observer, explain: Callable[[], str] | None = None):
     """Integrate from ``state = (u, u̇, ü)`` at t = 0 over ``n_steps`` steps.
 
     Modified Newton: the factors of S are kept across iterations and steps and refreshed when an
     iteration contracts the residual by less than ``contraction_to_refactor`` or when they have
     served ``iterations_per_factorization`` iterations of the current step; the converged answer
     satisfies the same test ‖r‖ ≤ tol · scale whatever the factors. A step that does not converge
-    in ``max_iterations`` or yields non-finite values raises :class:`SolverError` naming the time;
-    ``observe`` has seen every converged step before that.
+    in ``max_iterations``, yields non-finite values or whose linear solve fails (the system raises
+    :class:`SolverError`) raises :class:`SolverError` naming the time, with the relative residuals
+    of the step, the system's ``linear_solve_status()`` if it has one, and the text of
+    ``explain()`` (called only then) as hints, all on one line; ``observe`` has seen every
+    converged step before that.
     """
     u, v, a = (np.array(x, dtype=float) for x in state)
     have_factors = False
@@ -107,32 +110,50 @@ def integrate(system: NewtonSystem, scheme: NewmarkScheme, n_steps: int, state, 
         iterations_with_factors = 0
         previous_norm = np.inf
         history = []
+        where = f"t = {time:.4g} s (step {step} of {n_steps})"
+        kept_until = time - scheme.time_step
         for iteration in range(settings.max_iterations + 1):
             v_new, a_new = scheme.correct(u_new, u_predicted, v_predicted)
             residual, scale = system.residual(time, u_new, v_new, a_new)
             residual_norm = system.norm(residual)
             history.append(residual_norm / max(scale, settings.force_floor))
             if not np.isfinite(residual_norm):
-                raise SolverError(f"non-finite residual at t = {time:.4g} s (step {step} of {n_steps}, "
-                                  f"Newton iteration {iteration}); results kept up to t = {time - scheme.time_step:.4g} s")
+                raise SolverError(failure_message(f"non-finite residual at {where}, Newton iteration {iteration}",
+                                                  history, kept_until, system, explain))
             if residual_norm <= settings.tolerance * max(scale, settings.force_floor):
                 break
             if iteration == settings.max_iterations:
-                raise SolverError(
-                    f"Newton did not converge at t = {time:.4g} s (step {step} of {n_steps}) in "
-                    f"{settings.max_iterations} iterations; relative residuals "
-                    f"{', '.join(f'{value:.2e}' for value in history[-6:])}; "
-                    f"results kept up to t = {time - scheme.time_step:.4g} s")
+                raise SolverError(failure_message(f"Newton did not converge at {where} in {settings.max_iterations} "
+                                                  "iterations", history, kept_until, system, explain))
             slow = residual_norm > settings.contraction_to_refactor * previous_norm
             worn = iterations_with_factors >= settings.iterations_per_factorization
-            if not have_factors or slow or worn:
-                system.factorize(time, u_new, v_new, a_new)
-                have_factors = True
-                factorizations += 1
-                iterations_with_factors = 0
-            iterations_with_factors += 1
-            previous_norm = residual_norm
-            u_new = u_new - system.solve(residual)
+            try:
+                if not have_factors or slow or worn:
+                    system.factorize(time, u_new, v_new, a_new)
+                    have_factors = True
+                    factorizations += 1
+                    iterations_with_factors = 0
+                iterations_with_factors += 1
+                previous_norm = residual_norm
+                u_new = u_new - system.solve(residual)
+            except SolverError as failure:
+                raise SolverError(failure_message(f"{failure} at {where}, Newton iteration {iteration}",
+                                                  history, kept_until, system, explain)) from None
         u, v, a = u_new, v_new, a_new
         observe(StepReport(step, time, iteration, factorizations), u, v, a)
     return u, v, a
+
+
+def failure_message(what: str, history: list[float], kept_until: float, system, explain) -> str:
+    """One line: what stopped where, the step's relative residuals, the last linear solve,
+    the time [s] up to which results are kept, and the hints of ``explain()``."""
+    parts = [what, "relative residuals " + ", ".join(f"{value:.2e}" for value in history[-6:])]
+    linear_solve_status = getattr(system, "linear_solve_status", None)
+    status = linear_solve_status() if linear_solve_status is not None else ""
+    if status and status not in what:
+        parts.append(f"last linear solve: {status}")
+    parts.append(f"results kept up to t = {kept_until:.4g} s")
+    hints = " ".join(explain().split()) if explain is not None else ""
+    if hints:
+        parts.append(f"hints: {hints}")
+    return "; ".join(parts)

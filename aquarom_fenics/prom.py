@@ -97,15 +97,19 @@ class ReducedModel:
     def delta(self, xi: np.ndarray) -> np.ndarray:
         """Δξ = ξ - ξ_c, refused beyond the validity radius."""
         xi = np.asarray(xi, dtype=float)
-        delta = xi - self.xi_center
-        outside = np.abs(delta) > self.validity_radius * (1 + 1e-12)
+        self.refuse_outside_radius(self.shape_names, xi, self.xi_center, self.validity_radius)
+        return xi - self.xi_center
+
+    @staticmethod
+    def refuse_outside_radius(names, xi, center, radius) -> None:
+        """InputError naming the parameters with |ξ - ξ_c|_k beyond their validity radius."""
+        outside = np.abs(xi - center) > radius * (1 + 1e-12)
         if np.any(outside):
-            names = [f"{name}={value:g}" for name, value, out in zip(self.shape_names, xi, outside) if out]
+            values = [f"{name}={value:g}" for name, value, out in zip(names, xi, outside) if out]
             raise InputError(
-                f"design {', '.join(names)} is outside the PROM's validity radius "
-                f"{', '.join(f'{r:g}' for r, o in zip(self.validity_radius, outside) if o)} around its building "
-                f"point {dict(zip(self.shape_names, np.round(self.xi_center, 6).tolist()))}; build a PROM nearer")
-        return delta
+                f"design {', '.join(values)} is outside the PROM's validity radius "
+                f"{', '.join(f'{r:g}' for r, o in zip(radius, outside) if o)} around its building "
+                f"point {dict(zip(names, np.round(center, 6).tolist()))}; build a PROM nearer")
 
     # ------------------------------------------------------------------ file format
     def save(self, path: Path) -> None:

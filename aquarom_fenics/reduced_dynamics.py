@@ -195,6 +195,7 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
     With ``sensitivities`` the result carries dη/dξ (and dd/dξ); with ``amplitude_sensitivity``
     one more column, d/dA of the actuation amplitude (``amplitude`` overrides the scene's A).
     """
+    from .diagnostics import newton_failure_hints
     from .errors import SolverError
     from .simulate import check_time_grid
 
@@ -228,7 +229,8 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
     settings = NewtonSettings(tolerance=scene.solver.tolerance, max_iterations=scene.solver.max_iterations)
     error = None
     try:
-        integrate(system, scheme, n_steps, (zero, zero, zero), settings, record)
+        integrate(system, scheme, n_steps, (zero, zero, zero), settings, record,
+                  explain=lambda: "; ".join(newton_failure_hints(scene)))
     except SolverError as failure:
         error = str(failure)
     arrays = trajectory.arrays()

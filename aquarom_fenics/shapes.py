@@ -31,6 +31,14 @@ class BoxDimensions(Protocol):
     height: float
 
 
+class RegionTags(Protocol):
+    """Anything with the cell indices of the head and of the two muscles (e.g. ``FishTags``)."""
+
+    head_cells: np.ndarray
+    left_muscle_cells: np.ndarray
+    right_muscle_cells: np.ndarray
+
+
 ShapeField = Callable[
     [np.ndarray, np.ndarray, np.ndarray, BoxDimensions], tuple[np.ndarray, np.ndarray, np.ndarray]
 ]
@@ -38,6 +46,9 @@ ShapeField = Callable[
 
 MIN_VOLUME_RATIO = 0.1
 """A design may shrink no cell below this fraction of its nominal volume (SPEC §4)."""
+
+CELLS_NAMED = 3
+"""A refused design names at most this many of its worst cells."""
 
 
 def _zero(x: np.ndarray) -> np.ndarray:
@@ -209,12 +220,32 @@ def design_points(points: np.ndarray, U: np.ndarray, xi: np.ndarray) -> np.ndarr
     return points + (U @ np.asarray(xi, dtype=float)).reshape(points.shape)
 
 
+def cell_region(cell: int, regions: RegionTags) -> str:
+    """'head', 'left muscle', 'right muscle' or 'passive' (the rest of the body)."""
+    for name, region_cells in (("head", regions.head_cells), ("left muscle", regions.left_muscle_cells),
+                               ("right muscle", regions.right_muscle_cells)):
+        if cell in region_cells:
+            return name
+    return "passive"
+
+
+def describe_cell(cell: int, points: np.ndarray, cells: np.ndarray, volume_ratio: float,
+                  regions: RegionTags | None = None) -> str:
+    """'cell 17 (left muscle) at x=…, y=…, z=… [m], volume ratio …' of a nominal-mesh cell."""
+    centroid = np.asarray(points, dtype=float)[np.asarray(cells)[cell]].mean(axis=0)
+    region = f" ({cell_region(cell, regions)})" if regions is not None else ""
+    return (f"cell {cell}{region} at x={centroid[0]:.4g}, y={centroid[1]:.4g}, z={centroid[2]:.4g}, "
+            f"volume ratio {volume_ratio:.3g}")
+
+
 def check_design(points: np.ndarray, cells: np.ndarray, moved_points: np.ndarray,
-                 xi_by_name: Mapping[str, float], label: str = "design") -> None:
+                 xi_by_name: Mapping[str, float], label: str = "design",
+                 regions: RegionTags | None = None) -> None:
     """Raise InputError if the moved mesh inverts, flattens or shrinks a cell below 10%.
 
     Volumes are compared with the nominal cell's signed volume, so the check holds for
-    either orientation of the nominal cells.
+    either orientation of the nominal cells. The message names the worst cells with their
+    centroids in the nominal mesh [m] and, given ``regions``, the region of each.
     """
     from .mesh import signed_cell_volumes
 
@@ -227,13 +258,12 @@ def check_design(points: np.ndarray, cells: np.ndarray, moved_points: np.ndarray
     shrunk = ~inverted & (volume_ratio < MIN_VOLUME_RATIO)
     if not (inverted.any() or shrunk.any()):
         return
-    worst = int(np.argmin(volume_ratio))
-    centroid = np.asarray(points, dtype=float)[np.asarray(cells)[worst]].mean(axis=0)
+    n_offending = int(inverted.sum() + shrunk.sum())
+    worst = np.argsort(volume_ratio, kind="stable")[:min(CELLS_NAMED, n_offending)]
+    named = "; ".join(describe_cell(int(cell), points, cells, volume_ratio[cell], regions) for cell in worst)
     parameters = ", ".join(f"{name}={value:g}" for name, value in xi_by_name.items())
     raise InputError(
         f"{label} {parameters} inverts or flattens {int(inverted.sum())} and shrinks "
         f"{int(shrunk.sum())} more of {len(nominal)} cells below {MIN_VOLUME_RATIO:g} of their "
-        f"nominal volume (worst: volume ratio {volume_ratio[worst]:.3g} in the cell at "
-        f"x={centroid[0]:.4g}, y={centroid[1]:.4g}, z={centroid[2]:.4g} of the nominal mesh); "
-        f"reduce the parameters"
+        f"nominal volume (worst, in the nominal mesh: {named}); reduce the parameters"
     )

@@ -11,6 +11,7 @@ import numpy as np
 from mpi4py import MPI
 
 from .animate import DISPLACEMENT_FILE, write_displacement_series
+from .diagnostics import newton_failure_hints, scene_warnings
 from .errors import InputError, SolverError
 from .fish import Fish, load_fish
 from .fom import FullOrderModel
@@ -71,6 +72,8 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
     n_steps = check_time_grid(scene)
     started = clock.perf_counter()
     fish = fish or load_fish(scene, comm)
+    for warning in scene_warnings(scene, fish):
+        log.warning("scene %s: %s", scene.source, warning)
     model = FullOrderModel(scene, fish, xi, moved_mesh=moved_mesh, comm=comm)
     setup_time = clock.perf_counter() - started
     log.info("FOM: %d cells, %d dofs, %d steps of %g s (set-up %.2f s)", model.n_cells, model.n_global_dofs,
@@ -103,7 +106,8 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
     settings = NewtonSettings(tolerance=scene.solver.tolerance, max_iterations=scene.solver.max_iterations)
     error = None
     try:
-        integrate(model, model.scheme, n_steps, (zero, velocity, zero), settings, record)
+        integrate(model, model.scheme, n_steps, (zero, velocity, zero), settings, record,
+                  explain=lambda: "; ".join(newton_failure_hints(scene, model)))
     except SolverError as failure:
         error = str(failure)
     finally:

@@ -89,7 +89,8 @@ def test_damaged_prom_file_is_refused(built, tmp_path, capsys):
 def test_design_beyond_the_validity_radius_is_refused(tmp_path, capsys):
     scene = write_scene(tmp_path, radius=0.05)
     assert main(["simulate", str(scene), "--model", "prom", "--xi", "y_thin=0.1", "--out", str(tmp_path / "r")]) == 2
-    message = capsys.readouterr().err
+    message = capsys.readouterr().err.strip()
+    assert len(message.splitlines()) == 1
     assert "validity radius 0.05" in message and "y_thin=0.1" in message
 
 
