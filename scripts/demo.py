@@ -7,6 +7,7 @@ the coarsest mesh, a few minutes).
 """
 import argparse
 import json
+import shutil
 import sys
 from pathlib import Path
 
@@ -23,6 +24,20 @@ def run(arguments: list[str]) -> None:
         sys.exit(code)
 
 
+GALLERY = Path(__file__).resolve().parents[1] / "docs" / "gallery"
+GALLERY_FILES = {"so1-shapes/shapes.png": "so1_shapes.png", "nominal-fom/trajectory.png": "nominal_trajectory.png",
+                 "nominal-compare/compare.png": "nominal_rom_vs_fom.png", "so1-optimize/cost.png": "so1_cost.png",
+                 "so1-optimize/nominal_vs_optimal.png": "so1_nominal_vs_optimal.png",
+                 "so1-optimal-fom/animation.gif": "so1_optimal_swimming.gif"}
+
+
+def refresh_gallery(out: Path) -> None:
+    """Copy the pictures the README's gallery shows from this demo run."""
+    GALLERY.mkdir(parents=True, exist_ok=True)
+    for source, name in GALLERY_FILES.items():
+        shutil.copyfile(out / source, GALLERY / name)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--out", type=Path, default=Path("results/demo"))
@@ -37,6 +52,7 @@ def main():
     design = [argument for name, value in optimum.items() for argument in ("--xi", f"{name}={value}")]
     run(["simulate", "so1", "--level", "1", *design, "--out", str(out / "so1-optimal-fom"), "--no-progress"])
     run(["animate", str(out / "so1-optimal-fom")])
+    refresh_gallery(out)
     print(f"\ndemo outputs in {out.resolve()}:")
     for path in sorted(out.rglob("*")):
         if path.is_file():

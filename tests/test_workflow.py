@@ -84,3 +84,14 @@ def test_second_identical_optimisation_reuses_every_prom(tmp_path, caplog):
     assert log.count("PROM cache: reused") == builds and "built and stored" not in log
     assert "FOM at" in log and "reused from the cache" in log
     assert timings[1] < timings[0]
+
+
+def test_every_command_help_shows_an_example(capsys):
+    import pytest
+
+    from aquarom_fenics.cli import COMMANDS
+
+    for command in COMMANDS:
+        with pytest.raises(SystemExit):
+            main([command, "--help"])
+        assert "example:" in capsys.readouterr().out, command
