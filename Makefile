@@ -3,7 +3,7 @@ PYTHON := .venv/bin/python
 AQUAROM := .venv/bin/aquarom
 OUT ?= results/demo
 
-.PHONY: setup demo test bench validate study clean
+.PHONY: setup demo test bench validate validate-radius study clean
 
 setup:
 	@bash scripts/setup.sh
@@ -23,6 +23,9 @@ study: setup
 	$(PYTHON) scripts/study.py
 
 validate: setup
+	$(PYTHON) scripts/validate.py --jobs 2
+
+validate-radius: setup
 	$(PYTHON) scripts/validate_prom_radius.py
 
 clean:

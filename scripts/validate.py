@@ -5,7 +5,7 @@ Studies (SPEC §11 "Validation studies", the validation issue):
           × actuation stiffnesses: errors of distance and tail amplitude, build and solve times;
           heat maps of the distance error over (cells, tail amplitude).
   b       cost against size: build (basis / tensors / rest) and solve time against cells, fitted
-          power-law exponents (the reference-stiffness cases of a).
+          power-law exponents (over every case of a; solve times are the minimum of 3 repeats).
   c       run time against error on the reference case: basis variants, time steps, Taylor order;
           one Pareto plot.
   d       time-step convergence: successive-difference ratios of head x and of the sensitivities
@@ -19,8 +19,8 @@ toolkit version), so a rerun computes only what is missing; each study writes <o
 figures go to <out>/, and the report to results/REPORT.md (--report-only rewrites figures and
 report from what is cached).
 
-    .venv/bin/python scripts/validate.py                 # everything (about 30–45 min on 2 cores)
-    .venv/bin/python scripts/validate.py --quick         # levels 1–2, short horizon (≈ 2–3 min)
+    .venv/bin/python scripts/validate.py --jobs 2        # everything, missing cases in 2 workers
+    .venv/bin/python scripts/validate.py --quick         # levels 1–2, 0.4 s horizon (≈ 1–2 min)
     .venv/bin/python scripts/validate.py --only a,b      # selected studies
     .venv/bin/python scripts/validate.py --report-only   # figures and REPORT.md from the cache
 """
@@ -42,8 +42,8 @@ for path in (REPOSITORY, SCRIPTS):
         sys.path.insert(0, str(path))
 
 import validate_report as report  # noqa: E402
-from validate_cases import (Runner, fom_case, machine, mpi_case, power_law_fit,  # noqa: E402
-                            reduced_case)
+from validate_cases import (CasesCollected, Runner, compute_in_parallel, fom_case, machine,  # noqa: E402
+                            mpi_case, power_law_fit, reduced_case)
 
 STUDIES = ("a", "b", "c", "d", "e", "stress")
 
@@ -72,7 +72,7 @@ class Settings:
 FULL = Settings(quick=False, levels=(1, 2, 3, 4, 5), stiffnesses=(1.2e4, 2.5e4, 4e4, 6e4, 7.5e4), duration=2.0,
                 reference_level=3, time_steps=(0.04, 0.02, 0.01, 0.005), convergence_steps=(0.02, 0.01, 0.005),
                 mpi_levels=(4, 5), stress_level=3, fine_prom_level=5, time_limit=1800.0)
-QUICK = Settings(quick=True, levels=(1, 2), stiffnesses=(1.2e4, 6e4, 7.5e4), duration=0.5, reference_level=1,
+QUICK = Settings(quick=True, levels=(1, 2), stiffnesses=(1.2e4, 6e4, 7.5e4), duration=0.4, reference_level=1,
                  time_steps=(0.04, 0.02, 0.01, 0.005), convergence_steps=(0.02, 0.01, 0.005),
                  mpi_levels=(1, 2), stress_level=1, fine_prom_level=2, time_limit=300.0)
 
@@ -151,8 +151,15 @@ SUMMARY_KEYS = ("status", "message", "distance", "tail_amplitude", "wall_time", 
                 "computed_at")
 
 
+ENERGY_KEYS = ("work_actuation", "work_thrust", "work_drag", "throughput", "dissipated", "dissipated_midpoint",
+               "kinetic", "elastic", "imbalance_relative", "imbalance_midpoint_relative")
+
+
 def summary_of(record: dict) -> dict:
-    return {key: record.get(key) for key in SUMMARY_KEYS if key in record}
+    summary = {key: record.get(key) for key in SUMMARY_KEYS if key in record}
+    if record.get("energy"):
+        summary["energy"] = {key: record["energy"].get(key) for key in ENERGY_KEYS}
+    return summary
 
 
 def errors_against(reference: dict, record: dict) -> dict:
@@ -171,7 +178,8 @@ def errors_against(reference: dict, record: dict) -> dict:
 
 
 def study_b(runner: Runner, settings: Settings) -> dict:
-    accuracy = study_a(runner, settings, stiffnesses=(REFERENCE_STIFFNESS,), study="b")
+    """Cost fits over every case of study a (all stiffnesses: several timings per level)."""
+    accuracy = study_a(runner, settings, study="b")
     rows = accuracy["rows"]
     series, fits = {}, []
 
@@ -192,7 +200,7 @@ def study_b(runner: Runner, settings: Settings) -> dict:
                               ("solve", "solve_time"), ("solve with sensitivities", "solve_time_sensitivities")):
             if any(row["models"][model_id].get(key) for row in rows):
                 add(model_id, quantity, value(key))
-    return {"study": "b", "stiffness": REFERENCE_STIFFNESS, "models": {"FOM": "FOM"} | accuracy["models"],
+    return {"study": "b", "stiffnesses": accuracy["stiffnesses"], "models": {"FOM": "FOM"} | accuracy["models"],
             "series": series, "fits": fits}
 
 
@@ -201,11 +209,16 @@ def study_b(runner: Runner, settings: Settings) -> dict:
 
 
 BASIS_VARIANTS = (
-    ("basis-1mode-no-md", "1 mode, no modal derivative", dict(basis="paper", vibration_modes=1, modal_derivatives=False)),
-    ("basis-source", "source's basis (1 mode + θ)", dict(basis="paper", vibration_modes=1, modal_derivatives=True)),
-    ("basis-2modes-md", "2 modes + θ", dict(basis="paper", vibration_modes=2, modal_derivatives=True)),
-    ("basis-default", "default (1 mode + θ + ψ, θ_ψ)", dict(basis="default", vibration_modes=1, modal_derivatives=True)),
+    ("basis-1mode-no-md", "1 mode, no modal derivative", dict(basis="paper", vibration_modes=1, modal_derivatives=False),
+     "1 mode, no θ"),
+    ("basis-source", "source's basis (1 mode + θ)", dict(basis="paper", vibration_modes=1, modal_derivatives=True),
+     "source's basis"),
+    ("basis-2modes-md", "2 modes + θ (source's basis with 2 modes)",
+     dict(basis="paper", vibration_modes=2, modal_derivatives=True), "2 modes + θ"),
+    ("basis-default", "default (1 mode + θ + ψ, θ_ψ)", dict(basis="default", vibration_modes=1, modal_derivatives=True),
+     "default ROM"),
 )
+"""(id, label, [reduction] values, short label) of the basis variants of study c (ROM, h = 0.02 s)."""
 
 
 def taylor_design(settings: Settings):
@@ -219,9 +232,9 @@ def study_c(runner: Runner, settings: Settings) -> dict:
     nominal = base_scene(settings)
     points, cases = [], []
 
-    def point(point_id, label, family, case, reference, default=False, time_step=0.02):
+    def point(point_id, label, family, case, reference, default=False, time_step=0.02, short=None):
         points.append({"id": point_id, "label": label, "family": family, "case": case, "reference": reference,
-                       "default": default, "time_step": time_step})
+                       "default": default, "time_step": time_step, "short": short or label})
         cases.append(case)
 
     reference = fom_case(f"FOM reference h={finest}", base_scene(settings, time_step=finest))
@@ -229,16 +242,16 @@ def study_c(runner: Runner, settings: Settings) -> dict:
     for h in settings.time_steps:
         if h != finest:
             point(f"fom-h{h}", f"FOM, h = {h} s", "FOM", fom_case(f"FOM h={h}", base_scene(settings, time_step=h)),
-                  reference, time_step=h)
-    for point_id, label, values in BASIS_VARIANTS:
+                  reference, time_step=h, short=f"FOM h={h:g}")
+    for point_id, label, values, short in BASIS_VARIANTS:
         scene = nominal.replace("reduction", **values)
         point(point_id, f"ROM {label}", "basis", reduced_case(f"ROM {label}", scene, parametric=False), reference,
-              default=point_id == "basis-default")
+              default=point_id == "basis-default", short=short)
     for h in settings.time_steps:
         if h != 0.02:
             point(f"rom-h{h}", f"ROM, h = {h} s", "time step",
                   reduced_case(f"ROM h={h}", base_scene(settings, time_step=h), parametric=False), reference,
-                  time_step=h)
+                  time_step=h, short=f"ROM h={h:g}")
     so1, radii = taylor_design(settings)
     taylor_reference = fom_case(f"FOM SO1 at ξ = radius, h={finest}", so1.replace("solver", time_step=finest), xi=radii)
     cases.append(taylor_reference)
@@ -246,7 +259,7 @@ def study_c(runner: Runner, settings: Settings) -> dict:
         scene = so1.replace("reduction", taylor_order=order)
         point(f"taylor{order}", f"PROM p = 3, Taylor order {order}, at ξ = radius", "Taylor order",
               reduced_case(f"PROM SO1 order {order} at ξ = radius", scene, parametric=True, xi=radii),
-              taylor_reference)
+              taylor_reference, short=f"PROM order {order} (ξ = radius)")
     records = dict(zip((case.key for case in cases), runner.run("c", cases)))
     rows = []
     for entry in points:
@@ -254,7 +267,7 @@ def study_c(runner: Runner, settings: Settings) -> dict:
         wall = record.get("wall_time") if record["kind"] == "fom" else (
             (record.get("build_time") or 0) + (record.get("solve_time") or 0) if record.get("build_time") else None)
         errors = errors_against(ref, record)
-        rows.append({key: entry[key] for key in ("id", "label", "family", "default", "time_step")}
+        rows.append({key: entry[key] for key in ("id", "label", "short", "family", "default", "time_step")}
                     | {"status": record.get("status"), "message": record.get("message"), "wall_time": wall,
                        "build_time": record.get("build_time"), "solve_time": record.get("solve_time"),
                        "size": record.get("size"), "labels": record.get("labels"),
@@ -425,13 +438,27 @@ def stress_row(record: dict) -> dict:
 # Driver
 
 
+STUDY_FUNCTIONS = {"a": study_a, "b": study_b, "c": study_c, "d": study_d, "e": study_e, "stress": study_stress}
+
+
 def run(settings: Settings, out: Path, report_path: Path, studies=STUDIES, recompute_failed=False,
-        time_limit: float | None = None, stream=None) -> dict:
+        time_limit: float | None = None, stream=None, jobs: int = 1) -> dict:
+    """Every selected study (missing cases first in ``jobs`` workers when jobs > 1), figures, report."""
+    started = time.perf_counter()
+    time_limit = time_limit or settings.time_limit
+    runner = Runner(out, time_limit, recompute_failed=recompute_failed, stream=stream, concurrent_jobs=1)
+    parallel = 0
+    if jobs > 1:
+        collector = Runner(out, time_limit, recompute_failed=recompute_failed, stream=stream, collect=True)
+        for study in studies:
+            try:
+                STUDY_FUNCTIONS[study](collector, settings)
+            except CasesCollected:
+                pass
+        parallel = compute_in_parallel(runner, collector.collected, jobs)
     from aquarom_fenics.outputs import software_versions, write_json_atomic
 
-    started = time.perf_counter()
-    runner = Runner(out, time_limit or settings.time_limit, recompute_failed=recompute_failed, stream=stream)
-    functions = {"a": study_a, "b": study_b, "c": study_c, "d": study_d, "e": study_e, "stress": study_stress}
+    functions = STUDY_FUNCTIONS
     for study in studies:
         study_started = time.perf_counter()
         print(f"== study {study} ==", file=runner.stream, flush=True)
@@ -441,15 +468,15 @@ def run(settings: Settings, out: Path, report_path: Path, studies=STUDIES, recom
         result["study_time"] = time.perf_counter() - study_started
         write_json_atomic(out / f"{study}.json", result)
     info = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "versions": software_versions(), "machine": machine(),
-            "quick": settings.quick, "studies": list(studies), "cases": dict(runner.counts),
-            "compute_time": runner.compute_time, "command": " ".join(sys.argv)}
+            "quick": settings.quick, "studies": list(studies), "cases": dict(runner.counts), "jobs": jobs,
+            "computed_in_parallel": parallel, "compute_time": runner.compute_time, "command": " ".join(sys.argv)}
     figures = report.make_figures(out)
     info["wall_time"] = time.perf_counter() - started
     write_json_atomic(out / "run.json", info)
     history_path = out / "run_history.json"
     history = json.loads(history_path.read_text()) if history_path.exists() else []
     history.append({"date": info["date"], "wall_time": info["wall_time"], "cases": info["cases"],
-                    "quick": settings.quick, "studies": list(studies), "cores": info["machine"]["cores"],
+                    "quick": settings.quick, "studies": list(studies), "cores": info["machine"]["cores"], "jobs": jobs,
                     "from_empty": runner.counts["cached"] == 0 and runner.counts["computed"] > 0
                     and tuple(studies) == STUDIES})
     write_json_atomic(history_path, history[-20:])
@@ -461,7 +488,7 @@ def run(settings: Settings, out: Path, report_path: Path, studies=STUDIES, recom
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--quick", action="store_true", help="levels 1–2, three stiffnesses, 0.5 s horizon (smoke run)")
+    parser.add_argument("--quick", action="store_true", help="levels 1–2, three stiffnesses, 0.4 s horizon (smoke run)")
     parser.add_argument("--only", help=f"comma-separated studies among {', '.join(STUDIES)} (default all)")
     parser.add_argument("--out", type=Path, help="results folder (default results/validation, "
                                                  "results/validation-quick with --quick)")
@@ -469,6 +496,9 @@ def main(argv=None) -> int:
     parser.add_argument("--report-only", action="store_true", help="rewrite figures and report from the cached results")
     parser.add_argument("--recompute-failed", action="store_true", help="recompute cached cases that did not complete")
     parser.add_argument("--time-limit", type=float, help="seconds per case (default 1800, 300 with --quick)")
+    parser.add_argument("--jobs", type=int, default=1,
+                        help="compute the missing cases in this many worker processes first (the MPI study e "
+                             "always runs alone afterwards); timings are then taken with that many cases at once")
     args = parser.parse_args(argv)
     settings = QUICK if args.quick else FULL
     out = args.out or REPOSITORY / "results" / ("validation-quick" if args.quick else "validation")
@@ -484,7 +514,9 @@ def main(argv=None) -> int:
         unknown = [name for name in studies if name not in STUDIES]
         if unknown:
             parser.error(f"--only: unknown studies {', '.join(unknown)}; valid: {', '.join(STUDIES)}")
-    run(settings, out, report_path, studies, args.recompute_failed, args.time_limit)
+    if args.jobs < 1:
+        parser.error("--jobs must be at least 1")
+    run(settings, out, report_path, studies, args.recompute_failed, args.time_limit, jobs=args.jobs)
     return 0
 
 

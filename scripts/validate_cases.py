@@ -42,6 +42,10 @@ CASE_FORMAT = 1
 """Version of the case records; part of every key (bump it when a record's content changes)."""
 
 CACHED_STATUSES = ("completed", "stopped", "non-finite")
+
+SOLVE_REPEATS = 3
+"""Reduced solves are repeated and the shortest time kept (they last ~0.1 s: one slow run in a
+busy machine would bend the cost-against-cells fit)."""
 """Outcomes that are answers of the model and therefore cached; time limits and crashes are not."""
 
 
@@ -69,8 +73,9 @@ class Case:
         return f"{self.kind}-{self.key}.json"
 
 
-def fom_case(label: str, scene: Scene, xi=None, energy: bool = False) -> Case:
-    """The FOM (serial, in this process); ``energy`` keeps the states and computes the energy balance."""
+def fom_case(label: str, scene: Scene, xi=None, energy: bool = True) -> Case:
+    """The FOM (serial, in this process); ``energy`` keeps the states and computes the energy balance
+    after the run (outside its timing; a few per cent of its cost)."""
     return Case("fom", label, scene, {"xi": _plain_xi(xi), "energy": bool(energy)})
 
 
@@ -97,51 +102,90 @@ class CaseTimeLimit(Exception):
     """Raised by the alarm when a case runs past its time limit."""
 
 
-class Runner:
-    """Runs cases once: cached records are read, missing ones computed and written."""
+class CasesCollected(Exception):
+    """Raised by a collecting Runner: the study's case list is known, nothing was run."""
 
-    def __init__(self, out: Path, time_limit: float = 1800.0, recompute_failed: bool = False, stream=None):
+
+class Runner:
+    """Runs cases once: cached records are read, missing ones computed and written.
+
+    ``collect`` True: ``run`` only records the cases it is given and raises CasesCollected (the
+    study functions call ``run`` once each), so that a driver can list every case of a set of
+    studies and compute them in parallel first (see ``compute_in_parallel``).
+    """
+
+    def __init__(self, out: Path, time_limit: float = 1800.0, recompute_failed: bool = False, stream=None,
+                 collect: bool = False, concurrent_jobs: int = 1):
         self.out = Path(out)
         self.cases_dir = self.out / "cases"
         self.time_limit = float(time_limit)
         self.recompute_failed = recompute_failed
         self.stream = stream or sys.stdout
-        self.counts = {"cached": 0, "computed": 0, "not cached (time limit or crash)": 0}
+        self.collect = collect
+        self.collected: list[Case] = []
+        self.concurrent_jobs = concurrent_jobs
+        self.outcomes: dict[str, str] = {}      # key → "cached" | "computed" | "not cached (…)", once per case
+        self.this_run: dict[str, dict] = {}      # records computed in this run (also the uncached ones)
+        self.computed_elsewhere: set[str] = set()
         self.compute_time = 0.0
         self._fish = {}
         self._warm = set()
         logging.getLogger("aquarom").setLevel(logging.ERROR)   # dropped vectors etc. are in the records
 
+    @property
+    def counts(self) -> dict:
+        counts = {"cached": 0, "computed": 0, "not cached (time limit or crash)": 0}
+        for outcome in self.outcomes.values():
+            counts[outcome] += 1
+        return counts
+
     # ----------------------------------------------------------------- public
     def run(self, study: str, cases: list[Case]) -> list[dict]:
         """Records of ``cases`` in order, computing those missing; one progress line per case."""
+        if self.collect:
+            self.collected += cases
+            raise CasesCollected(study)
         records = []
         width = len(str(len(cases)))
         for number, case in enumerate(cases, start=1):
             prefix = f"[{study} {number:>{width}}/{len(cases)}] {case.label}"
-            path = self.cases_dir / case.file_name
-            record = read_record(path)
-            if record is not None and self.recompute_failed and record["status"] != "completed":
-                record = None
+            record = self.this_run.get(case.key) or self.cached(case)
             if record is not None:
-                self.counts["cached"] += 1
-                self._say(f"{prefix}: cached — {describe(record)}")
+                if case.key not in self.outcomes:
+                    self.outcomes[case.key] = "computed" if case.key in self.computed_elsewhere else "cached"
+                done = "computed in parallel" if case.key in self.computed_elsewhere else (
+                    "done" if case.key in self.this_run else "cached")
+                self._say(f"{prefix}: {done} — {describe(record)}")
                 records.append(record)
                 continue
             self._say(f"{prefix}: computing …", end="")
-            started = time.perf_counter()
-            record = self.compute(case)
-            elapsed = time.perf_counter() - started
-            self.compute_time += elapsed
-            record["compute_time"] = elapsed
-            if record["status"] in CACHED_STATUSES:
-                write_json_atomic(path, record)
-                self.counts["computed"] += 1
-            else:
-                self.counts["not cached (time limit or crash)"] += 1
-            self._say(f" {elapsed:.1f} s — {describe(record)}", prefix=False)
+            record, elapsed = self.compute_and_store(case)
+            self._say(f" {elapsed:.1f} s — {describe(record)}")
             records.append(record)
         return records
+
+    def cached(self, case: Case) -> dict | None:
+        record = read_record(self.cases_dir / case.file_name)
+        if record is not None and self.recompute_failed and record["status"] != "completed" \
+                and case.key not in self.computed_elsewhere:
+            return None
+        return record
+
+    def compute_and_store(self, case: Case) -> tuple[dict, float]:
+        """Compute a case, write its record when it is an answer of the model; (record, seconds)."""
+        started = time.perf_counter()
+        record = self.compute(case)
+        elapsed = time.perf_counter() - started
+        self.compute_time += elapsed
+        record["compute_time"] = elapsed
+        record["concurrent_jobs"] = self.concurrent_jobs
+        if record["status"] in CACHED_STATUSES:
+            write_json_atomic(self.cases_dir / case.file_name, record)
+            self.outcomes[case.key] = "computed"
+        else:
+            self.outcomes[case.key] = "not cached (time limit or crash)"
+        self.this_run[case.key] = record
+        return record, elapsed
 
     def compute(self, case: Case) -> dict:
         """The record of one case (never raises for the model's own failures)."""
@@ -173,9 +217,10 @@ class Runner:
         return self._fish[key]
 
     def warm_up(self, scene: Scene, parametric: bool | None) -> None:
-        """Compile (or load from the JIT cache) the forms of a model kind on level 1, untimed.
+        """Compile (or load from the JIT cache) the forms of a model kind and run it briefly on level 1.
 
-        Keeps the form compilation out of the first timed build, which would bend the cost fits.
+        Keeps form compilation and first-call costs out of the first timed case, which would bend
+        the cost fits.
         ``parametric`` None: the FOM's forms.
         """
         order = scene.reduction.taylor_order if parametric and scene.shapes else 0
@@ -184,17 +229,92 @@ class Runner:
             return
         self._warm.add(key)
         coarse = scene.replace("mesh", level=1) if not scene.mesh.file else scene
+        coarse = coarse.replace("solver", duration=0.1, time_step=0.02)
         if parametric is None:
-            from aquarom_fenics.fom import FullOrderModel
+            from aquarom_fenics.simulate import simulate_fom
 
-            FullOrderModel(coarse, self.fish(coarse))
+            simulate_fom(coarse, fish=self.fish(coarse), progress=False)
         else:
+            from aquarom_fenics.reduced_dynamics import simulate_reduced
             from aquarom_fenics.reductor import build_prom
 
-            build_prom(coarse, fish=self.fish(coarse), parametric=parametric)
+            simulate_reduced(build_prom(coarse, fish=self.fish(coarse), parametric=parametric), coarse,
+                             sensitivities=True)
 
-    def _say(self, text: str, end: str = "\n", prefix: bool = True) -> None:
+    def _say(self, text: str, end: str = "\n") -> None:
         print(text, end=end, file=self.stream, flush=True)
+
+
+# ---------------------------------------------------------------------------------------------
+# Parallel computation of the missing cases (--jobs N)
+
+LEVEL_CELLS = {1: 1232, 2: 4176, 3: 7944, 4: 15392, 5: 25312}
+
+_WORKER: Runner | None = None
+
+
+def estimated_cost(case: Case) -> float:
+    """A rough run time [s], to start the longest cases first."""
+    cells = LEVEL_CELLS.get(case.scene.mesh.level, 8000)
+    steps = case.scene.n_steps
+    if case.kind in ("fom", "mpi"):
+        return 7e-4 * cells ** 1.1 * steps / 100.0
+    p = len(case.scene.shapes) if case.options.get("parametric") else 0
+    order = case.scene.reduction.taylor_order if p else 0
+    return 1e-4 * cells * (1 + p) * (4 if order == 2 else 1) + 0.05 * steps / 100.0
+
+
+def _start_worker(out, time_limit, recompute_failed, jobs):
+    global _WORKER
+    _WORKER = Runner(out, time_limit, recompute_failed, stream=open(os.devnull, "w"), concurrent_jobs=jobs)
+
+
+def _work(case: Case):
+    return _WORKER.compute_and_store(case)
+
+
+def compute_in_parallel(runner: Runner, cases: list[Case], jobs: int) -> int:
+    """Compute the missing (non-MPI) cases in ``jobs`` worker processes, longest first.
+
+    Workers are fresh interpreters (spawn), each with one BLAS thread; their records are written
+    to the cache as usual, and the uncached outcomes (time limit, crash) are handed to ``runner``
+    so that the studies do not retry them in the same run. Returns the number of cases computed.
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    pending = {}
+    for case in cases:
+        if case.kind != "mpi" and case.key not in pending and runner.cached(case) is None:
+            pending[case.key] = case
+    if not pending:
+        return 0
+    order = sorted(pending.values(), key=estimated_cost, reverse=True)
+    print(f"== computing {len(order)} missing cases with {jobs} parallel workers (longest first) ==",
+          file=runner.stream, flush=True)
+    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[name] = "1"
+    width = len(str(len(order)))
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=_start_worker,
+                             initargs=(runner.out, runner.time_limit, runner.recompute_failed, jobs)) as pool:
+        futures = {pool.submit(_work, case): case for case in order}
+        for number, future in enumerate(as_completed(futures), start=1):
+            case = futures[future]
+            prefix = f"[parallel {number:>{width}}/{len(order)}] {case.label}"
+            try:
+                record, elapsed = future.result()
+            except Exception as error:  # noqa: BLE001 — a dead worker: the studies compute the case again
+                print(f"{prefix}: worker failed ({type(error).__name__}: {error}); computed again below",
+                      file=runner.stream, flush=True)
+                continue
+            if record["status"] in CACHED_STATUSES:
+                runner.computed_elsewhere.add(case.key)
+            else:
+                runner.this_run[case.key] = record
+                runner.outcomes[case.key] = "not cached (time limit or crash)"
+            print(f"{prefix}: {elapsed:.1f} s — {describe(record)}", file=runner.stream, flush=True)
+    return len(order)
 
 
 def with_time_limit(seconds: float, function):
@@ -310,6 +430,7 @@ def compute_reduced(runner: Runner, case: Case) -> dict:
                          for part in vars(getattr(prom, name)).values() if part is not None)
     xi = options.get("xi")
     result = simulate_reduced(prom, scene, xi)
+    solve_times = [result.wall_time] + [simulate_reduced(prom, scene, xi).wall_time for _ in range(SOLVE_REPEATS - 1)]
     arrays = result.trajectory.arrays()
     status, message = _outcome(result.completed, result.error, result.distance, result.tail_amplitude,
                                *arrays["head_x"])
@@ -322,13 +443,15 @@ def compute_reduced(runner: Runner, case: Case) -> dict:
               "cells": prom.cells, "dofs": prom.dofs, "finite_tensors": bool(finite_tensors),
               "build_time": build_time, "build_basis": timings.get("basis_total", 0.0), "build_tensors": tensors,
               "build_rest": max(build_time - timings.get("basis_total", 0.0) - tensors, 0.0),
-              "build_timings": dict(timings), "solve_time": result.wall_time,
+              "build_timings": dict(timings), "solve_time": min(solve_times), "solve_times": solve_times,
               "distance": result.distance, "tail_amplitude": result.tail_amplitude,
               "head_x_final": float(arrays["head_x"][-1]), "stopped_at": float(arrays["time"][-1]),
               "newton": _newton_stats(arrays["newton_iterations"]), "trajectory": _trajectory(arrays)}
     if options.get("sensitivities") and prom.n_parameters:
         sensitive = simulate_reduced(prom, scene, xi, sensitivities=True)
-        record["solve_time_sensitivities"] = sensitive.wall_time
+        times = [sensitive.wall_time] + [simulate_reduced(prom, scene, xi, sensitivities=True).wall_time
+                                         for _ in range(SOLVE_REPEATS - 1)]
+        record["solve_time_sensitivities"] = min(times)
         if sensitive.completed and sensitive.sensitivities is not None:
             head = np.einsum("m,smk->sk", prom.head_x_row, sensitive.sensitivities)
             record["head_x_sensitivity"] = head.tolist()
@@ -344,8 +467,13 @@ def energy_balance(result) -> dict:
     W_ext = Σ_n ½ (f_n + f_{n+1})·(u_{n+1} - u_n) for f = actuation, thrust and drag (trapezoidal
     rule on the stored samples); D = Σ_n ½ h (u̇_n·C u̇_n + u̇_{n+1}·C u̇_{n+1}); stored = kinetic +
     elastic energy. Accelerations are recovered from the Newmark relations (ü_0 = 0). The
-    imbalance W_ext - D - E(T) is relative to |W_act| + |W_thrust| + |W_drag|. Serial runs only
-    (owned dofs are all dofs).
+    imbalance W_ext - D - E(T) is relative to the energy throughput Σ_n (|ΔW_act| + |ΔW_thrust| +
+    |ΔW_drag|). Serial runs only (owned dofs are all dofs).
+
+    The trapezoidal D over-counts the dissipation by h/4 Δu̇·C Δu̇ per step; the midpoint form
+    D_mid = Σ_n h ū·C ū, ū = ½(u̇_n + u̇_{n+1}), is the one of Newmark's own energy identity (with
+    γ = ½, β = ¼ the balance then closes up to the trapezoidal error of the nonlinear forces), so
+    both are recorded: a residual of D_mid measures the scheme's numerical dissipation.
     """
     model = result.model
     scheme = model.scheme
@@ -358,12 +486,15 @@ def energy_balance(result) -> dict:
         (_, v_old), (_, v_new) = states[index - 1], states[index]
         accelerations.append((v_new - v_old - h * (1.0 - gamma) * accelerations[-1]) / (h * gamma))
     forces = {"actuation": [], "thrust": [], "drag": []}
-    damping_power, kinetic, elastic = [], [], []
+    damping_power, damping_midpoint, kinetic, elastic = [], [], [], []
     for index, (u, v) in enumerate(states):
         forces["actuation"].append(model.actuation_force(float(times[index]), u))
         forces["thrust"].append(model.thrust_force(u, v, accelerations[index]))
         forces["drag"].append(model.drag_force(v))
         damping_power.append(float(v @ model.matvec(model.damping_matrix, v)))
+        if index:
+            mean_velocity = 0.5 * (v + states[index - 1][1])
+            damping_midpoint.append(float(mean_velocity @ model.matvec(model.damping_matrix, mean_velocity)))
         kinetic.append(model.kinetic_energy(v))
         elastic.append(model.elastic_energy(u))
     cumulative = {}
@@ -373,17 +504,24 @@ def energy_balance(result) -> dict:
         cumulative[name] = np.concatenate([[0.0], np.cumsum(increments)])
     dissipated = np.concatenate([[0.0], np.cumsum([0.5 * h * (damping_power[i] + damping_power[i + 1])
                                                      for i in range(n - 1)])])
+    midpoint_series = np.concatenate([[0.0], np.cumsum(h * np.asarray(damping_midpoint))])
+    midpoint = float(midpoint_series[-1])
     work = cumulative["actuation"] + cumulative["thrust"] + cumulative["drag"]
     stored = np.asarray(kinetic) + np.asarray(elastic)
-    scale = sum(abs(values[-1]) for values in cumulative.values())
+    # Normalised by the energy throughput Σ_n |ΔW_n| of every force: the final works alone can be
+    # near zero (the muscles take back over a cycle what they gave).
+    scale = sum(float(np.abs(np.diff(values)).sum()) for values in cumulative.values())
     imbalance = work[-1] - dissipated[-1] - stored[-1]
+    imbalance_midpoint = work[-1] - midpoint - stored[-1]
     return {"work_actuation": float(cumulative["actuation"][-1]), "work_thrust": float(cumulative["thrust"][-1]),
-            "work_drag": float(cumulative["drag"][-1]), "dissipated": float(dissipated[-1]),
+            "work_drag": float(cumulative["drag"][-1]), "throughput": float(scale), "dissipated": float(dissipated[-1]),
             "kinetic": float(kinetic[-1]), "elastic": float(elastic[-1]), "imbalance": float(imbalance),
             "imbalance_relative": float(imbalance / scale) if scale > 0 else float("nan"),
+            "dissipated_midpoint": midpoint, "imbalance_midpoint": float(imbalance_midpoint),
+            "imbalance_midpoint_relative": float(imbalance_midpoint / scale) if scale > 0 else float("nan"),
             "includes": "actuation, thrust and drag work; Rayleigh damping dissipation",
             "series": {"time": times.tolist(), "work": work.tolist(), "dissipated": dissipated.tolist(),
-                       "stored": stored.tolist()}}
+                       "dissipated_midpoint": midpoint_series.tolist(), "stored": stored.tolist()}}
 
 
 # ---------------------------------------------------------------------------------------------
