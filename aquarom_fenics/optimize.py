@@ -196,9 +196,11 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, st
         _record(history, history_row(space, iteration, z, cost, gradient, distance,
                                      "built" if rebuild else "approximated", started), on_iteration)
         previous = state["previous_gradient"]
-        if previous is not None:
+        if previous is None:     # W starts at 1/‖∇L_0‖_∞: the first step changes the leading parameter by γ
+            scaling /= max(np.abs(total_gradient).max(), 1e-300)
+        else:
             scaling[np.sign(total_gradient) * np.sign(previous) < 0] *= 0.5
-        step = _scaled_step(total_gradient, scaling, settings.step_size)
+        step = -settings.step_size * scaling * total_gradient
         fraction, blocking = _fraction_to_boundary(space, z, step)
         if fraction < 1.0:
             scaling[blocking] *= 0.5
@@ -254,13 +256,6 @@ def _weighted_cost(space, weights, z, distance, distance_gradient):
         gradient = gradient.copy()
         gradient[-1] += weights.energy * 2 * weights.alpha * z[-1]
     return cost, gradient
-
-
-def _scaled_step(gradient, scaling, step_size):
-    """-γ W g / ‖W g‖_∞: the largest parameter change is γ."""
-    direction = scaling * gradient
-    largest = np.abs(direction).max()
-    return np.zeros_like(gradient) if largest == 0 else -step_size * direction / largest
 
 
 def _fraction_to_boundary(space: DesignSpace, z, step, keep: float = 0.1) -> tuple[float, np.ndarray]:
