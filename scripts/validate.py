@@ -82,13 +82,15 @@ QUICK = Settings(quick=True, levels=(1, 2), stiffnesses=(1.2e4, 6e4, 7.5e4), dur
 
 
 def base_scene(settings: Settings, name: str = "nominal", level: int | None = None,
-               stiffness: float = REFERENCE_STIFFNESS, time_step: float = 0.02):
+               stiffness: float = REFERENCE_STIFFNESS, time_step: float = 0.02, newmark_alpha: float | None = None):
     from aquarom_fenics.scene import Scene
 
     scene = Scene.load(name)
     scene = scene.replace("mesh", level=level or settings.reference_level)
     scene = scene.replace("actuation", stiffness=float(stiffness))
     scene = scene.replace("solver", duration=settings.duration, time_step=float(time_step))
+    if newmark_alpha is not None:
+        scene = scene.replace("solver", newmark_alpha=float(newmark_alpha))
     return scene.replace("output", plots=False, render=False, xdmf=False)
 
 
@@ -283,39 +285,58 @@ def study_c(runner: Runner, settings: Settings) -> dict:
 # d: time-step convergence
 
 
+SPEC_NEWMARK_ALPHA = 0.005
+"""α_N of SPEC §6 (the shipped default is larger, see scene.py)."""
+
+
+def convergence_alphas() -> tuple[float, ...]:
+    """α_N of study d: 0 (γ = ½, the scheme's second-order member), SPEC's and the default.
+
+    With γ = ½ + α_N the scheme's error has an O(α_N h) term, so for α_N > 0 the ratios tend to 2
+    as h → 0; how soon depends on α_N against h."""
+    from aquarom_fenics.scene import SolverSection
+
+    return tuple(sorted({0.0, SPEC_NEWMARK_ALPHA, SolverSection().newmark_alpha}))
+
+
 def study_d(runner: Runner, settings: Settings) -> dict:
     steps = settings.convergence_steps
-    families = {
-        "FOM head x": [fom_case(f"FOM h={h}", base_scene(settings, time_step=h)) for h in steps],
-        "ROM head x": [reduced_case(f"ROM h={h}", base_scene(settings, time_step=h), parametric=False) for h in steps],
-        "PROM p=3 sensitivities": [reduced_case(f"PROM SO1 h={h} with sensitivities",
-                                                base_scene(settings, "so1", time_step=h), parametric=True,
-                                                sensitivities=True) for h in steps],
-    }
+    families = {}
+    for alpha in convergence_alphas():
+        def scene(name="nominal", h=0.02, alpha=alpha):
+            return base_scene(settings, name, time_step=h, newmark_alpha=alpha)
+        tag = f"α_N = {alpha:g}"
+        families[(alpha, f"FOM head x, {tag}")] = [fom_case(f"FOM h={h} {tag}", scene(h=h)) for h in steps]
+        families[(alpha, f"ROM head x, {tag}")] = [reduced_case(f"ROM h={h} {tag}", scene(h=h), parametric=False)
+                                                   for h in steps]
+        families[(alpha, f"PROM p=3 sensitivities, {tag}")] = [
+            reduced_case(f"PROM SO1 h={h} {tag} with sensitivities", scene("so1", h), parametric=True,
+                         sensitivities=True) for h in steps]
     cases = [case for family in families.values() for case in family]
     records = dict(zip((case.key for case in cases), runner.run("d", cases)))
     coarse = steps[0]
     result = {"study": "d", "level": settings.reference_level, "time_steps": list(steps), "grid_step": coarse,
-              "quantities": []}
-    for name, family in families.items():
+              "alphas": list(convergence_alphas()), "quantities": []}
+    for (alpha, name), family in families.items():
         runs = [records[case.key] for case in family]
+        tag = f"α_N = {alpha:g}"
         if any(run.get("status") != "completed" for run in runs):
-            result["quantities"].append({"name": name, "status": "incomplete",
+            result["quantities"].append({"name": name, "newmark_alpha": alpha, "status": "incomplete",
                                          "message": "; ".join(f"h={h}: {run.get('status')} {run.get('message') or ''}"
                                                               for h, run in zip(steps, runs))})
             continue
-        if name.endswith("sensitivities"):
+        if "sensitivities" in name:
             parameter_names = runs[0].get("parameter_names") or []
             series = [on_grid(run["trajectory"]["time"], np.asarray(run["head_x_sensitivity"]), coarse) for run in runs]
             for index, parameter in enumerate(parameter_names):
-                result["quantities"].append(convergence(f"d head x / d ξ[{parameter}] (PROM p=3)",
-                                                        [s[1][:, index] for s in series], series[0][0], steps))
+                result["quantities"].append(convergence(f"d head x / d ξ[{parameter}] (PROM p=3), {tag}",
+                                                        [s[1][:, index] for s in series], series[0][0], steps, alpha))
             gradients = [np.asarray(run["distance_gradient"]) for run in runs]
-            result["quantities"].append(convergence("d distance / d ξ (PROM p=3, norm over parameters)",
-                                                    gradients, None, steps))
+            result["quantities"].append(convergence(f"d distance / d ξ (PROM p=3, norm over parameters), {tag}",
+                                                    gradients, None, steps, alpha))
         else:
             series = [on_grid(run["trajectory"]["time"], np.asarray(run["trajectory"]["head_x"]), coarse) for run in runs]
-            result["quantities"].append(convergence(name, [s[1] for s in series], series[0][0], steps))
+            result["quantities"].append(convergence(name, [s[1] for s in series], series[0][0], steps, alpha))
     return result
 
 
@@ -326,11 +347,12 @@ def on_grid(time, values, step):
     return time[::stride], np.asarray(values)[::stride]
 
 
-def convergence(name, values, time, steps) -> dict:
+def convergence(name, values, time, steps, newmark_alpha: float) -> dict:
     """Successive differences ‖q_h - q_h/2‖_∞ and their ratio (≈ 4 for a second-order scheme)."""
     differences = [float(np.max(np.abs(np.asarray(a) - np.asarray(b)))) for a, b in zip(values, values[1:])]
     ratios = [first / second if second > 0 else None for first, second in zip(differences, differences[1:])]
-    entry = {"name": name, "status": "completed", "differences": differences, "ratios": ratios,
+    entry = {"name": name, "newmark_alpha": newmark_alpha, "status": "completed", "differences": differences,
+             "ratios": ratios,
              "ratio": ratios[0] if ratios else None, "pairs": [f"{a:g}–{b:g}" for a, b in zip(steps, steps[1:])]}
     if time is not None:
         entry["time"] = np.asarray(time).tolist()

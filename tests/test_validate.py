@@ -193,7 +193,10 @@ def synthetic_results(folder: Path):
          "taylor_design": {"y_thin": 0.0375}, "reference": {"distance": 0.01, "wall_time": 2.0}, "points": points}
     time_values, values = _trajectory(1e-4, 21)
     d = {"study": "d", "level": 1, "time_steps": [0.02, 0.01, 0.005], "grid_step": 0.02, "quantities": [
-        {"name": "FOM head x", "status": "completed", "differences": [4e-5, 1e-5], "ratios": [4.0], "ratio": 4.0,
+        {"name": "FOM head x, α_N = 0.02", "newmark_alpha": 0.02, "status": "completed", "differences": [4e-5, 2e-5],
+         "ratios": [2.0], "ratio": 2.0, "pairs": ["0.02–0.01", "0.01–0.005"]},
+        {"name": "FOM head x, α_N = 0", "newmark_alpha": 0.0, "status": "completed", "differences": [4e-5, 1e-5],
+         "ratios": [4.0], "ratio": 4.0,
          "pairs": ["0.02–0.01", "0.01–0.005"], "time": time_values.tolist(),
          "difference_series": [values.tolist(), (values / 4).tolist()]},
         {"name": "d head x / d ξ[y_thin] (PROM p=3)", "status": "completed", "differences": [4e-4, 1.1e-4],
@@ -242,6 +245,7 @@ def test_report_writer_on_synthetic_results(tmp_path):
     assert "| ROM, source's basis | 1 | 1232 | 12 |" in text          # the case above 10%, with cells and k
     assert "](studies/so1/cost.png)" in text and "| so1 | 1.2 |" in text
     assert "**FAIL**" not in text.split("## a.")[0]                 # synthetic numbers meet every check
+    assert "| time-step ratio, FOM head x, α_N = 0.02 | 2.00 | → 2 (first order: γ = ½ + α_N) | — |" in text
 
 
 def test_report_without_results_says_what_is_missing(tmp_path):
