@@ -114,7 +114,7 @@ def test_left_and_right_muscles_bend_the_tail_to_opposite_sides():
 def test_halving_the_time_step_converges_at_second_order():
     """Successive differences of head x for h = 0.02, 0.01, 0.005, 0.0025 shrink about 4× (α_N = 0).
 
-    With the default α_N = 0.005 (γ = ½ + α_N) the scheme keeps an O(α_N h) first-order term, so
+    With α_N > 0 (SPEC 0.005, default 0.02; γ = ½ + α_N) the scheme keeps an O(α_N h) first-order term, so
     the ratios fall towards 2 as h → 0; the second-order scheme is α_N = 0.
     """
     head_x = {}
