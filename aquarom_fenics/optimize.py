@@ -48,14 +48,16 @@ class OptimizationResult:
     space: DesignSpace
     prom_size: int = 0                        # reduced dofs of the last PROM built
     timings: dict = field(default_factory=dict)
+    reused: int = 0                           # of the builds, PROMs taken from the cache
 
 
 class PromBuilder:
-    """Builds PROMs centred on designs, counting builds and their time."""
+    """Builds PROMs centred on designs, counting builds, cache reuses and their time."""
 
     def __init__(self, scene: Scene, fish: Fish, space: DesignSpace):
         self.scene, self.fish, self.space = scene, fish, space
         self.builds = 0
+        self.reused = 0
         self.last_size = 0
         self.build_time = 0.0
         self.solve_time = 0.0
@@ -63,9 +65,16 @@ class PromBuilder:
     def build(self, z: np.ndarray) -> ReducedModel:
         started = time.perf_counter()
         center = z[: self.space.n_shapes]
-        prom = cached_prom(self.scene, center, lambda: build_prom(self.scene, xi_center=center, fish=self.fish))
+        built = []
+
+        def build_here():
+            built.append(build_prom(self.scene, xi_center=center, fish=self.fish))
+            return built[0]
+
+        prom = cached_prom(self.scene, center, build_here)
         self.build_time += time.perf_counter() - started
         self.builds += 1
+        self.reused += not built
         self.last_size = prom.size
         return prom
 
@@ -100,7 +109,7 @@ class Checkpoint:
         if self.path is None:
             return
         write_json_atomic(self.path, {"scene_hash": self.scene_hash, "method": self.method, "state": state,
-                                      "history": history, "builds": builder.builds,
+                                      "history": history, "builds": builder.builds, "reused": builder.reused,
                                       "build_time": builder.build_time, "solve_time": builder.solve_time})
 
     def load(self) -> dict | None:
@@ -133,14 +142,17 @@ def optimize(scene: Scene, fish: Fish | None = None, weights: CostWeights | None
     history = list(saved["history"]) if saved else []
     if saved:
         builder.builds, builder.build_time, builder.solve_time = saved["builds"], saved["build_time"], saved["solve_time"]
+        builder.reused = saved.get("reused", 0)
     started = time.perf_counter() - (history[-1]["wall_time"] if history else 0.0)
     algorithm = {"paper": _paper_method, "trust-region": _trust_region}[method]
     optimum, evaluation, reason = algorithm(scene, space, builder, weights, history, checkpoint,
                                             saved["state"] if saved else None, started, on_iteration or (lambda row: None))
     timings = {"prom_builds": builder.build_time, "prom_solves": builder.solve_time,
                "total": time.perf_counter() - started}
-    log.info("optimisation (%s) stopped: %s; %d PROM builds, %.1f s", method, reason, builder.builds, timings["total"])
-    return OptimizationResult(optimum, evaluation, history, builder.builds, reason, space, builder.last_size, timings)
+    log.info("optimisation (%s) stopped: %s; %d PROM builds (%d reused from the cache), %.1f s", method, reason,
+             builder.builds, builder.reused, timings["total"])
+    return OptimizationResult(optimum, evaluation, history, builder.builds, reason, space, builder.last_size, timings,
+                              builder.reused)
 
 
 def _record(history, row, on_iteration):

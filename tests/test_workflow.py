@@ -72,16 +72,19 @@ def test_truncated_prom_cache_entry_is_detected_and_rebuilt(tmp_path, caplog):
 
 def test_second_identical_optimisation_reuses_every_prom(tmp_path, caplog):
     scene = write_scene(tmp_path)
-    timings = []
+    timings, reused = [], []
     for run in ("first", "second"):
         caplog.clear()
         started = time.perf_counter()
         with caplog.at_level(logging.INFO, logger="aquarom"):
             assert main(["optimize", scene, "--out", str(tmp_path / run)]) == 0
         timings.append(time.perf_counter() - started)
-        builds = json.loads((tmp_path / run / "summary.json").read_text())["prom_builds"]
+        summary = json.loads((tmp_path / run / "summary.json").read_text())
+        reused.append(summary["prom_builds_reused_from_cache"])
         log = caplog.text
+    builds = summary["prom_builds"]
     assert log.count("PROM cache: reused") == builds and "built and stored" not in log
+    assert reused == [0, builds]
     assert "FOM at" in log and "reused from the cache" in log
     assert timings[1] < timings[0]
 
