@@ -70,7 +70,8 @@ def test_truncated_prom_cache_entry_is_detected_and_rebuilt(tmp_path, caplog):
     assert first == second
 
 
-def test_second_identical_optimisation_reuses_every_prom(tmp_path, caplog):
+def test_second_identical_optimisation_reuses_every_prom(tmp_path, caplog, monkeypatch):
+    monkeypatch.setenv("AQUAROM_CACHE", str(tmp_path / "cache"))   # empty: the first run builds everything
     scene = write_scene(tmp_path)
     timings, reused = [], []
     for run in ("first", "second"):
