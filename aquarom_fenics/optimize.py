@@ -5,8 +5,9 @@ Two algorithms over the same cost and design space (``cost.py``):
 * ``paper``: the source's gradient descent with a log-barrier, z ← z - γ W ∇L_b with a diagonal
   W that starts at 1/‖∇L_b(z_0)‖_∞ (so the first step changes the leading parameter by γ) and is
   halved along a direction whose gradient component changes sign or whose bound becomes active,
-  the linearised trajectory η ≈ η_c + S (ξ - ξ_c) between PROM builds (so d ≈ d_c + ∇d_c·(z - z_c)), and a new PROM when
-  any |z - z_c|_i exceeds ``rebuild_threshold`` or every ``n_rebuild`` iterations.
+  the linearised trajectory η ≈ η_c + S (ξ - ξ_c) between PROM builds (so d ≈ d_c + ∇d_c·(z - z_c)),
+  and a new PROM when any |z - z_c|_i exceeds ``rebuild_threshold`` or every ``n_rebuild``
+  iterations.
 * ``trust-region``: the PROM built at the centre is a nonlinear surrogate (simulated at any z in
   the radius, with its own sensitivities); SciPy's SLSQP solves the surrogate problem with bounds
   and linear constraints inside the radius; a PROM built at the candidate gives the actual
