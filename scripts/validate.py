@@ -301,8 +301,9 @@ def convergence_alphas() -> tuple[float, ...]:
 
 def study_d(runner: Runner, settings: Settings) -> dict:
     steps = settings.convergence_steps
+    alphas = convergence_alphas()
     families = {}
-    for alpha in convergence_alphas():
+    for alpha in alphas:
         def scene(name="nominal", h=0.02, alpha=alpha):
             return base_scene(settings, name, time_step=h, newmark_alpha=alpha)
         tag = f"α_N = {alpha:g}"
@@ -316,7 +317,7 @@ def study_d(runner: Runner, settings: Settings) -> dict:
     records = dict(zip((case.key for case in cases), runner.run("d", cases)))
     coarse = steps[0]
     result = {"study": "d", "level": settings.reference_level, "time_steps": list(steps), "grid_step": coarse,
-              "alphas": list(convergence_alphas()), "quantities": []}
+              "alphas": list(alphas), "quantities": []}
     for (alpha, name), family in families.items():
         runs = [records[case.key] for case in family]
         tag = f"α_N = {alpha:g}"

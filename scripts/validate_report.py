@@ -93,6 +93,22 @@ def _pyplot():
     return plt
 
 
+def _saved(figure, path: Path, rect=(0, 0, 1, 1)) -> Path:
+    """Lay out ``figure`` within ``rect``, write it to ``path`` at DPI and close it."""
+    figure.tight_layout(rect=rect)
+    figure.savefig(path, dpi=DPI)
+    _pyplot().close(figure)
+    return path
+
+
+def _grid_and_legend(axes, fontsize: int) -> None:
+    """Major and minor grid on every axis, and a legend where something is labelled."""
+    for axis in axes:
+        axis.grid(alpha=0.3, which="both")
+        if axis.get_legend_handles_labels()[0]:
+            axis.legend(fontsize=fontsize)
+
+
 def make_figures(out: Path) -> list[Path]:
     """Every figure whose study file exists; returns the files written."""
     out = Path(out)
@@ -229,10 +245,7 @@ def _heatmap_figure(study, kind, key, scale, unit, path) -> Path:
         axis.axis("off")
     figure.suptitle(f"Swimming distance error against the FOM ({kind}); cell text: error and FOM tail amplitude A; "
                     f"hatched: run stopped; thick frame: |relative error| > {100 * TOLERANCE_LIST:g}%", fontsize=10)
-    figure.tight_layout()
-    figure.savefig(path, dpi=DPI)
-    plt.close(figure)
-    return path
+    return _saved(figure, path)
 
 
 MODEL_STYLES = {"FOM": ("black", "s"), "rom": ("tab:blue", "o"), "rom-paper": ("tab:cyan", "v"),
@@ -293,15 +306,10 @@ def cost_figure(study: dict, path: Path) -> Path:
     for axis in axes:
         axis.set_xlabel("cells")
         axis.set_ylabel("wall time [s]")
-        axis.grid(alpha=0.3, which="both")
-        if axis.get_legend_handles_labels()[0]:
-            axis.legend(fontsize=7)
+    _grid_and_legend(axes, fontsize=7)
     figure.suptitle("Cost against mesh size (log-log; dots: every case, lines: per-level median; least-squares "
                     "exponents over all cases)")
-    figure.tight_layout()
-    figure.savefig(path, dpi=DPI)
-    plt.close(figure)
-    return path
+    return _saved(figure, path)
 
 
 FAMILY_STYLES = {"FOM": ("black", "s"), "basis": ("tab:blue", "o"), "time step": ("tab:orange", "^"),
@@ -368,10 +376,7 @@ def pareto_figure(study: dict, path: Path) -> Path:
                    f"k = {study['stiffness'] / 1e3:g} kPa)")
     axis.grid(alpha=0.3, which="both")
     axis.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, frameon=False)
-    figure.tight_layout()
-    figure.savefig(path, dpi=DPI)
-    plt.close(figure)
-    return path
+    return _saved(figure, path)
 
 
 def convergence_figure(study: dict, path: Path) -> Path:
@@ -394,15 +399,10 @@ def convergence_figure(study: dict, path: Path) -> Path:
     axes[1].set_title("sensitivities d head x / d ξ: successive differences")
     for axis in axes:
         axis.set_xlabel("time [s]")
-        axis.grid(alpha=0.3, which="both")
-        if axis.get_legend_handles_labels()[0]:
-            axis.legend(fontsize=6)
+    _grid_and_legend(axes, fontsize=6)
     figure.suptitle("Time-step convergence (second order: each halving of h divides the difference by ≈ 4; "
                     "α_N > 0 tends to first order, ≈ 2)")
-    figure.tight_layout()
-    figure.savefig(path, dpi=DPI)
-    plt.close(figure)
-    return path
+    return _saved(figure, path)
 
 
 def energy_figure(study: dict, path: Path) -> Path | None:
@@ -441,10 +441,7 @@ def energy_figure(study: dict, path: Path) -> Path | None:
     for axis in axes.ravel()[len(rows):]:
         axis.axis("off")
     figure.suptitle("Energy balance of the FOM stress cases (imbalance relative to the energy throughput)")
-    figure.tight_layout(rect=(0, 0.06, 1, 1))
-    figure.savefig(path, dpi=DPI)
-    plt.close(figure)
-    return path
+    return _saved(figure, path, rect=(0, 0.06, 1, 1))
 
 
 # ---------------------------------------------------------------------------------------------
