@@ -7,11 +7,13 @@ Compiled forms are cached by FFCx itself (by form signature) in its own cache fo
 """
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import json
 import logging
 import os
 import shutil
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +29,22 @@ KINDS = ("prom", "fom")
 def cache_root() -> Path:
     """$AQUAROM_CACHE, default results/cache in the repository."""
     return Path(os.environ.get("AQUAROM_CACHE", REPOSITORY / "results" / "cache"))
+
+
+def require_cache_writable(kind: str | None = None) -> None:
+    """Refuse (one line, exit 2) a cache that cannot take new entries, before the work that fills it."""
+    from .outputs import require_writable
+
+    root = cache_root()
+    folder = root / kind if kind else root
+    if root.exists() and not root.is_dir():
+        raise InputError(f"cache {root} ($AQUAROM_CACHE) is a file, not a folder; point AQUAROM_CACHE to a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise InputError(f"cache {folder} ($AQUAROM_CACHE): cannot create it ({error.strerror}); "
+                         "point AQUAROM_CACHE to a writable folder") from None
+    require_writable(folder, "cache")
 
 
 def mesh_cache_dir() -> Path:
@@ -64,13 +82,52 @@ def is_intact(path: Path) -> bool:
 
 
 def seal(path: Path) -> None:
-    """Write the SHA-256 sidecar of a finished cache file."""
-    path.with_name(path.name + ".sha256").write_text(file_digest(path) + "\n")
+    """Write the SHA-256 sidecar of a finished cache file (atomically, under a unique temporary name)."""
+    from .outputs import write_text_atomic
+
+    write_text_atomic(path.with_name(path.name + ".sha256"), file_digest(path) + "\n")
+
+
+def store(path: Path, save) -> None:
+    """``save(path)`` (an atomic replacement) and the checksum sidecar, as one step under the entry's lock."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with entry_lock(path):
+        save(path)
+        seal(path)
 
 
 def discard(path: Path) -> None:
-    for victim in (path, path.with_name(path.name + ".sha256")):
-        victim.unlink(missing_ok=True)
+    with entry_lock(path):
+        for victim in (path, path.with_name(path.name + ".sha256")):
+            victim.unlink(missing_ok=True)
+
+
+@contextmanager
+def entry_lock(path: Path, shared: bool = False):
+    """An flock on ``PATH.lock``: exclusive for writers, shared for readers, so a reader never sees
+    one writer's data with another writer's checksum. A read-only cache is read without a lock."""
+    try:
+        handle = open(path.with_name(path.name + ".lock"), "a")
+    except OSError:
+        if not shared:
+            raise
+        handle = None
+    try:
+        if handle is not None:
+            fcntl.flock(handle, fcntl.LOCK_SH if shared else fcntl.LOCK_EX)
+        yield
+    finally:
+        if handle is not None:
+            handle.close()
+
+
+def read_intact(path: Path, load):
+    """``load(path)`` of an entry that matches its checksum; None (logged) for a damaged one."""
+    with entry_lock(path, shared=True):
+        if is_intact(path):
+            return load(path)
+    log.warning("cache: entry %s does not match its checksum (corrupted); rebuilding it", path.name)
+    return None
 
 
 def cached_prom(scene: Scene, xi_center: np.ndarray, build, parametric: bool = True,
@@ -81,22 +138,20 @@ def cached_prom(scene: Scene, xi_center: np.ndarray, build, parametric: bool = T
     key = entry_key("prom", scene.hash, np.asarray(xi_center, dtype=float), parametric)
     path = cache_root() / "prom" / f"{key}.npz"
     if path.exists():
-        if is_intact(path):
-            try:
-                model = ReducedModel.load(path, scene_hash=scene.hash)
+        try:
+            model = read_intact(path, lambda entry: ReducedModel.load(entry, scene_hash=scene.hash))
+            if model is not None:
                 log.info("PROM cache: reused %s", path.name)
                 return model
-            except InputError as damaged:
-                log.warning("PROM cache: entry %s unusable (%s); rebuilding it", path.name, damaged)
-        else:
-            log.warning("PROM cache: entry %s does not match its checksum (corrupted); rebuilding it", path.name)
+        except InputError as damaged:
+            log.warning("PROM cache: entry %s unusable (%s); rebuilding it", path.name, damaged)
         comm.barrier()
         if comm.rank == 0:
             discard(path)
+    require_cache_writable("prom")
     model = build()
     if comm.rank == 0:
-        model.save(path)
-        seal(path)
+        store(path, model.save)
         log.info("PROM cache: built and stored %s", path.name)
     comm.barrier()
     return model
@@ -109,7 +164,8 @@ def listing() -> list[tuple[str, int, int]]:
     folders["compiled forms"] = Path.home() / ".cache" / "fenics"
     rows = []
     for kind, folder in folders.items():
-        files = [f for f in folder.rglob("*") if f.is_file() and not f.name.endswith(".sha256")] if folder.exists() else []
+        files = [f for f in folder.rglob("*") if f.is_file() and not f.name.endswith((".sha256", ".lock"))
+                 ] if folder.exists() else []
         rows.append((kind, len(files), sum(f.stat().st_size for f in files)))
     return rows
 

@@ -8,17 +8,18 @@ from __future__ import annotations
 import argparse
 import logging
 import os
-import shutil
 import subprocess
 import sys
 import textwrap
 import time
+import traceback
+import zipfile
 from pathlib import Path
 
 import numpy as np
 from mpi4py import MPI
 
-from .errors import InputError, SolverError
+from .errors import InputError, Interrupted, SolverError
 
 EXAMPLES = {
     "mesh": "aquarom mesh scenes/nominal.toml",
@@ -85,6 +86,8 @@ def build_parser() -> argparse.ArgumentParser:
     optimize.add_argument("--method", choices=["paper", "trust-region"], help="override the scene's method")
     optimize.add_argument("--weight", type=float, default=0.5,
                           help="w_1 of L = w_1(-d) + (1-w_1) α A² for co-optimisation scenes (default 0.5)")
+    optimize.add_argument("--max-time", type=float, metavar="SECONDS",
+                          help="stop the optimiser after this wall time (default 86400 s, one day)")
     pareto = command("pareto", "co-optimisation weight sweep: Pareto front of distance against actuation energy")
     pareto.add_argument("--out", type=Path, help="output directory (default results/pareto/SCENE)")
     pareto.add_argument("--force", action="store_true", help="replace existing outputs")
@@ -113,27 +116,80 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+AGREEMENT_SECONDS = 10.0    # how long a failing rank waits for the others to fail too before aborting all
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    rank = MPI.COMM_WORLD.rank
+    comm = MPI.COMM_WORLD
+    agreement = comm.Dup() if comm.size > 1 else None
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(message)s")
-    logging.getLogger("aquarom").setLevel(logging.INFO if rank == 0 else logging.ERROR)
+    logging.getLogger("aquarom").setLevel(logging.INFO if comm.rank == 0 else logging.ERROR)
     started = time.perf_counter()
+    line = None
     try:
-        if getattr(args, "dry_run", False):
-            return run_dry(args)
-        code = COMMANDS[args.command](args)
-        if code == 0 and getattr(args, "output_dir", None) is not None and rank == 0:
-            write_manifest(args, time.perf_counter() - started)
+        code = run_dry(args) if getattr(args, "dry_run", False) else COMMANDS[args.command](args)
+    except (Exception, KeyboardInterrupt) as error:
+        code, line = describe_failure(args, error)
+    try:
+        settle_output(args, code, time.perf_counter() - started)
+    except (OSError, InputError) as problem:
+        text = os_error_text(problem) if isinstance(problem, OSError) else str(problem)
+        code, line = InputError.exit_code, f"{line + '; ' if line else ''}error: the outputs could not be finished ({text})"
+    if line is None:
         return code
-    except InputError as error:
-        if rank == 0:
-            print(f"aquarom {args.command}: error: {error}", file=sys.stderr)
-        return InputError.exit_code
-    except SolverError as error:
-        if rank == 0:
-            print(f"aquarom {args.command}: solver stopped: {error}", file=sys.stderr)
-        return SolverError.exit_code
+    return end_in_agreement(agreement, code, f"aquarom {args.command}: {line}")
+
+
+def describe_failure(args, error: BaseException) -> tuple[int, str]:
+    """Exit code and the one line for the user: 2 bad input or OS error, 3 solver stop, 130 Ctrl-C.
+
+    Anything else is a bug: its traceback is printed and the exit code is 1.
+    """
+    if isinstance(error, KeyboardInterrupt):
+        location = getattr(args, "output", None)
+        written = location is not None and location.working.is_dir() and any(location.working.iterdir())
+        where = f"; partial results in {location.working}/" if written else "; nothing written"
+        return Interrupted.exit_code, f"{str(error) or 'interrupted'}{where}"
+    if isinstance(error, InputError):
+        return InputError.exit_code, f"error: {error}"
+    if isinstance(error, SolverError):
+        return SolverError.exit_code, f"solver stopped: {error}"
+    if isinstance(error, OSError):
+        return InputError.exit_code, f"error: {os_error_text(error)}"
+    if MPI.COMM_WORLD.size == 1:
+        raise error
+    traceback.print_exc()
+    return 1, f"internal error on rank {MPI.COMM_WORLD.rank}: {type(error).__name__}: {error}"
+
+
+def os_error_text(error: OSError) -> str:
+    """'PATH: what went wrong' for an operating-system error (permission, missing folder, full disk)."""
+    where = error.filename if error.filename is not None else "a file"
+    return f"{where}: {error.strerror or error}"
+
+
+def end_in_agreement(agreement, code: int, line: str) -> int:
+    """Print the one line and return the exit code, on every rank alike.
+
+    Under MPI the failing ranks wait (on their own communicator) for the others: when every rank
+    failed, rank 0 prints its line and all return its code; when some rank is still busy (a
+    failure on one rank only), this rank prints its line and aborts every rank with its code.
+    """
+    if agreement is None:
+        print(line, file=sys.stderr, flush=True)
+        return code
+    request = agreement.Ibarrier()
+    deadline = time.monotonic() + AGREEMENT_SECONDS
+    while not request.Test():
+        if time.monotonic() > deadline:
+            print(line, file=sys.stderr, flush=True)
+            MPI.COMM_WORLD.Abort(code)
+        time.sleep(0.01)
+    code, line = agreement.bcast((code, line))
+    if agreement.rank == 0:
+        print(line, file=sys.stderr, flush=True)
+    return code
 
 
 def run_dry(args) -> int:
@@ -147,18 +203,75 @@ def run_dry(args) -> int:
 
 
 def claim_output(args, path: Path, resume: bool = False) -> Path:
-    """An output location that may be written: refuses to overwrite existing outputs without --force."""
-    path = Path(path)
-    occupied = path.is_file() or (path.is_dir() and any(path.iterdir()))
-    if occupied and not resume:
-        if not getattr(args, "force", False):
-            raise InputError(f"output {path} exists; pass --force to replace it or choose another --out")
-        if MPI.COMM_WORLD.rank == 0:
-            shutil.rmtree(path) if path.is_dir() else path.unlink()
-        MPI.COMM_WORLD.barrier()
-    if path.suffix == "":
-        args.output_dir = path
-    return path
+    """The folder this run writes to (see :func:`outputs.claim_folder`): the output folder itself,
+    or a folder beside it when --force replaces an earlier run's results."""
+    from .outputs import claim_folder
+
+    location = on_rank_zero(lambda: claim_folder(path, getattr(args, "force", False), resume))
+    args.output = location
+    args.output_dir = location.working
+    return location.working
+
+
+def claim_output_file(args, path: Path) -> Path:
+    """An output file (a PROM): an existing one is replaced only with --force and only if it is a PROM file."""
+    from .outputs import claim_file
+
+    return on_rank_zero(lambda: claim_file(path, args.force, is_prom_file))
+
+
+def is_prom_file(path: Path) -> bool:
+    """A .npz archive with the header of a PROM file (see ``ReducedModel.save``)."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            return "header.npy" in archive.namelist()
+    except (OSError, zipfile.BadZipFile):
+        return False
+
+
+def shown(args, path: Path) -> Path:
+    """Where ``path`` (written in the working folder) is once a successful run is published."""
+    location = getattr(args, "output", None)
+    if location is None or not location.replacing:
+        return Path(path)
+    return location.target / Path(path).relative_to(location.working)
+
+
+def on_rank_zero(action):
+    """``action()`` on rank 0 (file-system work); its value, or its error as the same InputError on every rank."""
+    comm = MPI.COMM_WORLD
+    outcome = (None, None)
+    if comm.rank == 0:
+        try:
+            outcome = (action(), None)
+        except InputError as error:
+            outcome = (None, str(error))
+        except OSError as error:
+            outcome = (None, os_error_text(error))
+    value, problem = comm.bcast(outcome) if comm.size > 1 else outcome
+    if problem:
+        raise InputError(problem)
+    return value
+
+
+def settle_output(args, code: int, wall_time: float) -> None:
+    """Finish the output folder on rank 0: a finished run gets its manifest and is swapped into
+    place; a stopped or interrupted one keeps its partial results and a manifest (an earlier
+    run being replaced stays untouched); a refused one removes the folder it created."""
+    from .outputs import discard, list_outputs, publish
+
+    location = getattr(args, "output", None)
+    if location is None or MPI.COMM_WORLD.rank != 0:
+        return
+    if code in (0, SolverError.exit_code, Interrupted.exit_code):
+        if location.working.is_dir():
+            write_manifest(args, wall_time)
+            list_outputs(location.working)
+        if code == 0:
+            publish(location)
+    else:
+        discard(location)
+    args.output = None
 
 
 def write_manifest(args, wall_time: float) -> None:
@@ -235,7 +348,7 @@ def run_shapes(args) -> int:
             raise InputError(f"scene {scene.source} has no [shapes]: nothing to show (add shape variations or use --xi)")
         files = render_shape_sheet(fish, scene, out)
     for path in files:
-        say(f"wrote {path}")
+        say(f"wrote {shown(args, path)}")
     return 0
 
 
@@ -245,6 +358,8 @@ def run_simulate(args) -> int:
 
     scene = load_scene(args)
     xi = parse_xi_assignments(args.xi, scene)
+    if args.prom is not None and args.model != "prom":
+        raise InputError(f"--prom {args.prom} is used by --model prom only (this run: --model {args.model})")
     out = claim_output(args, args.out or Path("results") / "simulate" / f"{scene.name}-{args.model}")
     if args.model == "fom":
         result = simulate_fom(scene, xi=xi, out_dir=out, progress=not args.no_progress)
@@ -254,7 +369,7 @@ def run_simulate(args) -> int:
         raise SolverError(f"{result.error}; partial trajectory in {out / 'trajectory.csv'}")
     say(f"{scene.name} ({args.model}): distance {100 * result.distance:.3f} cm, tail amplitude "
         f"{100 * result.tail_amplitude:.3f} cm, {result.wall_time:.2f} s on {MPI.COMM_WORLD.size} rank(s)")
-    say(f"outputs in {out}/ (trajectory.csv, summary.json, trajectory.png)")
+    say(f"outputs in {shown(args, out)}/ (trajectory.csv, summary.json, trajectory.png)")
     return 0
 
 
@@ -311,7 +426,7 @@ def run_build(args) -> int:
 
     scene = load_scene(args)
     xi = {s.name: s.start for s in scene.shapes} | parse_xi_assignments(args.xi, scene)
-    out = claim_output(args, args.out or Path("results") / "build" / f"{scene.name}-prom.npz")
+    out = claim_output_file(args, args.out or Path("results") / "build" / f"{scene.name}-prom.npz")
     fish = load_fish(scene)
     center = fish.parameter_vector(xi)
     prom = cached_prom(scene, center, lambda: build_prom(scene, xi_center=center, fish=fish))
@@ -346,12 +461,13 @@ def run_compare(args) -> int:
                         f"{scene.name}: FOM against {args.model.upper()}")
     say(f"{scene.name} at {xi or 'the start values'}: distance FOM {100 * full.distance:.3f} cm, "
         f"{args.model.upper()} {100 * reduced.distance:.3f} cm ({100 * errors['distance_relative']:+.2f} %); "
-        f"tail amplitude {100 * errors['tail_amplitude_relative']:+.2f} %; outputs in {out}/")
+        f"tail amplitude {100 * errors['tail_amplitude_relative']:+.2f} %; outputs in {shown(args, out)}/")
     return 0
 
 
 def run_optimize(args) -> int:
     from .cost import CostWeights
+    from .optimize import DEFAULT_MAX_TIME
     from .study import run_optimization
 
     scene = load_scene(args)
@@ -364,8 +480,11 @@ def run_optimize(args) -> int:
         if not 0.0 <= args.weight <= 1.0:
             raise InputError(f"--weight {args.weight}: must be in [0, 1]")
         weights = CostWeights(args.weight, 1.0 - args.weight, scene.cooptimization.energy_weight)
+    if args.max_time is not None and not args.max_time > 0:
+        raise InputError(f"--max-time {args.max_time}: must be a positive number of seconds")
     out = claim_output(args, args.out or Path("results") / "optimize" / scene.name, resume=args.resume)
-    result, check = run_optimization(scene, out, resume=args.resume, weights=weights)
+    result, check = run_optimization(scene, out, resume=args.resume, weights=weights,
+                                     max_time=DEFAULT_MAX_TIME if args.max_time is None else args.max_time)
     args.timings = result.timings | {"fom_check": check.time}
     space = result.space
     say(f"{scene.name} ({scene.optimizer.method}): optimum "
@@ -374,7 +493,7 @@ def run_optimize(args) -> int:
     if check.error:
         raise SolverError(f"FOM check: {check.error}; the optimisation outputs are in {out}/")
     say(f"FOM check: nominal {100 * check.nominal_distance:.3f} cm, optimal {100 * check.optimal_distance:.3f} cm "
-        f"(PROM {100 * check.prom_optimal_distance:.3f} cm), ratio {check.ratio:.2f}; outputs in {out}/")
+        f"(PROM {100 * check.prom_optimal_distance:.3f} cm), ratio {check.ratio:.2f}; outputs in {shown(args, out)}/")
     return 0
 
 
@@ -389,7 +508,7 @@ def run_pareto(args) -> int:
     for point in points:
         say(f"w1 = {point['w1']:.2f}: amplitude {point['amplitude']:.3f}, energy {point['energy']:.4f}, "
             f"FOM distance {100 * point['distance']:.3f} cm")
-    say(f"outputs in {out}/ (pareto.csv, pareto.png, one folder per weight)")
+    say(f"outputs in {shown(args, out)}/ (pareto.csv, pareto.png, one folder per weight)")
     return 0
 
 
@@ -412,7 +531,7 @@ def run_basis(args) -> int:
     prom = build_prom(scene, xi_center={s.name: s.start for s in scene.shapes}, fish=fish)
     files = render_basis_sheet(prom, fish, out)
     dropped = f"; dropped as dependent: {', '.join(prom.dropped)}" if prom.dropped else ""
-    say(f"basis of {scene.name}: m = {prom.size} ({', '.join(prom.labels)}){dropped}; wrote {files[0]}")
+    say(f"basis of {scene.name}: m = {prom.size} ({', '.join(prom.labels)}){dropped}; wrote {shown(args, files[0])}")
     return 0
 
 

@@ -36,6 +36,38 @@ class DesignSpace:
         """Every inequality as s(z) ≥ 0: z - lower, upper - z, b - A z."""
         return np.concatenate([z - self.lower, self.upper - z, self.constraint_bound - self.constraint_matrix @ z])
 
+    @property
+    def free(self) -> np.ndarray:
+        """Parameters with room to move (lower < upper); the others are fixed at their bound."""
+        return self.upper > self.lower
+
+    @property
+    def slack_jacobian(self) -> np.ndarray:
+        """∂s/∂z of :meth:`slacks`: rows I, -I, -A."""
+        n = len(self.names)
+        return np.vstack([np.eye(n), -np.eye(n), -self.constraint_matrix])
+
+    @property
+    def barrier_rows(self) -> np.ndarray:
+        """The slacks that must stay positive inside the set: all but the box rows of fixed parameters."""
+        return np.concatenate([self.free, self.free, np.ones(self.constraint_bound.size, dtype=bool)])
+
+    def most_interior_point(self) -> np.ndarray:
+        """argmax_z min_i s_i(z) over the barrier rows (a linear programme in (z, t))."""
+        rows = self.barrier_rows
+        jacobian, n = self.slack_jacobian[rows], len(self.names)
+        offsets = self.slacks(np.zeros(n))[rows]            # s(z) = offsets + J z
+        # maximise t subject to t - J z <= offsets  (every slack >= t)
+        bounds = [(lo, hi) for lo, hi in zip(self.lower, self.upper)] + [(None, None)]
+        solution = linprog(np.r_[np.zeros(n), -1.0], A_ub=np.hstack([-jacobian, np.ones((rows.sum(), 1))]),
+                           b_ub=offsets, bounds=bounds, method="highs")
+        return solution.x[:n]
+
+    def interior_depth(self) -> float:
+        """max_z min_i s_i(z) over the barrier rows: > 0 when the feasible set has an interior."""
+        z = self.most_interior_point()
+        return float(self.slacks(z)[self.barrier_rows].min()) if self.barrier_rows.any() else 0.0
+
     def is_feasible(self, z: np.ndarray, tolerance: float = 1e-12) -> bool:
         return bool(np.all(self.slacks(z) >= -tolerance))
 
@@ -79,6 +111,9 @@ def design_space(scene: Scene) -> DesignSpace:
                            bounds=list(zip(space.lower, space.upper)), method="highs")
         if feasible.status == 2:
             raise InputError(f"scene {scene.source}: the linear constraints and the bounds leave no feasible design")
+    if not space.free.any():
+        raise InputError(f"scene {scene.source}: every design parameter has equal bounds "
+                         f"({', '.join(space.names)}): nothing to optimise; widen a bound")
     violated = np.flatnonzero(space.constraint_bound - space.constraint_matrix @ space.start < -1e-12)
     if violated.size:
         raise InputError(f"scene {scene.source}: the start point {space.as_dict(space.start)} violates linear "

@@ -11,3 +11,9 @@ class SolverError(Exception):
     """A solver that stopped (divergence, non-finite values): exit code 3, results kept so far."""
 
     exit_code = 3
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C, after the partial results and their summary were written: exit code 130."""
+
+    exit_code = 130

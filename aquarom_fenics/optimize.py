@@ -37,6 +37,7 @@ from .reductor import build_prom
 from .scene import Scene
 
 log = logging.getLogger("aquarom")
+DEFAULT_MAX_TIME = 24 * 3600.0     # s, wall-time safeguard of one optimisation
 
 
 @dataclass
@@ -87,6 +88,12 @@ class PromBuilder:
             self.solve_time += time.perf_counter() - started
 
 
+def history_columns(space: DesignSpace) -> list[str]:
+    """The columns of a history row, in the order :func:`history_row` makes them."""
+    return (["iteration", *(f"xi_{name}" for name in space.names), "cost", *(f"grad_{name}" for name in space.names)]
+            + ["distance", "prom", "wall_time", "radius", "ratio"])
+
+
 def history_row(space: DesignSpace, iteration: int, z, cost, gradient, distance, kind: str, started: float,
                 radius: float | None = None, ratio: float | None = None) -> dict:
     """One iteration: ξ, cost, gradient, distance [m], how the PROM was used, and for the trust
@@ -103,11 +110,13 @@ def history_row(space: DesignSpace, iteration: int, z, cost, gradient, distance,
 class Checkpoint:
     """Optimiser state as JSON, written atomically after every iteration."""
 
-    def __init__(self, path: Path | None, scene: Scene, method: str):
-        self.path, self.scene_hash, self.method = path, scene.hash, method
+    KEYS = ("scene_hash", "method", "state", "history", "builds", "build_time", "solve_time")
+
+    def __init__(self, path: Path | None, scene: Scene, method: str, write: bool = True):
+        self.path, self.scene_hash, self.method, self.write = path, scene.hash, method, write
 
     def save(self, state: dict, history: list[dict], builder: PromBuilder) -> None:
-        if self.path is None:
+        if self.path is None or not self.write:
             return
         write_json_atomic(self.path, {"scene_hash": self.scene_hash, "method": self.method, "state": state,
                                       "history": history, "builds": builder.builds, "reused": builder.reused,
@@ -118,8 +127,11 @@ class Checkpoint:
             return None
         try:
             data = json.loads(self.path.read_text())
-        except json.JSONDecodeError as error:
+        except (json.JSONDecodeError, UnicodeDecodeError) as error:
             raise InputError(f"checkpoint {self.path}: unreadable ({error}); start without --resume") from None
+        if not isinstance(data, dict) or any(key not in data for key in self.KEYS):
+            raise InputError(f"checkpoint {self.path}: incomplete (needs {', '.join(self.KEYS)}); "
+                             "start without --resume")
         if data.get("scene_hash") != self.scene_hash or data.get("method") != self.method:
             raise InputError(f"checkpoint {self.path}: written for scene hash {data.get('scene_hash')} with "
                              f"method {data.get('method')}, not this scene ({self.scene_hash}, {self.method}); "
@@ -129,8 +141,12 @@ class Checkpoint:
 
 def optimize(scene: Scene, fish: Fish | None = None, weights: CostWeights | None = None,
              checkpoint_path: Path | None = None, resume: bool = False,
-             on_iteration=None) -> OptimizationResult:
-    """Run the scene's optimiser; ``on_iteration(row)`` sees every history row as it is made."""
+             on_iteration=None, write_checkpoint: bool = True, max_time: float = DEFAULT_MAX_TIME) -> OptimizationResult:
+    """Run the scene's optimiser; ``on_iteration(row)`` sees every history row as it is made.
+
+    Every rank reads a checkpoint to resume from; only ranks with ``write_checkpoint`` write one.
+    The run stops after ``scene.optimizer.max_iterations`` iterations or ``max_time`` seconds.
+    """
     fish = fish or load_fish(scene)
     space, notes = meshable_space(design_space(scene), fish)
     for note in notes:
@@ -138,7 +154,7 @@ def optimize(scene: Scene, fish: Fish | None = None, weights: CostWeights | None
     weights = weights or CostWeights()
     method = scene.optimizer.method
     builder = PromBuilder(scene, fish, space)
-    checkpoint = Checkpoint(checkpoint_path, scene, method)
+    checkpoint = Checkpoint(checkpoint_path, scene, method, write=write_checkpoint)
     saved = checkpoint.load() if resume else None
     history = list(saved["history"]) if saved else []
     if saved:
@@ -146,14 +162,37 @@ def optimize(scene: Scene, fish: Fish | None = None, weights: CostWeights | None
         builder.reused = saved.get("reused", 0)
     started = time.perf_counter() - (history[-1]["wall_time"] if history else 0.0)
     algorithm = {"paper": _paper_method, "trust-region": _trust_region}[method]
+    safeguard = Safeguard(started, max_time)
     optimum, evaluation, reason = algorithm(scene, space, builder, weights, history, checkpoint,
-                                            saved["state"] if saved else None, started, on_iteration or (lambda row: None))
+                                            saved["state"] if saved else None, safeguard,
+                                            on_iteration or (lambda row: None))
     timings = {"prom_builds": builder.build_time, "prom_solves": builder.solve_time,
                "total": time.perf_counter() - started}
     log.info("optimisation (%s) stopped: %s; %d PROM builds (%d reused from the cache), %.1f s", method, reason,
              builder.builds, builder.reused, timings["total"])
     return OptimizationResult(optimum, evaluation, history, builder.builds, reason, space, builder.last_size, timings,
                               builder.reused)
+
+
+@dataclass
+class Safeguard:
+    """Stops a loop past its wall-time budget and refuses a non-finite design."""
+
+    started: float
+    max_time: float
+
+    def out_of_time(self) -> bool:
+        return time.perf_counter() - self.started > self.max_time
+
+    @property
+    def reason(self) -> str:
+        return f"wall-time limit of {self.max_time:g} s reached"
+
+    @staticmethod
+    def finite(z: np.ndarray, iteration: int) -> np.ndarray:
+        if not np.all(np.isfinite(z)):
+            raise SolverError(f"the optimiser produced a non-finite design {z.tolist()} at iteration {iteration}")
+        return z
 
 
 def _record(history, row, on_iteration):
@@ -163,17 +202,23 @@ def _record(history, row, on_iteration):
 
 # ---------------------------------------------------------------------- the source's method
 def barrier(space: DesignSpace, z: np.ndarray) -> tuple[float, np.ndarray]:
-    """B(z) = -Σ log s_i(z) and ∇B, over the box and linear inequalities s(z) ≥ 0."""
-    slacks = space.slacks(z)
+    """B(z) = -Σ log s_i(z) and ∇B, over the box bounds of the free parameters and the linear
+    inequalities s(z) ≥ 0 (a fixed parameter, lower = upper, has no interior to keep to)."""
+    rows = space.barrier_rows
+    slacks = space.slacks(z)[rows]
     if np.any(slacks <= 0):
         return np.inf, np.full(z.size, np.nan)
-    n = z.size
-    jacobian = np.vstack([np.eye(n), -np.eye(n), -space.constraint_matrix])   # ∂s/∂z
+    jacobian = space.slack_jacobian[rows]   # ∂s/∂z
     return float(-np.log(slacks).sum()), -(jacobian / slacks[:, None]).sum(axis=0)
 
 
-def _paper_method(scene, space, builder, weights, history, checkpoint, state, started, on_iteration):
+def _paper_method(scene, space, builder, weights, history, checkpoint, state, safeguard, on_iteration):
     settings = scene.optimizer
+    started = safeguard.started
+    if space.interior_depth() <= 1e-12:
+        raise InputError(f"scene {scene.source}: the linear constraints leave no interior to the design space "
+                         "(an equality, or bounds that meet); the paper method's log-barrier needs one: "
+                         "use [optimizer] method = \"trust-region\" or loosen the constraints")
     interior = _strictly_inside(space, space.start)
     if state is None:
         state = {"z": interior.tolist(), "iteration": 0, "scaling": np.ones(space.names.__len__()).tolist(),
@@ -185,6 +230,9 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, st
     reason = "maximum number of iterations"
     while state["iteration"] < settings.max_iterations:
         iteration = state["iteration"]
+        if safeguard.out_of_time():
+            reason = safeguard.reason
+            break
         drift = np.inf if center is None else np.abs(z - np.array(center["z"])).max()
         rebuild = center is None or drift > settings.rebuild_threshold or state["since_build"] >= settings.n_rebuild
         if rebuild:
@@ -205,7 +253,7 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, st
         cost, gradient = _weighted_cost(space, weights, z, distance, distance_gradient)
         barrier_value, barrier_gradient = barrier(space, z)
         barrier_scale = settings.barrier_weight * max(abs(cost), 1e-12)
-        total_gradient = gradient + barrier_scale * barrier_gradient
+        total_gradient = np.where(space.free, gradient + barrier_scale * barrier_gradient, 0.0)
         _record(history, history_row(space, iteration, z, cost, gradient, distance,
                                      "built" if rebuild else "approximated", started), on_iteration)
         previous = state["previous_gradient"]
@@ -219,7 +267,7 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, st
             scaling[blocking] *= 0.5
             step = fraction * step
         previous_cost = history[-2]["cost"] if len(history) > 1 else None
-        z = z + step
+        z = safeguard.finite(z + step, iteration)
         state.update(z=z.tolist(), iteration=iteration + 1, scaling=scaling.tolist(),
                      previous_gradient=total_gradient.tolist(), since_build=state["since_build"] + 1, center=center)
         checkpoint.save(state, history, builder)
@@ -250,9 +298,13 @@ def _final_evaluation(builder: PromBuilder, weights, z, last_built) -> Evaluatio
 
 
 def _strictly_inside(space: DesignSpace, z: np.ndarray) -> np.ndarray:
-    """Move a start on a bound slightly inside (the barrier needs interior points)."""
+    """Move a start on a bound slightly inside (the barrier needs interior points); a start on a
+    linear constraint moves halfway towards the most interior point of the feasible set."""
     margin = 1e-3 * (space.upper - space.lower)
-    return np.clip(z, space.lower + margin, space.upper - margin)
+    z = np.clip(z, space.lower + margin, space.upper - margin)
+    if np.all(space.slacks(z)[space.barrier_rows] > 0):
+        return z
+    return 0.5 * (z + space.most_interior_point())
 
 
 def _linearised_distance(center: dict, z: np.ndarray) -> tuple[float, np.ndarray]:
@@ -273,9 +325,9 @@ def _weighted_cost(space, weights, z, distance, distance_gradient):
 
 def _fraction_to_boundary(space: DesignSpace, z, step, keep: float = 0.1) -> tuple[float, np.ndarray]:
     """Largest t ≤ 1 that keeps ``keep`` of every slack s(z) > 0, and the directions it blocks."""
-    slacks = space.slacks(z)
-    n = z.size
-    jacobian = np.vstack([np.eye(n), -np.eye(n), -space.constraint_matrix])
+    rows = space.barrier_rows
+    slacks = space.slacks(z)[rows]
+    jacobian = space.slack_jacobian[rows]
     change = jacobian @ step
     shrinking = change < 0
     if not np.any(shrinking):
@@ -291,8 +343,9 @@ def _fraction_to_boundary(space: DesignSpace, z, step, keep: float = 0.1) -> tup
 
 
 # ---------------------------------------------------------------------- trust region
-def _trust_region(scene, space, builder, weights, history, checkpoint, state, started, on_iteration):
+def _trust_region(scene, space, builder, weights, history, checkpoint, state, safeguard, on_iteration):
     settings = scene.optimizer
+    started = safeguard.started
     # The trust radius is a fraction of the PROM validity box; the amplitude enters the reduced
     # actuation exactly (linearly), so its box is its whole range.
     half_widths = np.array(scene.validity_radii() + ([space.upper[-1] - space.lower[-1]] if space.with_amplitude else []))
@@ -306,8 +359,12 @@ def _trust_region(scene, space, builder, weights, history, checkpoint, state, st
                                      "built", started, radius=state["radius"]), on_iteration)
     reason = "maximum number of iterations"
     while state["iteration"] < settings.max_iterations:
+        if safeguard.out_of_time():
+            reason = safeguard.reason
+            break
         radius = state["radius"]
         candidate, predicted_cost = _surrogate_step(builder, prom, space, weights, center, radius * half_widths)
+        candidate = safeguard.finite(candidate, state["iteration"] + 1)
         predicted = current.cost - predicted_cost
         step = candidate - center
         iteration = state["iteration"] + 1

@@ -9,6 +9,8 @@ quadratic in ξ, its geometry does not move with the catalog's shape variations)
 from __future__ import annotations
 
 import json
+import os
+import tempfile
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
@@ -17,6 +19,7 @@ import numpy as np
 from .errors import InputError
 
 FORMAT_VERSION = 1
+ZIP_MAGIC = b"PK\x03\x04"       # first bytes of a .npz (zip) archive
 
 
 @dataclass
@@ -128,9 +131,14 @@ class ReducedModel:
         arrays["header"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        temporary = path.with_name(f".{path.name}.tmp.npz")
-        np.savez(temporary, **arrays)
-        temporary.replace(path)
+        handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".npz")
+        try:     # a unique temporary name, then an atomic replace: concurrent writers never collide
+            with os.fdopen(handle, "wb") as stream:
+                np.savez(stream, **arrays)
+            os.replace(temporary, path)
+        except BaseException:
+            Path(temporary).unlink(missing_ok=True)
+            raise
 
     @classmethod
     def load(cls, path: Path, scene_hash: str | None = None) -> "ReducedModel":
@@ -138,6 +146,9 @@ class ReducedModel:
         from . import __version__
 
         path = Path(path)
+        if path.is_file() and _first_bytes(path, 4) != ZIP_MAGIC:
+            content = "an empty file" if path.stat().st_size == 0 else "not a .npz archive"
+            raise InputError(f"PROM file {path}: {content}, not a PROM file (write one with `aquarom build SCENE`)")
         try:
             with np.load(path) as data:
                 arrays = {key: data[key] for key in data.files}
@@ -163,3 +174,8 @@ class ReducedModel:
                 values[item.name] = header[item.name]
         values["rayleigh"] = tuple(values["rayleigh"])
         return cls(**values)
+
+
+def _first_bytes(path: Path, count: int) -> bytes:
+    with open(path, "rb") as stream:
+        return stream.read(count)

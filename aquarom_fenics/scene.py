@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import logging
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -201,6 +202,8 @@ class Scene:
             raise InputError(f"scene {path}: malformed TOML ({error})") from None
         except UnicodeDecodeError:
             raise InputError(f"scene {path}: not a UTF-8 text file") from None
+        except OSError as error:
+            raise InputError(f"scene {path}: cannot be read ({error.strerror})") from None
         return scene_from_dict(data, source=str(path), base_dir=str(path.parent))
 
     @property
@@ -268,11 +271,20 @@ def scene_from_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str 
     for key, value in (("name", name), ("description", description)):
         if not isinstance(value, str):
             raise InputError(f"{where}: '{key}' must be a string, got {value!r}")
+    if not _plain_file_name(name):
+        raise InputError(f"{where}: name = {name!r} must be a plain folder name (printable, no '/' or '\\', "
+                         "not '.' or '..', not starting with '-'): it names the default output folder")
     sections = {key: _section_from_dict(cls, _table(data, key, where), where, key) for key, cls in SECTIONS.items()}
     shapes = _shapes_from_dict(_table(data, "shapes", where), where)
     constraints = _constraints_from_list(data.get("constraints", []), shapes, where)
     return Scene(name=name, description=description, source=source, base_dir=base_dir,
                  shapes=shapes, constraints=constraints, **sections)
+
+
+def _plain_file_name(name: str) -> bool:
+    """A name that stays one folder inside results/ (no path separators, not '.' or '..', printable)."""
+    return (name.strip() not in ("", ".", "..") and not any(c in name for c in "/\\")
+            and name.isprintable() and not name.startswith("-") and len(name) <= 100)
 
 
 def _table(data, key, where) -> dict:
@@ -382,7 +394,10 @@ def _constraints_from_list(items, shapes, where) -> tuple[LinearConstraint, ...]
 
 
 def parse_xi_assignments(assignments: list[str] | None, scene: Scene) -> dict[str, float]:
-    """``["z_tail=0.1", …]`` → ``{"z_tail": 0.1}``; names must be shapes of the scene."""
+    """``["z_tail=0.1", …]`` → ``{"z_tail": 0.1}``; names must be shapes of the scene, each given once.
+
+    A value outside the scene's bounds is accepted (any design can be simulated) with a warning.
+    """
     values = {}
     for text in assignments or []:
         name, sep, number = text.partition("=")
@@ -398,5 +413,11 @@ def parse_xi_assignments(assignments: list[str] | None, scene: Scene) -> dict[st
             raise InputError(f"--xi {text}: '{number}' is not a number") from None
         if not math.isfinite(value):
             raise InputError(f"--xi {text}: '{number.strip()}' is not a finite number")
+        if name in values:
+            raise InputError(f"--xi {text}: {name} is given twice (first {name}={values[name]:g}); give it once")
+        shape = next(s for s in scene.shapes if s.name == name)
+        if not shape.lower <= value <= shape.upper:
+            logging.getLogger("aquarom").warning("--xi %s is outside the scene's bounds [%g, %g] of %s",
+                                                 text, shape.lower, shape.upper, name)
         values[name] = value
     return values

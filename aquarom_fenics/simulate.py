@@ -3,7 +3,9 @@ from __future__ import annotations
 
 import logging
 import resource
+import signal
 import time as clock
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -12,7 +14,7 @@ from mpi4py import MPI
 
 from .animate import DISPLACEMENT_FILE, write_displacement_series
 from .diagnostics import newton_failure_hints, scene_warnings
-from .errors import InputError, SolverError
+from .errors import InputError, Interrupted, SolverError
 from .fish import Fish, load_fish
 from .fom import FullOrderModel
 from .newmark import NewmarkScheme, NewtonSettings, StepReport, integrate
@@ -42,7 +44,7 @@ class SimulationResult:
     def summary(self) -> dict:
         iterations = np.asarray(self.trajectory.newton_iterations[1:])
         return {"distance": self.distance, "tail_amplitude": self.tail_amplitude, "completed": self.completed,
-                "error": self.error, "wall_time": self.wall_time, "cells": self.n_cells, "dofs": self.n_dofs,
+                "error": self.error, "stop_reason": self.error or "completed", "wall_time": self.wall_time, "cells": self.n_cells, "dofs": self.n_dofs,
                 "steps": len(self.trajectory) - 1,
                 "mean_newton_iterations": float(iterations.mean()) if iterations.size else None,
                 "timings": self.timings}
@@ -98,18 +100,24 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
             displacements.append(model.nodal_displacement(u))
         if bar:
             bar.update(1)
+        if stop_requested():     # Ctrl-C: end after this complete sample
+            raise KeyboardInterrupt
 
     bar = _progress_bar(n_steps, "FOM", progress and comm.rank == 0)
+    stop_requested = bool        # () → False until the time loop listens for Ctrl-C
     velocity = np.zeros(model.n_owned_dofs) if initial_velocity is None else model.owned_from_nodal(initial_velocity)
     zero = np.zeros(model.n_owned_dofs)
     record(StepReport(0, 0.0, 0, 0), zero, velocity, zero)
     settings = NewtonSettings(tolerance=scene.solver.tolerance, max_iterations=scene.solver.max_iterations)
-    error = None
+    error = interruption = None
     try:
-        integrate(model, model.scheme, n_steps, (zero, velocity, zero), settings, record,
-                  explain=lambda: "; ".join(newton_failure_hints(scene, model)))
+        with _stop_between_steps() as stop_requested:
+            integrate(model, model.scheme, n_steps, (zero, velocity, zero), settings, record,
+                      explain=lambda: "; ".join(newton_failure_hints(scene, model)))
     except SolverError as failure:
         error = str(failure)
+    except KeyboardInterrupt:
+        error = interruption = f"interrupted at t = {trajectory.time[-1]:g} s (Ctrl-C)"
     finally:
         if bar:
             bar.close()
@@ -131,6 +139,8 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
         write_displacement_series(Path(out_dir) / DISPLACEMENT_FILE, model.rest_points, fish.mesh.cells,
                                   arrays["time"], displacements)
         write_run_outputs(Path(out_dir), scene, result, "fom", fish.parameter_vector(xi), fish.shape_names, comm)
+    if interruption:
+        raise Interrupted(interruption)
     return result
 
 
@@ -147,6 +157,22 @@ def write_run_outputs(out_dir: Path, scene: Scene, result, model_name: str, xi, 
         title = f"{scene.name} ({model_name}): distance " + (
             f"{100 * result.distance:.2f} cm" if result.completed else "n/a (stopped early)")
         plot_trajectory(out_dir / "trajectory.png", result.trajectory.arrays(), title)
+
+
+@contextmanager
+def _stop_between_steps():
+    """While the time loop runs, Ctrl-C (SIGINT) only asks it to stop after the current step, so
+    trajectory, displacements and summary stay consistent; yields the "was it asked?" test."""
+    requested = []
+    try:
+        previous = signal.signal(signal.SIGINT, lambda number, frame: requested.append(number))
+    except ValueError:       # not the main thread: Ctrl-C cannot reach this loop
+        yield lambda: False
+        return
+    try:
+        yield lambda: bool(requested)
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _progress_bar(total: int, label: str, enabled: bool):

@@ -11,11 +11,11 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-from .cache import cache_root, entry_key, is_intact, seal
+from .cache import cache_root, entry_key, read_intact, require_cache_writable, store
 from .cost import CostWeights, design_space
-from .errors import InputError, SolverError
+from .errors import InputError, Interrupted, SolverError
 from .fish import Fish, load_fish
-from .optimize import OptimizationResult, optimize
+from .optimize import DEFAULT_MAX_TIME, Checkpoint, OptimizationResult, history_columns, optimize
 from .outputs import software_versions, write_json_atomic
 from .scene import Scene
 from .simulate import simulate_fom
@@ -50,16 +50,17 @@ def fom_distance(scene: Scene, fish: Fish, design: dict[str, float], amplitude: 
         scene = scene.replace("actuation", amplitude=amplitude)
     path = cache_root() / "fom" / f"{entry_key('fom', scene.hash, sorted(design.items()))}.json"
     if path.exists():
-        if is_intact(path):
+        distance = read_intact(path, lambda entry: json.loads(entry.read_text())["distance"])
+        if distance is not None:
             log.info("FOM at %s: reused from the cache (%s)", design, path.name)
-            return json.loads(path.read_text())["distance"]
-        log.warning("FOM cache: entry %s does not match its checksum (corrupted); recomputing it", path.name)
+            return distance
+    require_cache_writable("fom")
     result = simulate_fom(scene, design, fish=fish, progress=MPI.COMM_WORLD.rank == 0)
     if not result.completed:
         raise SolverError(f"FOM at {design} stopped: {result.error}")
     if MPI.COMM_WORLD.rank == 0:
-        write_json_atomic(path, {"design": design, "scene_hash": scene.hash, "distance": result.distance})
-        seal(path)
+        entry = {"design": design, "scene_hash": scene.hash, "distance": result.distance}
+        store(path, lambda target: write_json_atomic(target, entry))
     return result.distance
 
 
@@ -84,23 +85,41 @@ def fom_check(scene: Scene, fish: Fish, result: OptimizationResult) -> FomCheck:
 
 
 def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights: CostWeights | None = None,
-                     fish: Fish | None = None, render: bool = True) -> tuple[OptimizationResult, FomCheck]:
-    """Optimise, check with the FOM and write history.csv, summary.json, plots, renders, XDMF."""
+                     fish: Fish | None = None, render: bool = True,
+                     max_time: float = DEFAULT_MAX_TIME) -> tuple[OptimizationResult, FomCheck]:
+    """Optimise, check with the FOM and write history.csv, summary.json, plots, renders, XDMF.
+
+    A checkpoint to resume from is validated before anything is written; Ctrl-C leaves the
+    history, a valid checkpoint and a summary.json with the stop reason.
+    """
     out_dir = Path(out_dir)
     is_writer = MPI.COMM_WORLD.rank == 0
-    fish = fish or load_fish(scene)
     space = design_space(scene)
     checkpoint = out_dir / "checkpoint.json"
-    history_file = out_dir / "history.csv"
-    if is_writer:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    checkpoint_rows = json.loads(checkpoint.read_text())["history"] if resume and checkpoint.exists() else []
     if resume and not checkpoint.exists():
         raise InputError(f"--resume: no checkpoint in {out_dir}; run without --resume")
-    writer = HistoryWriter(history_file, checkpoint_rows) if is_writer else None
-    result = optimize(scene, fish=fish, weights=weights, checkpoint_path=checkpoint if is_writer else None,
-                      resume=resume, on_iteration=writer.write if writer else None)
-    check = fom_check(scene, fish, result)
+    saved = Checkpoint(checkpoint, scene, scene.optimizer.method).load() if resume else None
+    require_cache_writable()
+    fish = fish or load_fish(scene)
+    if is_writer:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    history_file = out_dir / "history.csv"
+    writer = HistoryWriter(history_file, history_columns(space), saved["history"] if saved else []) if is_writer else None
+    try:
+        result = optimize(scene, fish=fish, weights=weights, checkpoint_path=checkpoint, resume=resume,
+                          on_iteration=writer.write if writer else None, write_checkpoint=is_writer,
+                          max_time=max_time)
+        check = fom_check(scene, fish, result)
+    except KeyboardInterrupt as stop:
+        rows = writer.rows if writer else 0
+        reason = f"{stop or 'interrupted'}" if isinstance(stop, Interrupted) else "interrupted (Ctrl-C)"
+        if is_writer:
+            writer.close()
+            write_json_atomic(out_dir / "summary.json", {
+                "scene": scene.name, "scene_hash": scene.hash, "method": scene.optimizer.method, "completed": False,
+                "stop_reason": f"{reason} after {rows} history row(s)", "history": history_file.name,
+                "resume": f"aquarom optimize {scene.source} --out {out_dir} --resume"})
+        raise Interrupted(f"{reason} after {rows} history row(s); continue with --resume") from None
     if is_writer:
         writer.close()
         _write_summary(out_dir, scene, result, check, weights or CostWeights())
@@ -109,24 +128,30 @@ def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights:
 
 
 class HistoryWriter:
-    """history.csv, one row per iteration, flushed at once; a resumed run starts from the
-    checkpoint's rows (a row written after the last checkpoint is made again, not duplicated)."""
+    """history.csv, one row per iteration in the columns of :func:`history_columns`, flushed at
+    once; a resumed run starts from the checkpoint's rows (a row written after the last
+    checkpoint is made again, not duplicated)."""
 
-    def __init__(self, path: Path, checkpoint_rows: list[dict]):
+    def __init__(self, path: Path, columns: list[str], checkpoint_rows: list[dict]):
         self.stream = open(path, "w", newline="")
-        self.header = None
+        self.header = columns
+        self.rows = 0
+        csv.writer(self.stream).writerow(self.header)
         for row in checkpoint_rows:
             self.write(row)
 
     def write(self, row: dict) -> None:
-        if self.header is None:
-            self.header = list(row)
-            csv.writer(self.stream).writerow(self.header)
-        csv.writer(self.stream).writerow([row.get(key, "") for key in self.header])
+        csv.writer(self.stream).writerow([_csv_value(row.get(key)) for key in self.header])
         self.stream.flush()
+        self.rows += 1
 
     def close(self) -> None:
         self.stream.close()
+
+
+def _csv_value(value):
+    """An empty cell for a missing value (a JSON null in a resumed row is the same as None)."""
+    return "" if value is None else value
 
 
 def _write_summary(out_dir, scene, result, check, weights):

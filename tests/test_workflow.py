@@ -51,8 +51,13 @@ def test_existing_outputs_are_kept_unless_forced_and_a_manifest_is_written(tmp_p
     assert main(["simulate", scene, "--model", "rom", "--out", str(out)]) == 2
     assert "--force" in capsys.readouterr().err
     assert (out / "notes.txt").read_text() == "mine"
+    assert main(["simulate", scene, "--model", "rom", "--out", str(out), "--force"]) == 2
+    assert "did not write (notes.txt)" in capsys.readouterr().err
+    assert (out / "notes.txt").read_text() == "mine"
+    (out / "notes.txt").unlink()
     assert main(["simulate", scene, "--model", "rom", "--out", str(out), "--force"]) == 0
-    assert not (out / "notes.txt").exists() and (out / "trajectory.csv").exists()
+    assert (out / "trajectory.csv").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["run", "toy.toml"]
+    assert "trajectory.csv" in json.loads((out / "manifest.json").read_text())["files"]
 
 
 def test_truncated_prom_cache_entry_is_detected_and_rebuilt(tmp_path, caplog):
