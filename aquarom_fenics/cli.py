@@ -123,7 +123,10 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     comm = MPI.COMM_WORLD
     agreement = comm.Dup() if comm.size > 1 else None
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(message)s")
+    console = logging.StreamHandler()          # details (INFO) only with --verbose
+    console.setFormatter(logging.Formatter("%(message)s"))
+    console.setLevel(logging.INFO if args.verbose else logging.WARNING)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, handlers=[console])
     logging.getLogger("aquarom").setLevel(logging.INFO if comm.rank == 0 else logging.ERROR)
     started = time.perf_counter()
     line = None

@@ -230,9 +230,6 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, sa
     reason = "maximum number of iterations"
     while state["iteration"] < settings.max_iterations:
         iteration = state["iteration"]
-        if safeguard.out_of_time():
-            reason = safeguard.reason
-            break
         drift = np.inf if center is None else np.abs(z - np.array(center["z"])).max()
         rebuild = center is None or drift > settings.rebuild_threshold or state["since_build"] >= settings.n_rebuild
         if rebuild:
@@ -271,6 +268,9 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, sa
         state.update(z=z.tolist(), iteration=iteration + 1, scaling=scaling.tolist(),
                      previous_gradient=total_gradient.tolist(), since_build=state["since_build"] + 1, center=center)
         checkpoint.save(state, history, builder)
+        if safeguard.out_of_time():
+            reason = safeguard.reason
+            break
         if np.linalg.norm(step) < settings.step_tolerance:
             reason = f"step {np.linalg.norm(step):.2e} below the step tolerance"
             break

@@ -205,3 +205,42 @@ def test_fom_check_that_stops_is_reported_and_the_outputs_are_kept(tmp_path, cap
     summary = json.loads((out / "summary.json").read_text())
     assert summary["fom_check"]["ratio"] is None and "stopped" in summary["fom_check"]["error"]
     assert (out / "history.csv").exists()
+
+
+@pytest.mark.parametrize("method", ["paper", "trust-region"])
+def test_a_parameter_with_equal_bounds_stays_fixed_and_no_design_is_nan(method, toy_fish):
+    scene = coarse_scene(shapes={"z_tail": {"bounds": [0.0, 0.0]}, "y_thin": {"bounds": [-0.1, 0.1]}},
+                         solver={"duration": 1.0}, optimizer={"method": method, "max_iterations": 4})
+    result = optimize(scene, fish=toy_fish)
+    designs = np.array([[row["xi_z_tail"], row["xi_y_thin"]] for row in result.history])
+    assert np.all(np.isfinite(designs)) and np.all(designs[:, 0] == 0.0)
+    assert result.optimum[1] > 0.05          # thinner swims further (the free parameter still moves)
+
+
+def test_every_bound_equal_is_refused():
+    scene = coarse_scene(shapes={"z_tail": {"bounds": [0.1, 0.1], "start": 0.1}})
+    with pytest.raises(InputError, match="nothing to optimise"):
+        design_space(scene)
+
+
+def test_paper_method_refuses_a_feasible_set_without_interior(toy_fish):
+    from aquarom_fenics.scene import scene_from_dict
+
+    scene = scene_from_dict({"mesh": {"level": 1}, "shapes": TOY_SHAPES, "solver": {"duration": 1.0},
+                             "optimizer": {"method": "paper", "max_iterations": 3},
+                             "constraints": [{"coefficients": {"z_tail": 1.0, "y_thin": 1.0}, "lower": 0.0,
+                                              "upper": 0.0}]})
+    with pytest.raises(InputError, match="no interior"):
+        optimize(scene, fish=toy_fish)
+
+
+@pytest.mark.parametrize("method", ["paper", "trust-region"])
+def test_wall_time_safeguard_stops_the_optimiser(method, toy_fish):
+    result = optimize(toy_scene(method), fish=toy_fish, max_time=0.0)
+    assert result.stop_reason == "wall-time limit of 0 s reached"
+    assert all(np.isfinite(row["cost"]) for row in result.history)
+
+
+def test_a_non_finite_design_is_refused():
+    with pytest.raises(SolverError, match="non-finite design"):
+        optimize_module.Safeguard.finite(np.array([0.1, np.nan]), 3)

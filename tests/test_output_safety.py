@@ -364,3 +364,46 @@ def test_two_processes_saving_the_same_prom_entry(tmp_path):
         assert out.strip() == "0", "a reader saw data and checksum of different writers"
     assert ReducedModel.load(entry).timings["save"] == 149
     assert sorted(p.name for p in entry.parent.iterdir()) == ["entry.npz", "entry.npz.lock", "entry.npz.sha256"]
+
+
+# ---------------------------------------------------------------------- MPI: a failure on one rank ends all
+RANK_ZERO_DISK_FULL = """
+import errno
+import sys
+
+from mpi4py import MPI
+
+from aquarom_fenics import outputs
+from aquarom_fenics.cli import main
+
+if MPI.COMM_WORLD.rank == 0:
+    def disk_full(self, *args):
+        raise OSError(errno.ENOSPC, "No space left on device", "trajectory.csv")
+
+    outputs.TrajectoryCSV.write = disk_full
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("failure", ["output below a file", "disk full on rank 0 only"])
+def test_a_failure_on_one_rank_ends_every_rank(tmp_path, failure):
+    import shutil
+
+    if shutil.which("mpirun") is None:
+        pytest.skip("mpirun not installed")
+    scene = write_scene(tmp_path)
+    (tmp_path / "file").write_text("x")
+    if failure == "output below a file":
+        command = [str(Path(sys.executable).with_name("aquarom")), "simulate", scene, "--out",
+                   str(tmp_path / "file" / "run")]
+        expected = "a parent of this folder is a file"
+    else:
+        (tmp_path / "failing.py").write_text(RANK_ZERO_DISK_FULL)
+        command = [sys.executable, str(tmp_path / "failing.py"), "simulate", scene, "--out", str(tmp_path / "run")]
+        expected = "trajectory.csv: No space left on device"
+    completed = subprocess.run(["mpirun", "-n", "2", *command, "--no-progress"], capture_output=True, text=True,
+                               timeout=120, env=os.environ)
+    assert completed.returncode == 2, completed.stderr
+    assert completed.stderr.count("aquarom simulate:") == 1 and expected in completed.stderr
+    assert "Traceback" not in completed.stderr
