@@ -198,11 +198,40 @@ def end_in_agreement(agreement, code: int, line: str) -> int:
 def run_dry(args) -> int:
     from .plan import plan
 
-    scene = load_scene(args)
+    scene, _ = check_inputs(args, load_scene(args))
     say(f"plan for `aquarom {args.command}` (dry run, nothing is written):")
     for line in plan(args.command, scene, getattr(args, "model", None)):
         say(f"  {line}")
     return 0
+
+
+def check_inputs(args, scene):
+    """The checks a command makes before its work (arguments against the scene, time grid, design
+    space), so a dry run refuses what the run would refuse; returns the scene the command uses and
+    the --xi values."""
+    from .cost import design_space
+    from .scene import parse_xi_assignments
+    from .simulate import check_time_grid
+
+    xi = parse_xi_assignments(getattr(args, "xi", None), scene)
+    if getattr(args, "prom", None) is not None and getattr(args, "model", "prom") != "prom":
+        raise InputError(f"--prom {args.prom} is used by --model prom only (this run: --model {args.model})")
+    if args.command in ("simulate", "compare", "optimize", "pareto"):
+        check_time_grid(scene)
+    if args.command == "optimize":
+        if args.method:
+            scene = scene.replace("optimizer", method=args.method)
+        if not scene.shapes:
+            raise InputError(f"scene {scene.source} has no [shapes] to optimise")
+        if scene.cooptimization.enabled and not 0.0 <= args.weight <= 1.0:
+            raise InputError(f"--weight {args.weight}: must be in [0, 1]")
+        if args.max_time is not None and not args.max_time > 0:
+            raise InputError(f"--max-time {args.max_time}: must be a positive number of seconds")
+    if args.command == "pareto" and not scene.cooptimization.enabled:
+        raise InputError(f"scene {scene.source}: [cooptimization] enabled = true is needed for a Pareto sweep")
+    if args.command in ("optimize", "pareto"):
+        design_space(scene)
+    return scene, xi
 
 
 def claim_output(args, path: Path, resume: bool = False) -> Path:
@@ -337,18 +366,15 @@ def run_mesh(args) -> int:
 def run_shapes(args) -> int:
     from .render import render_design, render_shape_sheet
     from .fish import load_fish
-    from .scene import parse_xi_assignments
 
-    scene = load_scene(args)
-    xi = parse_xi_assignments(args.xi, scene)
+    scene, xi = check_inputs(args, load_scene(args))
+    if not xi and not scene.shapes:
+        raise InputError(f"scene {scene.source} has no [shapes]: nothing to show (add shape variations or use --xi)")
     fish = load_fish(scene)
     out = claim_output(args, args.out or Path("results") / "shapes" / scene.name)
     if xi:
-        design = fish.design(xi)
-        files = render_design(fish, design, xi, out)
+        files = render_design(fish, fish.design(xi), xi, out)
     else:
-        if not scene.shapes:
-            raise InputError(f"scene {scene.source} has no [shapes]: nothing to show (add shape variations or use --xi)")
         files = render_shape_sheet(fish, scene, out)
     for path in files:
         say(f"wrote {shown(args, path)}")
@@ -356,13 +382,9 @@ def run_shapes(args) -> int:
 
 
 def run_simulate(args) -> int:
-    from .scene import parse_xi_assignments
     from .simulate import simulate_fom
 
-    scene = load_scene(args)
-    xi = parse_xi_assignments(args.xi, scene)
-    if args.prom is not None and args.model != "prom":
-        raise InputError(f"--prom {args.prom} is used by --model prom only (this run: --model {args.model})")
+    scene, xi = check_inputs(args, load_scene(args))
     out = claim_output(args, args.out or Path("results") / "simulate" / f"{scene.name}-{args.model}")
     if args.model == "fom":
         result = simulate_fom(scene, xi=xi, out_dir=out, progress=not args.no_progress)
@@ -425,10 +447,9 @@ def run_build(args) -> int:
     from .cache import cached_prom
     from .fish import load_fish
     from .reductor import build_prom
-    from .scene import parse_xi_assignments
 
-    scene = load_scene(args)
-    xi = {s.name: s.start for s in scene.shapes} | parse_xi_assignments(args.xi, scene)
+    scene, xi = check_inputs(args, load_scene(args))
+    xi = {s.name: s.start for s in scene.shapes} | xi
     out = claim_output_file(args, args.out or Path("results") / "build" / f"{scene.name}-prom.npz")
     fish = load_fish(scene)
     center = fish.parameter_vector(xi)
@@ -443,11 +464,9 @@ def run_build(args) -> int:
 def run_compare(args) -> int:
     from .compare import model_errors
     from .outputs import plot_comparison, write_json_atomic
-    from .scene import parse_xi_assignments
     from .simulate import simulate_fom
 
-    scene = load_scene(args)
-    xi = parse_xi_assignments(args.xi, scene)
+    scene, xi = check_inputs(args, load_scene(args))
     out = claim_output(args, args.out or Path("results") / "compare" / scene.name)
     reduced = run_reduced_model(scene, xi, args.model, args.prom, out / args.model)
     full = simulate_fom(scene, xi=xi, out_dir=out / "fom", progress=not args.no_progress)
@@ -473,18 +492,10 @@ def run_optimize(args) -> int:
     from .optimize import DEFAULT_MAX_TIME
     from .study import run_optimization
 
-    scene = load_scene(args)
-    if args.method:
-        scene = scene.replace("optimizer", method=args.method)
-    if not scene.shapes:
-        raise InputError(f"scene {scene.source} has no [shapes] to optimise")
+    scene, _ = check_inputs(args, load_scene(args))
     weights = CostWeights()
     if scene.cooptimization.enabled:
-        if not 0.0 <= args.weight <= 1.0:
-            raise InputError(f"--weight {args.weight}: must be in [0, 1]")
         weights = CostWeights(args.weight, 1.0 - args.weight, scene.cooptimization.energy_weight)
-    if args.max_time is not None and not args.max_time > 0:
-        raise InputError(f"--max-time {args.max_time}: must be a positive number of seconds")
     out = claim_output(args, args.out or Path("results") / "optimize" / scene.name, resume=args.resume)
     result, check = run_optimization(scene, out, resume=args.resume, weights=weights,
                                      max_time=DEFAULT_MAX_TIME if args.max_time is None else args.max_time)
@@ -503,9 +514,7 @@ def run_optimize(args) -> int:
 def run_pareto(args) -> int:
     from .study import pareto_sweep
 
-    scene = load_scene(args)
-    if not scene.cooptimization.enabled:
-        raise InputError(f"scene {scene.source}: [cooptimization] enabled = true is needed for a Pareto sweep")
+    scene, _ = check_inputs(args, load_scene(args))
     out = claim_output(args, args.out or Path("results") / "pareto" / scene.name)
     points = pareto_sweep(scene, out)
     for point in points:
