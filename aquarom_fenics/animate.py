@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +19,7 @@ import numpy as np
 from mpi4py import MPI
 
 from .errors import InputError
+from .outputs import write_npz_atomic
 from .render import EDGE_COLOUR, EDGE_OPACITY, _frame_camera, _plotter, _save, tetra_grid
 
 DISPLACEMENT_FILE = "displacement.npz"
@@ -116,12 +115,8 @@ def write_displacement_series(path: Path, points, cells, time, nodal_displacemen
         raise ValueError(f"displacement series for {path}: {problem}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    with os.fdopen(handle, "wb") as stream:
-        np.savez_compressed(stream, points=series.points, cells=series.cells, time=series.time,
-                            displacement=series.displacement)
-    os.chmod(temporary, 0o644)
-    os.replace(temporary, path)
+    write_npz_atomic(path, {"points": series.points, "cells": series.cells, "time": series.time,
+                            "displacement": series.displacement}, compressed=True)
     return path
 
 

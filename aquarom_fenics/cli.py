@@ -159,16 +159,18 @@ def describe_failure(args, error: BaseException) -> tuple[int, str]:
     if isinstance(error, SolverError):
         return SolverError.exit_code, f"solver stopped: {error}"
     if isinstance(error, OSError):
-        return InputError.exit_code, f"error: {os_error_text(error)}"
+        location = getattr(args, "output", None)
+        unnamed = f"writing in {location.working}/" if location is not None else "a file"
+        return InputError.exit_code, f"error: {os_error_text(error, unnamed)}"
     if MPI.COMM_WORLD.size == 1:
         raise error
     traceback.print_exc()
     return 1, f"internal error on rank {MPI.COMM_WORLD.rank}: {type(error).__name__}: {error}"
 
 
-def os_error_text(error: OSError) -> str:
+def os_error_text(error: OSError, unnamed: str = "a file") -> str:
     """'PATH: what went wrong' for an operating-system error (permission, missing folder, full disk)."""
-    where = error.filename if error.filename is not None else "a file"
+    where = error.filename if error.filename is not None else unnamed
     return f"{where}: {error.strerror or error}"
 
 
@@ -292,7 +294,7 @@ def settle_output(args, code: int, wall_time: float) -> None:
     run being replaced stays untouched); a refused one removes the folder it created."""
     from .outputs import discard, list_outputs, publish
 
-    location = getattr(args, "output", None)
+    location = vars(args).pop("output", None)     # settled once; not an argument for the manifest
     if location is None or MPI.COMM_WORLD.rank != 0:
         return
     if code in (0, SolverError.exit_code, Interrupted.exit_code):
@@ -303,7 +305,6 @@ def settle_output(args, code: int, wall_time: float) -> None:
             publish(location)
     else:
         discard(location)
-    args.output = None
 
 
 def write_manifest(args, wall_time: float) -> None:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import csv
 import ctypes
+import io
 import json
 import math
 import os
@@ -37,6 +38,31 @@ def write_text_atomic(path: Path, text: str) -> None:
             stream.write(text)
         os.chmod(temporary, 0o644)
         os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+
+
+def write_npz_atomic(path: Path, arrays: dict[str, np.ndarray], compressed: bool = False) -> None:
+    """A .npz archive built in memory, then written like :func:`write_bytes_atomic` (a full disk
+    fails on one plain write that names the file, never halfway through the archive)."""
+    buffer = io.BytesIO()
+    (np.savez_compressed if compressed else np.savez)(buffer, **arrays)
+    write_bytes_atomic(path, buffer.getvalue())
+
+
+def write_bytes_atomic(path: Path, content: bytes) -> None:
+    """A uniquely named temporary file beside ``path``, then os.replace; an OS error names ``path``."""
+    path = Path(path)
+    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    try:
+        with os.fdopen(handle, "wb") as stream:
+            stream.write(content)
+        os.chmod(temporary, 0o644)
+        os.replace(temporary, path)
+    except OSError as error:
+        Path(temporary).unlink(missing_ok=True)
+        raise OSError(error.errno, error.strerror, str(path)) from None
     except BaseException:
         Path(temporary).unlink(missing_ok=True)
         raise

@@ -9,14 +9,13 @@ quadratic in ξ, its geometry does not move with the catalog's shape variations)
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
 
 from .errors import InputError
+from .outputs import write_npz_atomic
 
 FORMAT_VERSION = 1
 ZIP_MAGIC = b"PK\x03\x04"       # first bytes of a .npz (zip) archive
@@ -131,14 +130,7 @@ class ReducedModel:
         arrays["header"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".npz")
-        try:     # a unique temporary name, then an atomic replace: concurrent writers never collide
-            with os.fdopen(handle, "wb") as stream:
-                np.savez(stream, **arrays)
-            os.replace(temporary, path)
-        except BaseException:
-            Path(temporary).unlink(missing_ok=True)
-            raise
+        write_npz_atomic(path, arrays)     # unique temporary name, atomic replace: concurrent writers never collide
 
     @classmethod
     def load(cls, path: Path, scene_hash: str | None = None) -> "ReducedModel":

@@ -164,9 +164,12 @@ def _stop_between_steps():
     """While the time loop runs, Ctrl-C (SIGINT) only asks it to stop after the current step, so
     trajectory, displacements and summary stay consistent; yields the "was it asked?" test."""
     requested = []
+    previous = signal.getsignal(signal.SIGINT)
     try:
-        previous = signal.signal(signal.SIGINT, lambda number, frame: requested.append(number))
-    except ValueError:       # not the main thread: Ctrl-C cannot reach this loop
+        if previous is not signal.default_int_handler:      # Ctrl-C ignored or handled by the caller
+            raise ValueError
+        signal.signal(signal.SIGINT, lambda number, frame: requested.append(number))
+    except ValueError:       # or not the main thread: Ctrl-C does not reach this loop
         yield lambda: False
         return
     try:
