@@ -211,7 +211,7 @@ def check_inputs(args, scene):
     """The checks a command makes before its work (arguments against the scene, time grid, design
     space), so a dry run refuses what the run would refuse; returns the scene the command uses and
     the --xi values."""
-    from .cost import design_space
+    from .cost import design_space, require_interior
     from .scene import parse_xi_assignments
     from .simulate import check_time_grid
 
@@ -232,7 +232,9 @@ def check_inputs(args, scene):
     if args.command == "pareto" and not scene.cooptimization.enabled:
         raise InputError(f"scene {scene.source}: [cooptimization] enabled = true is needed for a Pareto sweep")
     if args.command in ("optimize", "pareto"):
-        design_space(scene)
+        space = design_space(scene)
+        if scene.optimizer.method == "paper":
+            require_interior(space, scene)
     return scene, xi
 
 

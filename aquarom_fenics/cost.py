@@ -121,6 +121,14 @@ def design_space(scene: Scene) -> DesignSpace:
     return space
 
 
+def require_interior(space: DesignSpace, scene: Scene) -> None:
+    """The paper method's log-barrier needs a feasible set with an interior (max_z min_i s_i(z) > 0)."""
+    if space.interior_depth() <= 1e-12:
+        raise InputError(f"scene {scene.source}: the linear constraints leave no interior to the design space "
+                         "(an equality, or bounds that meet); the paper method's log-barrier needs one: "
+                         "use [optimizer] method = \"trust-region\" or loosen the constraints")
+
+
 def meshable_space(space: DesignSpace, fish) -> tuple[DesignSpace, list[str]]:
     """The design space with each shape bound pulled in to where the design still meshes.
 

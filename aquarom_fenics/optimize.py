@@ -28,7 +28,7 @@ import numpy as np
 from scipy.optimize import LinearConstraint, minimize
 
 from .cache import cached_prom
-from .cost import CostWeights, DesignSpace, Evaluation, design_space, evaluate, meshable_space
+from .cost import CostWeights, DesignSpace, Evaluation, design_space, evaluate, meshable_space, require_interior
 from .errors import InputError, SolverError
 from .fish import Fish, load_fish
 from .outputs import write_json_atomic
@@ -215,10 +215,7 @@ def barrier(space: DesignSpace, z: np.ndarray) -> tuple[float, np.ndarray]:
 def _paper_method(scene, space, builder, weights, history, checkpoint, state, safeguard, on_iteration):
     settings = scene.optimizer
     started = safeguard.started
-    if space.interior_depth() <= 1e-12:
-        raise InputError(f"scene {scene.source}: the linear constraints leave no interior to the design space "
-                         "(an equality, or bounds that meet); the paper method's log-barrier needs one: "
-                         "use [optimizer] method = \"trust-region\" or loosen the constraints")
+    require_interior(space, scene)
     interior = _strictly_inside(space, space.start)
     if state is None:
         state = {"z": interior.tolist(), "iteration": 0, "scaling": np.ones(space.names.__len__()).tolist(),
