@@ -293,9 +293,10 @@ def run_reduced_model(scene, xi: dict, model: str, prom_file: Path | None, out: 
         out.mkdir(parents=True, exist_ok=True)
         write_trajectory_csv(out / "trajectory.csv", result.trajectory.arrays())
         design = reduced.design_point | xi
-        write_displacement_series(out / DISPLACEMENT_FILE, fish.design(design), fish.mesh.cells,
+        vertices = fish.nodes.n_vertices
+        write_displacement_series(out / DISPLACEMENT_FILE, fish.design(design)[:vertices], fish.mesh.cells,
                                   result.trajectory.arrays()["time"],
-                                  np.einsum("ndm,sm->snd", reduced.basis, result.states))
+                                  np.einsum("ndm,sm->snd", reduced.basis[:vertices], result.states))
         write_run_outputs(out, scene, result, model, list(design.values()), list(design), MPI.COMM_WORLD,
                           extra={"cells": reduced.cells, "dofs": reduced.dofs, "reduced_size": reduced.size,
                                  "basis": reduced.labels, "basis_dropped": reduced.dropped,

@@ -212,14 +212,20 @@ def sub_space_dofs_of_nodes(space, layout: DofLayout, nodes: np.ndarray, compone
 
 
 class XDMFTimeSeries:
-    """A displacement time series for ParaView (XDMF + HDF5)."""
+    """A displacement time series for ParaView (XDMF + HDF5) on the linear mesh.
+
+    XDMF holds the mesh's own (linear) nodes: a quadratic displacement is written as its P1
+    interpolant, i.e. its values at the vertices.
+    """
 
     def __init__(self, comm: MPI.Comm, path, mesh):
         self._file = io.XDMFFile(comm, str(path), "w")
         self._file.write_mesh(mesh)
+        self._vertex_values = fem.Function(vector_space(mesh, 1), name="displacement")
 
     def write(self, function, time: float) -> None:
-        self._file.write_function(function, time)
+        self._vertex_values.interpolate(function)
+        self._file.write_function(self._vertex_values, time)
 
     def close(self) -> None:
         self._file.close()

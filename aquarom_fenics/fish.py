@@ -18,14 +18,20 @@ from .shapes import check_exact_design, design_points, reference_to_cells, shape
 from .tags import FishTags, tag_fish
 
 
+MASS_QUADRATURE_DEGREE = {1: 2, 2: 6}
+"""Per element degree k: the lowest rule degree ≥ 2k (exact for φ_i·φ_j) whose default rule has
+only interior points and positive weights; the degree-4 and -5 rules of the tetrahedron have
+points on its edges, where the √ profiles of SPEC §4 have an infinite slope on the end faces."""
+
+
 def quadrature_degrees(degree: int) -> dict[str, int]:
     """Quadrature degree of the volume forms per element degree k (one rule per family).
 
     "stiffness" (elastic and muscle energies): 2(k - 1), at least 1: the centroid for linear
-    elements (∇u constant per cell), the 4-point rule for quadratic ones (exact for the tangent
-    at rest). "mass" (mass, centre of mass, total mass): 2k, exact for φ_i·φ_j.
+    elements (∇u constant per cell), the 4-point interior rule for quadratic ones (exact for the
+    tangent at rest). "mass" (mass, centre of mass, total mass, drag): MASS_QUADRATURE_DEGREE.
     """
-    return {"stiffness": max(1, 2 * (degree - 1)), "mass": 2 * degree}
+    return {"stiffness": max(1, 2 * (degree - 1)), "mass": MASS_QUADRATURE_DEGREE[degree]}
 
 
 @dataclass(frozen=True)
