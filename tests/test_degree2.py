@@ -106,3 +106,30 @@ def test_degree_two_first_xi_derivative_matches_central_difference_of_the_fom(qu
                    - (projected_force(2 * unit) - projected_force(-2 * unit))) / (12 * step)
         reference = max(np.linalg.norm(central), 1e-9 * force_scale)
         assert np.linalg.norm(derivative[k] - central) < 1e-5 * reference, name
+
+
+SO2_CORNER_DESIGN = {"z_tail": -0.49, "z_head": 0.32, "y_lin_long_tail": 0.39, "y_head": 0.49, "y_ellipse": 0.49}
+"""Refused on level 3 by a check of the linearly interpolated design (head corner cells invert),
+although the exact map has det F_1 = (1 + ∂Δy/∂y)(1 + ∂Δz/∂z) > 0 for |ξ| < 1."""
+
+
+def test_design_check_judges_the_exact_geometry_not_its_nodal_interpolation():
+    from aquarom_fenics.scene import Scene
+    from aquarom_fenics.shapes import check_design
+
+    fish = load_fish(Scene.load("so2").replace("mesh", level=3))
+    xi = fish.parameter_vector(SO2_CORNER_DESIGN)
+    interpolated = fish.mesh.points + fish.shape_displacement(xi)[:fish.nodes.n_vertices]
+    with pytest.raises(InputError, match="inverts or flattens [1-9]"):
+        check_design(fish.mesh.points, fish.mesh.cells, interpolated, SO2_CORNER_DESIGN)
+    design = fish.design(SO2_CORNER_DESIGN)
+    np.testing.assert_allclose(design, fish.nodes.points + fish.shape_displacement(xi))
+
+
+@pytest.mark.parametrize("degree", [1, 2])
+def test_a_design_that_inverts_in_the_continuum_is_refused(degree):
+    fish = load_fish(coarse_scene(mesh={"degree": degree}, shapes={"z_head": {"bounds": [-4.0, 4.0]}}))
+    fish.design({"z_head": 0.9})
+    # det F_1 = 1 + ∂Δz/∂z = 1 + ξ (√(1 - s²) - 1) < 0 for s > 0.745 at ξ = 3 (x > -0.015 m).
+    with pytest.raises(InputError, match=r"z_head=3 inverts or flattens [1-9]\d* .*reduce the parameters"):
+        fish.design({"z_head": 3.0})
