@@ -32,7 +32,8 @@ EXAMPLES = {
     "pareto": "aquarom pareto co --level 1 --out results/co-pareto",
     "animate": "aquarom animate results/nominal-fom --fps 20 --stride 2",
     "basis": "aquarom basis so1 --level 1 --out results/so1-basis",
-    "check": "aquarom check so1 --level 1\n  aquarom check so1 --prom results/so1-prom.npz",
+    "check": "aquarom check so1 --level 1\n  aquarom check so1 --level 1 --degree 2\n"
+             "  aquarom check so1 --prom results/so1-prom.npz",
     "cache": "aquarom cache list\n  aquarom cache clear --kind prom",
 }
 
@@ -50,6 +51,8 @@ def build_parser() -> argparse.ArgumentParser:
         sub.add_argument("scene", help="scene file (.toml) or shipped scene name")
         sub.add_argument("--level", type=int, choices=range(1, 6), metavar="{1..5}",
                          help="override the scene's mesh level (1 is the coarsest)")
+        sub.add_argument("--degree", type=int, choices=(1, 2),
+                         help="override the scene's element degree (1: linear, 2: quadratic tetrahedra)")
         sub.add_argument("--dry-run", action="store_true",
                          help="print what would be built, reused and skipped, and a time estimate; write nothing")
         return sub
@@ -180,12 +183,14 @@ def write_manifest(args, wall_time: float) -> None:
 
 
 def load_scene(args):
-    """The scene named on the command line, with the --level override applied."""
+    """The scene named on the command line, with the --level and --degree overrides applied."""
     from .scene import Scene
 
     scene = Scene.load(args.scene)
     if args.level is not None:
         scene = scene.replace("mesh", level=args.level)
+    if args.degree is not None:
+        scene = scene.replace("mesh", degree=args.degree)
     args.scene_used = scene
     return scene
 
