@@ -213,7 +213,7 @@ def run_mesh(args) -> int:
         scene {scene.name}: {mesh.source}
           box          L = {box.length:.4g} m, W = {box.width:.4g} m, H = {box.height:.4g} m
           cells        {mesh.cells.shape[0]}
-          nodes        {mesh.points.shape[0]}  ({3 * mesh.points.shape[0]} dofs)
+          nodes        {fish.nodes.points.shape[0]} of degree {fish.degree} ({mesh.points.shape[0]} vertices, {3 * fish.nodes.points.shape[0]} dofs)
           head         {tags.head_cells.size} cells, {tags.head_nodes.size} nodes
           muscles      left {tags.left_muscle_cells.size} cells, right {tags.right_muscle_cells.size} cells
           skin         {tags.skin_facets.shape[0]} facets, {tags.skin_nodes.size} nodes
