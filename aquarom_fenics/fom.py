@@ -66,6 +66,7 @@ class FullOrderModel:
                  comm: MPI.Comm = MPI.COMM_WORLD):
         self.scene, self.fish, self.comm = scene, fish, comm
         self.xi = fish.parameter_vector(xi)
+        self.moved_mesh = moved_mesh
         rest_points = fish.design(self.xi)
         shape_displacement = np.zeros_like(rest_points) if moved_mesh else rest_points - fish.nodes.points
         mesh_points = rest_points[:fish.nodes.n_vertices] if moved_mesh else fish.mesh.points
@@ -111,7 +112,12 @@ class FullOrderModel:
             self.shape_gradients[family] = gradient
 
     def shape_direction(self, name: str) -> "ShapeDirection":
-        """A design direction δξ as coefficients of this model's forms (see ``shape_derivative``)."""
+        """A design direction δξ as coefficients of this model's forms (see ``shape_derivative``).
+
+        Only on the pulled-back model: ∇U_k is the gradient with respect to nominal coordinates.
+        """
+        if self.moved_mesh:
+            raise ValueError("shape derivatives need the design pulled back to the nominal mesh (moved_mesh=False)")
         return ShapeDirection(self, name)
 
     def shape_derivative(self, form, direction: "ShapeDirection"):
