@@ -133,3 +133,14 @@ def test_a_design_that_inverts_in_the_continuum_is_refused(degree):
     # det F_1 = 1 + ∂Δz/∂z = 1 + ξ (√(1 - s²) - 1) < 0 for s > 0.745 at ξ = 3 (x > -0.015 m).
     with pytest.raises(InputError, match=r"z_head=3 inverts or flattens [1-9]\d* .*reduce the parameters"):
         fish.design({"z_head": 3.0})
+
+
+def test_so1_bounds_are_no_longer_pulled_in_on_the_reference_level():
+    """With the nodal check, z_head's upper bound 0.5 was pulled in to 0.41 on level 3 (an artifact)."""
+    from aquarom_fenics.cost import design_space, meshable_space
+    from aquarom_fenics.scene import Scene
+
+    scene = Scene.load("so1")
+    space, notes = meshable_space(design_space(scene), load_fish(scene))
+    assert notes == []
+    np.testing.assert_array_equal(space.upper, design_space(scene).upper)
