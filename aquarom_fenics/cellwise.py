@@ -37,9 +37,12 @@ for _a, (_i, _j) in enumerate(_PAIRS):
     SYMMETRIC_BASIS[_a, _i, _j] = SYMMETRIC_BASIS[_a, _j, _i] = 1.0 if _i == _j else 1.0 / np.sqrt(2.0)
 
 
+_TO_SYMMETRIC = np.ascontiguousarray(SYMMETRIC_BASIS.reshape(6, 9).T)   # contiguous: a fast matmul
+
+
 def symmetric_coordinates(tensors: np.ndarray) -> np.ndarray:
     """(..., 9) row-major 3×3 tensors → (..., 6) coordinates s_a = E:B_a."""
-    return tensors @ SYMMETRIC_BASIS.reshape(6, 9).T
+    return tensors @ _TO_SYMMETRIC
 
 
 class CellSampler:
