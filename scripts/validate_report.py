@@ -797,7 +797,8 @@ def _section_mesh(lines, study, out, report):
               "The nominal fish per element degree and mesh level: swimming distance, tail amplitude, first natural "
               "frequency (head clamped) and static tail deflection with the muscles at their peak (head clamped). "
               "Reference: Richardson extrapolation of the three finest cases of the highest degree with h = "
-              "cells^(-1/3); its estimated error is the correction |f* − f_finest|.", ""]
+              "cells^(-1/3); its estimated error is the correction |f* − f_finest|. When the differences change sign "
+              "(no order, shown as —) the finest value is the reference and the last difference its error.", ""]
     lines += table(["quantity", "reference", "observed order", "estimated error", "from degree"],
                    [[name, f"{fmt(ref['value'], '.4g', units[name][1])} {units[name][0]}",
                      fmt(ref.get("observed_order"), ".2f"), f"{fmt(ref['estimated_error'], '.2g', units[name][1])} "
