@@ -80,7 +80,11 @@ class Fish:
         return shape_gradients([self.shape_names[k]], self.tags.box.relative(points), self.tags.box)[0]
 
     def integration_points(self) -> np.ndarray:
-        """(n_cells, n_q, 3) nominal positions of every quadrature point the forms use."""
+        """(n_cells, n_q, 3) nominal positions of every quadrature point the forms use.
+
+        The rules used (degrees 1, 2, 6) are symmetric under permutations of the vertices, so these
+        are the FOM's points whatever vertex order dolfinx keeps per cell.
+        """
         reference = np.vstack([fx.quadrature_rule(q)[0] for q in quadrature_degrees(self.degree).values()])
         return reference_to_cells(self.mesh.points, self.mesh.cells, reference)
 

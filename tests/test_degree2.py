@@ -144,3 +144,19 @@ def test_so1_bounds_are_no_longer_pulled_in_on_the_reference_level():
     space, notes = meshable_space(design_space(scene), load_fish(scene))
     assert notes == []
     np.testing.assert_array_equal(space.upper, design_space(scene).upper)
+
+
+def test_the_design_check_samples_the_points_where_the_fom_integrates():
+    from aquarom_fenics import dolfinx_adapter as fx
+
+    scene = coarse_scene(mesh={"degree": 2})
+    fish = load_fish(scene)
+    model = FullOrderModel(scene, fish)
+    fom_points = np.concatenate([model.quadrature_points[family] for family in ("stiffness", "mass")], axis=1)
+    check_points = fish.integration_points()[fx.input_cell_indices(model.mesh)]
+    assert fom_points.shape == check_points.shape
+
+    def sorted_per_cell(points):        # rounded to 1e-12 m before the lexicographic order
+        return np.stack([cell[np.lexsort(np.round(cell, 12).T)] for cell in points])
+
+    np.testing.assert_allclose(sorted_per_cell(fom_points), sorted_per_cell(check_points), atol=1e-12)
