@@ -7,7 +7,8 @@
 5. dL/dz_k      cost gradient against central differences of the cost, < 1e-6
 
 The FOM of every comparison is the design pulled back to the nominal mesh with the exact shape
-gradient (SPEC §4–§5), as the PROM; the PROM's basis must live on the scene's mesh. Differences run on a short horizon with a tight Newton tolerance.
+gradient (SPEC §4–§5), as the PROM; the PROM's basis must live on the scene's mesh.
+Differences run on a short horizon with a tight Newton tolerance.
 """
 from __future__ import annotations
 

@@ -208,12 +208,12 @@ def run_mesh(args) -> int:
     fish = load_fish(scene)
     mesh, tags = fish.mesh, fish.tags
     quality = cell_quality(mesh.points, mesh.cells)
-    box = tags.box
+    box, nodes = tags.box, fish.nodes.points.shape[0]
     say(textwrap.dedent(f"""\
         scene {scene.name}: {mesh.source}
           box          L = {box.length:.4g} m, W = {box.width:.4g} m, H = {box.height:.4g} m
           cells        {mesh.cells.shape[0]}
-          nodes        {fish.nodes.points.shape[0]} of degree {fish.degree} ({mesh.points.shape[0]} vertices, {3 * fish.nodes.points.shape[0]} dofs)
+          nodes        {nodes} of degree {fish.degree} ({mesh.points.shape[0]} vertices, {3 * nodes} dofs)
           head         {tags.head_cells.size} cells, {tags.head_nodes.size} nodes
           muscles      left {tags.left_muscle_cells.size} cells, right {tags.right_muscle_cells.size} cells
           skin         {tags.skin_facets.shape[0]} facets, {tags.skin_nodes.size} nodes

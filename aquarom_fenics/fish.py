@@ -71,7 +71,8 @@ class Fish:
         gradient = np.zeros((len(points), 3, 3))
         active = [k for k in range(len(xi)) if xi[k] != 0.0]
         if active:
-            fields = shape_gradients([self.shape_names[k] for k in active], self.tags.box.relative(points), self.tags.box)
+            names = [self.shape_names[k] for k in active]
+            fields = shape_gradients(names, self.tags.box.relative(points), self.tags.box)
             gradient += np.einsum("k,knij->nij", xi[active], fields)
         return gradient
 

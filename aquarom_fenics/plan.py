@@ -119,5 +119,7 @@ def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
     elif command == "build":
         lines.append(f"estimate: ~{prom_build_seconds(cells, len(scene.shapes), degree):.1f} s")
     elif command in ("simulate", "compare"):
-        lines.append(f"estimate: ~{(fom_time if model == 'fom' or command == 'compare' else 0) + (prom_build_seconds(cells, len(scene.shapes), degree) if reduced else 0):.0f} s")
+        fom_part = fom_time if model == "fom" or command == "compare" else 0
+        prom_part = prom_build_seconds(cells, len(scene.shapes), degree) if reduced else 0
+        lines.append(f"estimate: ~{fom_part + prom_part:.0f} s")
     return lines

@@ -75,16 +75,16 @@ def main():
             plain = simulate_reduced(prom, scene)
             with_sensitivities = simulate_reduced(prom, scene, sensitivities=True)
             runs.append({
-                "degree": degree, "level": level, "cells": prom.cells, "dofs": prom.dofs, "parameters": p, "scene": name,
-                "reduced_size": prom.size, "basis": prom.labels, "dropped": prom.dropped,
+                "degree": degree, "level": level, "cells": prom.cells, "dofs": prom.dofs, "parameters": p,
+                "scene": name, "reduced_size": prom.size, "basis": prom.labels, "dropped": prom.dropped,
                 "build_time": build_time, "basis_time": prom.timings["basis_total"],
                 "tensor_time": prom.timings["internal_force_tensors"] + prom.timings["other_tensors"],
                 "form_evaluations": evaluations,
                 "solve_time": plain.wall_time, "solve_time_with_sensitivities": with_sensitivities.wall_time,
                 "distance": plain.distance, "fom_time": fom.wall_time, "fom_distance": fom.distance,
                 "fom_over_prom_total_time": fom.wall_time / (build_time + plain.wall_time)})
-            print({key: runs[-1][key] for key in ("degree", "level", "cells", "parameters", "reduced_size", "build_time",
-                                                  "solve_time", "solve_time_with_sensitivities", "fom_time")},
+            print({key: runs[-1][key] for key in ("degree", "level", "cells", "parameters", "reduced_size",
+                                                  "build_time", "solve_time", "solve_time_with_sensitivities", "fom_time")},
                   flush=True)
     write_json_atomic(args.out, {"benchmark": "prom", "runs": runs, "cores": os.cpu_count(),
                                  "versions": software_versions(), "date": time.strftime("%Y-%m-%d %H:%M:%S")})

@@ -473,7 +473,8 @@ def study_mesh_convergence(runner: Runner, settings: Settings) -> dict:
     """Mesh convergence of the nominal FOM per element degree and level; Richardson reference."""
     from aquarom_fenics.convergence import MeshCase, mesh_convergence
 
-    cases = [mesh_case(f"degree {degree}, level {level}", base_scene(settings, level=level).replace("mesh", degree=degree))
+    cases = [mesh_case(f"degree {degree}, level {level}",
+                       base_scene(settings, level=level).replace("mesh", degree=degree))
              for degree, levels in settings.mesh_series for level in levels]
     records = runner.run("mesh_convergence", cases)
     fields = MeshCase.__dataclass_fields__
