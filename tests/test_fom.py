@@ -67,8 +67,9 @@ def test_newton_matrix_is_the_derivative_of_the_residual(shaped_model):
         assert relative_error(model.matvec(matrix, direction), finite_difference) < 1e-6
 
 
-def test_design_pulled_back_equals_design_meshed_directly():
-    scene = coarse_scene(shapes=SHAPES, solver={"duration": 0.2})
+@pytest.mark.parametrize("degree", [1, 2])
+def test_design_pulled_back_equals_design_meshed_directly(degree):
+    scene = coarse_scene(shapes=SHAPES, solver={"duration": 0.2}, mesh={"degree": degree})
     fish = load_fish(scene)
     pulled_back = simulate_fom(scene, LINEAR_DESIGN, fish=fish, progress=False).trajectory.arrays()
     moved = simulate_fom(scene, LINEAR_DESIGN, fish=fish, moved_mesh=True, progress=False).trajectory.arrays()
