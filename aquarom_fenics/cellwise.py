@@ -209,12 +209,18 @@ def internal_force_taylor(sampler: CellSampler, vectors: np.ndarray, n_parameter
 
     def tensors_for(derivative_indices):
         totals = [np.zeros((m, m)), np.zeros((m, m, m)), np.zeros((m, m, m, m))]
+        # energy_tensors is symmetric in its two factors: (w, E_a, E_b) and (w, E_b, E_a) are equal.
+        terms: dict[tuple, int] = {}
         for weight_indices, left_indices, right_indices in _leibniz(derivative_indices):
+            key = (weight_indices,) + ((left_indices, right_indices) if weight_indices
+                                       else tuple(sorted((left_indices, right_indices))))
+            terms[key] = terms.get(key, 0) + 1
+        for (weight_indices, left_indices, right_indices), count in terms.items():
             left = strain(left_indices)
             if weight_indices:
                 left = tuple(part * weight(weight_indices) for part in left)
             for total, part in zip(totals, energy_tensors(left, strain(right_indices), m)):
-                total += part
+                total += count * part
         return force_tensors(*(comm.allreduce(total, op=MPI.SUM) for total in totals))
 
     taylor = [tensors_for(())]
