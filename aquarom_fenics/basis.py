@@ -43,17 +43,24 @@ class _SecondVariations:
         self.fom = fom
         self.direction_a = fx.new_function(fom.space, "direction_a")
         self.direction_b = fx.new_function(fom.space, "direction_b")
+        self.shape_direction = fom.shape_direction("shape_direction")
         internal = fom.ufl_forms["internal_force"]
         first = ufl.derivative(internal, fom.displacement, self.direction_a)
         self.modal = fx.compile_form(ufl.derivative(first, fom.displacement, self.direction_b))
-        self.shape = fx.compile_form(ufl.derivative(first, fom.shape_displacement, self.direction_b))
+        self.shape = fx.compile_form(fom.shape_derivative(first, self.shape_direction))
         self.vector = fx.create_vector(self.modal)
 
-    def evaluate(self, compiled, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    def evaluate(self, compiled, a: np.ndarray, b: np.ndarray | None = None) -> np.ndarray:
         fx.set_owned_values(self.fom.displacement, np.zeros(self.fom.n_owned_dofs))
         fx.set_owned_values(self.direction_a, a)
-        fx.set_owned_values(self.direction_b, b)
+        if b is not None:
+            fx.set_owned_values(self.direction_b, b)
         return fx.assemble_vector_into(self.vector, compiled).copy()
+
+    def shape_variation(self, a: np.ndarray, k: int) -> np.ndarray:
+        """∂/∂ξ_k (d f_int(0)[a])."""
+        self.shape_direction.set_parameter(k)
+        return self.evaluate(self.shape, a)
 
 
 def clamped_stiffness(fom: FullOrderModel) -> PETSc.Mat:
@@ -93,8 +100,8 @@ def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int) -> tu
     return np.column_stack(modes), np.array(frequencies)
 
 
-def build_basis(fom: FullOrderModel, shape_fields: list[np.ndarray]) -> ReductionBasis:
-    """Basis of SPEC §7 for the FOM's design; ``shape_fields`` are the owned dof arrays of U_k."""
+def build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
+    """Basis of SPEC §7 for the FOM's design, with sensitivities to the first ``n_parameters`` ξ_k."""
     settings = fom.scene.reduction
     timings = {}
     started = time.perf_counter()
@@ -122,9 +129,9 @@ def build_basis(fom: FullOrderModel, shape_fields: list[np.ndarray]) -> Reductio
         for i, j in ((i, j) for j in range(len(modes)) for i in range(j + 1)):
             theta = -static_solve(variations.evaluate(variations.modal, modes[i], modes[j]))
             candidates.append((f"theta_{i + 1}_{j + 1}", theta))
-    for k, field_k in enumerate(shape_fields):
+    for k in range(n_parameters):
         for i, mode in enumerate(modes):
-            sensitivity = -static_solve(variations.evaluate(variations.shape, mode, field_k))
+            sensitivity = -static_solve(variations.shape_variation(mode, k))
             candidates.append((f"xi_{i + 1}_{k + 1}", sensitivity))
     if settings.basis == "default" and fom.actuation_on:
         psi = static_solve(unit_actuation_force(fom))

@@ -33,7 +33,8 @@ EXAMPLES = {
     "pareto": "aquarom pareto co --level 1 --out results/co-pareto",
     "animate": "aquarom animate results/nominal-fom --fps 20 --stride 2",
     "basis": "aquarom basis so1 --level 1 --out results/so1-basis",
-    "check": "aquarom check so1 --level 1\n  aquarom check so1 --prom results/so1-prom.npz",
+    "check": "aquarom check so1 --level 1\n  aquarom check so1 --level 1 --degree 2\n"
+             "  aquarom check so1 --prom results/so1-prom.npz",
     "cache": "aquarom cache list\n  aquarom cache clear --kind prom",
 }
 
@@ -51,6 +52,8 @@ def build_parser() -> argparse.ArgumentParser:
         sub.add_argument("scene", help="scene file (.toml) or shipped scene name")
         sub.add_argument("--level", type=int, choices=range(1, 6), metavar="{1..5}",
                          help="override the scene's mesh level (1 is the coarsest)")
+        sub.add_argument("--degree", type=int, choices=(1, 2),
+                         help="override the scene's element degree (1: linear, 2: quadratic tetrahedra)")
         sub.add_argument("--dry-run", action="store_true",
                          help="print what would be built, reused and skipped, and a time estimate; write nothing")
         return sub
@@ -328,12 +331,14 @@ def write_manifest(args, wall_time: float) -> None:
 
 
 def load_scene(args):
-    """The scene named on the command line, with the --level override applied."""
+    """The scene named on the command line, with the --level and --degree overrides applied."""
     from .scene import Scene
 
     scene = Scene.load(args.scene)
     if args.level is not None:
         scene = scene.replace("mesh", level=args.level)
+    if args.degree is not None:
+        scene = scene.replace("mesh", degree=args.degree)
     args.scene_used = scene
     return scene
 
@@ -351,12 +356,12 @@ def run_mesh(args) -> int:
     fish = load_fish(scene)
     mesh, tags = fish.mesh, fish.tags
     quality = cell_quality(mesh.points, mesh.cells)
-    box = tags.box
+    box, nodes = tags.box, fish.nodes.points.shape[0]
     say(textwrap.dedent(f"""\
         scene {scene.name}: {mesh.source}
           box          L = {box.length:.4g} m, W = {box.width:.4g} m, H = {box.height:.4g} m
           cells        {mesh.cells.shape[0]}
-          nodes        {mesh.points.shape[0]}  ({3 * mesh.points.shape[0]} dofs)
+          nodes        {nodes} of degree {fish.degree} ({mesh.points.shape[0]} vertices, {3 * nodes} dofs)
           head         {tags.head_cells.size} cells, {tags.head_nodes.size} nodes
           muscles      left {tags.left_muscle_cells.size} cells, right {tags.right_muscle_cells.size} cells
           skin         {tags.skin_facets.shape[0]} facets, {tags.skin_nodes.size} nodes
@@ -436,9 +441,10 @@ def run_reduced_model(scene, xi: dict, model: str, prom_file: Path | None, out: 
         out.mkdir(parents=True, exist_ok=True)
         write_trajectory_csv(out / "trajectory.csv", result.trajectory.arrays())
         design = reduced.design_point | xi
-        write_displacement_series(out / DISPLACEMENT_FILE, fish.design(design), fish.mesh.cells,
+        vertices = fish.nodes.n_vertices
+        write_displacement_series(out / DISPLACEMENT_FILE, fish.design(design)[:vertices], fish.mesh.cells,
                                   result.trajectory.arrays()["time"],
-                                  np.einsum("ndm,sm->snd", reduced.basis, result.states))
+                                  np.einsum("ndm,sm->snd", reduced.basis[:vertices], result.states))
         write_run_outputs(out, scene, result, model, list(design.values()), list(design), MPI.COMM_WORLD,
                           extra={"cells": reduced.cells, "dofs": reduced.dofs, "reduced_size": reduced.size,
                                  "basis": reduced.labels, "basis_dropped": reduced.dropped,

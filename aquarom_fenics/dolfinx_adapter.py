@@ -8,6 +8,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 
+import basix
 import numpy as np
 import ufl
 from dolfinx import fem, io
@@ -26,8 +27,46 @@ def create_tet_mesh(comm: MPI.Comm, points: np.ndarray, cells: np.ndarray):
     return dolfinx_mesh.create_mesh(comm, np.asarray(cells, dtype=np.int64), np.asarray(points, dtype=np.float64), domain)
 
 
-def vector_p1_space(mesh):
-    return fem.VectorFunctionSpace(mesh, ("Lagrange", 1))
+def vector_space(mesh, degree: int):
+    """Vector Lagrange space of the displacement (degree 1 or 2)."""
+    return fem.VectorFunctionSpace(mesh, ("Lagrange", degree))
+
+
+def quadrature_tensor_space(mesh, degree: int):
+    """3×3 tensors held at the points of the default quadrature rule of ``degree`` (per cell)."""
+    element = ufl.TensorElement("Quadrature", mesh.ufl_cell(), degree, quad_scheme="default", shape=(3, 3))
+    return fem.FunctionSpace(mesh, element)
+
+
+def quadrature_rule(degree: int) -> tuple[np.ndarray, np.ndarray]:
+    """(points (n_q, 3), weights (n_q,)) of the reference tetrahedron's default rule, as FFCx uses
+    it for ``quadrature_degree = degree`` (the weights sum to 1/6)."""
+    return basix.make_quadrature(basix.CellType.tetrahedron, degree)
+
+
+def with_quadrature_degree(form, degree: int):
+    """The form with every integral evaluated by the default rule of ``degree``."""
+    return ufl.Form([integral.reconstruct(metadata={**integral.metadata(), "quadrature_degree": degree})
+                     for integral in form.integrals()])
+
+
+def local_cells(mesh) -> np.ndarray:
+    """Every local cell (owned, then ghosts)."""
+    index_map = mesh.topology.index_map(3)
+    return np.arange(index_map.size_local + index_map.num_ghosts, dtype=np.int32)
+
+
+def quadrature_points(mesh, degree: int) -> np.ndarray:
+    """(n_local_cells, n_q, 3) physical coordinates of the quadrature points of every local cell."""
+    points, _ = quadrature_rule(degree)
+    compiled = _quietly(fem.Expression, ufl.SpatialCoordinate(mesh), points)
+    return compiled.eval(local_cells(mesh)).reshape(-1, points.shape[0], 3)
+
+
+def set_quadrature_values(function, values: np.ndarray) -> None:
+    """Fill a quadrature tensor function from (n_local_cells, n_q, 3, 3) values."""
+    blocks = function.function_space.dofmap.list.array
+    function.x.array.reshape(-1, 9)[blocks] = values.reshape(-1, 9)
 
 
 def cellwise_constant_space(mesh):
@@ -44,7 +83,7 @@ def constant(mesh, value: float):
 
 @dataclass(frozen=True)
 class DofLayout:
-    """Where the nodes of the input mesh live in a distributed P1 vector space (block size 3).
+    """Where the displacement nodes live in a distributed Lagrange vector space (block size 3).
 
     ``node_of_block[b]`` is the input-mesh node index of local dof block b (owned first, then
     ghosts); ``global_block[b]`` its global PETSc block index; ``n_owned_blocks`` the owned count.
@@ -59,14 +98,26 @@ class DofLayout:
         return self.node_of_block[: self.n_owned_blocks]
 
 
-def dof_layout(space) -> DofLayout:
+def dof_layout(space, nodes_of_pairs) -> DofLayout:
+    """The input node of every dof block of a degree-1 or degree-2 space on a linear mesh.
+
+    A vertex dof is named by the pair (v, v) of its input vertex, an edge dof (degree 2) by the
+    input vertices (a, b) of its edge; ``nodes_of_pairs`` maps (n, 2) pairs to node indices.
+    """
     mesh = space.mesh
-    geometry_nodes = mesh.geometry.dofmap.array.reshape(-1, 4)
-    dof_blocks = space.dofmap.list.array.reshape(-1, 4)
+    vertices = np.asarray(mesh.geometry.input_global_indices)[mesh.geometry.dofmap.array.reshape(-1, 4)]
+    layout = space.dofmap.dof_layout
+    dof_blocks = space.dofmap.list.array.reshape(vertices.shape[0], -1)
+    pairs = np.empty(dof_blocks.shape + (2,), dtype=np.int64)
+    for vertex in range(4):
+        pairs[:, layout.entity_dofs(0, vertex), :] = vertices[:, [vertex, vertex]][:, None, :]
+    edges = basix.topology(basix.CellType.tetrahedron)[1]
+    for edge in range(6) if layout.num_entity_dofs(1) else ():
+        pairs[:, layout.entity_dofs(1, edge), :] = vertices[:, edges[edge]][:, None, :]
     index_map = space.dofmap.index_map
     n_local = index_map.size_local + index_map.num_ghosts
     node_of_block = np.empty(n_local, dtype=np.int64)
-    node_of_block[dof_blocks.ravel()] = np.asarray(mesh.geometry.input_global_indices)[geometry_nodes.ravel()]
+    node_of_block[dof_blocks.ravel()] = nodes_of_pairs(pairs.reshape(-1, 2))
     global_block = np.asarray(index_map.local_to_global(np.arange(n_local, dtype=np.int32)), dtype=np.int64)
     return DofLayout(node_of_block, global_block, index_map.size_local)
 
@@ -98,13 +149,13 @@ def compile_form(form):
     return _quietly(fem.form, form)
 
 
-def compile_midpoint_expression(expression):
-    """JIT-compile a UFL expression evaluated at the cell midpoint of a tetrahedron."""
-    return _quietly(fem.Expression, expression, np.array([[0.25, 0.25, 0.25]]))
+def compile_quadrature_expression(expression, degree: int):
+    """JIT-compile a UFL expression evaluated at the points of the default rule of ``degree``."""
+    return _quietly(fem.Expression, expression, quadrature_rule(degree)[0])
 
 
 def evaluate_expression(compiled, cells: np.ndarray) -> np.ndarray:
-    """(n_cells, value size) values of a compiled midpoint expression."""
+    """(n_cells, n_points × value size) values of a compiled expression."""
     return compiled.eval(cells)
 
 
@@ -161,14 +212,20 @@ def sub_space_dofs_of_nodes(space, layout: DofLayout, nodes: np.ndarray, compone
 
 
 class XDMFTimeSeries:
-    """A displacement time series for ParaView (XDMF + HDF5)."""
+    """A displacement time series for ParaView (XDMF + HDF5) on the linear mesh.
+
+    XDMF holds the mesh's own (linear) nodes: a quadratic displacement is written as its P1
+    interpolant, i.e. its values at the vertices.
+    """
 
     def __init__(self, comm: MPI.Comm, path, mesh):
         self._file = io.XDMFFile(comm, str(path), "w")
         self._file.write_mesh(mesh)
+        self._vertex_values = fem.Function(vector_space(mesh, 1), name="displacement")
 
     def write(self, function, time: float) -> None:
-        self._file.write_function(function, time)
+        self._vertex_values.interpolate(function)
+        self._file.write_function(self._vertex_values, time)
 
     def close(self) -> None:
         self._file.close()

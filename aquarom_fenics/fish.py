@@ -11,10 +11,27 @@ import numpy as np
 from mpi4py import MPI
 
 from .errors import InputError
-from .mesh import FishMesh, block_mesh, read_mesh
+from . import dolfinx_adapter as fx
+from .mesh import FishMesh, LagrangeNodes, block_mesh, lagrange_nodes, read_mesh
 from .scene import Scene
-from .shapes import check_design, design_points, shape_matrix
+from .shapes import check_exact_design, design_points, reference_to_cells, shape_gradients, shape_matrix
 from .tags import FishTags, tag_fish
+
+
+MASS_QUADRATURE_DEGREE = {1: 2, 2: 6}
+"""Per element degree k: the lowest rule degree ≥ 2k (exact for φ_i·φ_j) whose default rule has
+only interior points and positive weights; the degree-4 and -5 rules of the tetrahedron have
+points on its edges, where the √ profiles of SPEC §4 have an infinite slope on the end faces."""
+
+
+def quadrature_degrees(degree: int) -> dict[str, int]:
+    """Quadrature degree of the volume forms per element degree k (one rule per family).
+
+    "stiffness" (elastic and muscle energies): 2(k - 1), at least 1: the centroid for linear
+    elements (∇u constant per cell), the 4-point interior rule for quadratic ones (exact for the
+    tangent at rest). "mass" (mass, centre of mass, total mass, drag): MASS_QUADRATURE_DEGREE.
+    """
+    return {"stiffness": max(1, 2 * (degree - 1)), "mass": MASS_QUADRATURE_DEGREE[degree]}
 
 
 @dataclass(frozen=True)
@@ -22,7 +39,12 @@ class Fish:
     mesh: FishMesh
     tags: FishTags
     shape_names: tuple[str, ...]
-    shape_matrix: np.ndarray     # U, (3 n_nodes, p), node-major
+    shape_matrix: np.ndarray     # U, (3 n_nodes, p), node-major, at the displacement nodes
+    nodes: LagrangeNodes         # displacement nodes (vertices first, then edge midpoints at degree 2)
+
+    @property
+    def degree(self) -> int:
+        return self.nodes.degree
 
     def parameter_vector(self, xi: dict[str, float] | np.ndarray | None) -> np.ndarray:
         """ξ as an array ordered like ``shape_names`` (a dict may give a subset; missing = 0)."""
@@ -43,11 +65,40 @@ class Fish:
         """u_ξ = U ξ as an (n_nodes, 3) array [m]."""
         return (self.shape_matrix @ self.parameter_vector(xi)).reshape(-1, 3)
 
-    def design(self, xi) -> np.ndarray:
-        """Checked nodal positions x_0 + U ξ of the design (InputError if a cell inverts)."""
+    def shape_gradient(self, xi, points: np.ndarray) -> np.ndarray:
+        """∇u_ξ = Σ_k ξ_k ∇U_k, exact, at (n, 3) nominal positions: (n, 3, 3)."""
         xi = self.parameter_vector(xi)
-        moved = design_points(self.mesh.points, self.shape_matrix, xi)
-        check_design(self.mesh.points, self.mesh.cells, moved, dict(zip(self.shape_names, xi)), regions=self.tags)
+        gradient = np.zeros((len(points), 3, 3))
+        active = [k for k in range(len(xi)) if xi[k] != 0.0]
+        if active:
+            names = [self.shape_names[k] for k in active]
+            fields = shape_gradients(names, self.tags.box.relative(points), self.tags.box)
+            gradient += np.einsum("k,knij->nij", xi[active], fields)
+        return gradient
+
+    def shape_direction_gradient(self, k: int, points: np.ndarray) -> np.ndarray:
+        """∇U_k at (n, 3) nominal positions: (n, 3, 3)."""
+        return shape_gradients([self.shape_names[k]], self.tags.box.relative(points), self.tags.box)[0]
+
+    def integration_points(self) -> np.ndarray:
+        """(n_cells, n_q, 3) nominal positions of every quadrature point the forms use.
+
+        The rules used (degrees 1, 2, 6) are symmetric under permutations of the vertices, so these
+        are the FOM's points whatever vertex order dolfinx keeps per cell.
+        """
+        reference = np.vstack([fx.quadrature_rule(q)[0] for q in quadrature_degrees(self.degree).values()])
+        return reference_to_cells(self.mesh.points, self.mesh.cells, reference)
+
+    def design(self, xi) -> np.ndarray:
+        """Checked nodal positions x_0 + U ξ of the design.
+
+        InputError unless det F_1 = det(I + ∇u_ξ) > 0.1 at every quadrature point of the forms,
+        with ∇u_ξ of the exact shape fields (SPEC §4).
+        """
+        xi = self.parameter_vector(xi)
+        moved = design_points(self.nodes.points, self.shape_matrix, xi)
+        check_exact_design(self.mesh.points, self.mesh.cells, lambda points: self.shape_gradient(xi, points),
+                           self.integration_points(), dict(zip(self.shape_names, xi)), regions=self.tags)
         return moved
 
 
@@ -68,8 +119,10 @@ def load_fish(scene: Scene, comm: MPI.Comm = MPI.COMM_WORLD) -> Fish:
     mesh = comm.bcast(mesh_or_error, root=0)
     if isinstance(mesh, InputError):
         raise mesh
-    tags = tag_fish(mesh, head_fraction=scene.regions.head_fraction, muscle_range=scene.regions.muscle_range)
+    nodes = lagrange_nodes(mesh, scene.mesh.degree)
+    tags = tag_fish(mesh, head_fraction=scene.regions.head_fraction, muscle_range=scene.regions.muscle_range,
+                    nodes=nodes)
     names = tuple(scene.shape_names)
-    relative = tags.box.relative(mesh.points)
-    matrix = shape_matrix(names, relative, tags.box) if names else np.zeros((mesh.points.size, 0))
-    return Fish(mesh, tags, names, matrix)
+    relative = tags.box.relative(nodes.points)
+    matrix = shape_matrix(names, relative, tags.box) if names else np.zeros((nodes.points.size, 0))
+    return Fish(mesh, tags, names, matrix, nodes)

@@ -2,9 +2,11 @@
 
     M ü + C u̇ + f_int(u) = f_thrust(u, u̇, ü) + f_drag(u̇) + f_act(u, t)
 
-on a distributed P1 mesh with PETSc. The elastic, muscle, mass and drag terms are the UFL forms
-of ``forms/``; the Lighthill thrust acts on the spine nodes (``thrust.py``). A design ξ is either
-pulled back (forms on the nominal mesh with u_ξ = U ξ) or meshed directly (``moved_mesh``).
+on a distributed linear tetrahedral mesh with a degree-1 or degree-2 Lagrange displacement and
+PETSc. The elastic, muscle, mass and drag terms are the UFL forms of ``forms/``; the Lighthill
+thrust acts on the spine nodes (``thrust.py``). A design ξ is either pulled back (forms on the
+nominal mesh with F_1 = I + ∇u_ξ, ∇u_ξ = Σ ξ_k ∇U_k of the exact shape fields at the quadrature
+points, SPEC §4) or meshed directly (``moved_mesh``, u_ξ = 0).
 """
 from __future__ import annotations
 
@@ -12,9 +14,10 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
+from ufl.algorithms import extract_coefficients
 
 from . import dolfinx_adapter as fx
-from .fish import Fish
+from .fish import Fish, quadrature_degrees
 from .forms.drag import drag_direction_form
 from .forms.elasticity import strain_energy
 from .forms.inertia import mass_form, mass_moment_x, total_mass
@@ -63,14 +66,15 @@ class FullOrderModel:
                  comm: MPI.Comm = MPI.COMM_WORLD):
         self.scene, self.fish, self.comm = scene, fish, comm
         self.xi = fish.parameter_vector(xi)
+        self.moved_mesh = moved_mesh
         rest_points = fish.design(self.xi)
-        shape_displacement = np.zeros_like(rest_points) if moved_mesh else rest_points - fish.mesh.points
-        mesh_points = rest_points if moved_mesh else fish.mesh.points
+        shape_displacement = np.zeros_like(rest_points) if moved_mesh else rest_points - fish.nodes.points
+        mesh_points = rest_points[:fish.nodes.n_vertices] if moved_mesh else fish.mesh.points
         self.rest_points = rest_points
 
         self.mesh = fx.create_tet_mesh(comm, mesh_points, fish.mesh.cells)
-        self.space = fx.vector_p1_space(self.mesh)
-        self.layout = fx.dof_layout(self.space)
+        self.space = fx.vector_space(self.mesh, fish.degree)
+        self.layout = fx.dof_layout(self.space, fish.nodes.nodes_of_pairs)
         self.n_owned_dofs = 3 * self.layout.n_owned_blocks
         self.n_global_dofs = 3 * self.space.dofmap.index_map.size_global
         self.n_cells = fish.mesh.cells.shape[0]
@@ -78,6 +82,7 @@ class FullOrderModel:
         self.displacement = fx.new_function(self.space, "displacement")
         self.shape_displacement = fx.new_function(self.space, "shape_displacement")
         fx.set_nodal_values(self.shape_displacement, self.layout, shape_displacement)
+        self._build_shape_gradients(np.zeros_like(self.xi) if moved_mesh else self.xi)
         self._build_forms()
         self._build_spine(rest_points)
         self._build_boundary_conditions()
@@ -93,6 +98,35 @@ class FullOrderModel:
         field = fx.new_function(fx.cellwise_constant_space(self.mesh), name)
         fx.set_cell_values(field, values_by_cell)
         return field
+
+    def _build_shape_gradients(self, xi: np.ndarray) -> None:
+        """∇u_ξ = Σ_k ξ_k ∇U_k, exact, at the points of each quadrature rule (SPEC §4)."""
+        self.quadrature_degrees = quadrature_degrees(self.fish.degree)
+        self.quadrature_points = {family: fx.quadrature_points(self.mesh, degree)
+                                  for family, degree in self.quadrature_degrees.items()}
+        self.shape_gradients = {}
+        for family, degree in self.quadrature_degrees.items():
+            gradient = fx.new_function(fx.quadrature_tensor_space(self.mesh, degree), f"shape_gradient_{family}")
+            points = self.quadrature_points[family]
+            fx.set_quadrature_values(gradient, self.fish.shape_gradient(xi, points.reshape(-1, 3)))
+            self.shape_gradients[family] = gradient
+
+    def shape_direction(self, name: str) -> "ShapeDirection":
+        """A design direction δξ as coefficients of this model's forms (see ``shape_derivative``).
+
+        Only on the pulled-back model: ∇U_k is the gradient with respect to nominal coordinates.
+        """
+        if self.moved_mesh:
+            raise ValueError("shape derivatives need the design pulled back to the nominal mesh (moved_mesh=False)")
+        return ShapeDirection(self, name)
+
+    def shape_derivative(self, form, direction: "ShapeDirection"):
+        """d/dε form(ξ + ε δξ) at ε = 0: the UFL derivative along δu_ξ = U δξ and ∇δu_ξ = ∇U δξ
+        of every shape coefficient that appears in the form."""
+        present = set(extract_coefficients(form))
+        terms = [ufl.derivative(form, coefficient, variation) for coefficient, variation in direction.pairs()
+                 if coefficient in present]
+        return sum(terms[1:], terms[0])
 
     def _build_forms(self):
         scene, tags = self.scene, self.fish.tags
@@ -112,26 +146,30 @@ class FullOrderModel:
         density = fx.constant(self.mesh, material.density)
         muscle_stiffness = fx.constant(self.mesh, scene.actuation.stiffness)
         fluid_density = fx.constant(self.mesh, scene.fluid.density)
-        u, u_xi = self.displacement, self.shape_displacement
+        u = self.displacement
+        grad_stiffness, grad_mass = self.shape_gradients["stiffness"], self.shape_gradients["mass"]
         test, trial = ufl.TestFunction(self.space), ufl.TrialFunction(self.space)
-        elastic_energy = strain_energy(u, u_xi, young_modulus, poisson_ratio)
+        elastic_energy = self._stiffness_rule(strain_energy(u, grad_stiffness, young_modulus, poisson_ratio))
         internal_force = ufl.derivative(elastic_energy, u, test)
         self.actuation_on = scene.actuation.stiffness > 0 and scene.actuation.amplitude > 0
         tangent = ufl.derivative(internal_force, u, trial)
         forms = {"internal_force": internal_force, "elastic_energy": elastic_energy,
                  "elastic_tangent": tangent}
         if self.actuation_on:
-            energy = muscle_energy(u, u_xi, muscle_stiffness, self.activations, muscles,
-                                   nominal_volume=scene.actuation.muscle_volume == "nominal")
+            energy = self._stiffness_rule(muscle_energy(
+                u, grad_stiffness, muscle_stiffness, self.activations, muscles,
+                nominal_volume=scene.actuation.muscle_volume == "nominal"))
             negative_actuation = ufl.derivative(energy, u, test)
             forms["negative_actuation_force"] = negative_actuation
             tangent = tangent + ufl.derivative(negative_actuation, u, trial)
         forms["tangent"] = tangent
-        forms["mass"] = mass_form(trial, test, u_xi, density)
-        forms["mass_moment_x"] = mass_moment_x(test, u_xi, density)
-        forms["total_mass"] = total_mass(u_xi, density, self.mesh)
+        forms["mass"] = self._mass_rule(mass_form(trial, test, grad_mass, density))
+        forms["mass_moment_x"] = self._mass_rule(mass_moment_x(test, grad_mass, density))
+        forms["total_mass"] = self._mass_rule(total_mass(grad_mass, density, self.mesh))
         if scene.fluid.drag:
-            forms["drag_direction"] = drag_direction_form(test, u_xi, fluid_density, self.mesh)
+            # The skin of the rest shape: u_ξ interpolated at the displacement nodes (SPEC §5).
+            forms["drag_direction"] = self._mass_rule(drag_direction_form(
+                test, ufl.grad(self.shape_displacement), fluid_density, self.mesh))
         self.ufl_forms = forms
         self.young_modulus, self.muscle_indicators = young_modulus, muscles
         self.forms = {name: fx.compile_form(form) for name, form in forms.items()}
@@ -140,9 +178,15 @@ class FullOrderModel:
         self.tangent_matrix = fx.create_matrix(self.forms["tangent"])
         self.tangent_matrix.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
 
+    def _stiffness_rule(self, form):
+        return fx.with_quadrature_degree(form, self.quadrature_degrees["stiffness"])
+
+    def _mass_rule(self, form):
+        return fx.with_quadrature_degree(form, self.quadrature_degrees["mass"])
+
     def owned_positions(self, nodes: np.ndarray):
         """(owned local blocks, index into ``nodes``) of the given input nodes owned by this rank."""
-        lookup = np.full(self.fish.mesh.points.shape[0], -1)
+        lookup = np.full(self.fish.nodes.points.shape[0], -1)
         lookup[nodes] = np.arange(nodes.size)
         position = lookup[self.layout.owned_nodes]
         blocks = np.flatnonzero(position >= 0)
@@ -377,7 +421,35 @@ class FullOrderModel:
         return fx.assemble_scalar(self.forms["elastic_energy"], self.comm)
 
     def nodal_displacement(self, u: np.ndarray) -> np.ndarray:
-        """(n_input_nodes, 3) on every rank (for renders and checks)."""
-        nodal = np.zeros((self.fish.mesh.points.shape[0], 3))
+        """(n_nodes, 3) on every rank (for renders and checks; the vertices come first)."""
+        nodal = np.zeros((self.fish.nodes.points.shape[0], 3))
         nodal[self.layout.owned_nodes] = u.reshape(-1, 3)
         return self.comm.allreduce(nodal, op=MPI.SUM)
+
+
+class ShapeDirection:
+    """A design direction δξ as the coefficients the forms are differentiated along.
+
+    δu_ξ = U δξ at the displacement nodes (the skin form) and ∇δu_ξ = ∇U δξ, exact, at the points
+    of each quadrature rule (the volume forms), on the model's nominal mesh.
+    """
+
+    def __init__(self, fom: FullOrderModel, name: str):
+        self.fom = fom
+        self.nodal = fx.new_function(fom.space, f"{name}_nodal")
+        self.gradients = {family: fx.new_function(gradient.function_space, f"{name}_{family}")
+                          for family, gradient in fom.shape_gradients.items()}
+
+    def pairs(self):
+        """(shape coefficient, its variation) for every representation of u_ξ."""
+        fom = self.fom
+        return [(fom.shape_displacement, self.nodal)] + [(fom.shape_gradients[family], self.gradients[family])
+                                                        for family in self.gradients]
+
+    def set_parameter(self, k: int) -> None:
+        """δξ = e_k: δu_ξ = U_k."""
+        fom = self.fom
+        fx.set_owned_values(self.nodal, fom.owned_values(fom.fish.shape_matrix[:, k].reshape(-1, 3)))
+        for family, function in self.gradients.items():
+            points = fom.quadrature_points[family].reshape(-1, 3)
+            fx.set_quadrature_values(function, fom.fish.shape_direction_gradient(k, points))

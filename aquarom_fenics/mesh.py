@@ -57,6 +57,59 @@ class FishMesh:
     source: str  # where it came from, e.g. "block level 1" or the file path
 
 
+TETRAHEDRON_EDGES = np.array([[2, 3], [1, 3], [1, 2], [0, 3], [0, 2], [0, 1]])
+"""Local vertices of the six edges of a tetrahedron, in the reference (basix/UFC) edge order."""
+
+
+@dataclass(frozen=True)
+class LagrangeNodes:
+    """The displacement nodes of a degree-1 or degree-2 Lagrange space on a `FishMesh`.
+
+    Degree 1: the vertices. Degree 2: the vertices, then one node at the midpoint of every edge
+    (``edges[e]`` its two vertices, node ``n_vertices + e``). ``cell_nodes`` lists each cell's
+    nodes, vertices first, then its edges in the order of ``TETRAHEDRON_EDGES``.
+    """
+
+    degree: int
+    points: np.ndarray  # (n_nodes, 3) metres; the first n_vertices rows are the mesh points
+    cell_nodes: np.ndarray  # (n_cells, 4) or (n_cells, 10)
+    edges: np.ndarray  # (n_edges, 2) vertex pairs, smaller index first (empty at degree 1)
+    n_vertices: int
+
+    def nodes_of_pairs(self, pairs: np.ndarray) -> np.ndarray:
+        """Node index of each vertex pair (a, b): the vertex a if a = b, else the edge's midpoint."""
+        pairs = np.sort(np.asarray(pairs, dtype=np.int64).reshape(-1, 2), axis=1)
+        nodes = pairs[:, 0].copy()
+        on_edge = pairs[:, 0] != pairs[:, 1]
+        if on_edge.any():
+            keys = self.edges[:, 0] * self.n_vertices + self.edges[:, 1]
+            wanted = pairs[on_edge, 0] * self.n_vertices + pairs[on_edge, 1]
+            nodes[on_edge] = self.n_vertices + np.searchsorted(keys, wanted)
+        return nodes
+
+    def facet_nodes(self, facets: np.ndarray) -> np.ndarray:
+        """All nodes of the given (n, 3) vertex triangles (their vertices and edge midpoints)."""
+        facets = np.asarray(facets, dtype=np.int64)
+        if self.degree == 1:
+            return np.unique(facets)
+        pairs = facets[:, [[0, 0], [1, 1], [2, 2], [0, 1], [1, 2], [0, 2]]].reshape(-1, 2)
+        return np.unique(self.nodes_of_pairs(pairs))
+
+
+def lagrange_nodes(mesh: FishMesh, degree: int) -> LagrangeNodes:
+    """The nodes of the degree-``degree`` Lagrange space on ``mesh`` (SPEC §3: vertices and, at
+    degree 2, edge midpoints x_m = (x_a + x_b)/2)."""
+    cells = np.asarray(mesh.cells, dtype=np.int64)
+    n_vertices = mesh.points.shape[0]
+    if degree == 1:
+        return LagrangeNodes(1, mesh.points, cells, np.empty((0, 2), dtype=np.int64), n_vertices)
+    cell_edges = np.sort(cells[:, TETRAHEDRON_EDGES], axis=2).reshape(-1, 2)
+    edges, edge_of = np.unique(cell_edges, axis=0, return_inverse=True)
+    midpoints = 0.5 * (mesh.points[edges[:, 0]] + mesh.points[edges[:, 1]])
+    cell_nodes = np.hstack([cells, n_vertices + edge_of.reshape(-1, 6)])
+    return LagrangeNodes(degree, np.vstack([mesh.points, midpoints]), cell_nodes, edges, n_vertices)
+
+
 # ---------------------------------------------------------------------------------------------
 # Geometry of tetrahedra
 

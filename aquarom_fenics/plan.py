@@ -19,24 +19,28 @@ BENCH = REPOSITORY / "results" / "bench"
 REFERENCE_CELLS = 7944
 REFERENCE_FOM_SECONDS = 10.3
 REFERENCE_FOM_EXPONENT = 1.1
+QUADRATIC_COST_FACTOR = {1: 1.0, 2: 8.6}
+"""Cost of a quadratic mesh against the linear one on the same cells (level 1 FOM: 16.4 s against 1.9 s)."""
 
 
-def fom_seconds(cells: int, steps: int) -> float:
+def fom_seconds(cells: int, steps: int, degree: int = 1) -> float:
     """Estimated FOM wall time [s] for ``steps`` Newmark steps."""
-    runs = _bench_runs("fom.json", lambda r: r.get("ranks") == 1 and "failed" not in r)
+    runs = _bench_runs("fom.json", lambda r: r.get("ranks") == 1 and "failed" not in r
+                       and r.get("degree", 1) == degree)
     if len(runs) >= 2:
         exponent, scale = np.polyfit(np.log([r["cells"] for r in runs]),
                                      np.log([r["time_integration"] for r in runs]), 1)
         return float(np.exp(scale) * cells ** exponent) * steps / 100
-    return REFERENCE_FOM_SECONDS * (cells / REFERENCE_CELLS) ** REFERENCE_FOM_EXPONENT * steps / 100
+    return (QUADRATIC_COST_FACTOR[degree] * REFERENCE_FOM_SECONDS * (cells / REFERENCE_CELLS) ** REFERENCE_FOM_EXPONENT
+            * steps / 100)
 
 
-def prom_build_seconds(cells: int, parameters: int) -> float:
-    runs = _bench_runs("prom.json", lambda r: r["parameters"] == parameters)
+def prom_build_seconds(cells: int, parameters: int, degree: int = 1) -> float:
+    runs = _bench_runs("prom.json", lambda r: r["parameters"] == parameters and r.get("degree", 1) == degree)
     if len(runs) >= 2:
         exponent, scale = np.polyfit(np.log([r["cells"] for r in runs]), np.log([r["build_time"] for r in runs]), 1)
         return float(np.exp(scale) * cells ** exponent)
-    return (0.5 + 0.33 * parameters) * cells / REFERENCE_CELLS
+    return QUADRATIC_COST_FACTOR[degree] * (0.5 + 0.33 * parameters) * cells / REFERENCE_CELLS
 
 
 def _bench_runs(name: str, keep) -> list[dict]:
@@ -79,7 +83,8 @@ def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
         return lines + ["estimate: a few seconds"]
     lines.append("forms: SVK energy, muscle energy, mass, drag (compiled once by FFCx, then reused)")
     steps = scene.n_steps
-    fom_time = fom_seconds(cells, steps)
+    degree = scene.mesh.degree
+    fom_time = fom_seconds(cells, steps, degree)
     reduced = model in ("rom", "prom") or command in ("build", "optimize", "pareto", "basis", "check")
     if reduced:
         parametric = model != "rom"
@@ -96,7 +101,7 @@ def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
             skipped.append("ξ-terms")
         lines.append("tensors: " + ", ".join(tensors))
         lines.append("skipped: " + (", ".join(skipped) or "nothing"))
-        build_time = prom_build_seconds(cells, p)
+        build_time = prom_build_seconds(cells, p, degree)
         lines.append(f"PROM: from the PROM cache when an identical one was built before, else ~{build_time:.1f} s")
     if command == "simulate" and model == "fom" or command == "compare":
         lines.append(f"FOM: {steps} steps of {scene.solver.time_step:g} s, ~{fom_time:.0f} s")
@@ -109,10 +114,12 @@ def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
         lines.append(f"optimiser: {settings.method}, at most {settings.max_iterations} iterations, ~{builds} PROM "
                      f"builds per run ({runs} run{'s' if runs > 1 else ''}), sensitivities dη/dξ at every built PROM")
         lines.append(f"FOM checks: start and optimal design per run (~{fom_time:.0f} s each; the start is cached)")
-        total = runs * (builds * (prom_build_seconds(cells, len(scene.shapes)) + 0.2) + 2 * fom_time)
+        total = runs * (builds * (prom_build_seconds(cells, len(scene.shapes), degree) + 0.2) + 2 * fom_time)
         lines.append(f"estimate: ~{total:.0f} s")
     elif command == "build":
-        lines.append(f"estimate: ~{prom_build_seconds(cells, len(scene.shapes)):.1f} s")
+        lines.append(f"estimate: ~{prom_build_seconds(cells, len(scene.shapes), degree):.1f} s")
     elif command in ("simulate", "compare"):
-        lines.append(f"estimate: ~{(fom_time if model == 'fom' or command == 'compare' else 0) + (prom_build_seconds(cells, len(scene.shapes)) if reduced else 0):.0f} s")
+        fom_part = fom_time if model == "fom" or command == "compare" else 0
+        prom_part = prom_build_seconds(cells, len(scene.shapes), degree) if reduced else 0
+        lines.append(f"estimate: ~{fom_part + prom_part:.0f} s")
     return lines

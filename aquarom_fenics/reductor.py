@@ -1,7 +1,8 @@
 """Build a PROM from the FOM's forms (SPEC §7–§8): basis, then every reduced tensor.
 
-The design ξ_c is meshed directly (the shape displacement coefficient u_ξ is zero there), so the
-ξ-derivatives of every form are UFL derivatives with respect to u_ξ in the directions U_k. Only
+The design ξ_c is pulled back to the nominal mesh (F_1 = I + ∇u_ξ with the exact shape fields at
+the quadrature points, SPEC §4), so the ξ-derivatives of every form are UFL derivatives with
+respect to the shape coefficients ∇u_ξ (and u_ξ for the skin) in the directions ∇U_k (U_k). Only
 what the scene uses is built; the log says what was built, what was skipped and how long it took.
 """
 from __future__ import annotations
@@ -32,12 +33,12 @@ class FormTaylor:
     def __init__(self, fom: FullOrderModel, form, order: int, shape_directions):
         self.fom = fom
         self.rank = len(form.arguments())
-        first = ufl.derivative(form, fom.shape_displacement, shape_directions[0])
         self.forms = [fx.compile_form(form)]
         if order >= 1:
+            first = fom.shape_derivative(form, shape_directions[0])
             self.forms.append(fx.compile_form(first))
         if order >= 2:
-            self.forms.append(fx.compile_form(ufl.derivative(first, fom.shape_displacement, shape_directions[1])))
+            self.forms.append(fx.compile_form(fom.shape_derivative(first, shape_directions[1])))
         self.matrix = fx.create_matrix(self.forms[0]) if self.rank == 2 else None
         self.vector = fx.create_vector(self.forms[0]) if self.rank == 1 else None
 
@@ -58,23 +59,22 @@ class FormTaylor:
         return fom.comm.allreduce(vectors.T @ product, op=MPI.SUM)
 
 
-def taylor_of(form_taylor: FormTaylor, vectors, shape_fields, order, directions, **options) -> Taylor:
-    """Evaluate a FormTaylor over all parameters (and pairs) into a :class:`Taylor`."""
+def taylor_of(form_taylor: FormTaylor, vectors, p, order, directions, **options) -> Taylor:
+    """Evaluate a FormTaylor over all ``p`` parameters (and pairs) into a :class:`Taylor`."""
     constant = form_taylor.project(0, vectors, **options)
-    p = len(shape_fields)
     first = second = None
     if order >= 1 and p:
         first = []
         for k in range(p):
-            fx.set_owned_values(directions[0], shape_fields[k])
+            directions[0].set_parameter(k)
             first.append(form_taylor.project(1, vectors, **options))
         first = np.stack(first)
     if order >= 2 and p:
         second = np.empty((p, p) + np.shape(constant))
         for k in range(p):
             for l in range(k, p):
-                fx.set_owned_values(directions[0], shape_fields[k])
-                fx.set_owned_values(directions[1], shape_fields[l])
+                directions[0].set_parameter(k)
+                directions[1].set_parameter(l)
                 second[k, l] = second[l, k] = form_taylor.project(2, vectors, **options)
     return Taylor(constant, first, second)
 
@@ -86,19 +86,18 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
     timings = {}
     fish = fish or load_fish(scene, comm)
     xi_center = fish.parameter_vector(xi_center)
-    fom = FullOrderModel(scene, fish, xi_center, moved_mesh=True, comm=comm)
+    fom = FullOrderModel(scene, fish, xi_center, comm=comm)
     timings["fom_setup"] = time.perf_counter() - started
     p = len(fish.shape_names) if parametric else 0
     order = scene.reduction.taylor_order if p else 0
-    shape_fields = [fom.owned_values(fish.shape_matrix[:, k].reshape(-1, 3)) for k in range(p)]
     _check_spine_is_not_moved(fish)
 
-    basis = build_basis(fom, shape_fields)
+    basis = build_basis(fom, p)
     vectors = basis.vectors
     timings.update(basis.timings)
     mark = time.perf_counter()
     sampler = CellSampler(fom, order)
-    internal = internal_force_taylor(sampler, vectors, shape_fields, order, comm)
+    internal = internal_force_taylor(sampler, vectors, p, order, comm)
     timings["internal_force_tensors"] = time.perf_counter() - mark
 
     mark = time.perf_counter()
@@ -107,7 +106,7 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
     built, skipped = ["mass", "internal force (cubic)", "centre of mass"], []
 
     def taylor(form, **options):
-        return taylor_of(FormTaylor(fom, form, order, directions), vectors, shape_fields, order, directions, **options)
+        return taylor_of(FormTaylor(fom, form, order, directions), vectors, p, order, directions, **options)
 
     mass = taylor(forms["mass"], lump=scene.material.mass == "lumped")
     moment = taylor(forms["mass_moment_x"])
@@ -198,7 +197,7 @@ def _gathered_rows(fom: FullOrderModel, vectors: np.ndarray, node: int) -> np.nd
 
 def nodal_rows(fish: Fish) -> np.ndarray:
     """U as (n_nodes, 3, p)."""
-    return fish.shape_matrix.reshape(fish.mesh.points.shape[0], 3, -1)
+    return fish.shape_matrix.reshape(fish.nodes.points.shape[0], 3, -1)
 
 
 def _check_spine_is_not_moved(fish: Fish) -> None:

@@ -76,7 +76,8 @@ def render_design(fish, design_points: np.ndarray, xi: dict[str, float], out_dir
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     xdmf_path, picture_path = out_dir / "design.xdmf", out_dir / "design.png"
-    write_mesh_xdmf(comm, xdmf_path, create_tet_mesh(comm, design_points, fish.mesh.cells))
+    vertices = design_points[:fish.mesh.points.shape[0]]   # a quadratic mesh's edge midpoints follow them
+    write_mesh_xdmf(comm, xdmf_path, create_tet_mesh(comm, vertices, fish.mesh.cells))
     if comm.rank == 0:
         _render_design_picture(fish, design_points, _design_title(fish, xi), picture_path)
     comm.barrier()

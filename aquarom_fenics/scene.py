@@ -51,6 +51,7 @@ def _interval_within(low, high):
 @dataclass(frozen=True)
 class MeshSection:
     level: int = _spec(3, _one_of(1, 2, 3, 4, 5), "refinement level of the built-in block (1: ~1.3k … 5: ~25k cells)")
+    degree: int = _spec(1, _one_of(1, 2), "Lagrange degree of the displacement (1: linear, 2: quadratic tetrahedra)")
     file: str = _spec("", None, "external mesh (.msh or .inp), relative to the scene file; overrides level")
     scale: float = _spec(1.0, _positive, "factor applied to the file's coordinates (to metres)")
     translate: tuple[float, float, float] = _spec((0.0, 0.0, 0.0), None, "shift after scaling [m]")

@@ -188,6 +188,146 @@ CATALOG: dict[str, ShapeField] = {
 """Every shape variation by the name scenes use, in the order of SPEC §4 (paper numbers 1-13)."""
 
 
+# ---------------------------------------------------------------------------------------------
+# Exact gradients ∇U_k of the fields (SPEC §4: F_1 = I + ∇u_ξ where the forms are integrated)
+
+ShapeGradient = Callable[[np.ndarray, np.ndarray, np.ndarray, BoxDimensions], np.ndarray]
+"""(x, y, z) relative coordinates, box -> (n, 3, 3) gradient G_ij = ∂Δx_i/∂x_j (dimensionless)."""
+
+
+def _rounding_slope(s: np.ndarray) -> np.ndarray:
+    """d/ds (√(1 - s²) - 1) = -s/√(1 - s²); infinite at |s| = 1 (only on the body's faces)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(s**2 < 1.0, -s / np.sqrt(np.clip(1.0 - s**2, 0.0, None)), -np.sign(s) * np.inf)
+
+
+def _tail_rounding_slope(x: np.ndarray, box: BoxDimensions) -> np.ndarray:
+    """d/dx of `_tail_rounding`: (1/(0.3L)) d/ds (√(1-s²) - 1) for x ≤ -0.7L."""
+    length = box.length
+    s = (x + 0.7 * length) / (0.3 * length)
+    return _inside(x <= -0.7 * length, _rounding_slope(s) / (0.3 * length))
+
+
+def _head_rounding_slope(x: np.ndarray, box: BoxDimensions) -> np.ndarray:
+    """d/dx of `_head_rounding`: (1/(0.3L)) d/ds (√(1-s²) - 1) for x ≥ -0.3L."""
+    length = box.length
+    s = (x + 0.3 * length) / (0.3 * length)
+    return _inside(x >= -0.3 * length, _rounding_slope(s) / (0.3 * length))
+
+
+def _piecewise_linear_slope(x: np.ndarray, knots: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Slope of the piecewise-linear interpolant of (knots, values) at x; 0 outside the knots."""
+    slopes = np.diff(values) / np.diff(knots)
+    segment = np.clip(np.searchsorted(knots, x, side="right") - 1, 0, len(slopes) - 1)
+    return np.where((x >= knots[0]) & (x <= knots[-1]), slopes[segment], 0.0)
+
+
+def _long_tail_ramp_slope(x: np.ndarray, box: BoxDimensions) -> np.ndarray:
+    """d/dx of `_long_tail_ramp`: -1/(0.7L) for x ≤ -0.3L."""
+    return _inside(x <= -0.3 * box.length, np.full(np.shape(x), -1.0 / (0.7 * box.length)))
+
+
+def _notch_slope(x: np.ndarray, box: BoxDimensions) -> np.ndarray:
+    """d/dx of `_notch`."""
+    knots = np.array([-0.9, -0.7, -0.3]) * box.length
+    return _piecewise_linear_slope(x, knots, np.array([0.0, 1.0, 0.0]))
+
+
+def _gradient(n: int, entries) -> np.ndarray:
+    """(n, 3, 3) gradient with the given {(i, j): ∂Δx_i/∂x_j} entries, zero elsewhere."""
+    gradient = np.zeros((n, 3, 3))
+    for (i, j), value in entries.items():
+        gradient[:, i, j] = value
+    return gradient
+
+
+def _product_gradient(n: int, component: int, factor, factor_slope, factor_axis: int,
+                      profile, profile_slope, profile_axis: int) -> np.ndarray:
+    """∇ of Δx_c = a(x_k) p(x_l): ∂/∂x_k = a' p, ∂/∂x_l = a p' (k ≠ l)."""
+    return _gradient(n, {(component, factor_axis): factor_slope * profile,
+                         (component, profile_axis): factor * profile_slope})
+
+
+def _grad_z_times_x_profile(sign, profile, slope):
+    """∇ of Δz = sign · z p(x)."""
+    def gradient(x, y, z, box):
+        return _product_gradient(np.size(x), 2, sign * z, sign, 2, profile(x, box), slope(x, box), 0)
+    return gradient
+
+
+def _grad_y_times_x_profile(sign, profile, slope):
+    """∇ of Δy = sign · y p(x)."""
+    def gradient(x, y, z, box):
+        return _product_gradient(np.size(x), 1, sign * y, sign, 1, profile(x, box), slope(x, box), 0)
+    return gradient
+
+
+def _fin_hat(x, box):
+    length = box.length
+    region = (x >= -0.9 * length) & (x <= -0.7 * length)
+    return _inside(region, np.interp(x, [-0.9 * length, -0.8 * length, -0.7 * length], [0.0, 1.0, 0.0]))
+
+
+def _fin_hat_slope(x, box):
+    return _piecewise_linear_slope(x, np.array([-0.9, -0.8, -0.7]) * box.length, np.array([0.0, 1.0, 0.0]))
+
+
+def _tail_step(x, box):
+    length = box.length
+    return _inside(x <= -0.45 * length, np.interp(x, [-0.55 * length, -0.45 * length], [1.0, 0.0]))
+
+
+def _tail_step_slope(x, box):
+    return _piecewise_linear_slope(x, np.array([-0.55, -0.45]) * box.length, np.array([1.0, 0.0]))
+
+
+def _grad_y_ellipse(x, y, z, box):
+    # Δy = y ρ(2z/H), ρ(s) = √(1 - s²) - 1: ∂/∂y = ρ, ∂/∂z = y ρ'(2z/H) 2/H
+    s = 2.0 * z / box.height
+    return _product_gradient(np.size(x), 1, y, 1.0, 1, _rounding(s), 2.0 / box.height * _rounding_slope(s), 2)
+
+
+def _grad_xz_concave_tail(x, y, z, box):
+    # Δx = -|z| b(x), Δz = 0.4 z b(x), b = (-0.9L - x)/(0.1L) for x ≤ -0.9L
+    length = box.length
+    b = _inside(x <= -0.9 * length, (-0.9 * length - x) / (0.1 * length))
+    b_slope = _inside(x <= -0.9 * length, np.full(np.shape(x), -1.0 / (0.1 * length)))
+    return _gradient(np.size(x), {(0, 0): -np.abs(z) * b_slope, (0, 2): -np.sign(z) * b,
+                                  (2, 0): 0.4 * z * b_slope, (2, 2): 0.4 * b})
+
+
+def _constant_gradient(i: int, value: float):
+    def gradient(x, y, z, box):
+        return _gradient(np.size(x), {(i, i): value})
+    return gradient
+
+
+GRADIENTS: dict[str, ShapeGradient] = {
+    "z_tail": _grad_z_times_x_profile(1.0, _tail_rounding, _tail_rounding_slope),
+    "z_head": _grad_z_times_x_profile(1.0, _head_rounding, _head_rounding_slope),
+    "y_thin": _constant_gradient(1, -1.0),
+    "y_lin_long_tail": _grad_y_times_x_profile(-1.0, _long_tail_ramp, _long_tail_ramp_slope),
+    "y_head": _grad_y_times_x_profile(1.0, _head_rounding, _head_rounding_slope),
+    "y_ellipse": _grad_y_ellipse,
+    "z_small": _constant_gradient(2, -1.0),
+    "z_notch": _grad_z_times_x_profile(-1.0, _notch, _notch_slope),
+    "xz_concave_tail": _grad_xz_concave_tail,
+    "y_fin": _grad_y_times_x_profile(1.0, _fin_hat, _fin_hat_slope),
+    "y_notch": _grad_y_times_x_profile(-1.0, _notch, _notch_slope),
+    "z_tail_step": _grad_z_times_x_profile(-1.0, _tail_step, _tail_step_slope),
+    "z_tail_lin": _grad_z_times_x_profile(-1.0, _long_tail_ramp, _long_tail_ramp_slope),
+    "y_tail": _grad_y_times_x_profile(1.0, _tail_rounding, _tail_rounding_slope),
+}
+"""∇U_k of every catalog field, exact (piecewise-analytic; one-sided at the kinks)."""
+
+
+def shape_gradients(names: Sequence[str], relative_points: np.ndarray, box: BoxDimensions) -> np.ndarray:
+    """(p, n, 3, 3): ∇U_k at (n, 3) relative coordinates, for every name."""
+    points = np.asarray(relative_points, dtype=float).reshape(-1, 3)
+    return np.stack([GRADIENTS[name](points[:, 0], points[:, 1], points[:, 2], box) for name in names]) \
+        if len(names) else np.zeros((0, points.shape[0], 3, 3))
+
+
 def shape_names() -> list[str]:
     return list(CATALOG)
 
@@ -253,7 +393,40 @@ def check_design(points: np.ndarray, cells: np.ndarray, moved_points: np.ndarray
         names = ", ".join(f"{name}={value:g}" for name, value in xi_by_name.items())
         raise InputError(f"{label} {names} has non-finite node coordinates; give finite parameters")
     nominal = signed_cell_volumes(points, cells)
-    volume_ratio = signed_cell_volumes(moved_points, cells) / nominal
+    check_volume_ratios(signed_cell_volumes(moved_points, cells) / nominal, points, cells, xi_by_name, label, regions)
+
+
+def reference_to_cells(points: np.ndarray, cells: np.ndarray, reference_points: np.ndarray) -> np.ndarray:
+    """(n_cells, n_q, 3) physical positions x = x_0 + Σ_a X_a (x_a - x_0) of reference points X."""
+    vertices = np.asarray(points, dtype=float)[np.asarray(cells)]
+    edges = vertices[:, 1:, :] - vertices[:, :1, :]
+    return vertices[:, None, 0, :] + np.einsum("qa,cai->cqi", reference_points, edges)
+
+
+def check_exact_design(points: np.ndarray, cells: np.ndarray, gradient_at, sample_points: np.ndarray,
+                       xi_by_name: Mapping[str, float], label: str = "design",
+                       regions: RegionTags | None = None) -> None:
+    """Raise InputError unless det F_1 = det(I + ∇u_ξ) > 0.1 at every sample point (SPEC §4).
+
+    ``sample_points`` (n_cells, n_q, 3) are where the forms are integrated; ``gradient_at`` maps
+    (n, 3) positions to ∇u_ξ (n, 3, 3) of the exact shape field. The message names the cells with
+    the smallest det F_1 (their "volume ratio").
+    """
+    if not all(np.isfinite(value) for value in xi_by_name.values()):
+        names = ", ".join(f"{name}={value:g}" for name, value in xi_by_name.items())
+        raise InputError(f"{label} {names} has non-finite node coordinates; give finite parameters")
+    n_cells, n_points = sample_points.shape[:2]
+    gradient = gradient_at(sample_points.reshape(-1, 3))
+    with np.errstate(invalid="ignore"):
+        determinant = np.linalg.det(np.eye(3) + gradient).reshape(n_cells, n_points)
+    determinant = np.where(np.isfinite(determinant), determinant, -np.inf)
+    check_volume_ratios(determinant.min(axis=1), points, cells, xi_by_name, label, regions)
+
+
+def check_volume_ratios(volume_ratio: np.ndarray, points: np.ndarray, cells: np.ndarray,
+                        xi_by_name: Mapping[str, float], label: str = "design",
+                        regions: RegionTags | None = None) -> None:
+    """Raise InputError if a cell's volume ratio is ≤ 0 (inverted) or below MIN_VOLUME_RATIO."""
     inverted = volume_ratio <= 0.0
     shrunk = ~inverted & (volume_ratio < MIN_VOLUME_RATIO)
     if not (inverted.any() or shrunk.any()):
@@ -264,6 +437,6 @@ def check_design(points: np.ndarray, cells: np.ndarray, moved_points: np.ndarray
     parameters = ", ".join(f"{name}={value:g}" for name, value in xi_by_name.items())
     raise InputError(
         f"{label} {parameters} inverts or flattens {int(inverted.sum())} and shrinks "
-        f"{int(shrunk.sum())} more of {len(nominal)} cells below {MIN_VOLUME_RATIO:g} of their "
+        f"{int(shrunk.sum())} more of {len(volume_ratio)} cells below {MIN_VOLUME_RATIO:g} of their "
         f"nominal volume (worst, in the nominal mesh: {named}); reduce the parameters"
     )

@@ -97,7 +97,7 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
         if keep_states:
             states.append((u.copy(), v.copy()))
         if displacements is not None:
-            displacements.append(model.nodal_displacement(u))
+            displacements.append(model.nodal_displacement(u)[:fish.nodes.n_vertices])
         if bar:
             bar.update(1)
         if stop_requested():     # Ctrl-C: end after this complete sample
@@ -136,7 +136,8 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
         timings={"setup": setup_time, "time_integration": clock.perf_counter() - started - setup_time},
         states=states, model=model)
     if is_writer:
-        write_displacement_series(Path(out_dir) / DISPLACEMENT_FILE, model.rest_points, fish.mesh.cells,
+        write_displacement_series(Path(out_dir) / DISPLACEMENT_FILE, model.rest_points[:fish.nodes.n_vertices],
+                                  fish.mesh.cells,
                                   arrays["time"], displacements)
         write_run_outputs(Path(out_dir), scene, result, "fom", fish.parameter_vector(xi), fish.shape_names, comm)
     if interruption:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import InputError
-from .mesh import FishMesh, mean_edge_length
+from .mesh import FishMesh, LagrangeNodes, lagrange_nodes, mean_edge_length
 
 RELATIVE_TOLERANCE = 1e-4
 """Tolerance as a fraction of the mean edge length: far below any node spacing, far above the
@@ -57,7 +57,9 @@ class FishBox:
 
 @dataclass(frozen=True)
 class FishTags:
-    """Regions and special nodes of a fish mesh; all arrays index `FishMesh.points`/`cells`."""
+    """Regions and special nodes of a fish mesh; cell arrays index `FishMesh.cells`, node arrays
+    the displacement nodes (`LagrangeNodes.points`: the vertices, and at degree 2 the edge
+    midpoints as well, so that spine segments halve)."""
 
     box: FishBox
     tolerance: float  # metres
@@ -124,9 +126,9 @@ def _check_fractions(source: str, head_fraction: float, muscle_range) -> None:
         )
 
 
-def _spine(mesh: FishMesh, box: FishBox, tolerance: float) -> np.ndarray:
+def _spine(mesh: FishMesh, nodes: LagrangeNodes, box: FishBox, tolerance: float) -> np.ndarray:
     """Nodes on the body axis y_rel = z_rel = 0 sorted tail → head, checked to span [-L, 0]."""
-    relative = box.relative(mesh.points)
+    relative = box.relative(nodes.points)
     on_axis = np.flatnonzero(
         (np.abs(relative[:, 1]) <= tolerance) & (np.abs(relative[:, 2]) <= tolerance)
     )
@@ -148,11 +150,11 @@ def _spine(mesh: FishMesh, box: FishBox, tolerance: float) -> np.ndarray:
 
 
 def _dorsal_nodes(
-    mesh: FishMesh, box: FishBox, tolerance: float, skin_nodes, rear_nodes
+    mesh: FishMesh, nodes: LagrangeNodes, box: FishBox, tolerance: float, skin_nodes, rear_nodes
 ) -> np.ndarray:
     """Per rear node: the skin node on y_rel = 0 with z_rel > 0 whose x is nearest (ties within
     the tolerance: the largest z)."""
-    relative = box.relative(mesh.points)
+    relative = box.relative(nodes.points)
     candidates = skin_nodes[
         (np.abs(relative[skin_nodes, 1]) <= tolerance) & (relative[skin_nodes, 2] > tolerance)
     ]
@@ -176,12 +178,17 @@ def _nonempty(mesh: FishMesh, name: str, cells: np.ndarray, rule: str) -> np.nda
     return cells
 
 
-def tag_fish(mesh: FishMesh, head_fraction=0.35, muscle_range=(-0.95, -0.35)) -> FishTags:
-    """All tags of SPEC §3 for a fish mesh (head, muscles, skin, spine, tail, dorsal nodes)."""
+def tag_fish(mesh: FishMesh, head_fraction=0.35, muscle_range=(-0.95, -0.35),
+             nodes: LagrangeNodes | None = None) -> FishTags:
+    """All tags of SPEC §3 for a fish mesh (head, muscles, skin, spine, tail, dorsal nodes).
+
+    Node tags refer to ``nodes`` (default: the vertices, i.e. linear elements).
+    """
     _check_fractions(mesh.source, head_fraction, muscle_range)
+    nodes = nodes or lagrange_nodes(mesh, 1)
     box = FishBox.of(mesh.points)
     tolerance = mesh_tolerance(mesh.points, mesh.cells)
-    spine_nodes = _spine(mesh, box, tolerance)
+    spine_nodes = _spine(mesh, nodes, box, tolerance)
     spine_segments = np.column_stack([spine_nodes[:-1], spine_nodes[1:]])
     centroids = cell_centroids(mesh.points, mesh.cells)
     head_cells = _nonempty(
@@ -197,12 +204,12 @@ def tag_fish(mesh: FishMesh, head_fraction=0.35, muscle_range=(-0.95, -0.35)) ->
         mesh, "right muscle", np.flatnonzero(right_mask), rule + " < 0"
     )
     facets = skin_facets(mesh.cells)
-    skin_nodes = np.unique(facets)
+    skin_nodes = nodes.facet_nodes(facets)
     return FishTags(
         box=box,
         tolerance=tolerance,
         head_cells=head_cells,
-        head_nodes=np.unique(mesh.cells[head_cells]),
+        head_nodes=np.unique(nodes.cell_nodes[head_cells]),
         left_muscle_cells=left_muscle_cells,
         right_muscle_cells=right_muscle_cells,
         skin_facets=facets,
@@ -211,5 +218,5 @@ def tag_fish(mesh: FishMesh, head_fraction=0.35, muscle_range=(-0.95, -0.35)) ->
         spine_segments=spine_segments,
         tail_node=int(spine_nodes[0]),
         head_spine_node=int(spine_nodes[-1]),
-        dorsal_nodes=_dorsal_nodes(mesh, box, tolerance, skin_nodes, spine_segments[:, 0]),
+        dorsal_nodes=_dorsal_nodes(mesh, nodes, box, tolerance, skin_nodes, spine_segments[:, 0]),
     )

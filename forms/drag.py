@@ -9,10 +9,10 @@ import ufl
 from .kinematics import shape_gradient
 
 
-def drag_direction_form(test, shape_displacement, fluid_density, mesh):
+def drag_direction_form(test, shape_gradient_field, fluid_density, mesh):
     """g_i = -∫_skin ½ ρ_w C_d φ_i·e_x dA_ξ = -∫_skin ρ_w (a·e_x)² / |a| φ_i·e_x dA_0  [kg/m]."""
     normal = ufl.FacetNormal(mesh)
-    deformation = shape_gradient(shape_displacement)
+    deformation = shape_gradient(shape_gradient_field)
     area_normal = ufl.det(deformation) * ufl.inv(deformation).T * normal
     drag_coefficient_area = area_normal[0] ** 2 / ufl.sqrt(ufl.inner(area_normal, area_normal))
     return -fluid_density * drag_coefficient_area * test[0] * ufl.ds

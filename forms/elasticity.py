@@ -17,8 +17,8 @@ def svk_energy_density(strain, young_modulus, poisson_ratio):
     return 0.5 * lam * ufl.tr(strain) ** 2 + mu * ufl.inner(strain, strain)
 
 
-def strain_energy(displacement, shape_displacement, young_modulus, poisson_ratio):
+def strain_energy(displacement, shape_gradient_field, young_modulus, poisson_ratio):
     """Π = ∫ ψ(E) dV_ξ = ∫ ψ(E) det F_1 dV_0  [J]; f_int = ∂Π/∂u."""
-    strain = green_lagrange_strain(displacement, shape_displacement)
+    strain = green_lagrange_strain(displacement, shape_gradient_field)
     density = svk_energy_density(strain, young_modulus, poisson_ratio)
-    return density * volume_ratio(shape_displacement) * ufl.dx
+    return density * volume_ratio(shape_gradient_field) * ufl.dx

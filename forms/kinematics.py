@@ -1,32 +1,34 @@
 """Kinematics of the shape-varied, deformed body on the nominal mesh (SPEC §5).
 
-All quantities are pulled back to the mesh the forms are integrated on: ``shape_displacement``
-is u_ξ = U ξ (zero when the design is meshed directly), ``displacement`` is the elastic u.
+All quantities are pulled back to the mesh the forms are integrated on: ``shape_gradient_field``
+is ∇u_ξ, the gradient of the design's shape displacement u_ξ = U ξ (zero when the design is
+meshed directly; the FOM passes the exact ∇U ξ at the quadrature points), ``displacement`` is
+the elastic u.
 """
 import ufl
 
 
-def shape_gradient(shape_displacement):
+def shape_gradient(shape_gradient_field):
     """F_1 = I + ∇u_ξ: nominal → shape-varied configuration."""
-    return ufl.Identity(3) + ufl.grad(shape_displacement)
+    return ufl.Identity(3) + shape_gradient_field
 
 
-def total_gradient(displacement, shape_displacement):
+def total_gradient(displacement, shape_gradient_field):
     """F = I + ∇u_ξ + ∇u: nominal → deformed configuration."""
-    return ufl.Identity(3) + ufl.grad(shape_displacement) + ufl.grad(displacement)
+    return ufl.Identity(3) + shape_gradient_field + ufl.grad(displacement)
 
 
-def relative_gradient(displacement, shape_displacement):
+def relative_gradient(displacement, shape_gradient_field):
     """F_2 = F F_1⁻¹: shape-varied → deformed configuration."""
-    return total_gradient(displacement, shape_displacement) * ufl.inv(shape_gradient(shape_displacement))
+    return total_gradient(displacement, shape_gradient_field) * ufl.inv(shape_gradient(shape_gradient_field))
 
 
-def green_lagrange_strain(displacement, shape_displacement):
+def green_lagrange_strain(displacement, shape_gradient_field):
     """E = ½ (F_2ᵀ F_2 - I), the strain measured from the shape-varied configuration."""
-    deformation = relative_gradient(displacement, shape_displacement)
+    deformation = relative_gradient(displacement, shape_gradient_field)
     return 0.5 * (deformation.T * deformation - ufl.Identity(3))
 
 
-def volume_ratio(shape_displacement):
+def volume_ratio(shape_gradient_field):
     """dV_ξ / dV_0 = det F_1."""
-    return ufl.det(shape_gradient(shape_displacement))
+    return ufl.det(shape_gradient(shape_gradient_field))

@@ -9,7 +9,7 @@ from .kinematics import relative_gradient, total_gradient, volume_ratio
 FIBRE = ufl.as_vector((1.0, 0.0, 0.0))
 
 
-def muscle_energy(displacement, shape_displacement, stiffness, activations, indicators,
+def muscle_energy(displacement, shape_gradient_field, stiffness, activations, indicators,
                   nominal_volume=False):
     """Σ_j ½ k a_j ∫ χ_j |F_2 m|² det F_1 dV_0  [J].
 
@@ -17,10 +17,10 @@ def muscle_energy(displacement, shape_displacement, stiffness, activations, indi
     With ``nominal_volume`` the source's variant Σ_j ½ k a_j ∫ χ_j |F m|² dV_0 is used.
     """
     if nominal_volume:
-        stretch = total_gradient(displacement, shape_displacement) * FIBRE
+        stretch = total_gradient(displacement, shape_gradient_field) * FIBRE
         volume = 1.0
     else:
-        stretch = relative_gradient(displacement, shape_displacement) * FIBRE
-        volume = volume_ratio(shape_displacement)
+        stretch = relative_gradient(displacement, shape_gradient_field) * FIBRE
+        volume = volume_ratio(shape_gradient_field)
     activation_field = sum(a * chi for a, chi in zip(activations, indicators))
     return 0.5 * stiffness * activation_field * ufl.inner(stretch, stretch) * volume * ufl.dx

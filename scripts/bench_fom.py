@@ -1,7 +1,8 @@
 """FOM benchmark: the 2 s reference simulation on every mesh level, serial and `mpirun -n 2`.
 
 Writes results/bench/fom.json: cells, dofs, wall time, mean Newton iterations, peak memory,
-distance and tail amplitude per level and rank count, and the -n 2 speed-up.
+distance and tail amplitude per element degree, level and rank count, and the -n 2 speed-up.
+Linear tetrahedra on --levels (default 1–5), quadratic ones on --quadratic-levels (default 1–3).
 """
 import argparse
 import json
@@ -17,16 +18,17 @@ sys.path.insert(0, str(REPOSITORY))
 
 from aquarom_fenics.outputs import software_versions, write_json_atomic  # noqa: E402
 
-SCENE = """name = "bench-level{level}"
+SCENE = """name = "bench-degree{degree}-level{level}"
 [mesh]
 level = {level}
+degree = {degree}
 """
 
 
-def run_level(level: int, ranks: int, work: Path) -> dict:
-    scene = work / f"level{level}.toml"
-    scene.write_text(SCENE.format(level=level))
-    out = work / f"level{level}-n{ranks}"
+def run_level(level: int, ranks: int, work: Path, degree: int = 1) -> dict:
+    scene = work / f"degree{degree}-level{level}.toml"
+    scene.write_text(SCENE.format(level=level, degree=degree))
+    out = work / f"degree{degree}-level{level}-n{ranks}"
     shutil.rmtree(out, ignore_errors=True)
     command = [str(Path(sys.executable).with_name("aquarom")), "simulate", str(scene), "--out", str(out), "--no-progress"]
     if ranks > 1:
@@ -36,9 +38,9 @@ def run_level(level: int, ranks: int, work: Path) -> dict:
     completed = subprocess.run(command, capture_output=True, text=True, env=environment)
     elapsed = time.perf_counter() - started
     if completed.returncode != 0:
-        return {"level": level, "ranks": ranks, "failed": completed.stderr.strip().splitlines()[-1:]}
+        return {"degree": degree, "level": level, "ranks": ranks, "failed": completed.stderr.strip().splitlines()[-1:]}
     summary = json.loads((out / "summary.json").read_text())
-    return {"level": level, "ranks": ranks, "cells": summary["cells"], "dofs": summary["dofs"],
+    return {"degree": degree, "level": level, "ranks": ranks, "cells": summary["cells"], "dofs": summary["dofs"],
             "wall_time_simulation": summary["wall_time"], "wall_time_process": elapsed,
             "time_integration": summary["timings"]["time_integration"],
             "mean_newton_iterations": summary["mean_newton_iterations"],
@@ -48,21 +50,25 @@ def run_level(level: int, ranks: int, work: Path) -> dict:
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3, 4, 5])
+    parser.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3, 4, 5], help="levels at degree 1")
+    parser.add_argument("--quadratic-levels", type=int, nargs="*", default=[1, 2, 3], help="levels at degree 2")
     parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "bench" / "fom.json")
     args = parser.parse_args()
     work = args.out.parent / "fom-runs"
     work.mkdir(parents=True, exist_ok=True)
     runs = []
-    for level in args.levels:
+    cases = [(1, level) for level in args.levels] + [(2, level) for level in args.quadratic_levels]
+    for degree, level in cases:
         for ranks in (1, 2):
-            runs.append(run_level(level, ranks, work))
+            runs.append(run_level(level, ranks, work, degree))
             print(json.dumps(runs[-1]), flush=True)
     speedups = {}
-    for level in args.levels:
-        serial, parallel = (next(r for r in runs if r["level"] == level and r["ranks"] == n) for n in (1, 2))
+    for degree, level in cases:
+        serial, parallel = (next(r for r in runs if (r["degree"], r["level"], r["ranks"]) == (degree, level, n))
+                            for n in (1, 2))
         if "failed" not in serial and "failed" not in parallel:
-            speedups[f"level{level}"] = serial["wall_time_simulation"] / parallel["wall_time_simulation"]
+            name = f"level{level}" if degree == 1 else f"degree{degree}-level{level}"
+            speedups[name] = serial["wall_time_simulation"] / parallel["wall_time_simulation"]
     write_json_atomic(args.out, {"benchmark": "fom", "horizon_s": 2.0, "time_step_s": 0.02, "runs": runs,
                                  "speedup_2_ranks": speedups, "cores": os.cpu_count(),
                                  "versions": software_versions(), "date": time.strftime("%Y-%m-%d %H:%M:%S")})

@@ -1,6 +1,7 @@
 """PROM benchmark: build and solve costs per mesh level and number of parameters, FOM in the same run.
 
-For each level and p ∈ {0, 3, 5, 8} (no shapes, SO1, SO2, SO3 shape sets): basis time, tensor
+For each element degree and level (degree 1: --levels, default 1–5; degree 2: --quadratic-levels,
+default 1–3) and p ∈ {0, 3, 5, 8} (no shapes, SO1, SO2, SO3 shape sets): basis time, tensor
 time, number of form evaluations (vector/matrix assemblies and cell-wise expression evaluations),
 reduced solve time with and without sensitivities, and the FOM time on the same mesh.
 Writes results/bench/prom.json.
@@ -52,16 +53,18 @@ class EvaluationCounter:
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3, 4, 5])
+    parser.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3, 4, 5], help="levels at degree 1")
+    parser.add_argument("--quadratic-levels", type=int, nargs="*", default=[1, 2, 3], help="levels at degree 2")
     parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "bench" / "prom.json")
     args = parser.parse_args()
     counter = EvaluationCounter()
     runs = []
-    for level in args.levels:
-        fom_scene = Scene.load("nominal").replace("mesh", level=level)
+    cases = [(1, level) for level in args.levels] + [(2, level) for level in args.quadratic_levels]
+    for degree, level in cases:
+        fom_scene = Scene.load("nominal").replace("mesh", level=level, degree=degree)
         fom = simulate_fom(fom_scene, progress=False)
         for p, name in SHAPE_SETS.items():
-            scene = Scene.load(name).replace("mesh", level=level)
+            scene = Scene.load(name).replace("mesh", level=level, degree=degree)
             fish = load_fish(scene)
             build_prom(scene, fish=fish)          # compiles the forms once (JIT cache)
             counter.take()
@@ -72,16 +75,16 @@ def main():
             plain = simulate_reduced(prom, scene)
             with_sensitivities = simulate_reduced(prom, scene, sensitivities=True)
             runs.append({
-                "level": level, "cells": prom.cells, "dofs": prom.dofs, "parameters": p, "scene": name,
-                "reduced_size": prom.size, "basis": prom.labels, "dropped": prom.dropped,
+                "degree": degree, "level": level, "cells": prom.cells, "dofs": prom.dofs, "parameters": p,
+                "scene": name, "reduced_size": prom.size, "basis": prom.labels, "dropped": prom.dropped,
                 "build_time": build_time, "basis_time": prom.timings["basis_total"],
                 "tensor_time": prom.timings["internal_force_tensors"] + prom.timings["other_tensors"],
                 "form_evaluations": evaluations,
                 "solve_time": plain.wall_time, "solve_time_with_sensitivities": with_sensitivities.wall_time,
                 "distance": plain.distance, "fom_time": fom.wall_time, "fom_distance": fom.distance,
                 "fom_over_prom_total_time": fom.wall_time / (build_time + plain.wall_time)})
-            print({key: runs[-1][key] for key in ("level", "cells", "parameters", "reduced_size", "build_time",
-                                                  "solve_time", "solve_time_with_sensitivities", "fom_time")},
+            print({key: runs[-1][key] for key in ("degree", "level", "cells", "parameters", "reduced_size",
+                                                  "build_time", "solve_time", "solve_time_with_sensitivities", "fom_time")},
                   flush=True)
     write_json_atomic(args.out, {"benchmark": "prom", "runs": runs, "cores": os.cpu_count(),
                                  "versions": software_versions(), "date": time.strftime("%Y-%m-%d %H:%M:%S")})

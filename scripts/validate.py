@@ -13,6 +13,11 @@ Studies (SPEC §11 "Validation studies", the validation issue):
   e       MPI: the FOM with mpirun -n 1 and -n 2 on the 16k and 25k levels: speed-up, agreement.
   stress  numerical stability: 2×–5× actuation stiffness, h up to 0.1 s, α_N = 0, E/5, the PROM
           on the finest mesh; Newton iterations and the energy balance per case.
+  mesh_convergence
+          the nominal FOM for degree 1 on levels 1–5 and degree 2 on levels 1–3: distance, tail
+          amplitude, first frequency, static peak-muscle tail deflection, wall time; Richardson
+          reference per quantity (observed order, error estimate) and the cheapest (degree, level)
+          within 3% of the reference distance (`aquarom_fenics.convergence`).
 
 Every case is cached in <out>/cases/<kind>-<key>.json (key: scene hash + model settings +
 toolkit version), so a rerun computes only what is missing; each study writes <out>/<study>.json,
@@ -43,9 +48,9 @@ for path in (REPOSITORY, SCRIPTS):
 
 import validate_report as report  # noqa: E402
 from validate_cases import (CasesCollected, Runner, compute_in_parallel, fom_case, machine,  # noqa: E402
-                            mpi_case, power_law_fit, reduced_case)
+                            mesh_case, mpi_case, power_law_fit, reduced_case)
 
-STUDIES = ("a", "b", "c", "d", "e", "stress")
+STUDIES = ("a", "b", "c", "d", "e", "stress", "mesh_convergence")
 
 REFERENCE_STIFFNESS = 6e4
 """k [Pa] of the reference fish (SPEC §5)."""
@@ -67,14 +72,17 @@ class Settings:
     stress_level: int
     fine_prom_level: int
     time_limit: float                        # s per case
+    mesh_series: tuple[tuple[int, tuple[int, ...]], ...]   # (degree, levels) of the mesh-convergence study
 
 
 FULL = Settings(quick=False, levels=(1, 2, 3, 4, 5), stiffnesses=(1.2e4, 2.5e4, 4e4, 6e4, 7.5e4), duration=2.0,
                 reference_level=3, time_steps=(0.04, 0.02, 0.01, 0.005), convergence_steps=(0.02, 0.01, 0.005),
-                mpi_levels=(4, 5), stress_level=3, fine_prom_level=5, time_limit=1800.0)
+                mpi_levels=(4, 5), stress_level=3, fine_prom_level=5, time_limit=1800.0,
+                mesh_series=((1, (1, 2, 3, 4, 5)), (2, (1, 2, 3))))
 QUICK = Settings(quick=True, levels=(1, 2), stiffnesses=(1.2e4, 6e4, 7.5e4), duration=0.4, reference_level=1,
                  time_steps=(0.04, 0.02, 0.01, 0.005), convergence_steps=(0.02, 0.01, 0.005),
-                 mpi_levels=(1, 2), stress_level=1, fine_prom_level=2, time_limit=300.0)
+                 mpi_levels=(1, 2), stress_level=1, fine_prom_level=2, time_limit=300.0,
+                 mesh_series=((1, (1, 2, 3)), (2, (1,))))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -461,7 +469,24 @@ def stress_row(record: dict) -> dict:
 # Driver
 
 
-STUDY_FUNCTIONS = {"a": study_a, "b": study_b, "c": study_c, "d": study_d, "e": study_e, "stress": study_stress}
+def study_mesh_convergence(runner: Runner, settings: Settings) -> dict:
+    """Mesh convergence of the nominal FOM per element degree and level; Richardson reference."""
+    from aquarom_fenics.convergence import MeshCase, mesh_convergence
+
+    cases = [mesh_case(f"degree {degree}, level {level}",
+                       base_scene(settings, level=level).replace("mesh", degree=degree))
+             for degree, levels in settings.mesh_series for level in levels]
+    records = runner.run("mesh_convergence", cases)
+    fields = MeshCase.__dataclass_fields__
+    measured = [MeshCase(**{name: record[name] for name in fields}) for record in records
+                if record["status"] == "completed"]
+    failed = [{"label": record["label"], "status": record["status"], "message": record.get("message")}
+              for record in records if record["status"] != "completed"]
+    return mesh_convergence(measured) | {"failed": failed}
+
+
+STUDY_FUNCTIONS = {"a": study_a, "b": study_b, "c": study_c, "d": study_d, "e": study_e, "stress": study_stress,
+                   "mesh_convergence": study_mesh_convergence}
 
 
 def run(settings: Settings, out: Path, report_path: Path, studies=STUDIES, recompute_failed=False,

@@ -25,7 +25,7 @@ import subprocess
 import sys
 import time
 import traceback
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -83,6 +83,11 @@ def reduced_case(label: str, scene: Scene, parametric: bool, xi=None, sensitivit
     """A ROM (``parametric`` False) or the scene's PROM built at ξ_c = 0, run at ξ."""
     return Case("reduced", label, scene, {"parametric": bool(parametric), "xi": _plain_xi(xi),
                                           "sensitivities": bool(sensitivities)})
+
+
+def mesh_case(label: str, scene: Scene) -> Case:
+    """The nominal fish's FOM run, first frequency and static peak-muscle deflection (mesh convergence)."""
+    return Case("mesh", label, scene, {})
 
 
 def mpi_case(label: str, scene: Scene, ranks: int) -> Case:
@@ -196,7 +201,7 @@ class Runner:
             if case.kind == "mpi":
                 record.update(compute_mpi(self, case))
             else:
-                compute = compute_fom if case.kind == "fom" else compute_reduced
+                compute = {"fom": compute_fom, "reduced": compute_reduced, "mesh": compute_mesh}[case.kind]
                 record.update(with_time_limit(self.time_limit, lambda: compute(self, case)))
         except CaseTimeLimit:
             record.update(status="time-limit", message=f"stopped by the validation's time limit of "
@@ -257,8 +262,9 @@ def estimated_cost(case: Case) -> float:
     """A rough run time [s], to start the longest cases first."""
     cells = LEVEL_CELLS.get(case.scene.mesh.level, 8000)
     steps = case.scene.n_steps
-    if case.kind in ("fom", "mpi"):
-        return 7e-4 * cells ** 1.1 * steps / 100.0
+    if case.kind in ("fom", "mpi", "mesh"):
+        quadratic = 8.0 if case.scene.mesh.degree == 2 else 1.0   # measured: level 1, 16 s against 1.9 s
+        return quadratic * 7e-4 * cells ** 1.1 * steps / 100.0
     p = len(case.scene.shapes) if case.options.get("parametric") else 0
     order = case.scene.reduction.taylor_order if p else 0
     return 1e-4 * cells * (1 + p) * (4 if order == 2 else 1) + 0.05 * steps / 100.0
@@ -354,6 +360,9 @@ def describe(record: dict) -> str:
                      f"solve {record.get('solve_time', 0):.2f} s")
     else:
         parts.append(f"{record.get('wall_time', 0):.1f} s")
+    if record["kind"] == "mesh":
+        parts.append(f"f_1 = {record['first_frequency']:.3f} Hz, static tail y = "
+                     f"{100 * record['static_tail_deflection']:.3f} cm")
     if record.get("energy"):
         parts.append(f"energy imbalance {100 * record['energy']['imbalance_relative']:+.2f}%")
     return ", ".join(parts)
@@ -410,6 +419,15 @@ def compute_fom(runner: Runner, case: Case) -> dict:
             record.update(status="non-finite", message="energy balance not finite")
     result.states.clear()
     return record
+
+
+def compute_mesh(runner: Runner, case: Case) -> dict:
+    from aquarom_fenics.convergence import measure
+
+    runner.warm_up(case.scene, None)
+    measured = asdict(measure(case.scene, runner.fish(case.scene)))
+    status, message = _outcome(True, None, *(value for value in measured.values()))
+    return {"status": status, "message": message} | measured
 
 
 def compute_reduced(runner: Runner, case: Case) -> dict:

@@ -31,6 +31,7 @@ FIGURES = {
     "pareto": "pareto_time_error.png",
     "convergence": "timestep_convergence.png",
     "energy": "stress_energy.png",
+    "mesh": "mesh_convergence.png",
 }
 REDUCED_MODELS = ("rom", "rom-paper", "prom3", "prom5", "prom8")
 
@@ -42,7 +43,7 @@ def model_order(models: dict) -> list[str]:
 
 def load_studies(out: Path) -> dict:
     studies = {}
-    for name in ("a", "b", "c", "d", "e", "stress", "run"):
+    for name in ("a", "b", "c", "d", "e", "stress", "mesh_convergence", "run"):
         path = Path(out) / f"{name}.json"
         if path.exists():
             studies[name] = json.loads(path.read_text())
@@ -125,6 +126,8 @@ def make_figures(out: Path) -> list[Path]:
     if "stress" in studies:
         figure = energy_figure(studies["stress"], out / FIGURES["energy"])
         written += [figure] if figure else []
+    if studies.get("mesh_convergence", {}).get("rows"):
+        written += [mesh_figure(studies["mesh_convergence"], out / FIGURES["mesh"])]
     return written
 
 
@@ -405,6 +408,33 @@ def convergence_figure(study: dict, path: Path) -> Path:
     return _saved(figure, path)
 
 
+MESH_QUANTITIES = (("distance", "swimming distance"), ("static_tail_deflection", "static tail deflection"),
+                   ("first_frequency", "first frequency"), ("tail_amplitude", "tail amplitude"))
+
+
+def mesh_figure(study: dict, path: Path) -> Path:
+    """FOM wall time against the relative error of each quantity, one line per element degree."""
+    plt = _pyplot()
+    figure, axes = plt.subplots(1, len(MESH_QUANTITIES), figsize=(18, 5), sharey=True)
+    for axis, (name, label) in zip(axes, MESH_QUANTITIES):
+        for degree, marker in ((1, "o"), (2, "s")):
+            # The case that is its own reference (an oscillating series) has no error to draw.
+            rows = [row for row in study["rows"] if row["degree"] == degree and row[f"{name}_error"] != 0.0]
+            if not rows:
+                continue
+            errors = [abs(row[f"{name}_error"]) for row in rows]
+            axis.loglog(errors, [row["wall_time"] for row in rows], marker=marker, label=f"degree {degree}")
+            for row, error in zip(rows, errors):
+                axis.annotate(f"L{row['level']}", (error, row["wall_time"]), fontsize=7)
+        axis.axvline(0.03, color="grey", linestyle=":", linewidth=1)
+        axis.set_xlabel(f"|relative error| of the {label}")
+        axis.set_title(label)
+    axes[0].set_ylabel("FOM wall time [s]")
+    _grid_and_legend(axes, fontsize=8)
+    figure.suptitle("Mesh convergence: FOM cost against error w.r.t. the Richardson reference (dotted: 3 %)")
+    return _saved(figure, path)
+
+
 def energy_figure(study: dict, path: Path) -> Path | None:
     rows = [row for row in study["rows"] if row.get("energy")]
     if not rows:
@@ -571,6 +601,7 @@ def write_report(out: Path, report: Path, studies_summary: Path | None = None) -
     _section_d(lines, studies.get("d"), out, report)
     _section_e(lines, studies.get("e"))
     _section_stress(lines, studies.get("stress"), out, report)
+    _section_mesh(lines, studies.get("mesh_convergence"), out, report)
     _section_validity(lines, out / "prom_validity.md", report)
     _section_optimisation(lines, studies_summary or report.parent / "studies" / "summary.md", report)
     lines += ["## Reproduce", "", "    make validate                                   # every study, cached per case",
@@ -755,6 +786,40 @@ def _section_d(lines, study, out, report):
                                                            zip(q.get("pairs", []), q.get("differences", [])))
                      or short(q.get("message")), fmt(q.get("ratio"), ".2f")] for q in study["quantities"]])
     lines += [""]
+
+
+def _section_mesh(lines, study, out, report):
+    title = "## Mesh convergence of the FOM"
+    if not study or not study.get("rows"):
+        return _not_run(lines, title)
+    units = {"distance": ("cm", 100.0), "tail_amplitude": ("cm", 100.0), "first_frequency": ("Hz", 1.0),
+             "static_tail_deflection": ("cm", 100.0)}
+    lines += [title, "",
+              "The nominal fish per element degree and mesh level: swimming distance, tail amplitude, first natural "
+              "frequency (head clamped) and static tail deflection with the muscles at their peak (head clamped). "
+              "Reference: Richardson extrapolation of the three finest cases of the highest degree with h = "
+              "cells^(-1/3); its estimated error is the correction |f* − f_finest|. When the differences change sign "
+              "(no order, shown as —) the finest value is the reference and the last difference its error.", ""]
+    lines += table(["quantity", "reference", "observed order", "estimated error", "from degree"],
+                   [[name, f"{fmt(ref['value'], '.4g', units[name][1])} {units[name][0]}",
+                     fmt(ref.get("observed_order"), ".2f"), f"{fmt(ref['estimated_error'], '.2g', units[name][1])} "
+                     f"{units[name][0]}", str(ref.get("degree"))] for name, ref in study["reference"].items()])
+    lines += [""]
+    lines += table(["degree", "level", "cells", "dofs", "distance [cm]", "error", "tail amplitude [cm]",
+                    "f_1 [Hz]", "static tail y [cm]", "wall time [s]"],
+                   [[str(row["degree"]), str(row["level"]), str(row["cells"]), str(row["dofs"]),
+                     fmt(row["distance"], ".4g", 100.0), percent(row["relative_error_distance"], 1),
+                     fmt(row["tail_amplitude"], ".4g", 100.0), fmt(row["first_frequency"], ".4g"),
+                     fmt(row["static_tail_deflection"], ".4g", 100.0), fmt(row["wall_time"], ".1f")]
+                    for row in study["rows"]])
+    default = study.get("default")
+    lines += ["", ("Cheapest (degree, level) within 3 % of the reference distance: "
+                   f"degree {default['degree']}, level {default['level']} "
+                   f"({percent(default['relative_error_distance'], 1)}, {default['wall_time']:.1f} s)."
+                   if default else "No case is within 3 % of the reference distance."), ""]
+    for failure in study.get("failed", []):
+        lines += [f"- {failure['label']}: {failure['status']}, {short(failure.get('message'))}"]
+    _figure(lines, out, report, "mesh", "Mesh convergence", "FOM wall time against the error of each quantity.")
 
 
 def _section_e(lines, study):

@@ -17,15 +17,16 @@ from conftest import coarse_scene
 SHORT_SCENE = """
 [mesh]
 level = 1
+degree = {degree}
 [solver]
 duration = {duration}
 {extra}
 """
 
 
-def write_scene(directory: Path, duration=0.2, extra="") -> Path:
+def write_scene(directory: Path, duration=0.2, extra="", degree=1) -> Path:
     path = directory / "scene.toml"
-    path.write_text(SHORT_SCENE.format(duration=duration, extra=extra))
+    path.write_text(SHORT_SCENE.format(duration=duration, extra=extra, degree=degree))
     return path
 
 
@@ -43,10 +44,11 @@ def test_simulate_writes_trajectory_summary_and_plot(tmp_path, capsys):
 
 
 @pytest.mark.mpi
-def test_two_ranks_reproduce_the_serial_trajectory(tmp_path):
+@pytest.mark.parametrize("degree", [1, 2])
+def test_two_ranks_reproduce_the_serial_trajectory(tmp_path, degree):
     if shutil.which("mpirun") is None:
         pytest.skip("mpirun not installed")
-    scene = write_scene(tmp_path)
+    scene = write_scene(tmp_path, degree=degree, extra="[output]\nxdmf = true")
     main(["simulate", str(scene), "--out", str(tmp_path / "serial"), "--no-progress"])
     aquarom = Path(sys.executable).with_name("aquarom")
     completed = subprocess.run(["mpirun", "-n", "2", str(aquarom), "simulate", str(scene), "--out",
@@ -59,6 +61,7 @@ def test_two_ranks_reproduce_the_serial_trajectory(tmp_path):
         error = np.linalg.norm(parallel[name] - serial[name]) / np.linalg.norm(serial[name])
         assert error < 1e-8, (name, error)
     assert json.loads((tmp_path / "parallel" / "summary.json").read_text())["mpi_ranks"] == 2
+    assert (tmp_path / "parallel" / "displacement.xdmf").stat().st_size > 0
 
 
 def test_diverging_actuation_stops_naming_the_step_and_keeps_the_trajectory(tmp_path, capsys):

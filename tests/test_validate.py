@@ -220,7 +220,13 @@ def synthetic_results(folder: Path):
          "wall_time": 3.0}]}
     run = {"date": "2026-01-01 00:00:00", "versions": {"dolfinx": "0.5.2"}, "machine": {"cores": 2, "cpu": "test CPU"},
            "quick": True, "studies": list(validate.STUDIES), "cases": {"cached": 3, "computed": 4}, "wall_time": 42.0}
-    for name, data in (("a", a), ("b", b), ("c", c), ("d", d), ("e", e), ("stress", stress), ("run", run)):
+    from aquarom_fenics.convergence import MeshCase, mesh_convergence
+
+    quadratic = [MeshCase(2, level, cells, 5 * cells, 0.045 - 3.0 / cells, 0.03, 5.8, 0.027, 10.0 * level)
+                 for level, cells in ((1, 1232), (2, 4176), (3, 7944))]
+    mesh = mesh_convergence(quadratic + [MeshCase(1, 3, 7944, 6015, 0.034, 0.026, 6.4, 0.0226, 9.0)]) | {"failed": []}
+    for name, data in (("a", a), ("b", b), ("c", c), ("d", d), ("e", e), ("stress", stress),
+                       ("mesh_convergence", mesh), ("run", run)):
         (folder / f"{name}.json").write_text(json.dumps(data))
 
 
@@ -235,7 +241,7 @@ def test_report_writer_on_synthetic_results(tmp_path):
     report = validate_report.write_report(out, tmp_path / "REPORT.md")
     text = report.read_text()
     for section in ("## Checks", "## a. ", "## b. ", "## c. ", "## d. ", "## e. ", "## Stress tests",
-                    "### Energy balance", "## Optimisation studies", "## Reproduce"):
+                    "### Energy balance", "## Mesh convergence of the FOM", "## Optimisation studies", "## Reproduce"):
         assert section in text, section
     for name in validate_report.FIGURES.values():
         assert f"](validation/{name})" in text, name
@@ -246,8 +252,10 @@ def test_report_writer_on_synthetic_results(tmp_path):
     assert "](studies/so1/cost.png)" in text and "| so1 | 1.2 |" in text
     assert "**FAIL**" not in text.split("## a.")[0]                 # synthetic numbers meet every check
     assert "| time-step ratio, FOM head x, α_N = 0.02 | 2.00 | → 2 (first order: γ = ½ + α_N) | — |" in text
+    assert "| 1 | 3 | 7944 | 6015 | 3.4 | -24." in text                      # degree-1 row against the reference
+    assert "within 3 % of the reference distance: degree 2, level 2" in text
 
 
 def test_report_without_results_says_what_is_missing(tmp_path):
     text = validate_report.write_report(tmp_path / "validation", tmp_path / "REPORT.md").read_text()
-    assert text.count("*Not run yet*") == 6
+    assert text.count("*Not run yet*") == 7
