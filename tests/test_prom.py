@@ -4,7 +4,7 @@ import pytest
 
 from aquarom_fenics.fish import load_fish
 from aquarom_fenics.fom import FullOrderModel
-from aquarom_fenics.newmark import NewmarkScheme
+from aquarom_fenics.integrator import TimeScheme
 from aquarom_fenics.prom import ReducedModel
 from aquarom_fenics.reduced_dynamics import ReducedSystem, simulate_reduced
 from aquarom_fenics.reductor import build_prom
@@ -61,7 +61,7 @@ def random_states(rng, m, scale):
 
 def test_sampled_tensors_reproduce_every_projected_fom_force(scene, fish, prom):
     projected = ProjectedFOM(scene, fish, prom, prom.xi_center)
-    system = ReducedSystem(prom, scene, prom.xi_center, NewmarkScheme.with_damping(0.02, 0.005))
+    system = ReducedSystem(prom, scene, prom.xi_center, TimeScheme.newmark(0.02, 0.005))
     rng = np.random.default_rng(0)
     for sample in range(20):
         eta, eta_dot, eta_ddot = random_states(rng, prom.size, 0.02)
@@ -72,7 +72,7 @@ def test_sampled_tensors_reproduce_every_projected_fom_force(scene, fish, prom):
 
 
 def test_reduced_jacobians_match_finite_differences(scene, prom):
-    system = ReducedSystem(prom, scene, prom.xi_center + 0.01, NewmarkScheme.with_damping(0.02, 0.005))
+    system = ReducedSystem(prom, scene, prom.xi_center + 0.01, TimeScheme.newmark(0.02, 0.005))
     rng = np.random.default_rng(1)
     state = random_states(rng, prom.size, 0.02)
     tangents = system.tangents(0.3, *state)
@@ -86,10 +86,29 @@ def test_reduced_jacobians_match_finite_differences(scene, prom):
         assert relative_error(tangents[slot], np.column_stack(columns)) < 1e-7
 
 
+@pytest.mark.parametrize("integrator", ["generalized-alpha", "newmark"])
+def test_reduced_newton_matrix_is_the_derivative_of_the_step_residual(scene, prom, integrator):
+    """S = d/dη_{n+1} r(t_{n+1-α_f}, η_{n+1-α_f}, η̇_{n+1-α_f}, η̈_{n+1-α_m}) with the scheme's kinematics."""
+    scheme = TimeScheme.from_solver(scene.replace("solver", integrator=integrator).solver)
+    system = ReducedSystem(prom, scene, prom.xi_center + 0.01, scheme)
+    rng = np.random.default_rng(5)
+    old = random_states(rng, prom.size, 0.02)
+    u_predicted, v_predicted = scheme.predict(*old)
+    eta = u_predicted + 1e-3 * rng.standard_normal(prom.size)
+
+    def point(trial):
+        return scheme.evaluation_point(0.3, old, (trial, *scheme.correct(trial, u_predicted, v_predicted)))
+
+    step = 1e-7
+    columns = [(system.residual(*point(eta + step * direction))[0]
+                - system.residual(*point(eta - step * direction))[0]) / (2 * step) for direction in np.eye(prom.size)]
+    assert relative_error(system.newton_matrix(*point(eta)), np.column_stack(columns)) < 1e-7
+
+
 def test_first_xi_derivative_matches_central_difference_on_moved_meshes(scene, fish, prom):
     """∂/∂ξ_k Vᵀ f_int(Vη; ξ): PROM Taylor term against a 4th-order central difference of the FOM."""
     eta = 0.02 * np.random.default_rng(2).standard_normal(prom.size)
-    system = ReducedSystem(prom, scene, prom.xi_center, NewmarkScheme.with_damping(0.02, 0.005))
+    system = ReducedSystem(prom, scene, prom.xi_center, TimeScheme.newmark(0.02, 0.005))
     derivative = system.internal_force_gradient(eta)
     step = 2e-3
 
@@ -116,15 +135,16 @@ def test_taylor_error_falls_with_the_order(request, scene, fish, order_fixture, 
     errors = []
     for epsilon in (0.04, 0.02, 0.01):
         xi = model.xi_center + epsilon * direction
-        system = ReducedSystem(model, scene, xi, NewmarkScheme.with_damping(0.02, 0.005))
+        system = ReducedSystem(model, scene, xi, TimeScheme.newmark(0.02, 0.005))
         projected = ProjectedFOM(scene, fish, model, xi)
         errors.append(np.linalg.norm(system.internal_force(eta) - projected.internal_force(eta)))
     ratios = [errors[0] / errors[1], errors[1] / errors[2]]
     assert all(0.8 * expected_ratio < ratio < 1.25 * expected_ratio for ratio in ratios), ratios
 
 
-def test_sensitivities_match_central_differences_of_the_prom(scene, prom):
-    short = scene.replace("solver", duration=0.4, tolerance=1e-11)   # differences need a converged Newton
+@pytest.mark.parametrize("integrator", ["generalized-alpha", "newmark"])
+def test_sensitivities_match_central_differences_of_the_prom(scene, prom, integrator):
+    short = scene.replace("solver", duration=0.4, tolerance=1e-11, integrator=integrator)   # converged Newton
     xi = prom.xi_center + np.array([0.05, -0.03, 0.03])
     result = simulate_reduced(prom, short, xi, sensitivities=True)
     step = 1e-5
