@@ -307,8 +307,7 @@ def _subdivide(newton: _Newton, scheme: TimeScheme, end: float, state, on_step):
             except StepFailure as failure:
                 if size * h / 2.0 < minimum:
                     raise StepFailure(failure.what, f"{failure.detail} (sub-step to t = {sub_end:.6g} s cut to "
-                                      f"h = {size * h:.3g} s, the minimum is {minimum:g} s)", failure.history,
-                                      cuts + int(size < 1.0)) from None
+                                      f"h = {size * h:.3g} s, the minimum is {minimum:g} s)", failure.history, cuts) from None
                 size /= 2.0
                 continue
             if on_step is not None:
