@@ -156,7 +156,7 @@ class FullOrderModel:
         self._spine_global_blocks = self.comm.allreduce(global_blocks, op=MPI.SUM)
         dorsal_z = rest_points[tags.dorsal_nodes, 2] - tags.box.z_axis
         self.spine = SpineGeometry(rest_points[self.spine_nodes, :2],
-                                   virtual_mass(dorsal_z, self.scene.fluid.density))
+                                   virtual_mass(dorsal_z, self.scene.fluid.density), self.scene.fluid.spine_force)
         self.thrust_on = self.scene.fluid.thrust
 
     def _build_boundary_conditions(self):

@@ -36,7 +36,8 @@ class ReducedSystem:
         self.amplitude = scene.actuation.amplitude if amplitude is None else amplitude
         self.frequency = scene.actuation.frequency
         self.dorsal_z = prom.dorsal_z + prom.dorsal_z_gradient @ d if d.size else prom.dorsal_z
-        self.spine = SpineGeometry(prom.spine_rest_xy, virtual_mass(self.dorsal_z, prom.fluid_density))
+        self.spine = SpineGeometry(prom.spine_rest_xy, virtual_mass(self.dorsal_z, prom.fluid_density),
+                                   scene.fluid.spine_force)
         self.spine_rows = prom.spine_rows.reshape(-1, prom.size)            # (2 n_spine, m)
         self.com_weights = prom.mass_moment_x.at(d) / float(prom.total_mass.at(d))
         self._factors = None

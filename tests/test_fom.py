@@ -44,11 +44,15 @@ def test_rigid_motions_produce_no_elastic_force(xi):
     assert np.linalg.norm(model.internal_force(rotated)) < 1e-10 * reference
 
 
-@pytest.mark.parametrize("integrator", ["generalized-alpha", "newmark"])
-def test_newton_matrix_is_the_derivative_of_the_step_residual(shaped_model, integrator):
+@pytest.mark.parametrize("integrator, spine_force", [("generalized-alpha", "source"), ("newmark", "source"),
+                                                     ("generalized-alpha", "lagrangian")])
+def test_newton_matrix_is_the_derivative_of_the_step_residual(shaped_model, integrator, spine_force):
     """S du = d/dε r(t_{n+1-α_f}, u_{n+1-α_f}, u̇_{n+1-α_f}, ü_{n+1-α_m}) at u_{n+1} + ε du (thrust, drag,
     muscles all on), the intermediate state interpolated from an old state with the scheme's kinematics."""
     model = shaped_model
+    if spine_force != "source":
+        scene = coarse_scene(shapes=SHAPES, fluid={"spine_force": spine_force})
+        model = FullOrderModel(scene, load_fish(scene), DESIGN)
     scheme = TimeScheme.from_solver(coarse_scene(solver={"integrator": integrator}).solver)
     model.set_time_step(scheme)
     rng = np.random.default_rng(1)

@@ -86,10 +86,14 @@ def test_reduced_jacobians_match_finite_differences(scene, prom):
         assert relative_error(tangents[slot], np.column_stack(columns)) < 1e-7
 
 
-@pytest.mark.parametrize("integrator", ["generalized-alpha", "newmark"])
-def test_reduced_newton_matrix_is_the_derivative_of_the_step_residual(scene, prom, integrator):
+INTEGRATOR_AND_SPINE_FORCE = [("generalized-alpha", "source"), ("newmark", "source"), ("generalized-alpha", "lagrangian")]
+
+
+@pytest.mark.parametrize("integrator, spine_force", INTEGRATOR_AND_SPINE_FORCE)
+def test_reduced_newton_matrix_is_the_derivative_of_the_step_residual(scene, prom, integrator, spine_force):
     """S = d/dη_{n+1} r(t_{n+1-α_f}, η_{n+1-α_f}, η̇_{n+1-α_f}, η̈_{n+1-α_m}) with the scheme's kinematics."""
-    scheme = TimeScheme.from_solver(scene.replace("solver", integrator=integrator).solver)
+    scene = scene.replace("solver", integrator=integrator).replace("fluid", spine_force=spine_force)
+    scheme = TimeScheme.from_solver(scene.solver)
     system = ReducedSystem(prom, scene, prom.xi_center + 0.01, scheme)
     rng = np.random.default_rng(5)
     old = random_states(rng, prom.size, 0.02)
@@ -142,9 +146,10 @@ def test_taylor_error_falls_with_the_order(request, scene, fish, order_fixture, 
     assert all(0.8 * expected_ratio < ratio < 1.25 * expected_ratio for ratio in ratios), ratios
 
 
-@pytest.mark.parametrize("integrator", ["generalized-alpha", "newmark"])
-def test_sensitivities_match_central_differences_of_the_prom(scene, prom, integrator):
+@pytest.mark.parametrize("integrator, spine_force", INTEGRATOR_AND_SPINE_FORCE)
+def test_sensitivities_match_central_differences_of_the_prom(scene, prom, integrator, spine_force):
     short = scene.replace("solver", duration=0.4, tolerance=1e-11, integrator=integrator)   # converged Newton
+    short = short.replace("fluid", spine_force=spine_force)
     xi = prom.xi_center + np.array([0.05, -0.03, 0.03])
     result = simulate_reduced(prom, short, xi, sensitivities=True)
     step = 1e-5
