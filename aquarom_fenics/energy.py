@@ -1,0 +1,138 @@
+"""Per-force discrete energy balance of a FOM run under its time scheme (SPEC §5–§6).
+
+Every converged step n → n+1 makes the residual vanish at the scheme's evaluation points: for
+generalized-α at (t_{n+1-α_f}, u_{n+1-α_f}, u̇_{n+1-α_f}, ü_{n+1-α_m}) with weight 1; for Newmark
+at the step's end, so (a run from rest with zero force has r_0 = 0 as well) the mean of the
+residuals at t_n and t_{n+1} vanishes: two points of weight ½. At each point p
+
+    M ü_p + C u̇_p + f_int(u_p) = f_act(u_p, t_p) + f_thrust(u_p, u̇_p, ü_p) + f_drag(u̇_p)
+
+Dotted with Δu = u_{n+1} - u_n, weighted and summed over the steps:
+
+    W_act + W_thrust,a + W_thrust,v + W_drag = D_Rayleigh + D_numerical + ΔT + ΔΠ
+
+    W_F          = Σ w_p F_p·Δu  (the thrust split into its acceleration (added-mass) term
+                   f(u_p, u̇_p, ü_p) - f(u_p, u̇_p, 0) and the rest: velocity terms, tail force, ∂T_a/∂x)
+    D_Rayleigh   = Σ w_p (C u̇_p)·Δu
+    D_numerical  = Σ [w_p (M ü_p)·Δu - ΔT_n] + Σ [w_p f_int(u_p)·Δu - ΔΠ_n]: the scheme's inertia and
+                   internal force against the exact changes of T = ½ u̇ᵀM u̇ and Π. For generalized-α it
+                   is h(½ - α_f) ū̇ᵀMΔü + h²(β - γ/2) ü_mᵀMΔü + (½ - α_f) ΔuᵀK_tΔu + O(Δu³) per step;
+                   for Newmark with α_N = 0 it vanishes up to O(Δu³) (trapezoidal rule).
+    ΔT, ΔΠ       kinetic and strain energy at the end minus at the start [J]
+
+What is left (the imbalance) is the weighted Newton residual Σ w_p r_p·Δu, so the balance checks
+that the forces split here are the ones the integrator solved with.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from mpi4py import MPI
+
+from .integrator import TimeScheme
+
+
+@dataclass
+class EnergyBalance:
+    """Cumulative energies [J] at the stored samples (first entry 0) and the closure of the balance."""
+
+    time: np.ndarray
+    work_actuation: np.ndarray
+    work_thrust_acceleration: np.ndarray
+    work_thrust_velocity: np.ndarray
+    work_drag: np.ndarray
+    dissipated_rayleigh: np.ndarray
+    dissipated_numerical: np.ndarray
+    kinetic_change: np.ndarray
+    strain_change: np.ndarray
+
+    @property
+    def works(self) -> dict[str, np.ndarray]:
+        return {"actuation": self.work_actuation, "thrust_acceleration": self.work_thrust_acceleration,
+                "thrust_velocity": self.work_thrust_velocity, "drag": self.work_drag}
+
+    @property
+    def imbalance(self) -> np.ndarray:
+        """Σ W_F - D_Rayleigh - D_numerical - ΔT - ΔΠ [J]."""
+        return (sum(self.works.values()) - self.dissipated_rayleigh - self.dissipated_numerical
+                - self.kinetic_change - self.strain_change)
+
+    @property
+    def throughput(self) -> float:
+        """Σ_n Σ_F |ΔW_F,n| [J], the scale of the balance (final works can nearly cancel over a cycle)."""
+        return float(sum(np.abs(np.diff(work)).sum() for work in self.works.values()))
+
+    @property
+    def relative_imbalance(self) -> float:
+        return float(abs(self.imbalance[-1]) / self.throughput) if self.throughput > 0 else float("nan")
+
+    def summary(self) -> dict:
+        """Final values [J], the throughput and the relative imbalance."""
+        values = {name: float(series[-1]) for name, series in asdict(self).items() if name != "time"}
+        return values | {"throughput": self.throughput, "imbalance": float(self.imbalance[-1]),
+                         "relative_imbalance": self.relative_imbalance}
+
+
+def accelerations(scheme: TimeScheme, velocities) -> list[np.ndarray]:
+    """ü_n from the stored u̇_n: u̇_{n+1} = u̇_n + h (1 - γ) ü_n + h γ ü_{n+1}, ü_0 = 0 (the run starts at rest
+    with zero force)."""
+    h, gamma = scheme.time_step, scheme.gamma
+    values = [np.zeros_like(velocities[0])]
+    for v_old, v_new in zip(velocities, velocities[1:]):
+        values.append((v_new - v_old - h * (1.0 - gamma) * values[-1]) / (h * gamma))
+    return values
+
+
+def evaluation_points(scheme: TimeScheme, time_old: float, time_new: float, old, new):
+    """(weight, (t, u, u̇, ü)) of the points where the step's residuals vanish (module docstring)."""
+    if scheme.alpha_m == 0.0 and scheme.alpha_f == 0.0:
+        return [(0.5, (time_old, *old)), (0.5, (time_new, *new))]
+    return [(1.0, scheme.evaluation_point(time_new, old, new))]
+
+
+def energy_balance(result) -> EnergyBalance:
+    """The balance of a completed ``simulate_fom(..., keep_states=True)`` run on the grid of h.
+
+    Needs the states of every step of h, so a run with cut steps is refused (ValueError).
+    """
+    if result.cut_steps:
+        raise ValueError(f"energy balance: the run cut {result.cut_steps} steps; it needs uniform steps of h")
+    model = result.model
+    scheme = model.scheme
+    comm = model.comm
+    times = np.asarray(result.trajectory.time)
+    displacements = [u for u, _ in result.states]
+    velocities = [v for _, v in result.states]
+    states = list(zip(displacements, velocities, accelerations(scheme, velocities)))
+
+    def dot(force, increment) -> float:
+        return comm.allreduce(float(force @ increment), op=MPI.SUM)
+
+    increments = {name: [0.0] for name in ("actuation", "thrust_acceleration", "thrust_velocity", "drag",
+                                           "rayleigh", "numerical", "kinetic", "strain")}
+    kinetic = [model.kinetic_energy(v) for v in velocities]
+    strain = [model.elastic_energy(u) for u in displacements]
+    for n in range(len(states) - 1):
+        old, new = states[n], states[n + 1]
+        step = new[0] - old[0]
+        kinetic_step, strain_step = kinetic[n + 1] - kinetic[n], strain[n + 1] - strain[n]
+        values = dict.fromkeys(increments, 0.0)
+        values.update(kinetic=kinetic_step, strain=strain_step, numerical=-kinetic_step - strain_step)
+        for weight, (time, u, v, a) in evaluation_points(scheme, float(times[n]), float(times[n + 1]), old, new):
+            thrust_without_acceleration = model.thrust_force(u, v, np.zeros_like(a))
+            for name, force in (("actuation", model.actuation_force(time, u)),
+                                ("thrust_acceleration", model.thrust_force(u, v, a) - thrust_without_acceleration),
+                                ("thrust_velocity", thrust_without_acceleration), ("drag", model.drag_force(v)),
+                                ("rayleigh", model.matvec(model.damping_matrix, v)),
+                                # D_numerical,n = Σ w_p [(M ü_p)·Δu + f_int(u_p)·Δu] - ΔT_n - ΔΠ_n
+                                ("numerical", model.matvec(model.mass_matrix, a) + model.internal_force(u))):
+                values[name] += weight * dot(force, step)
+        for name, value in values.items():
+            increments[name].append(value)
+    cumulative = {name: np.cumsum(values) for name, values in increments.items()}
+    return EnergyBalance(time=times, work_actuation=cumulative["actuation"],
+                         work_thrust_acceleration=cumulative["thrust_acceleration"],
+                         work_thrust_velocity=cumulative["thrust_velocity"], work_drag=cumulative["drag"],
+                         dissipated_rayleigh=cumulative["rayleigh"], dissipated_numerical=cumulative["numerical"],
+                         kinetic_change=cumulative["kinetic"], strain_change=cumulative["strain"])
