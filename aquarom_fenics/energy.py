@@ -1,27 +1,26 @@
 """Per-force discrete energy balance of a FOM run under its time scheme (SPEC §5–§6).
 
-Every converged step n → n+1 makes the residual vanish at the scheme's evaluation points: for
-generalized-α at (t_{n+1-α_f}, u_{n+1-α_f}, u̇_{n+1-α_f}, ü_{n+1-α_m}) with weight 1; for Newmark
-at the step's end, so (a run from rest with zero force has r_0 = 0 as well) the mean of the
-residuals at t_n and t_{n+1} vanishes: two points of weight ½. At each point p
+The work of each force over a step n → n+1 is the trapezoidal rule on the stored states,
+W_F,n = ½ (F_n + F_{n+1})·Δu with Δu = u_{n+1} - u_n: second order for every scheme, so the
+works do not depend on where the scheme evaluates its forces. Summed over the steps:
 
-    M ü_p + C u̇_p + f_int(u_p) = f_act(u_p, t_p) + f_thrust(u_p, u̇_p, ü_p) + f_drag(u̇_p)
+    W_act + W_thrust,a + W_thrust,v + W_drag = D_Rayleigh + D_numerical + ΔT + ΔΠ + Σ_n ρ_n
 
-Dotted with Δu = u_{n+1} - u_n, weighted and summed over the steps:
+    W_thrust,a   the thrust's acceleration (added-mass) term f(u, u̇, ü) - f(u, u̇, 0); W_thrust,v the
+                 rest: velocity terms, tail force and, for the lagrangian form, ∂T_a/∂x
+    D_Rayleigh   = Σ ½ (C u̇_n + C u̇_{n+1})·Δu
+    ΔT, ΔΠ       kinetic ½ u̇ᵀM u̇ and strain energy at the end minus at the start [J]
+    ρ_n          = Σ_p w_p r_p·Δu, the residuals r_p at the points where the step solved r = 0
+                 (generalized-α: the evaluation point (t_{n+1-α_f}, u_{n+1-α_f}, u̇_{n+1-α_f}, ü_{n+1-α_m}),
+                 w = 1; Newmark: t_n and t_{n+1}, w = ½, a run from rest with zero force has r_0 = 0)
 
-    W_act + W_thrust,a + W_thrust,v + W_drag = D_Rayleigh + D_numerical + ΔT + ΔΠ
+The step equations give Σ_p w_p r_p·Δu = 0, which fixes the scheme's numerical dissipation:
 
-    W_F          = Σ w_p F_p·Δu  (the thrust split into its acceleration (added-mass) term
-                   f(u_p, u̇_p, ü_p) - f(u_p, u̇_p, 0) and the rest: velocity terms, tail force, ∂T_a/∂x)
-    D_Rayleigh   = Σ w_p (C u̇_p)·Δu
-    D_numerical  = Σ [w_p (M ü_p)·Δu - ΔT_n] + Σ [w_p f_int(u_p)·Δu - ΔΠ_n]: the scheme's inertia and
-                   internal force against the exact changes of T = ½ u̇ᵀM u̇ and Π. For generalized-α it
-                   is h(½ - α_f) ū̇ᵀMΔü + h²(β - γ/2) ü_mᵀMΔü + (½ - α_f) ΔuᵀK_tΔu + O(Δu³) per step;
-                   for Newmark with α_N = 0 it vanishes up to O(Δu³) (trapezoidal rule).
-    ΔT, ΔΠ       kinetic and strain energy at the end minus at the start [J]
+    D_numerical,n = Σ_F W_F,n - D_Rayleigh,n - ΔT_n - ΔΠ_n - Σ_p w_p r_p·Δu
 
-What is left (the imbalance) is the weighted Newton residual Σ w_p r_p·Δu, so the balance checks
-that the forces split here are the ones the integrator solved with.
+the energy the discrete equations remove beyond the physical dissipation (zero up to O(Δu³) for
+the trapezoidal rule, Newmark α_N = 0). The imbalance that is left is Σ ρ_n, the Newton residual of
+the steps, a check that the forces split here are the ones the integrator solved with.
 """
 from __future__ import annotations
 
@@ -46,6 +45,7 @@ class EnergyBalance:
     dissipated_numerical: np.ndarray
     kinetic_change: np.ndarray
     strain_change: np.ndarray
+    newton_residual: np.ndarray      # Σ ρ_n, what the balance leaves
 
     @property
     def works(self) -> dict[str, np.ndarray]:
@@ -84,6 +84,16 @@ def accelerations(scheme: TimeScheme, velocities) -> list[np.ndarray]:
     return values
 
 
+def nodal_forces(model, time: float, u, v, a) -> dict[str, np.ndarray]:
+    """The forces of the balance at one state, owned dofs [N]: f_act, the thrust's added-mass term
+    and the rest of the thrust, f_drag, and the Rayleigh force C u̇."""
+    thrust_without_acceleration = model.thrust_force(u, v, np.zeros_like(a))
+    return {"actuation": model.actuation_force(time, u),
+            "thrust_acceleration": model.thrust_force(u, v, a) - thrust_without_acceleration,
+            "thrust_velocity": thrust_without_acceleration, "drag": model.drag_force(v),
+            "rayleigh": model.matvec(model.damping_matrix, v)}
+
+
 def evaluation_points(scheme: TimeScheme, time_old: float, time_new: float, old, new):
     """(weight, (t, u, u̇, ü)) of the points where the step's residuals vanish (module docstring)."""
     if scheme.alpha_m == 0.0 and scheme.alpha_f == 0.0:
@@ -110,24 +120,24 @@ def energy_balance(result) -> EnergyBalance:
         return comm.allreduce(float(force @ increment), op=MPI.SUM)
 
     increments = {name: [0.0] for name in ("actuation", "thrust_acceleration", "thrust_velocity", "drag",
-                                           "rayleigh", "numerical", "kinetic", "strain")}
+                                           "rayleigh", "numerical", "kinetic", "strain", "residual")}
     kinetic = [model.kinetic_energy(v) for v in velocities]
     strain = [model.elastic_energy(u) for u in displacements]
+    forces = [nodal_forces(model, float(time), *state) for time, state in zip(times, states)]
     for n in range(len(states) - 1):
         old, new = states[n], states[n + 1]
         step = new[0] - old[0]
-        kinetic_step, strain_step = kinetic[n + 1] - kinetic[n], strain[n + 1] - strain[n]
-        values = dict.fromkeys(increments, 0.0)
-        values.update(kinetic=kinetic_step, strain=strain_step, numerical=-kinetic_step - strain_step)
-        for weight, (time, u, v, a) in evaluation_points(scheme, float(times[n]), float(times[n + 1]), old, new):
-            thrust_without_acceleration = model.thrust_force(u, v, np.zeros_like(a))
-            for name, force in (("actuation", model.actuation_force(time, u)),
-                                ("thrust_acceleration", model.thrust_force(u, v, a) - thrust_without_acceleration),
-                                ("thrust_velocity", thrust_without_acceleration), ("drag", model.drag_force(v)),
-                                ("rayleigh", model.matvec(model.damping_matrix, v)),
-                                # D_numerical,n = Σ w_p [(M ü_p)·Δu + f_int(u_p)·Δu] - ΔT_n - ΔΠ_n
-                                ("numerical", model.matvec(model.mass_matrix, a) + model.internal_force(u))):
-                values[name] += weight * dot(force, step)
+        values = {name: 0.5 * dot(forces[n][name] + forces[n + 1][name], step) for name in forces[n]}
+        points = evaluation_points(scheme, float(times[n]), float(times[n + 1]), old, new)
+        # the added mass is inertia: its work at the points where the scheme evaluates ü
+        values["thrust_acceleration"] = sum(weight * dot(nodal_forces(model, *point)["thrust_acceleration"], step)
+                                            for weight, point in points)
+        values["kinetic"], values["strain"] = kinetic[n + 1] - kinetic[n], strain[n + 1] - strain[n]
+        values["residual"] = sum(weight * dot(model.residual(*point)[0], step) for weight, point in points)
+        # D_numerical,n = Σ_F W_F,n - D_Rayleigh,n - ΔT_n - ΔΠ_n - Σ_p w_p r_p·Δu
+        values["numerical"] = (sum(values[name] for name in ("actuation", "thrust_acceleration", "thrust_velocity",
+                                                              "drag"))
+                               - values["rayleigh"] - values["kinetic"] - values["strain"] - values["residual"])
         for name, value in values.items():
             increments[name].append(value)
     cumulative = {name: np.cumsum(values) for name, values in increments.items()}
@@ -135,4 +145,5 @@ def energy_balance(result) -> EnergyBalance:
                          work_thrust_acceleration=cumulative["thrust_acceleration"],
                          work_thrust_velocity=cumulative["thrust_velocity"], work_drag=cumulative["drag"],
                          dissipated_rayleigh=cumulative["rayleigh"], dissipated_numerical=cumulative["numerical"],
-                         kinetic_change=cumulative["kinetic"], strain_change=cumulative["strain"])
+                         kinetic_change=cumulative["kinetic"], strain_change=cumulative["strain"],
+                         newton_residual=cumulative["residual"])
