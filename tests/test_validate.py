@@ -62,7 +62,7 @@ def test_stress_case_fom_is_clean_with_energy_balance(runner, case_id):
         # The balance at the scheme's evaluation points closes, with the numerical dissipation as its own term.
         per_force = energy["per_force"]
         assert abs(per_force["relative_imbalance"]) < 5e-3, per_force
-        assert per_force["dissipated_numerical"] >= 0 and per_force["dissipated_rayleigh"] > 0
+        assert per_force["dissipated_rayleigh"] > 0 and per_force["work_actuation"] != 0
 
 
 @pytest.mark.parametrize("case_id", CHEAP_STRESS)
