@@ -6,8 +6,10 @@ works do not depend on where the scheme evaluates its forces. Summed over the st
 
     W_act + W_thrust,a + W_thrust,v + W_drag = D_Rayleigh + D_numerical + ΔT + ΔΠ + Σ_n ρ_n
 
-    W_thrust,a   the thrust's acceleration (added-mass) term f(u, u̇, ü) - f(u, u̇, 0); W_thrust,v the
-                 rest: velocity terms, tail force and, for the lagrangian form, ∂T_a/∂x
+    W_thrust,a   the thrust's acceleration (added-mass) term f(u, u̇, ü) - f(u, u̇, 0), an inertia, taken
+                 like M ü at the points p below (Σ_p w_p f_a,p·Δu: the scheme's ü_n lags ü(t_n) by
+                 O(h) for α_m ≠ α_f); W_thrust,v the rest: velocity terms, tail force and, for the
+                 lagrangian form, ∂T_a/∂x
     D_Rayleigh   = Σ ½ (C u̇_n + C u̇_{n+1})·Δu
     ΔT, ΔΠ       kinetic ½ u̇ᵀM u̇ and strain energy at the end minus at the start [J]
     ρ_n          = Σ_p w_p r_p·Δu, the residuals r_p at the points where the step solved r = 0
