@@ -22,7 +22,7 @@ from .cost import CostWeights, design_space, evaluate
 from .errors import SolverError
 from .fish import Fish, load_fish
 from .fom import FullOrderModel
-from .newmark import NewmarkScheme
+from .integrator import TimeScheme
 from .prom import ReducedModel
 from .reduced_dynamics import ReducedSystem, simulate_reduced
 from .scene import Scene
@@ -137,8 +137,7 @@ def basis_mismatch(prom: ReducedModel, fish: Fish) -> str | None:
 
 
 def reduced_system(prom: ReducedModel, scene: Scene, xi: np.ndarray) -> ReducedSystem:
-    scheme = NewmarkScheme.with_damping(scene.solver.time_step, scene.solver.newmark_alpha)
-    return ReducedSystem(prom, scene, xi, scheme)
+    return ReducedSystem(prom, scene, xi, TimeScheme.from_solver(scene.solver))
 
 
 def check_tensors(prom: ReducedModel, scene: Scene, projected: ProjectedFOM) -> CheckResult:

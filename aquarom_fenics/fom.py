@@ -22,7 +22,7 @@ from .forms.drag import drag_direction_form
 from .forms.elasticity import strain_energy
 from .forms.inertia import mass_form, mass_moment_x, total_mass
 from .forms.muscle import muscle_energy
-from .newmark import NewmarkScheme
+from .integrator import TimeScheme
 from .errors import SolverError
 from .scene import Scene
 from .thrust import SpineGeometry, thrust_force, thrust_jacobians, virtual_mass
@@ -90,8 +90,7 @@ class FullOrderModel:
         self._work_in = PETSc.Vec().createMPI((self.n_owned_dofs, self.n_global_dofs), comm=comm)
         self._work_out = self._work_in.duplicate()
         self._solver = None
-        self.scheme = NewmarkScheme.with_damping(scene.solver.time_step, scene.solver.newmark_alpha)
-        self.set_time_step(self.scheme)
+        self.set_time_step(TimeScheme.from_solver(scene.solver))
 
     # ------------------------------------------------------------------ set-up
     def _cell_field(self, values_by_cell: np.ndarray, name: str):
@@ -201,7 +200,7 @@ class FullOrderModel:
         self._spine_global_blocks = self.comm.allreduce(global_blocks, op=MPI.SUM)
         dorsal_z = rest_points[tags.dorsal_nodes, 2] - tags.box.z_axis
         self.spine = SpineGeometry(rest_points[self.spine_nodes, :2],
-                                   virtual_mass(dorsal_z, self.scene.fluid.density))
+                                   virtual_mass(dorsal_z, self.scene.fluid.density), self.scene.fluid.spine_force)
         self.thrust_on = self.scene.fluid.thrust
 
     def _build_boundary_conditions(self):
@@ -242,8 +241,8 @@ class FullOrderModel:
         head = self.owned_positions(np.array([self.fish.tags.head_spine_node]))[0]
         self._head_x_owned = 3 * head  # empty on ranks that do not own the head node
 
-    def set_time_step(self, scheme: NewmarkScheme) -> None:
-        """Newmark constants enter S = K_t + (γ/(βh)) C_t + (1/(βh²)) M_t."""
+    def set_time_step(self, scheme: TimeScheme) -> None:
+        """The scheme's factors enter S = (1 - α_f) K_t + (1 - α_f)(γ/(βh)) C_t + ((1 - α_m)/(βh²)) M_t."""
         self.scheme = scheme
         self._inertia_damping = self.mass_matrix.copy()
         self._inertia_damping.scale(scheme.acceleration_factor)
@@ -314,9 +313,12 @@ class FullOrderModel:
         return residual, scale
 
     def assemble_newton_matrix(self, time, u, v, a) -> PETSc.Mat:
-        """S = K_t + (γ/(βh)) C_t + (1/(βh²)) M_t with the exact thrust and drag Jacobians."""
+        """S = ∂r_{n+1-α}/∂u_{n+1} = (1 - α_f) K_t + (1 - α_f)(γ/(βh)) C_t + ((1 - α_m)/(βh²)) M_t at the
+        evaluation point (t, u, u̇, ü), with the exact thrust and drag Jacobians."""
         self._set_state(time, u)
         matrix = fx.assemble_matrix_into(self.tangent_matrix, self.forms["tangent"])
+        if self.scheme.stiffness_factor != 1.0:
+            matrix.scale(self.scheme.stiffness_factor)
         matrix.axpy(1.0, self._inertia_damping, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         if self.thrust_on:
             self._add_thrust_jacobian(matrix, u, v, a)
@@ -329,8 +331,9 @@ class FullOrderModel:
     def _add_thrust_jacobian(self, matrix, u, v, a):
         jacobians = thrust_jacobians(self.spine, *(self.spine_values(x)[:, :2] for x in (u, v, a)))
         scheme = self.scheme
-        # S gets -(∂f/∂u + γ/(βh) ∂f/∂u̇ + 1/(βh²) ∂f/∂ü) since f_thrust is on the right-hand side.
-        block = -(jacobians[0] + scheme.velocity_factor * jacobians[1] + scheme.acceleration_factor * jacobians[2])
+        # S gets -((1 - α_f) ∂f/∂u + (1 - α_f) γ/(βh) ∂f/∂u̇ + (1 - α_m)/(βh²) ∂f/∂ü): f_thrust is on the right.
+        block = -(scheme.stiffness_factor * jacobians[0] + scheme.velocity_factor * jacobians[1]
+                  + scheme.acceleration_factor * jacobians[2])
         n_spine = self.spine_nodes.size
         spine_dofs = (3 * self._spine_global_blocks[:, None] + np.arange(2)).astype(np.int32)
         for index in self._spine_index:
@@ -341,7 +344,7 @@ class FullOrderModel:
             matrix.setValues(rows, columns, values, addv=PETSc.InsertMode.ADD_VALUES)
 
     def _add_drag_jacobian(self, matrix, v):
-        """∂(-g v_x²)/∂u = -2 g v_x (γ/(βh)) e_head_xᵀ: a column at the head's x dof."""
+        """∂(-g v_x²)/∂u_{n+1} = -2 g v_x (1 - α_f)(γ/(βh)) e_head_xᵀ: a column at the head's x dof."""
         head_global = int(3 * self._spine_global_blocks[-1])
         factor = -2.0 * self.head_velocity_x(v) * self.scheme.velocity_factor
         rows = self.global_dofs(self._drag_rows)

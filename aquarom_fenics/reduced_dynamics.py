@@ -1,10 +1,8 @@
-"""Reduced Newmark-Newton integration of a PROM at a design ξ, with sensitivities dη/dξ (SPEC §8–§9).
+"""Reduced generalized-α Newton integration of a PROM at a design ξ, with sensitivities dη/dξ (SPEC §8–§9).
 
-Direct differentiation of the Newmark scheme: after each converged step,
-
-    S η'_{n+1} = -∂r/∂ξ - C_t (u̇'_pred - (γ/(βh)) η'_pred) + M_t η'_pred / (βh²),
-
-with the same S = K_t + (γ/(βh)) C_t + (1/(βh²)) M_t, and u̇', ü' from the Newmark kinematics.
+Direct differentiation of the discrete step r(t_{n+1-α_f}, η_{n+1-α_f}, η̇_{n+1-α_f}, η̈_{n+1-α_m}; ξ) = 0
+(Brüls & Eberhard): after each converged (sub-)step one linear solve with the Newton matrix
+S = (1 - α_f) K_t + (1 - α_f)(γ/(βh)) C_t + ((1 - α_m)/(βh²)) M_t of that step (``propagate_sensitivity``).
 """
 from __future__ import annotations
 
@@ -14,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
-from .newmark import NewmarkScheme, NewtonSettings, StepReport, integrate
+from .integrator import IntegrationStopped, NewtonSettings, StepReport, TimeScheme, between, integrate
 from .prom import ReducedModel
 from .scene import Scene
 from .thrust import SpineGeometry, thrust_force, thrust_force_per_virtual_mass, thrust_jacobians, virtual_mass
@@ -24,7 +22,7 @@ from .trajectory import Trajectory, swimming_distance, tail_amplitude, window_ma
 class ReducedSystem:
     """The PROM's tensors evaluated at one design ξ (implements ``NewtonSystem``)."""
 
-    def __init__(self, prom: ReducedModel, scene: Scene, xi, scheme: NewmarkScheme, amplitude: float | None = None):
+    def __init__(self, prom: ReducedModel, scene: Scene, xi, scheme: TimeScheme, amplitude: float | None = None):
         self.prom, self.scheme = prom, scheme
         self.delta = prom.delta(xi)
         d = self.delta
@@ -38,7 +36,8 @@ class ReducedSystem:
         self.amplitude = scene.actuation.amplitude if amplitude is None else amplitude
         self.frequency = scene.actuation.frequency
         self.dorsal_z = prom.dorsal_z + prom.dorsal_z_gradient @ d if d.size else prom.dorsal_z
-        self.spine = SpineGeometry(prom.spine_rest_xy, virtual_mass(self.dorsal_z, prom.fluid_density))
+        self.spine = SpineGeometry(prom.spine_rest_xy, virtual_mass(self.dorsal_z, prom.fluid_density),
+                                   scene.fluid.spine_force)
         self.spine_rows = prom.spine_rows.reshape(-1, prom.size)            # (2 n_spine, m)
         self.com_weights = prom.mass_moment_x.at(d) / float(prom.total_mass.at(d))
         self._factors = None
@@ -108,9 +107,12 @@ class ReducedSystem:
         damping -= 2.0 * (head @ eta_dot) * np.outer(self.drag, head)
         return stiffness, damping, mass
 
+    def set_time_step(self, scheme: TimeScheme) -> None:
+        self.scheme = scheme
+
     def newton_matrix(self, time, eta, eta_dot, eta_ddot):
-        stiffness, damping, mass = self.tangents(time, eta, eta_dot, eta_ddot)
-        return stiffness + self.scheme.velocity_factor * damping + self.scheme.acceleration_factor * mass
+        """S = ∂r_{n+1-α}/∂η_{n+1} at the evaluation point (t, η, η̇, η̈)."""
+        return newton_matrix(self.scheme, *self.tangents(time, eta, eta_dot, eta_ddot))
 
     def factorize(self, time, eta, eta_dot, eta_ddot):
         self._factors = scipy.linalg.lu_factor(self.newton_matrix(time, eta, eta_dot, eta_ddot))
@@ -174,6 +176,7 @@ class ReducedResult:
     completed: bool
     wall_time: float
     error: str | None = None
+    cut_steps: int = 0                            # sub-steps shorter than h taken by the step control
     states: np.ndarray | None = None              # (n_samples, m) η
     sensitivities: np.ndarray | None = None       # (n_samples, m, p) dη/dξ
     distance_gradient: np.ndarray | None = None   # (p,) dd/dξ
@@ -183,6 +186,7 @@ class ReducedResult:
         iterations = np.asarray(self.trajectory.newton_iterations[1:])
         return {"distance": self.distance, "tail_amplitude": self.tail_amplitude, "completed": self.completed,
                 "error": self.error, "wall_time": self.wall_time, "steps": len(self.trajectory) - 1,
+                "cut_steps": self.cut_steps,
                 "mean_newton_iterations": float(iterations.mean()) if iterations.size else None,
                 "distance_gradient": None if self.distance_gradient is None else self.distance_gradient.tolist(),
                 "timings": self.timings}
@@ -196,13 +200,12 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
     one more column, d/dA of the actuation amplitude (``amplitude`` overrides the scene's A).
     """
     from .diagnostics import newton_failure_hints
-    from .errors import SolverError
     from .simulate import check_time_grid
 
     started = clock.perf_counter()
     n_steps = check_time_grid(scene)
     xi = prom.xi_center if xi is None else np.asarray(xi, dtype=float)
-    scheme = NewmarkScheme.with_damping(scene.solver.time_step, scene.solver.newmark_alpha)
+    scheme = TimeScheme.from_solver(scene.solver)
     system = ReducedSystem(prom, scene, xi, scheme, amplitude)
     m = prom.size
     columns = (prom.n_parameters if sensitivities else 0) + (1 if amplitude_sensitivity else 0)
@@ -212,31 +215,38 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
     trajectory.append(0.0, *system.observables(zero), 0)
     sensitivity = [np.zeros((m, columns))] * 3
     sensitivity_history = [np.zeros((m, columns))]
+    cut_steps = 0
+
+    def advance_sensitivity(step_scheme: TimeScheme, time: float, old, new):
+        """(η', η̇', η̈') follow every accepted (sub-)step."""
+        nonlocal sensitivity
+        point = step_scheme.evaluation_point(time, old, new)
+        derivative = np.zeros((m, 0))
+        if sensitivities:
+            derivative = system.parameter_derivative(*point)
+        if amplitude_sensitivity:
+            derivative = np.column_stack([derivative, system.amplitude_derivative(point[0], point[1])])
+        sensitivity = propagate_sensitivity(system, step_scheme, point, sensitivity, derivative)
 
     def record(report: StepReport, eta, eta_dot, eta_ddot):
-        nonlocal sensitivity
+        nonlocal cut_steps
+        cut_steps = report.cut_steps
         trajectory.append(report.time, *system.observables(eta), report.iterations)
         states.append(eta.copy())
         if columns:
-            derivative = np.zeros((m, 0))
-            if sensitivities:
-                derivative = system.parameter_derivative(report.time, eta, eta_dot, eta_ddot)
-            if amplitude_sensitivity:
-                derivative = np.column_stack([derivative, system.amplitude_derivative(report.time, eta)])
-            sensitivity = propagate_sensitivity(system, report.time, (eta, eta_dot, eta_ddot), sensitivity, derivative)
             sensitivity_history.append(sensitivity[0].copy())
 
-    settings = NewtonSettings(tolerance=scene.solver.tolerance, max_iterations=scene.solver.max_iterations)
     error = None
     try:
-        integrate(system, scheme, n_steps, (zero, zero, zero), settings, record,
-                  explain=lambda: "; ".join(newton_failure_hints(scene)))
-    except SolverError as failure:
-        error = str(failure)
+        integrate(system, scheme, n_steps, (zero, zero, zero), NewtonSettings.from_solver(scene.solver), record,
+                  explain=lambda: "; ".join(newton_failure_hints(scene)),
+                  on_step=advance_sensitivity if columns else None)
+    except IntegrationStopped as failure:
+        error, cut_steps = str(failure), failure.cut_steps
     arrays = trajectory.arrays()
     completed = error is None
     result = ReducedResult(
-        trajectory=trajectory, completed=completed, error=error, states=np.array(states),
+        trajectory=trajectory, completed=completed, error=error, states=np.array(states), cut_steps=cut_steps,
         distance=swimming_distance(arrays["time"], arrays["com_x"]) if completed else None,
         tail_amplitude=tail_amplitude(arrays["time"], arrays["tail_y"]) if completed else None,
         wall_time=clock.perf_counter() - started)
@@ -250,19 +260,33 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
     return result
 
 
-def propagate_sensitivity(system: ReducedSystem, time: float, state, previous, parameter_derivative):
-    """(η', η̇', η̈') at t_{n+1} from those at t_n by direct differentiation of Newmark.
+def newton_matrix(scheme: TimeScheme, stiffness, damping, mass) -> np.ndarray:
+    """S = (1 - α_f) K_t + (1 - α_f)(γ/(βh)) C_t + ((1 - α_m)/(βh²)) M_t."""
+    return scheme.stiffness_factor * stiffness + scheme.velocity_factor * damping + scheme.acceleration_factor * mass
 
-    ``parameter_derivative`` is ∂r/∂(parameters) at the converged state, shape (m, columns).
+
+def propagate_sensitivity(system: ReducedSystem, scheme: TimeScheme, point, previous, parameter_derivative):
+    """(η', η̇', η̈')_{n+1} from ``previous`` = (η', η̇', η̈')_n by differentiating the converged step.
+
+    d/dξ of r(t_{n+1-α_f}, η_{n+1-α_f}, η̇_{n+1-α_f}, η̈_{n+1-α_m}; ξ) = 0 with the scheme's kinematics,
+    tangents (K_t, C_t, M_t) and ∂r/∂ξ = ``parameter_derivative`` (shape (m, columns)) at the
+    evaluation ``point``, and (η'_p, η̇'_p) = predict(η'_n, η̇'_n, η̈'_n), v_f = (1 - α_f)γ/(βh),
+    a_f = (1 - α_m)/(βh²):
+
+        S η'_{n+1} = -∂r/∂ξ - α_f K_t η'_n - C_t ((1 - α_f) η̇'_p + α_f η̇'_n - v_f η'_p)
+                     + a_f M_t η'_p - α_m M_t η̈'_n
     """
-    scheme = system.scheme
-    stiffness, damping, mass = system.tangents(time, *state)
-    matrix = stiffness + scheme.velocity_factor * damping + scheme.acceleration_factor * mass
+    stiffness, damping, mass = system.tangents(*point)
+    u_old, v_old, a_old = previous
     u_predicted, v_predicted = scheme.predict(*previous)
     rhs = (-parameter_derivative
-           - damping @ (v_predicted - scheme.velocity_factor * u_predicted)
+           - damping @ (between(v_old, v_predicted, scheme.alpha_f) - scheme.velocity_factor * u_predicted)
            + scheme.acceleration_factor * (mass @ u_predicted))
-    u_new = np.linalg.solve(matrix, rhs)
+    if scheme.alpha_f:
+        rhs -= scheme.alpha_f * (stiffness @ u_old)
+    if scheme.alpha_m:
+        rhs -= scheme.alpha_m * (mass @ a_old)
+    u_new = np.linalg.solve(newton_matrix(scheme, stiffness, damping, mass), rhs)
     v_new, a_new = scheme.correct(u_new, u_predicted, v_predicted)
     return u_new, v_new, a_new
 

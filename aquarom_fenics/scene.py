@@ -90,6 +90,7 @@ class FluidSection:
     density: float = _spec(1000.0, _positive, "ρ_w [kg/m³]")
     thrust: bool = _spec(True, None, "Lighthill reactive thrust on the spine")
     drag: bool = _spec(True, None, "form drag on the skin")
+    spine_force: str = _spec("source", _one_of("source", "lagrangian"), "spine force -d/dt(∂T_a/∂v) ('source') or with +∂T_a/∂x ('lagrangian', exchanges no energy by itself)")
 
 
 @dataclass(frozen=True)
@@ -111,12 +112,15 @@ class LinearConstraint:
 
 @dataclass(frozen=True)
 class SolverSection:
-    time_step: float = _spec(0.02, _positive, "Newmark step h [s]")
+    time_step: float = _spec(0.02, _positive, "time step h [s]")
     duration: float = _spec(2.0, lambda v: None if v >= 0.1 else "must be ≥ 0.1 s (the distance averages the last 0.1 s)", "horizon T [s]")
-    # SPEC §6 gives α_N = 0.005; with it a high-frequency oscillation of the spine nodes grows under
-    # the Lighthill forces on finer meshes (levels 4-5) and on thin optimal designs, and the FOM
-    # stops near t = 1.9 s. α_N = 0.02 damps it (nominal distance -2 %, ROM error unchanged).
-    newmark_alpha: float = _spec(0.02, lambda v: None if 0 <= v < 0.5 else "must be in [0, 0.5)", "α_N: γ = ½ + α_N, β = (1 + α_N)²/4 (SPEC: 0.005, see the note in scene.py)")
+    integrator: str = _spec("generalized-alpha", _one_of("generalized-alpha", "newmark"), "time scheme (SPEC §6)")
+    rho_infinity: float = _spec(0.8, lambda v: None if 0 <= v <= 1 else "must be in [0, 1]", "ρ∞ of generalized-α: spectral radius at h ω → ∞ (README: how it was chosen)")
+    # SPEC §6 gives α_N = 0.005 for the source's Newmark; with it a high-frequency oscillation of the
+    # spine nodes grows under the Lighthill forces on finer meshes (levels 4-5) and on thin optimal
+    # designs, and the FOM stops near t = 1.9 s. α_N = 0.02 damps it (nominal distance -2 %).
+    newmark_alpha: float = _spec(0.02, lambda v: None if 0 <= v < 0.5 else "must be in [0, 0.5)", "α_N of integrator = \"newmark\": γ = ½ + α_N, β = (1 + α_N)²/4 (SPEC: 0.005)")
+    min_time_step: float = _spec(1e-3, _positive, "a step whose Newton fails is retried with h/2, h/4, … down to this [s]")
     tolerance: float = _spec(1e-6, _positive, "relative Newton tolerance")
     max_iterations: int = _spec(30, _positive, "Newton iterations per step")
 

@@ -14,10 +14,10 @@ from mpi4py import MPI
 
 from .animate import DISPLACEMENT_FILE, write_displacement_series
 from .diagnostics import newton_failure_hints, scene_warnings
-from .errors import InputError, Interrupted, SolverError
+from .errors import InputError, Interrupted
 from .fish import Fish, load_fish
 from .fom import FullOrderModel
-from .newmark import NewmarkScheme, NewtonSettings, StepReport, integrate
+from .integrator import IntegrationStopped, NewtonSettings, StepReport, integrate
 from .outputs import TrajectoryCSV, plot_trajectory, software_versions, write_json_atomic
 from .scene import Scene
 from .trajectory import DISTANCE_WINDOW, Trajectory, swimming_distance, tail_amplitude
@@ -37,6 +37,7 @@ class SimulationResult:
     n_cells: int
     n_dofs: int
     error: str | None = None
+    cut_steps: int = 0                            # sub-steps shorter than h taken by the step control
     timings: dict = field(default_factory=dict)
     states: list = field(default_factory=list)    # owned (u, u̇) per stored sample, when asked for
     model: FullOrderModel | None = None
@@ -44,8 +45,9 @@ class SimulationResult:
     def summary(self) -> dict:
         iterations = np.asarray(self.trajectory.newton_iterations[1:])
         return {"distance": self.distance, "tail_amplitude": self.tail_amplitude, "completed": self.completed,
-                "error": self.error, "stop_reason": self.error or "completed", "wall_time": self.wall_time, "cells": self.n_cells, "dofs": self.n_dofs,
-                "steps": len(self.trajectory) - 1,
+                "error": self.error, "stop_reason": self.error or "completed", "wall_time": self.wall_time,
+                "cells": self.n_cells, "dofs": self.n_dofs, "steps": len(self.trajectory) - 1,
+                "cut_steps": self.cut_steps,
                 "mean_newton_iterations": float(iterations.mean()) if iterations.size else None,
                 "timings": self.timings}
 
@@ -86,8 +88,11 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
     trajectory = Trajectory()
     states = []
     displacements = [] if out_dir is not None else None
+    cut_steps = 0
 
     def record(report: StepReport, u, v, a):
+        nonlocal cut_steps
+        cut_steps = report.cut_steps
         values = model.observables(u)
         trajectory.append(report.time, values["head_x"], values["tail_y"], values["com_x"], report.iterations)
         if csv:
@@ -108,14 +113,14 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
     velocity = np.zeros(model.n_owned_dofs) if initial_velocity is None else model.owned_from_nodal(initial_velocity)
     zero = np.zeros(model.n_owned_dofs)
     record(StepReport(0, 0.0, 0, 0), zero, velocity, zero)
-    settings = NewtonSettings(tolerance=scene.solver.tolerance, max_iterations=scene.solver.max_iterations)
+    settings = NewtonSettings.from_solver(scene.solver)
     error = interruption = None
     try:
         with _stop_between_steps() as stop_requested:
             integrate(model, model.scheme, n_steps, (zero, velocity, zero), settings, record,
                       explain=lambda: "; ".join(newton_failure_hints(scene, model)))
-    except SolverError as failure:
-        error = str(failure)
+    except IntegrationStopped as failure:
+        error, cut_steps = str(failure), failure.cut_steps
     except KeyboardInterrupt:
         error = interruption = f"interrupted at t = {trajectory.time[-1]:g} s (Ctrl-C)"
     finally:
@@ -132,7 +137,7 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
         distance=swimming_distance(arrays["time"], arrays["com_x"]) if completed else None,
         tail_amplitude=tail_amplitude(arrays["time"], arrays["tail_y"]) if completed else None,
         completed=completed, wall_time=clock.perf_counter() - started, n_cells=model.n_cells,
-        n_dofs=model.n_global_dofs, error=error,
+        n_dofs=model.n_global_dofs, error=error, cut_steps=cut_steps,
         timings={"setup": setup_time, "time_integration": clock.perf_counter() - started - setup_time},
         states=states, model=model)
     if is_writer:

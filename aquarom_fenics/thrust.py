@@ -13,6 +13,14 @@ For a segment with rest length ℓ_0 [m] and virtual mass per length m̃ [kg/m]:
 
     f_thrust = f_tail + Σ_segments f_spine   [N]
 
+With ``spine_force = "lagrangian"`` each segment also carries ∂T_a/∂x of its added-mass energy
+T_a = ½ m̃ ℓ_0 (v·n)² (n depends on the positions of its front and rear nodes):
+
+    g = ∂T_a/∂x_f = -∂T_a/∂x_r = m̃ (v·n) Rᵀ v     at the front node, -g at the rear node
+
+so that f_spine + ∂T_a/∂x = -d/dt(∂T_a/∂v) + ∂T_a/∂x (Lagrange's equations): its power is -dT_a/dt,
+the added mass exchanges no net energy with the body over a closed cycle.
+
 Every array is plain numpy; nodal vectors are (n_nodes, 2) in (x, y), and matrices use the dof
 order (x0, y0, x1, y1, ...).
 """
@@ -36,10 +44,12 @@ class SpineGeometry:
     rest_xy: (n_nodes, 2) x-y positions [m] of the spine nodes in the shape-varied configuration
         at rest, sorted tail -> head.
     virtual_mass: (n_nodes - 1,) virtual mass per length m̃ [kg/m] of each segment.
+    spine_force: "source" (-d/dt(∂T_a/∂v)) or "lagrangian" (+∂T_a/∂x as well).
     """
 
     rest_xy: np.ndarray
     virtual_mass: np.ndarray
+    spine_force: str = "source"
 
     def __post_init__(self) -> None:
         rest_xy = np.asarray(self.rest_xy, dtype=float)
@@ -54,6 +64,12 @@ class SpineGeometry:
         object.__setattr__(self, "virtual_mass", segment_mass)
         if np.any(self.rest_length <= 0.0):
             raise ValueError("spine nodes must be distinct (a segment has zero rest length)")
+        if self.spine_force not in ("source", "lagrangian"):
+            raise ValueError(f"spine_force must be 'source' or 'lagrangian', got {self.spine_force!r}")
+
+    @property
+    def lagrangian(self) -> bool:
+        return self.spine_force == "lagrangian"
 
     @property
     def n_nodes(self) -> int:
@@ -150,6 +166,13 @@ def _spine_force_per_mass(state: _SegmentState) -> np.ndarray:
     return -state.rest_length[:, None] * bracket
 
 
+def _position_force_per_mass(state: _SegmentState) -> np.ndarray:
+    """g / m̃ = (v·n) Rᵀ v per segment (∂T_a/∂x_f / m̃, = -∂T_a/∂x_r / m̃), (n_segments, 2) [m²/s²]."""
+    v_dot_n = _row_dot(state.rear_velocity, state.normal)
+    # Rᵀ v as row vectors: v R
+    return v_dot_n[:, None] * (state.rear_velocity @ ROTATION_90)
+
+
 def thrust_force(geometry: SpineGeometry, displacement, velocity, acceleration) -> np.ndarray:
     """Lighthill thrust f = f_tail + Σ f_spine on the spine nodes, (n_nodes, 2) [N].
 
@@ -163,6 +186,11 @@ def thrust_force(geometry: SpineGeometry, displacement, velocity, acceleration) 
     force[:-1] = mass[:, None] * _spine_force_per_mass(state)
     # f_0 += m̃_0 f_tail/m̃_0
     force[0] += mass[0] * _tail_force_per_mass(state)
+    if geometry.lagrangian:
+        # f_f += g, f_r -= g with g = m̃ (v·n) Rᵀ v
+        position_force = mass[:, None] * _position_force_per_mass(state)
+        force[1:] += position_force
+        force[:-1] -= position_force
     return force
 
 
@@ -172,7 +200,8 @@ def thrust_force_per_virtual_mass(
     """∂f/∂m̃_i of the thrust, (n_segments, n_nodes, 2) [N m/kg].
 
     f is linear in each segment's m̃, so f = Σ_i m̃_i ∂f/∂m̃_i. Row i holds f_spine,i / m̃_i at node
-    i, plus f_tail / m̃_0 at node 0 for i = 0.
+    i, plus f_tail / m̃_0 at node 0 for i = 0, and for the lagrangian form ±g_i / m̃_i at nodes
+    i + 1 and i.
     """
     state = _segment_state(geometry, displacement, velocity, acceleration)
     n_segments = geometry.n_nodes - 1
@@ -182,6 +211,11 @@ def thrust_force_per_virtual_mass(
     per_mass[segments, segments] = _spine_force_per_mass(state)
     # ∂f_0/∂m̃_0 += f_tail / m̃_0
     per_mass[0, 0] += _tail_force_per_mass(state)
+    if geometry.lagrangian:
+        # ∂f_{i+1}/∂m̃_i += g_i / m̃_i,  ∂f_i/∂m̃_i -= g_i / m̃_i
+        position_force = _position_force_per_mass(state)
+        per_mass[segments, segments + 1] += position_force
+        per_mass[segments, segments] -= position_force
     return per_mass
 
 
@@ -190,11 +224,11 @@ def thrust_jacobians(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact Jacobians (∂f/∂u [N/m], ∂f/∂u̇ [N s/m], ∂f/∂ü [kg]) of `thrust_force`.
 
-    Each is (2 n_nodes, 2 n_nodes) in the dof order (x0, y0, x1, y1, ...). The force on node r
-    depends only on nodes r and r + 1 (its segment's rear and front nodes), so the matrices are
-    block-tridiagonal with 2x2 blocks; in fact only the diagonal and the first upper block
-    diagonal are non-zero (block upper-bidiagonal). ∂f/∂ü is the added-mass block, non-zero on
-    the block diagonal only: -m̃ ℓ_0 n nᵀ.
+    Each is (2 n_nodes, 2 n_nodes) in the dof order (x0, y0, x1, y1, ...). A segment's forces
+    depend only on its rear and front nodes r and r + 1, so the matrices are block-tridiagonal
+    with 2x2 blocks; the source's form acts on rear nodes only (block upper-bidiagonal), the
+    lagrangian term adds the lower blocks. ∂f/∂ü is the added-mass block, non-zero on the block
+    diagonal only: -m̃ ℓ_0 n nᵀ.
     """
     state = _segment_state(geometry, displacement, velocity, acceleration)
     mass = geometry.virtual_mass[:, None, None]
@@ -236,17 +270,47 @@ def thrust_jacobians(
     damping_rear[0] += tail_mass * tail_v_dot_n * np.outer(tail_t, tail_n)
 
     n_nodes = geometry.n_nodes
-    return (
-        _assemble_upper_bidiagonal(stiffness_rear, stiffness_front, n_nodes),
-        _assemble_upper_bidiagonal(damping_rear, damping_front, n_nodes),
-        _assemble_upper_bidiagonal(added_mass_rear, np.zeros_like(added_mass_rear), n_nodes),
+    jacobians = (
+        _assemble_segment_blocks(n_nodes, rear_rear=stiffness_rear, rear_front=stiffness_front),
+        _assemble_segment_blocks(n_nodes, rear_rear=damping_rear, rear_front=damping_front),
+        _assemble_segment_blocks(n_nodes, rear_rear=added_mass_rear),
     )
+    if geometry.lagrangian:
+        jacobians[0][...] += _position_force_stiffness(geometry, state)
+        jacobians[1][...] += _position_force_damping(geometry, state)
+    return jacobians
 
 
-def _assemble_upper_bidiagonal(rear_blocks: np.ndarray, front_blocks: np.ndarray, n_nodes: int) -> np.ndarray:
-    """(2 n_nodes, 2 n_nodes) matrix with block (r, r) = rear_blocks[r], (r, r+1) = front_blocks[r]."""
+def _position_force_stiffness(geometry: SpineGeometry, state: _SegmentState) -> np.ndarray:
+    """∂(±g)/∂u of the lagrangian term g = m̃ (v·n) Rᵀ v (front +g, rear -g).
+
+    ∂g/∂n = m̃ Rᵀ v vᵀ, ∂n/∂u_f = -∂n/∂u_r = R/ℓ_0  =>  ∂g/∂u_f = -∂g/∂u_r = (m̃/ℓ_0) Rᵀ v vᵀ R.
+    """
+    v = state.rear_velocity
+    rotated = v @ ROTATION_90                      # rows Rᵀ v
+    block = (geometry.virtual_mass / state.rest_length)[:, None, None] * _outer(rotated, rotated)
+    # vᵀ R = (Rᵀ v)ᵀ, so Rᵀ v vᵀ R = (Rᵀ v)(Rᵀ v)ᵀ
+    return _assemble_segment_blocks(geometry.n_nodes, rear_rear=block, rear_front=-block,
+                                    front_rear=-block, front_front=block)
+
+
+def _position_force_damping(geometry: SpineGeometry, state: _SegmentState) -> np.ndarray:
+    """∂(±g)/∂u̇_r of g = m̃ (v·n) Rᵀ v: ∂g/∂v = m̃ [Rᵀ v nᵀ + (v·n) Rᵀ]."""
+    v, n = state.rear_velocity, state.normal
+    mass = geometry.virtual_mass[:, None, None]
+    block = mass * (_outer(v @ ROTATION_90, n) + _row_dot(v, n)[:, None, None] * ROTATION_90.T)
+    return _assemble_segment_blocks(geometry.n_nodes, rear_rear=-block, front_rear=block)
+
+
+def _assemble_segment_blocks(n_nodes: int, rear_rear=None, rear_front=None, front_rear=None,
+                             front_front=None) -> np.ndarray:
+    """(2 n_nodes, 2 n_nodes) matrix summing, per segment i (rear r = i, front f = i + 1), the 2x2
+    blocks ∂f_r/∂x_r, ∂f_r/∂x_f, ∂f_f/∂x_r, ∂f_f/∂x_f given as (n_segments, 2, 2) arrays."""
     blocks = np.zeros((n_nodes, 2, n_nodes, 2))
     rear = np.arange(n_nodes - 1)
-    blocks[rear, :, rear, :] = rear_blocks
-    blocks[rear, :, rear + 1, :] = front_blocks
+    front = rear + 1
+    for rows, columns, values in ((rear, rear, rear_rear), (rear, front, rear_front),
+                                  (front, rear, front_rear), (front, front, front_front)):
+        if values is not None:
+            blocks[rows, :, columns, :] += values
     return blocks.reshape(2 * n_nodes, 2 * n_nodes)

@@ -8,10 +8,11 @@ Studies (SPEC §11 "Validation studies", the validation issue):
           power-law exponents (over every case of a; solve times are the minimum of 3 repeats).
   c       run time against error on the reference case: basis variants, time steps, Taylor order;
           one Pareto plot.
-  d       time-step convergence: successive-difference ratios of head x and of the sensitivities
-          at h = 0.02, 0.01, 0.005.
+  d       time-step convergence: successive-difference ratios of head x, tail y (FOM, ROM) and of
+          the PROM sensitivities at h = 0.02 … 0.0025, for the default scheme and Newmark;
+          also written as <out>/time_convergence.json.
   e       MPI: the FOM with mpirun -n 1 and -n 2 on the 16k and 25k levels: speed-up, agreement.
-  stress  numerical stability: 2×–5× actuation stiffness, h up to 0.1 s, α_N = 0, E/5, the PROM
+  stress  numerical stability: 2×–5× actuation stiffness, h up to 0.1 s, Newmark α_N = 0, E/5, the PROM
           on the finest mesh; Newton iterations and the energy balance per case.
   mesh_convergence
           the nominal FOM for degree 1 on levels 1–5 and degree 2 on levels 1–3: distance, tail
@@ -76,11 +77,11 @@ class Settings:
 
 
 FULL = Settings(quick=False, levels=(1, 2, 3, 4, 5), stiffnesses=(1.2e4, 2.5e4, 4e4, 6e4, 7.5e4), duration=2.0,
-                reference_level=3, time_steps=(0.04, 0.02, 0.01, 0.005), convergence_steps=(0.02, 0.01, 0.005),
+                reference_level=3, time_steps=(0.04, 0.02, 0.01, 0.005), convergence_steps=(0.02, 0.01, 0.005, 0.0025),
                 mpi_levels=(4, 5), stress_level=3, fine_prom_level=5, time_limit=1800.0,
                 mesh_series=((1, (1, 2, 3, 4, 5)), (2, (1, 2, 3))))
 QUICK = Settings(quick=True, levels=(1, 2), stiffnesses=(1.2e4, 6e4, 7.5e4), duration=0.4, reference_level=1,
-                 time_steps=(0.04, 0.02, 0.01, 0.005), convergence_steps=(0.02, 0.01, 0.005),
+                 time_steps=(0.04, 0.02, 0.01, 0.005), convergence_steps=(0.02, 0.01, 0.005, 0.0025),
                  mpi_levels=(1, 2), stress_level=1, fine_prom_level=2, time_limit=300.0,
                  mesh_series=((1, (1, 2, 3)), (2, (1,))))
 
@@ -90,15 +91,14 @@ QUICK = Settings(quick=True, levels=(1, 2), stiffnesses=(1.2e4, 6e4, 7.5e4), dur
 
 
 def base_scene(settings: Settings, name: str = "nominal", level: int | None = None,
-               stiffness: float = REFERENCE_STIFFNESS, time_step: float = 0.02, newmark_alpha: float | None = None):
+               stiffness: float = REFERENCE_STIFFNESS, time_step: float = 0.02, solver: dict | None = None):
+    """A shipped scene at the study's level, stiffness, horizon and step; ``solver`` overrides [solver] values."""
     from aquarom_fenics.scene import Scene
 
     scene = Scene.load(name)
     scene = scene.replace("mesh", level=level or settings.reference_level)
     scene = scene.replace("actuation", stiffness=float(stiffness))
-    scene = scene.replace("solver", duration=settings.duration, time_step=float(time_step))
-    if newmark_alpha is not None:
-        scene = scene.replace("solver", newmark_alpha=float(newmark_alpha))
+    scene = scene.replace("solver", duration=settings.duration, time_step=float(time_step), **(solver or {}))
     return scene.replace("output", plots=False, render=False, xdmf=False)
 
 
@@ -293,60 +293,97 @@ def study_c(runner: Runner, settings: Settings) -> dict:
 # d: time-step convergence
 
 
-SPEC_NEWMARK_ALPHA = 0.005
-"""α_N of SPEC §6 (the shipped default is larger, see scene.py)."""
+@dataclass(frozen=True)
+class ConvergenceScheme:
+    """A time scheme of study d: its label, [solver] values and whether it is second order."""
+
+    tag: str
+    solver: tuple          # ([solver] key, value) pairs
+    second_order: bool
+
+    def facts(self) -> dict:
+        """integrator and ρ∞ or α_N, as written with each quantity."""
+        from aquarom_fenics.scene import SolverSection
+
+        values = {**vars(SolverSection()), **dict(self.solver)}
+        key = "rho_infinity" if values["integrator"] == "generalized-alpha" else "newmark_alpha"
+        return {"integrator": values["integrator"], key: values[key], "second_order": self.second_order}
 
 
-def convergence_alphas() -> tuple[float, ...]:
-    """α_N of study d: 0 (γ = ½, the scheme's second-order member), SPEC's and the default.
+def convergence_schemes() -> tuple[ConvergenceScheme, ...]:
+    """The default scheme (generalized-α, second order for any ρ∞) and Newmark at its default α_N.
 
-    With γ = ½ + α_N the scheme's error has an O(α_N h) term, so for α_N > 0 the ratios tend to 2
+    With γ = ½ + α_N Newmark's error has an O(α_N h) term, so for α_N > 0 the ratios tend to 2
     as h → 0; how soon depends on α_N against h."""
     from aquarom_fenics.scene import SolverSection
 
-    return tuple(sorted({0.0, SPEC_NEWMARK_ALPHA, SolverSection().newmark_alpha}))
+    defaults = SolverSection()
+    return (ConvergenceScheme(f"generalized-α ρ∞ = {defaults.rho_infinity:g}", (), True),
+            ConvergenceScheme(f"Newmark α_N = {defaults.newmark_alpha:g}", (("integrator", "newmark"),),
+                              defaults.newmark_alpha == 0.0))
 
 
 def study_d(runner: Runner, settings: Settings) -> dict:
     steps = settings.convergence_steps
-    alphas = convergence_alphas()
     families = {}
-    for alpha in alphas:
-        def scene(name="nominal", h=0.02, alpha=alpha):
-            return base_scene(settings, name, time_step=h, newmark_alpha=alpha)
-        tag = f"α_N = {alpha:g}"
-        families[(alpha, f"FOM head x, {tag}")] = [fom_case(f"FOM h={h} {tag}", scene(h=h)) for h in steps]
-        families[(alpha, f"ROM head x, {tag}")] = [reduced_case(f"ROM h={h} {tag}", scene(h=h), parametric=False)
+    for scheme in convergence_schemes():
+        def scene(name="nominal", h=0.02, scheme=scheme):
+            return base_scene(settings, name, time_step=h, solver=dict(scheme.solver))
+        tag = scheme.tag
+        families[(scheme, "FOM", f"FOM, {tag}")] = [fom_case(f"FOM h={h} {tag}", scene(h=h)) for h in steps]
+        families[(scheme, "ROM", f"ROM, {tag}")] = [reduced_case(f"ROM h={h} {tag}", scene(h=h), parametric=False)
                                                    for h in steps]
-        families[(alpha, f"PROM p=3 sensitivities, {tag}")] = [
+        families[(scheme, "PROM", f"PROM p=3 sensitivities, {tag}")] = [
             reduced_case(f"PROM SO1 h={h} {tag} with sensitivities", scene("so1", h), parametric=True,
                          sensitivities=True) for h in steps]
     cases = [case for family in families.values() for case in family]
     records = dict(zip((case.key for case in cases), runner.run("d", cases)))
     coarse = steps[0]
-    result = {"study": "d", "level": settings.reference_level, "time_steps": list(steps), "grid_step": coarse,
-              "alphas": list(alphas), "quantities": []}
-    for (alpha, name), family in families.items():
+    result = {"study": "d", "level": settings.reference_level, "duration": settings.duration,
+              "time_steps": list(steps), "grid_step": coarse,
+              "schemes": [{"tag": scheme.tag} | scheme.facts() for scheme in convergence_schemes()], "quantities": []}
+    for (scheme, model, name), family in families.items():
         runs = [records[case.key] for case in family]
-        tag = f"α_N = {alpha:g}"
+        facts = {"model": model} | scheme.facts()
         if any(run.get("status") != "completed" for run in runs):
-            result["quantities"].append({"name": name, "newmark_alpha": alpha, "status": "incomplete",
+            result["quantities"].append({"name": name, **facts, "status": "incomplete",
                                          "message": "; ".join(f"h={h}: {run.get('status')} {run.get('message') or ''}"
                                                               for h, run in zip(steps, runs))})
             continue
-        if "sensitivities" in name:
+        if model == "PROM":
             parameter_names = runs[0].get("parameter_names") or []
             series = [on_grid(run["trajectory"]["time"], np.asarray(run["head_x_sensitivity"]), coarse) for run in runs]
             for index, parameter in enumerate(parameter_names):
-                result["quantities"].append(convergence(f"d head x / d ξ[{parameter}] (PROM p=3), {tag}",
-                                                        [s[1][:, index] for s in series], series[0][0], steps, alpha))
+                result["quantities"].append(convergence(f"d head x / d ξ[{parameter}] (PROM p=3), {scheme.tag}",
+                                                        [s[1][:, index] for s in series], series[0][0], steps,
+                                                        facts | {"quantity": f"d head_x / d {parameter}"}))
             gradients = [np.asarray(run["distance_gradient"]) for run in runs]
-            result["quantities"].append(convergence(f"d distance / d ξ (PROM p=3, norm over parameters), {tag}",
-                                                    gradients, None, steps, alpha))
+            result["quantities"].append(convergence(f"d distance / d ξ (PROM p=3, norm over parameters), {scheme.tag}",
+                                                    gradients, None, steps, facts | {"quantity": "d distance / d xi"}))
         else:
-            series = [on_grid(run["trajectory"]["time"], np.asarray(run["trajectory"]["head_x"]), coarse) for run in runs]
-            result["quantities"].append(convergence(name, [s[1] for s in series], series[0][0], steps, alpha))
+            for quantity, label in (("head_x", "head x"), ("tail_y", "tail y")):
+                series = [on_grid(run["trajectory"]["time"], np.asarray(run["trajectory"][quantity]), coarse)
+                          for run in runs]
+                result["quantities"].append(convergence(f"{model} {label}, {scheme.tag}", [s[1] for s in series],
+                                                        series[0][0], steps, facts | {"quantity": quantity}))
     return result
+
+
+def time_convergence_summary(study: dict) -> dict:
+    """The ratios of study d per scheme, model and quantity (results/validation/time_convergence.json)."""
+    summary = {"level": study["level"], "duration": study["duration"], "time_steps": study["time_steps"],
+               "ratio_range_second_order": [3.5, 4.5], "schemes": []}
+    for scheme in study["schemes"]:
+        entries = [q for q in study["quantities"] if q["integrator"] == scheme["integrator"]
+                   and q.get("rho_infinity") == scheme.get("rho_infinity")
+                   and q.get("newmark_alpha") == scheme.get("newmark_alpha")]
+        models = {}
+        for entry in entries:
+            models.setdefault(entry["model"], {})[entry.get("quantity", entry["name"])] = (
+                {"ratios": entry["ratios"], "differences": entry["differences"]} if entry["status"] == "completed"
+                else {"status": entry["status"], "message": entry.get("message")})
+        summary["schemes"].append(scheme | {"models": models})
+    return summary
 
 
 def on_grid(time, values, step):
@@ -356,11 +393,11 @@ def on_grid(time, values, step):
     return time[::stride], np.asarray(values)[::stride]
 
 
-def convergence(name, values, time, steps, newmark_alpha: float) -> dict:
+def convergence(name, values, time, steps, facts: dict) -> dict:
     """Successive differences ‖q_h - q_h/2‖_∞ and their ratio (≈ 4 for a second-order scheme)."""
     differences = [float(np.max(np.abs(np.asarray(a) - np.asarray(b)))) for a, b in zip(values, values[1:])]
     ratios = [first / second if second > 0 else None for first, second in zip(differences, differences[1:])]
-    entry = {"name": name, "newmark_alpha": newmark_alpha, "status": "completed", "differences": differences,
+    entry = {"name": name, **facts, "status": "completed", "differences": differences,
              "ratios": ratios,
              "ratio": ratios[0] if ratios else None, "pairs": [f"{a:g}–{b:g}" for a, b in zip(steps, steps[1:])]}
     if time is not None:
@@ -421,7 +458,8 @@ def stress_scenes(settings: Settings, level: int | None = None, duration: float 
         ("stiffness-5x", "actuation stiffness 5× (3e5 Pa)", scene.replace("actuation", stiffness=5 * REFERENCE_STIFFNESS)),
         ("h-0.05", "time step h = 0.05 s", scene.replace("solver", time_step=0.05)),
         ("h-0.1", "time step h = 0.1 s", scene.replace("solver", time_step=0.1)),
-        ("alpha-0", "Newmark α_N = 0 (no numerical damping)", scene.replace("solver", newmark_alpha=0.0)),
+        ("alpha-0", "Newmark α_N = 0 (no numerical damping)",
+         scene.replace("solver", integrator="newmark", newmark_alpha=0.0)),
         ("soft", "very soft material E/5 (52 kPa)", scene.replace("material", young_modulus=scene.material.young_modulus / 5)),
     ]
 
@@ -515,6 +553,8 @@ def run(settings: Settings, out: Path, report_path: Path, studies=STUDIES, recom
         result["written_at"] = time.strftime("%Y-%m-%d %H:%M:%S")
         result["study_time"] = time.perf_counter() - study_started
         write_json_atomic(out / f"{study}.json", result)
+        if study == "d":
+            write_json_atomic(out / "time_convergence.json", time_convergence_summary(result))
     info = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "versions": software_versions(), "machine": machine(),
             "quick": settings.quick, "studies": list(studies), "cases": dict(runner.counts), "jobs": jobs,
             "computed_in_parallel": parallel, "compute_time": runner.compute_time, "command": " ".join(sys.argv)}

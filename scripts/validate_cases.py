@@ -412,9 +412,13 @@ def compute_fom(runner: Runner, case: Case) -> dict:
               "wall_time": result.wall_time, "setup_time": result.timings.get("setup"),
               "solve_time": result.timings.get("time_integration"), "cells": result.n_cells,
               "dofs": result.n_dofs, "newton": _newton_stats(arrays["newton_iterations"]),
-              "trajectory": _trajectory(arrays)}
+              "cut_steps": result.cut_steps, "trajectory": _trajectory(arrays)}
     if energy:
         record["energy"] = energy_balance(result)
+        if not result.cut_steps:
+            from aquarom_fenics.energy import energy_balance as per_force_balance
+
+            record["energy"]["per_force"] = per_force_balance(result).summary()
         if not _finite(record["energy"]["imbalance_relative"]):
             record.update(status="non-finite", message="energy balance not finite")
     result.states.clear()
@@ -464,7 +468,8 @@ def compute_reduced(runner: Runner, case: Case) -> dict:
               "build_timings": dict(timings), "solve_time": min(solve_times), "solve_times": solve_times,
               "distance": result.distance, "tail_amplitude": result.tail_amplitude,
               "head_x_final": float(arrays["head_x"][-1]), "stopped_at": float(arrays["time"][-1]),
-              "newton": _newton_stats(arrays["newton_iterations"]), "trajectory": _trajectory(arrays)}
+              "newton": _newton_stats(arrays["newton_iterations"]), "cut_steps": result.cut_steps,
+              "trajectory": _trajectory(arrays)}
     if options.get("sensitivities") and prom.n_parameters:
         sensitive = simulate_reduced(prom, scene, xi, sensitivities=True)
         times = [sensitive.wall_time] + [simulate_reduced(prom, scene, xi, sensitivities=True).wall_time

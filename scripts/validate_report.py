@@ -523,7 +523,7 @@ def checks(studies: dict, out: Path) -> list[list[str]]:
         for quantity in d["quantities"]:
             if "head x," not in quantity["name"]:
                 continue
-            second_order = quantity.get("newmark_alpha", 0.0) == 0.0
+            second_order = quantity.get("second_order", quantity.get("newmark_alpha", 0.0) == 0.0)
             required = f"{RATIO_RANGE[0]:g}–{RATIO_RANGE[1]:g}" if second_order else "→ 2 (first order: γ = ½ + α_N)"
             if quantity.get("ratio") is None:
                 rows.append([f"time-step ratio, {quantity['name']}", quantity.get("status", "—"), required,

@@ -201,7 +201,7 @@ def test_fom_check_that_stops_is_reported_and_the_outputs_are_kept(tmp_path, cap
     out = tmp_path / "run"
     assert main(["optimize", str(scene), "--out", str(out)]) == 3
     message = capsys.readouterr().err.strip()
-    assert len(message.splitlines()) == 1 and "FOM check" in message and "step 4" in message
+    assert len(message.splitlines()) == 1 and "FOM check" in message and "step 13" in message
     summary = json.loads((out / "summary.json").read_text())
     assert summary["fom_check"]["ratio"] is None and "stopped" in summary["fom_check"]["error"]
     assert (out / "history.csv").exists()

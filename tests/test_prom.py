@@ -4,7 +4,7 @@ import pytest
 
 from aquarom_fenics.fish import load_fish
 from aquarom_fenics.fom import FullOrderModel
-from aquarom_fenics.newmark import NewmarkScheme
+from aquarom_fenics.integrator import TimeScheme
 from aquarom_fenics.prom import ReducedModel
 from aquarom_fenics.reduced_dynamics import ReducedSystem, simulate_reduced
 from aquarom_fenics.reductor import build_prom
@@ -62,7 +62,7 @@ def random_states(rng, m, scale):
 
 def test_sampled_tensors_reproduce_every_projected_fom_force(scene, fish, prom):
     projected = ProjectedFOM(scene, fish, prom, prom.xi_center)
-    system = ReducedSystem(prom, scene, prom.xi_center, NewmarkScheme.with_damping(0.02, 0.005))
+    system = ReducedSystem(prom, scene, prom.xi_center, TimeScheme.newmark(0.02, 0.005))
     rng = np.random.default_rng(0)
     for sample in range(20):
         eta, eta_dot, eta_ddot = random_states(rng, prom.size, 0.02)
@@ -73,7 +73,7 @@ def test_sampled_tensors_reproduce_every_projected_fom_force(scene, fish, prom):
 
 
 def test_reduced_jacobians_match_finite_differences(scene, prom):
-    system = ReducedSystem(prom, scene, prom.xi_center + 0.01, NewmarkScheme.with_damping(0.02, 0.005))
+    system = ReducedSystem(prom, scene, prom.xi_center + 0.01, TimeScheme.newmark(0.02, 0.005))
     rng = np.random.default_rng(1)
     state = random_states(rng, prom.size, 0.02)
     tangents = system.tangents(0.3, *state)
@@ -87,10 +87,33 @@ def test_reduced_jacobians_match_finite_differences(scene, prom):
         assert relative_error(tangents[slot], np.column_stack(columns)) < 1e-7
 
 
+INTEGRATOR_AND_SPINE_FORCE = [("generalized-alpha", "source"), ("newmark", "source"), ("generalized-alpha", "lagrangian")]
+
+
+@pytest.mark.parametrize("integrator, spine_force", INTEGRATOR_AND_SPINE_FORCE)
+def test_reduced_newton_matrix_is_the_derivative_of_the_step_residual(scene, prom, integrator, spine_force):
+    """S = d/dη_{n+1} r(t_{n+1-α_f}, η_{n+1-α_f}, η̇_{n+1-α_f}, η̈_{n+1-α_m}) with the scheme's kinematics."""
+    scene = scene.replace("solver", integrator=integrator).replace("fluid", spine_force=spine_force)
+    scheme = TimeScheme.from_solver(scene.solver)
+    system = ReducedSystem(prom, scene, prom.xi_center + 0.01, scheme)
+    rng = np.random.default_rng(5)
+    old = random_states(rng, prom.size, 0.02)
+    u_predicted, v_predicted = scheme.predict(*old)
+    eta = u_predicted + 1e-3 * rng.standard_normal(prom.size)
+
+    def point(trial):
+        return scheme.evaluation_point(0.3, old, (trial, *scheme.correct(trial, u_predicted, v_predicted)))
+
+    step = 1e-7
+    columns = [(system.residual(*point(eta + step * direction))[0]
+                - system.residual(*point(eta - step * direction))[0]) / (2 * step) for direction in np.eye(prom.size)]
+    assert relative_error(system.newton_matrix(*point(eta)), np.column_stack(columns)) < 1e-7
+
+
 def test_first_xi_derivative_matches_central_difference_of_the_fom(scene, fish, prom):
     """∂/∂ξ_k Vᵀ f_int(Vη; ξ): PROM Taylor term against a 4th-order central difference of the FOM."""
     eta = 0.02 * np.random.default_rng(2).standard_normal(prom.size)
-    system = ReducedSystem(prom, scene, prom.xi_center, NewmarkScheme.with_damping(0.02, 0.005))
+    system = ReducedSystem(prom, scene, prom.xi_center, TimeScheme.newmark(0.02, 0.005))
     derivative = system.internal_force_gradient(eta)
     step = 2e-3
 
@@ -117,15 +140,17 @@ def test_taylor_error_falls_with_the_order(request, scene, fish, order_fixture, 
     errors = []
     for epsilon in (0.04, 0.02, 0.01):
         xi = model.xi_center + epsilon * direction
-        system = ReducedSystem(model, scene, xi, NewmarkScheme.with_damping(0.02, 0.005))
+        system = ReducedSystem(model, scene, xi, TimeScheme.newmark(0.02, 0.005))
         projected = ProjectedFOM(scene, fish, model, xi)
         errors.append(np.linalg.norm(system.internal_force(eta) - projected.internal_force(eta)))
     ratios = [errors[0] / errors[1], errors[1] / errors[2]]
     assert all(0.8 * expected_ratio < ratio < 1.25 * expected_ratio for ratio in ratios), ratios
 
 
-def test_sensitivities_match_central_differences_of_the_prom(scene, prom):
-    short = scene.replace("solver", duration=0.4, tolerance=1e-11)   # differences need a converged Newton
+@pytest.mark.parametrize("integrator, spine_force", INTEGRATOR_AND_SPINE_FORCE)
+def test_sensitivities_match_central_differences_of_the_prom(scene, prom, integrator, spine_force):
+    short = scene.replace("solver", duration=0.4, tolerance=1e-11, integrator=integrator)   # converged Newton
+    short = short.replace("fluid", spine_force=spine_force)
     xi = prom.xi_center + np.array([0.05, -0.03, 0.03])
     result = simulate_reduced(prom, short, xi, sensitivities=True)
     step = 1e-5
@@ -134,6 +159,23 @@ def test_sensitivities_match_central_differences_of_the_prom(scene, prom):
         plus = simulate_reduced(prom, short, xi + shift).states
         minus = simulate_reduced(prom, short, xi - shift).states
         central = (plus - minus) / (2 * step)
+        assert relative_error(result.sensitivities[:, :, k], central) < 1e-5, prom.shape_names[k]
+
+
+def test_sensitivities_follow_the_cut_steps(scene, prom):
+    """Three Newton iterations at h = 0.04 are not enough for some steps: they are cut, and dη/dξ follows
+    every sub-step (the same cuts happen at ξ ± ε)."""
+    cut = scene.replace("solver", duration=0.4, tolerance=1e-10, max_iterations=3, time_step=0.04)
+    xi = prom.xi_center + np.array([0.05, -0.03, 0.03])
+    result = simulate_reduced(prom, cut, xi, sensitivities=True)
+    assert result.completed and result.cut_steps > 0
+    assert result.summary()["cut_steps"] == result.cut_steps
+    step = 1e-5
+    for k in range(prom.n_parameters):
+        shift = step * np.eye(prom.n_parameters)[k]
+        plus, minus = simulate_reduced(prom, cut, xi + shift), simulate_reduced(prom, cut, xi - shift)
+        assert plus.cut_steps == minus.cut_steps == result.cut_steps
+        central = (plus.states - minus.states) / (2 * step)
         assert relative_error(result.sensitivities[:, :, k], central) < 1e-5, prom.shape_names[k]
 
 

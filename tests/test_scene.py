@@ -174,7 +174,11 @@ def test_defaults_are_the_values_of_spec():
     solver = scene.solver
     assert solver.time_step == 0.02
     assert solver.duration == 2.0
+    assert solver.integrator == "generalized-alpha"
+    assert solver.rho_infinity == SolverSection().rho_infinity and 0 <= solver.rho_infinity <= 1   # README
     assert solver.newmark_alpha == 0.02   # SPEC §6: 0.005, raised for stability (README, scene.py)
+    assert solver.min_time_step == 1e-3
+    assert scene.fluid.spine_force == "source"
     assert solver.tolerance == 1e-6
     assert solver.max_iterations == 30
     assert scene.n_steps == 100
@@ -358,6 +362,10 @@ BAD_SCENES = {
     "zero time step": (COARSE + "[solver]\ntime_step = 0.0\n", ["time_step", "> 0"]),
     "negative time step": (COARSE + "[solver]\ntime_step = -0.02\n", ["time_step", "> 0"]),
     "short duration": (COARSE + "[solver]\nduration = 0.05\n", ["duration", "0.1 s"]),
+    "unknown integrator": (COARSE + '[solver]\nintegrator = "euler"\n', ["integrator", "'generalized-alpha', 'newmark'"]),
+    "spectral radius above 1": (COARSE + "[solver]\nrho_infinity = 1.5\n", ["rho_infinity", "[0, 1]"]),
+    "zero minimum step": (COARSE + "[solver]\nmin_time_step = 0.0\n", ["min_time_step", "> 0"]),
+    "unknown spine force": (COARSE + '[fluid]\nspine_force = "euler"\n', ["spine_force", "'source', 'lagrangian'"]),
     "section not a table": ("solver = 3\n" + COARSE, ["[solver]", "table"]),
     "unknown shape": (COARSE + "[shapes]\ny_fat = { bounds = [-0.1, 0.1] }\n", ["'y_fat'", "y_thin"]),
     "bounds reversed": (COARSE + "[shapes]\ny_thin = { bounds = [0.1, -0.1] }\n",

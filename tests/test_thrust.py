@@ -62,11 +62,13 @@ def relative_error(actual: np.ndarray, expected: np.ndarray) -> float:
 
 # f is a polynomial of degree <= 3 in u and <= 2 in (u̇, ü): the u-step is small against the
 # segment length (truncation ~ (h/ℓ_0)²), the others are exact up to round-off.
+@pytest.mark.parametrize("spine_force", ["source", "lagrangian"])
 @pytest.mark.parametrize(
     "which, step",
     [("displacement", 1e-6), ("velocity", 1e-3), ("acceleration", 1e-3)],
 )
-def test_jacobians_match_central_differences(geometry, state, which, step):
+def test_jacobians_match_central_differences(geometry, state, which, step, spine_force):
+    geometry = SpineGeometry(geometry.rest_xy, geometry.virtual_mass, spine_force)
     displacement, velocity, acceleration = state
     fields = {"displacement": displacement, "velocity": velocity, "acceleration": acceleration}
     jacobian = dict(zip(fields, thrust_jacobians(geometry, *state)))[which]
@@ -96,14 +98,27 @@ def test_added_mass_block_is_block_diagonal_symmetric_negative_semidefinite(geom
     assert np.all(np.linalg.eigvalsh(added_mass) <= 1e-15)
 
 
-def test_force_per_virtual_mass_matches_differences_and_sums_to_force(geometry, state):
+def test_lagrangian_jacobians_are_block_tridiagonal_with_lower_blocks(geometry, state):
+    lagrangian = SpineGeometry(geometry.rest_xy, geometry.virtual_mass, "lagrangian")
+    node = np.repeat(np.arange(N_NODES), 2)
+    below = node[None, :] == node[:, None] - 1
+    outside_band = np.abs(node[None, :] - node[:, None]) > 1
+    stiffness, damping, _ = thrust_jacobians(lagrangian, *state)
+    for jacobian in (stiffness, damping):
+        assert np.all(jacobian[outside_band] == 0.0)
+        assert np.any(jacobian[below] != 0.0)
+
+
+@pytest.mark.parametrize("spine_force", ["source", "lagrangian"])
+def test_force_per_virtual_mass_matches_differences_and_sums_to_force(geometry, state, spine_force):
+    geometry = SpineGeometry(geometry.rest_xy, geometry.virtual_mass, spine_force)
     per_mass = thrust_force_per_virtual_mass(geometry, *state)
     assert per_mass.shape == (N_NODES - 1, N_NODES, 2)
     summed = np.einsum("i,ijk->jk", geometry.virtual_mass, per_mass)
     np.testing.assert_allclose(summed, thrust_force(geometry, *state), rtol=1e-13, atol=0)
 
     def force_of(segment_mass):
-        return thrust_force(SpineGeometry(geometry.rest_xy, segment_mass), *state)
+        return thrust_force(SpineGeometry(geometry.rest_xy, segment_mass, spine_force), *state)
 
     step = 1e-3 * np.min(geometry.virtual_mass)
     expected = central_difference_jacobian(force_of, geometry.virtual_mass, step)
@@ -179,6 +194,59 @@ def test_spine_force_is_minus_virtual_mass_times_rate_of_lateral_momentum(geomet
     spine[0] -= tail
 
     assert relative_error(spine, expected_spine) < 1e-8
+
+
+def periodic_motion(rng, period):
+    """Smooth T-periodic spine motion: harmonics 1–3 of 2π/T per node and component."""
+    amplitude = 1e-2 * rng.standard_normal((3, N_NODES, 2))
+    phase = rng.uniform(0.0, 2.0 * np.pi, (3, N_NODES, 2))
+    omega = 2.0 * np.pi / period * np.arange(1, 4)[:, None, None]
+
+    def at(t):
+        """(u, u̇, ü) at time t."""
+        angle = omega * t + phase
+        return ((amplitude * np.sin(angle)).sum(0), (amplitude * omega * np.cos(angle)).sum(0),
+                (-amplitude * omega ** 2 * np.sin(angle)).sum(0))
+
+    return at
+
+
+def spine_power(geometry, motion, t):
+    """Σ_nodes f·u̇ of the spine force (the tail force removed)."""
+    u, v, a = motion(t)
+    force = thrust_force(geometry, u, v, a)
+    tangent, normal = segment_frame(geometry, u)
+    force[0] -= 0.5 * geometry.virtual_mass[0] * (v[0] @ normal[0]) ** 2 * tangent[0]
+    return float(np.sum(force * v))
+
+
+def added_mass_energy(geometry, motion, t):
+    """T_a = Σ ½ m̃ ℓ_0 (v_r·n)² [J]."""
+    u, v, _ = motion(t)
+    _, normal = segment_frame(geometry, u)
+    return 0.5 * float(np.sum(geometry.virtual_mass * geometry.rest_length * np.einsum("ij,ij->i", v[:-1], normal) ** 2))
+
+
+def test_lagrangian_spine_force_power_is_minus_the_rate_of_added_mass_energy(geometry):
+    """f = -d/dt(∂T_a/∂v) + ∂T_a/∂x  ⇒  Σ f·u̇ = -dT_a/dt at every instant."""
+    lagrangian = SpineGeometry(geometry.rest_xy, geometry.virtual_mass, "lagrangian")
+    motion = periodic_motion(np.random.default_rng(11), 1.0)
+    dt = 1e-6
+    for t in (0.1, 0.37, 0.8):
+        rate = (added_mass_energy(lagrangian, motion, t + dt) - added_mass_energy(lagrangian, motion, t - dt)) / (2 * dt)
+        assert abs(spine_power(lagrangian, motion, t) + rate) < 1e-7 * abs(rate)
+
+
+def test_only_the_lagrangian_spine_force_does_no_net_work_over_a_closed_cycle(geometry):
+    motion = periodic_motion(np.random.default_rng(12), 1.0)
+    times = np.linspace(0.0, 1.0, 2000, endpoint=False)     # the rectangle rule is spectral for periodic data
+    work = {}
+    for form in ("source", "lagrangian"):
+        form_geometry = SpineGeometry(geometry.rest_xy, geometry.virtual_mass, form)
+        powers = np.array([spine_power(form_geometry, motion, t) for t in times])
+        work[form] = (powers.mean(), np.abs(powers).mean())
+    assert abs(work["lagrangian"][0]) < 1e-10 * work["lagrangian"][1]
+    assert abs(work["source"][0]) > 1e-2 * work["source"][1]
 
 
 def test_virtual_mass_formula():

@@ -59,8 +59,10 @@ def test_stress_case_fom_is_clean_with_energy_balance(runner, case_id):
         assert all(math.isfinite(energy[key]) for key in ("work_actuation", "work_thrust", "dissipated",
                                                            "dissipated_midpoint", "kinetic", "elastic"))
         assert energy["throughput"] > 0
-        # Newmark's identity with the midpoint dissipation closes up to the numerical damping α_N.
-        assert abs(energy["imbalance_midpoint_relative"]) < 0.05, energy["imbalance_midpoint_relative"]
+        # The balance at the scheme's evaluation points closes, with the numerical dissipation as its own term.
+        per_force = energy["per_force"]
+        assert abs(per_force["relative_imbalance"]) < 5e-3, per_force
+        assert per_force["dissipated_rayleigh"] > 0 and per_force["work_actuation"] != 0
 
 
 @pytest.mark.parametrize("case_id", CHEAP_STRESS)
