@@ -69,12 +69,12 @@ def test_degree_two_prom_reproduces_the_projected_fom_forces(quadratic_so1):
     """The strains sampled at the quadrature points of the FOM's forms give Vᵀ r exactly (SPEC §8)."""
     from test_prom import ProjectedFOM, random_states, relative_error
 
-    from aquarom_fenics.newmark import NewmarkScheme
+    from aquarom_fenics.integrator import TimeScheme
     from aquarom_fenics.reduced_dynamics import ReducedSystem
 
     scene, fish, prom = quadratic_so1
     projected = ProjectedFOM(scene, fish, prom, prom.xi_center)
-    system = ReducedSystem(prom, scene, prom.xi_center, NewmarkScheme.with_damping(0.02, 0.005))
+    system = ReducedSystem(prom, scene, prom.xi_center, TimeScheme.newmark(0.02, 0.005))
     rng = np.random.default_rng(0)
     for sample in range(5):
         eta, eta_dot, eta_ddot = random_states(rng, prom.size, 0.02)
@@ -87,12 +87,12 @@ def test_degree_two_prom_reproduces_the_projected_fom_forces(quadratic_so1):
 def test_degree_two_first_xi_derivative_matches_central_difference_of_the_fom(quadratic_so1):
     from test_prom import ProjectedFOM
 
-    from aquarom_fenics.newmark import NewmarkScheme
+    from aquarom_fenics.integrator import TimeScheme
     from aquarom_fenics.reduced_dynamics import ReducedSystem
 
     scene, fish, prom = quadratic_so1
     eta = 0.02 * np.random.default_rng(2).standard_normal(prom.size)
-    system = ReducedSystem(prom, scene, prom.xi_center, NewmarkScheme.with_damping(0.02, 0.005))
+    system = ReducedSystem(prom, scene, prom.xi_center, TimeScheme.newmark(0.02, 0.005))
     derivative = system.internal_force_gradient(eta)
     step = 2e-3
 
