@@ -11,7 +11,6 @@ import fcntl
 import hashlib
 import json
 import logging
-import os
 import shutil
 from contextlib import contextmanager
 from pathlib import Path
@@ -20,15 +19,11 @@ import numpy as np
 from mpi4py import MPI
 
 from .errors import InputError
-from .scene import REPOSITORY, Scene
+from .paths import cache_root, mesh_cache
+from .scene import Scene
 
 log = logging.getLogger("aquarom")
 KINDS = ("prom", "fom")
-
-
-def cache_root() -> Path:
-    """$AQUAROM_CACHE, default results/cache in the repository."""
-    return Path(os.environ.get("AQUAROM_CACHE", REPOSITORY / "results" / "cache"))
 
 
 def require_cache_writable(kind: str | None = None) -> None:
@@ -45,10 +40,6 @@ def require_cache_writable(kind: str | None = None) -> None:
         raise InputError(f"cache {folder} ($AQUAROM_CACHE): cannot create it ({error.strerror}); "
                          "point AQUAROM_CACHE to a writable folder") from None
     require_writable(folder, "cache")
-
-
-def mesh_cache_dir() -> Path:
-    return REPOSITORY / "meshes" / "cache"
 
 
 def entry_key(*parts) -> str:
@@ -160,7 +151,7 @@ def cached_prom(scene: Scene, xi_center: np.ndarray, build, parametric: bool = T
 def listing() -> list[tuple[str, int, int]]:
     """(kind, entries, bytes) for every cache: PROMs, FOM checks, meshes, compiled forms."""
     folders = {kind: cache_root() / kind for kind in KINDS}
-    folders["mesh"] = mesh_cache_dir()
+    folders["mesh"] = mesh_cache()
     folders["compiled forms"] = Path.home() / ".cache" / "fenics"
     rows = []
     for kind, folder in folders.items():
@@ -174,7 +165,7 @@ def clear(kinds: list[str]) -> list[Path]:
     """Remove the named caches ("prom", "fom", "mesh"); returns the folders removed."""
     removed = []
     for kind in kinds:
-        folder = mesh_cache_dir() if kind == "mesh" else cache_root() / kind
+        folder = mesh_cache() if kind == "mesh" else cache_root() / kind
         if folder.exists():
             shutil.rmtree(folder)
             removed.append(folder)

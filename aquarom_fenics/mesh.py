@@ -12,6 +12,7 @@ import os
 import signal
 import tempfile
 import threading
+import tomllib
 import warnings
 import zipfile
 from contextlib import contextmanager
@@ -21,30 +22,20 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
+from .paths import mesh_cache, shipped_meshes
 
-LEVEL_TARGET_CELLS = {1: 1300, 2: 4300, 3: 8100, 4: 16000, 5: 25000}
+BLOCK_RECIPE = tomllib.loads((shipped_meshes() / "block.toml").read_text())
+"""The reference block's recipe (``meshes/block.toml``): levels, element sizes, gmsh options."""
 
-REFERENCE_BOX = (0.20, 0.04, 0.10)
-"""(L, W, H) in metres of the reference fish, for which the level sizes are calibrated."""
-
-LEVEL_MESH_SIZE = {1: 0.0187, 2: 0.0109, 3: 0.0082, 4: 0.0066, 5: 0.0055}
-"""gmsh element size in metres per level on the reference box (scaled by the cube root of the
-volume ratio for other boxes, so that a level keeps about its number of cells)."""
-
-BLOCK_MESH_RECIPE = 1
+LEVEL_TARGET_CELLS = {int(level): entry["cells"] for level, entry in BLOCK_RECIPE["levels"].items()}
+LEVEL_MESH_SIZE = {int(level): entry["size"] for level, entry in BLOCK_RECIPE["levels"].items()}
+"""gmsh element size [m] per level on the reference box."""
+REFERENCE_BOX = tuple(BLOCK_RECIPE["reference_box"])
+BLOCK_MESH_RECIPE = BLOCK_RECIPE["recipe"]
 """Version of the block-meshing procedure; part of the cache file name."""
 
 _GMSH_TETRAHEDRON = 4
-_GMSH_BLOCK_OPTIONS = {
-    "General.Terminal": 0,
-    "General.NumThreads": 1,
-    "Mesh.Algorithm": 5,
-    "Mesh.Algorithm3D": 1,
-    "Mesh.OptimizeThreshold": 0.5,
-    "Mesh.MeshSizeFromPoints": 0,
-    "Mesh.MeshSizeFromCurvature": 0,
-    "Mesh.MeshSizeExtendFromBoundary": 0,
-}
+_GMSH_BLOCK_OPTIONS = BLOCK_RECIPE["gmsh"]
 _GMSH_READ_OPTIONS = {"General.Terminal": 0, "General.NumThreads": 1}
 
 
@@ -242,10 +233,6 @@ def _gmsh_version() -> str:
 # Block meshes
 
 
-def _default_cache_dir() -> Path:
-    return Path(__file__).resolve().parents[1] / "meshes" / "cache"
-
-
 def _check_block_input(level: int, length: float, width: float, height: float) -> None:
     is_integer = isinstance(level, (int, np.integer)) and not isinstance(level, bool)
     if not is_integer or level not in LEVEL_TARGET_CELLS:
@@ -347,7 +334,7 @@ def _generate_block(level: int, length: float, width: float, height: float):
 
 def block_cache_path(level: int, length: float, width: float, height: float, cache_dir: Path | None = None) -> Path:
     """Where :func:`block_mesh` caches a level (whether or not it exists yet)."""
-    return _block_cache_path(cache_dir or _default_cache_dir(), level, length, width, height)
+    return _block_cache_path(cache_dir or mesh_cache(), level, length, width, height)
 
 
 def _block_cache_path(cache_dir: Path, level: int, length: float, width: float, height: float):
@@ -408,7 +395,7 @@ def block_mesh(
     """
     _check_block_input(level, length, width, height)
     level = int(level)
-    cache_dir = _default_cache_dir() if cache_dir is None else Path(cache_dir)
+    cache_dir = mesh_cache() if cache_dir is None else Path(cache_dir)
     cache_path = _block_cache_path(cache_dir, level, length, width, height)
     cached = _load_cached_block(cache_path)
     if cached is None:

@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from .mesh import LEVEL_TARGET_CELLS, block_cache_path
-from .scene import REPOSITORY, Scene
+from .paths import bench_results
+from .scene import Scene
 
-BENCH = REPOSITORY / "results" / "bench"
 # Reference costs at 7944 cells (level 3, 2 cores): FOM 2 s simulation, PROM build with p
 # parameters ≈ 0.5 + 0.33 p s, reduced solve ≈ 0.1 s (0.2 s with sensitivities).
 REFERENCE_CELLS = 7944
@@ -44,8 +44,9 @@ def prom_build_seconds(cells: int, parameters: int, degree: int = 1) -> float:
 
 
 def _bench_runs(name: str, keep) -> list[dict]:
-    path = BENCH / name
-    if not path.exists():
+    folder = bench_results()
+    path = folder / name if folder else None
+    if path is None or not path.exists():
         return []
     try:
         return [r for r in json.loads(path.read_text())["runs"] if keep(r)]

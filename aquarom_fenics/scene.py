@@ -17,9 +17,10 @@ from pathlib import Path
 from typing import Any
 
 from .errors import InputError
+from .paths import shipped_scenes
 
 REPOSITORY = Path(__file__).resolve().parents[1]
-SCENES_DIR = REPOSITORY / "scenes"
+SCENES_DIR = shipped_scenes()
 
 
 def _positive(value) -> str | None:

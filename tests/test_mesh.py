@@ -8,6 +8,7 @@ from scipy.spatial import cKDTree
 
 from aquarom_fenics import mesh as mesh_module
 from aquarom_fenics.errors import InputError
+from aquarom_fenics.paths import shipped_meshes
 from aquarom_fenics.mesh import (
     LEVEL_TARGET_CELLS,
     FishMesh,
@@ -20,8 +21,8 @@ from aquarom_fenics.mesh import (
 from aquarom_fenics.tags import cell_centroids, head_cell_mask, muscle_cell_masks, tag_fish
 
 L, W, H = 0.20, 0.04, 0.10
-SHARED_MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
-ABAQUS_FISH = SHARED_MESHES / "3d_rectangle_1272el.inp"
+SHIPPED_MESHES = shipped_meshes()
+ABAQUS_FISH = SHIPPED_MESHES / "3d_rectangle_1272el.inp"
 
 
 @pytest.fixture(scope="module")
@@ -289,7 +290,6 @@ def test_gmsh_is_left_as_found(tmp_path):
 # Imported meshes
 
 
-@pytest.mark.skipif(not ABAQUS_FISH.is_file(), reason=f"{ABAQUS_FISH} is absent")
 def test_abaqus_fish_in_centimetres_imports_and_tags():
     fish = read_mesh(ABAQUS_FISH, scale=0.01)
     assert len(fish.cells) == 1272
