@@ -9,6 +9,7 @@ nominal FOM distance (2 MPI ranks, the scene's own mesh) and the SO1 optimum (le
 container next to the same runs on the host. Exit 1 when a check fails (the JSON is written).
 """
 import argparse
+import itertools
 import json
 import os
 import re
@@ -23,15 +24,17 @@ IMAGE = "aquarom-fenicsx"
 BASE_IMAGE = "debian:bookworm"
 AGREEMENT = 1e-10          # relative, container against host
 CONTEXT_LIMIT = 10e6       # bytes
+RUN_LIMIT = 3600           # s, any one run; a container is killed after it
+RUN_NUMBERS = itertools.count(1)
 
 
 class Missing(Exception):
     """Something docker-test needs is not there (exit 2)."""
 
 
-def docker(*arguments: str, check: bool = True) -> subprocess.CompletedProcess:
+def docker(*arguments: str, check: bool = True, timeout: float | None = None) -> subprocess.CompletedProcess:
     """Run `docker ARGUMENTS`, output captured; a failure ends the study with docker's message."""
-    completed = subprocess.run(["docker", *arguments], capture_output=True, text=True)
+    completed = subprocess.run(["docker", *arguments], capture_output=True, text=True, timeout=timeout)
     if check and completed.returncode != 0:
         raise RuntimeError(f"docker {' '.join(arguments[:3])} … failed ({completed.returncode}):\n"
                            f"{completed.stdout[-3000:]}\n{completed.stderr[-3000:]}")
@@ -91,8 +94,12 @@ def pytest_counts(output: str) -> dict:
 def in_container(*arguments: str, entrypoint: str | None = None, user: str | None = None,
                  mount: Path | None = None, environment: dict | None = None,
                  check: bool = True) -> subprocess.CompletedProcess:
-    """`docker run --rm IMAGE ARGUMENTS`; `mount` is seen as /results in the container."""
-    options = ["--rm"]
+    """`docker run --rm IMAGE ARGUMENTS`; `mount` is seen as /results in the container.
+
+    A run longer than RUN_LIMIT is killed and ends the study.
+    """
+    name = f"aquarom-docker-test-{os.getpid()}-{next(RUN_NUMBERS)}"
+    options = ["--rm", "--name", name]
     if entrypoint:
         options += ["--entrypoint", entrypoint]
     if user:
@@ -101,7 +108,12 @@ def in_container(*arguments: str, entrypoint: str | None = None, user: str | Non
         options += ["-v", f"{Path(mount).resolve()}:/results"]
     for name, value in (environment or {}).items():
         options += ["-e", f"{name}={value}"]
-    return docker("run", *options, IMAGE, *arguments, check=check)
+    try:
+        return docker("run", *options, IMAGE, *arguments, check=check, timeout=RUN_LIMIT)
+    except subprocess.TimeoutExpired:
+        docker("kill", name, check=False)
+        raise RuntimeError(f"docker run {' '.join(arguments[:4])} … took more than {RUN_LIMIT} s; stopped")
+
 
 
 def summary(folder: Path) -> dict:
@@ -114,11 +126,11 @@ def relative_difference(a: float, b: float) -> float:
 
 def nominal_fom(host: Path, container: Path, user: str) -> dict:
     """`mpirun -n 2 aquarom simulate nominal` (the scene's mesh) in the container and on the host."""
-    run = ["simulate", "nominal", "--no-progress", "--force"]
+    run = ["simulate", "nominal", "--no-progress"]
     completed, container_seconds = timed(lambda: in_container("-n", "2", "aquarom", *run, "--out", "/results/nominal-fom",
                                                               entrypoint="mpirun", user=user, mount=container))
     subprocess.run(["mpirun", "-n", "2", str(REPOSITORY / ".venv/bin/aquarom"), *run, "--out", str(host / "nominal-fom")],
-                   check=True, capture_output=True, env=os.environ | {"OMPI_ALLOW_RUN_AS_ROOT": "1",
+                   check=True, capture_output=True, timeout=RUN_LIMIT, env=os.environ | {"OMPI_ALLOW_RUN_AS_ROOT": "1",
                                                                         "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"})
     inside, outside = summary(container / "nominal-fom"), summary(host / "nominal-fom")
     return {"command": "mpirun -n 2 aquarom simulate nominal", "mpi_ranks": 2,
@@ -131,10 +143,10 @@ def nominal_fom(host: Path, container: Path, user: str) -> dict:
 
 def so1_optimum(host: Path, container: Path, user: str) -> dict:
     """`aquarom optimize so1 --level 1` in the container (as the calling user) and on the host."""
-    run = ["optimize", "so1", "--level", "1", "--force"]
+    run = ["optimize", "so1", "--level", "1"]
     in_container(*run, "--out", "/results/so1", user=user, mount=container)
     subprocess.run([str(REPOSITORY / ".venv/bin/aquarom"), *run, "--out", str(host / "so1")], check=True,
-                   capture_output=True)
+                   capture_output=True, timeout=RUN_LIMIT)
     inside, outside = summary(container / "so1"), summary(host / "so1")
     differences = [relative_difference(inside["optimum"][name], outside["optimum"][name]) for name in inside["optimum"]]
     differences.append(relative_difference(inside["fom_check"]["optimal_distance"],
@@ -173,7 +185,7 @@ def main() -> int:
         return 2
     try:
         report = study(args.reuse_layers)
-    except (RuntimeError, subprocess.CalledProcessError) as error:
+    except (RuntimeError, subprocess.CalledProcessError, subprocess.TimeoutExpired) as error:
         print(f"docker-test: {error}", file=sys.stderr)
         return 1
     args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -186,7 +198,7 @@ def main() -> int:
 def study(reuse_layers: bool) -> dict:
     """Build, test, demo, then the container's results against the host's."""
     user = f"{os.getuid()}:{os.getgid()}"
-    work = REPOSITORY / "results" / "docker"
+    work = REPOSITORY / "results" / "docker" / time.strftime("%Y%m%dT%H%M%S")   # fresh: no --force under MPI
     host, container = work / "host", work / "container"
     for folder in (host, container):
         folder.mkdir(parents=True, exist_ok=True)
