@@ -26,6 +26,7 @@ AGREEMENT = 1e-10          # relative, container against host
 CONTEXT_LIMIT = 10e6       # bytes
 RUN_LIMIT = 3600           # s, any one run; a container is killed after it
 RUN_NUMBERS = itertools.count(1)
+NOT_ROOT = (65534, 65534)  # uid, gid the container runs as when docker-test is run by root
 
 
 class Missing(Exception):
@@ -142,7 +143,7 @@ def nominal_fom(host: Path, container: Path, user: str) -> dict:
 
 
 def so1_optimum(host: Path, container: Path, user: str) -> dict:
-    """`aquarom optimize so1 --level 1` in the container (as the calling user) and on the host."""
+    """`aquarom optimize so1 --level 1` in the container (as `user`, not root) and on the host."""
     run = ["optimize", "so1", "--level", "1"]
     in_container(*run, "--out", "/results/so1", user=user, mount=container)
     subprocess.run([str(REPOSITORY / ".venv/bin/aquarom"), *run, "--out", str(host / "so1")], check=True,
@@ -151,14 +152,14 @@ def so1_optimum(host: Path, container: Path, user: str) -> dict:
     differences = [relative_difference(inside["optimum"][name], outside["optimum"][name]) for name in inside["optimum"]]
     differences.append(relative_difference(inside["fom_check"]["optimal_distance"],
                                            outside["fom_check"]["optimal_distance"]))
-    owners = {(path.stat().st_uid, path.stat().st_gid) for path in (container / "so1").rglob("*")}
+    owners = {f"{path.stat().st_uid}:{path.stat().st_gid}" for path in (container / "so1").rglob("*")}
     return {"command": f"docker run --user {user} -v FOLDER:/results {IMAGE} optimize so1 --level 1 --out /results/so1",
             "container_optimum": inside["optimum"], "host_optimum": outside["optimum"],
             "container_fom_optimal_distance": inside["fom_check"]["optimal_distance"],
             "host_fom_optimal_distance": outside["fom_check"]["optimal_distance"],
             "iterations": [inside["iterations"], outside["iterations"]],
             "max_relative_difference": max(differences),
-            "outputs_owned_by_caller": owners == {(os.getuid(), os.getgid())}}
+            "outputs_owned_by_container_user": owners == {user}}
 
 
 def ffcx_cache_saving() -> dict:
@@ -197,11 +198,13 @@ def main() -> int:
 
 def study(reuse_layers: bool) -> dict:
     """Build, test, demo, then the container's results against the host's."""
-    user = f"{os.getuid()}:{os.getgid()}"
     work = REPOSITORY / "results" / "docker" / time.strftime("%Y%m%dT%H%M%S")   # fresh: no --force under MPI
     host, container = work / "host", work / "container"
     for folder in (host, container):
         folder.mkdir(parents=True, exist_ok=True)
+    uid, gid = (os.getuid(), os.getgid()) if os.getuid() != 0 else NOT_ROOT
+    os.chown(container, uid, gid)         # the container writes as the folder's owner, never as root
+    user = f"{uid}:{gid}"
     print("docker-test: building the image", flush=True)
     report = {"image": IMAGE, "base_image": BASE_IMAGE, "build": build_image(reuse_layers), "host_cores": os.cpu_count()}
     print("docker-test: make test in the container", flush=True)
@@ -221,6 +224,7 @@ def study(reuse_layers: bool) -> dict:
                            and "errors" not in report["tests"],
         "nominal_distance_agrees": report["nominal_fom"]["relative_difference"] <= AGREEMENT,
         "so1_optimum_agrees": report["so1_optimize"]["max_relative_difference"] <= AGREEMENT,
+        "so1_outputs_owned_by_container_user": report["so1_optimize"]["outputs_owned_by_container_user"],
         "no_single_copy_warnings": report["nominal_fom"]["single_copy_warnings"] == 0}
     return report
 
