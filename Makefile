@@ -3,7 +3,7 @@ PYTHON := .venv/bin/python
 AQUAROM := .venv/bin/aquarom
 OUT ?= results/demo
 
-.PHONY: setup demo test bench validate validate-radius study clean
+.PHONY: setup demo test bench validate validate-radius study clean docker-test
 
 setup:
 	@bash scripts/setup.sh
@@ -30,3 +30,7 @@ validate-radius: setup
 
 clean:
 	rm -rf results meshes/cache .pytest_cache
+
+# Not part of `test`: needs a Docker daemon and a debian:bookworm image (docker/README.md).
+docker-test: setup
+	@$(PYTHON) scripts/docker_test.py

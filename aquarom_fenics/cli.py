@@ -8,7 +8,6 @@ from __future__ import annotations
 import argparse
 import logging
 import os
-import subprocess
 import sys
 import textwrap
 import time
@@ -314,17 +313,16 @@ def settle_output(args, code: int, wall_time: float) -> None:
 
 def write_manifest(args, wall_time: float) -> None:
     """manifest.json: scene, versions, git commit, command, host cores, timings per phase."""
-    from .outputs import software_versions, write_json_atomic
+    from .outputs import git_commit, software_versions, write_json_atomic
     from .scene import REPOSITORY
 
     scene = getattr(args, "scene_used", None)
-    commit = subprocess.run(["git", "-C", str(REPOSITORY), "rev-parse", "HEAD"], capture_output=True, text=True)
     write_json_atomic(args.output_dir / "manifest.json", {
         "command": "aquarom " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("aquarom") else args.command,
         "arguments": {k: str(v) for k, v in vars(args).items() if k not in ("scene_used", "timings", "output_dir")},
         "scene": None if scene is None else {"name": scene.name, "source": scene.source, "hash": scene.hash,
                                              "values": scene.to_dict()},
-        "versions": software_versions(), "git_commit": commit.stdout.strip() or None,
+        "versions": software_versions(), "git_commit": git_commit(REPOSITORY),
         "host_cores": os.cpu_count(), "mpi_ranks": MPI.COMM_WORLD.size,
         "timings": {"total": wall_time} | getattr(args, "timings", {}),
         "date": time.strftime("%Y-%m-%d %H:%M:%S")})

@@ -9,6 +9,7 @@ import math
 import os
 import platform
 import shutil
+import subprocess
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -130,6 +131,23 @@ def software_versions() -> dict[str, str]:
 
     return {"aquarom_fenics": __version__, "dolfinx": dolfinx.__version__, "petsc4py": petsc4py.__version__,
             "ufl": ufl.__version__, "numpy": np.__version__, "python": platform.python_version()}
+
+
+def git_commit(repository: Path) -> str:
+    """The commit checked out in `repository`, else $AQUAROM_GIT_COMMIT, else "unknown".
+
+    Only a checkout whose top level is `repository` itself counts (not one that merely contains a
+    copy of it); an image built without the history is given the commit in AQUAROM_GIT_COMMIT.
+    """
+    try:
+        answer = subprocess.run(["git", "-C", str(repository), "rev-parse", "--show-toplevel", "HEAD"],
+                                capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.TimeoutExpired):   # no git, or git hangs
+        answer = None
+    lines = answer.stdout.splitlines() if answer is not None and answer.returncode == 0 else []
+    if len(lines) == 2 and Path(lines[0]).resolve() == Path(repository).resolve():
+        return lines[1]
+    return os.environ.get("AQUAROM_GIT_COMMIT") or "unknown"
 
 
 def plot_comparison(path: Path, runs: dict[str, dict[str, np.ndarray]], title: str) -> None:

@@ -6,7 +6,6 @@ power laws in the number of cells), otherwise from the reference figures measure
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 
