@@ -1,0 +1,82 @@
+"""Stability of one design's FOM: completion, per-force energy balance and the spine's dominant mode.
+
+For each time step and spine-force form: does the FOM at the design complete (cut steps), where
+does the energy come from (``aquarom_fenics.energy``), and which spine motion carries the late-time
+response (``aquarom_fenics.energy.spine_spectrum``). Writes <out>/stability_<name>.json.
+
+    .venv/bin/python scripts/stability_co.py --optimum /tmp/co98/summary.json --level 3
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+REPOSITORY = Path(__file__).resolve().parent.parent
+if str(REPOSITORY) not in sys.path:
+    sys.path.insert(0, str(REPOSITORY))
+
+from aquarom_fenics.energy import energy_balance, spine_spectrum  # noqa: E402
+from aquarom_fenics.fish import load_fish  # noqa: E402
+from aquarom_fenics.outputs import write_json_atomic  # noqa: E402
+from aquarom_fenics.scene import Scene  # noqa: E402
+from aquarom_fenics.simulate import simulate_fom  # noqa: E402
+
+
+def design_of(summary: dict, scene: Scene) -> tuple[list[float], float]:
+    """(ξ in the scene's shape order, amplitude A) of an `aquarom optimize` summary."""
+    optimum = summary["optimum"]
+    return [optimum[name] for name in scene.shape_names], optimum.get("amplitude", scene.actuation.amplitude)
+
+
+def run_case(scene: Scene, fish, xi, time_step: float, spine_force: str) -> dict:
+    scene = scene.replace("solver", time_step=time_step).replace("fluid", spine_force=spine_force)
+    result = simulate_fom(scene, xi=xi, fish=fish, progress=False, keep_states=True)
+    arrays = result.trajectory.arrays()
+    record = {"time_step": time_step, "spine_force": spine_force, "completed": result.completed,
+              "error": result.error, "cut_steps": result.cut_steps, "stopped_at": float(arrays["time"][-1]),
+              "distance": result.distance, "wall_time": result.wall_time,
+              "mean_newton_iterations": result.summary()["mean_newton_iterations"],
+              "max_newton_iterations": int(max(arrays["newton_iterations"]))}
+    if result.cut_steps == 0:
+        record["energy"] = energy_balance(result).summary()
+    model = result.model
+    times = arrays["time"][: len(result.states)]
+    lateral = np.array([model.spine_values(u)[:, 1] for u, _ in result.states])
+    record["spine"] = spine_spectrum(times, lateral, scene.actuation.frequency)
+    return record
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--optimum", type=Path, required=True, help="summary.json of `aquarom optimize`")
+    parser.add_argument("--scene", default="co")
+    parser.add_argument("--level", type=int, default=3)
+    parser.add_argument("--time-steps", default="0.02,0.01")
+    parser.add_argument("--spine-forces", default="source,lagrangian")
+    parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "validation")
+    parser.add_argument("--name", default="co98")
+    args = parser.parse_args(argv)
+    scene = Scene.load(args.scene).replace("mesh", level=args.level)
+    xi, amplitude = design_of(json.loads(args.optimum.read_text()), scene)
+    scene = scene.replace("actuation", amplitude=amplitude)
+    fish = load_fish(scene)
+    cases = []
+    for spine_force in args.spine_forces.split(","):
+        for time_step in (float(h) for h in args.time_steps.split(",")):
+            case = run_case(scene, fish, xi, time_step, spine_force)
+            print(json.dumps({k: v for k, v in case.items() if k != "spine"} | {
+                "spine_peak": case["spine"]["peak"]}, default=float), flush=True)
+            cases.append(case)
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(args.out / f"stability_{args.name}.json",
+                      {"scene": args.scene, "level": args.level, "xi": dict(zip(scene.shape_names, xi)),
+                       "amplitude": amplitude, "cases": cases})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
