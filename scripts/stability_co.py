@@ -1,6 +1,6 @@
 """Stability of one design's FOM: completion, per-force energy balance and the spine's dominant mode.
 
-For each time step and spine-force form: does the FOM at the design complete (cut steps), where
+For each time step and spine-force form: the PROM's stability verdict at the design, does the FOM at the design complete (cut steps), where
 does the energy come from (``aquarom_fenics.energy``), and which spine motion carries the late-time
 response (``aquarom_fenics.energy.spine_spectrum``). Writes <out>/stability_<name>.json.
 
@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +23,8 @@ if str(REPOSITORY) not in sys.path:
 from aquarom_fenics.energy import energy_balance, spine_spectrum  # noqa: E402
 from aquarom_fenics.fish import load_fish  # noqa: E402
 from aquarom_fenics.outputs import write_json_atomic  # noqa: E402
+from aquarom_fenics.reduced_dynamics import reduced_stability  # noqa: E402
+from aquarom_fenics.reductor import build_prom  # noqa: E402
 from aquarom_fenics.scene import Scene  # noqa: E402
 from aquarom_fenics.simulate import simulate_fom  # noqa: E402
 
@@ -30,6 +33,12 @@ def design_of(summary: dict, scene: Scene) -> tuple[list[float], float]:
     """(ξ in the scene's shape order, amplitude A) of an `aquarom optimize` summary."""
     optimum = summary["optimum"]
     return [optimum[name] for name in scene.shape_names], optimum.get("amplitude", scene.actuation.amplitude)
+
+
+def solver_overrides(assignments: list[str]) -> dict:
+    """{"integrator": "newmark", ...} from ["integrator=newmark", ...] (values read as TOML)."""
+    return {key: tomllib.loads(f"v = {value}" if value[:1].isdigit() else f'v = "{value}"')["v"]
+            for key, value in (item.split("=", 1) for item in assignments)}
 
 
 def run_case(scene: Scene, fish, xi, time_step: float, spine_force: str) -> dict:
@@ -59,12 +68,20 @@ def main(argv=None) -> int:
     parser.add_argument("--spine-forces", default="source,lagrangian")
     parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "validation")
     parser.add_argument("--name", default="co98")
+    parser.add_argument("--solver", action="append", default=[], metavar="KEY=VALUE",
+                        help="[solver] override, e.g. integrator=newmark, min_time_step=1 (no step cuts)")
+    parser.add_argument("--no-prom", action="store_true", help="skip the PROM stability verdicts")
     args = parser.parse_args(argv)
     scene = Scene.load(args.scene).replace("mesh", level=args.level)
     xi, amplitude = design_of(json.loads(args.optimum.read_text()), scene)
-    scene = scene.replace("actuation", amplitude=amplitude)
+    scene = scene.replace("actuation", amplitude=amplitude).replace("solver", **solver_overrides(args.solver))
     fish = load_fish(scene)
-    cases = []
+    cases, verdicts = [], {}
+    for spine_force in [] if args.no_prom else args.spine_forces.split(","):
+        varied = scene.replace("fluid", spine_force=spine_force)
+        stable, reason = reduced_stability(build_prom(varied, xi_center=xi, fish=fish), varied, xi)
+        verdicts[spine_force] = {"stable": stable, "reason": reason}
+        print(f"PROM at the design, spine force {spine_force}: {reason}", flush=True)
     for spine_force in args.spine_forces.split(","):
         for time_step in (float(h) for h in args.time_steps.split(",")):
             case = run_case(scene, fish, xi, time_step, spine_force)
@@ -73,8 +90,8 @@ def main(argv=None) -> int:
             cases.append(case)
     args.out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(args.out / f"stability_{args.name}.json",
-                      {"scene": args.scene, "level": args.level, "xi": dict(zip(scene.shape_names, xi)),
-                       "amplitude": amplitude, "cases": cases})
+                      {"scene": args.scene, "level": args.level, "solver": solver_overrides(args.solver), "xi": dict(zip(scene.shape_names, xi)),
+                       "amplitude": amplitude, "prom_stability": verdicts, "cases": cases})
     return 0
 
 

@@ -4,7 +4,9 @@ import pytest
 
 from aquarom_fenics.energy import spine_spectrum
 from aquarom_fenics.fish import load_fish
-from aquarom_fenics.reduced_dynamics import FLOQUET_LIMIT, reduced_stability, simulate_reduced
+from aquarom_fenics.integrator import NewtonSettings, TimeScheme, integrate
+from aquarom_fenics.reduced_dynamics import (FLOQUET_LIMIT, ReducedSystem, reduced_stability, simulate_reduced,
+                                             transition_matrix)
 from aquarom_fenics.reductor import build_prom
 from conftest import coarse_scene
 
@@ -16,6 +18,27 @@ def fish():
 
 def multiplier(reason: str) -> float:
     return float(reason.split("|μ| = ")[1].split()[0])
+
+
+@pytest.mark.parametrize("solver", [{}, {"integrator": "newmark", "newmark_alpha": 0.02}])
+def test_the_transition_matrix_is_the_derivative_of_the_discrete_flow(fish, solver):
+    """Φ = ∂s(T)/∂s(0) against central differences of the whole run in each of the 3m directions of s(0)."""
+    scene = coarse_scene(solver={"duration": 0.4, "tolerance": 1e-12, **solver})
+    prom = build_prom(scene, fish=fish)
+    scheme, settings = TimeScheme.from_solver(scene.solver), NewtonSettings.from_solver(scene.solver)
+    system = ReducedSystem(prom, scene, prom.xi_center, scheme)
+    m, n_steps = prom.size, scene.n_steps
+    transition = transition_matrix(system, scheme, n_steps, settings, window_start=0.0)
+
+    def final_state(start):
+        state = integrate(system, scheme, n_steps, (start[:m], start[m:2 * m], start[2 * m:]), settings,
+                          lambda *_: None)
+        return np.concatenate(state)
+
+    step = 1e-7
+    differences = np.column_stack([(final_state(step * e) - final_state(-step * e)) / (2 * step)
+                                   for e in np.eye(3 * m)])
+    assert np.linalg.norm(differences - transition) < 1e-7 * np.linalg.norm(transition)
 
 
 def test_the_nominal_gait_is_stable(fish):
