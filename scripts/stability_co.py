@@ -4,7 +4,9 @@ For each time step and spine-force form: the PROM's stability verdict at the des
 does the energy come from (``aquarom_fenics.energy``), and which spine motion carries the late-time
 response (``aquarom_fenics.energy.spine_spectrum``). Writes <out>/stability_<name>.json.
 
-    .venv/bin/python scripts/stability_co.py --optimum /tmp/co98/summary.json --level 3
+    .venv/bin/python scripts/stability_co.py --optimum results/optimize/co/summary.json --level 3
+    .venv/bin/python scripts/stability_co.py --scene nominal --set material.young_modulus=52e3 \
+        --set solver.min_time_step=1.0 --spine-forces source --no-prom --name soft
 """
 from __future__ import annotations
 
@@ -35,10 +37,15 @@ def design_of(summary: dict, scene: Scene) -> tuple[list[float], float]:
     return [optimum[name] for name in scene.shape_names], optimum.get("amplitude", scene.actuation.amplitude)
 
 
-def solver_overrides(assignments: list[str]) -> dict:
-    """{"integrator": "newmark", ...} from ["integrator=newmark", ...] (values read as TOML)."""
-    return {key: tomllib.loads(f"v = {value}" if value[:1].isdigit() else f'v = "{value}"')["v"]
-            for key, value in (item.split("=", 1) for item in assignments)}
+def scene_overrides(assignments: list[str]) -> dict:
+    """{"solver": {"integrator": "newmark"}, ...} from ["solver.integrator=newmark", ...] (numbers read as TOML)."""
+    sections: dict = {}
+    for item in assignments:
+        key, value = item.split("=", 1)
+        section, name = key.split(".", 1)
+        number = value[:1].isdigit() or value[:1] in "+-."
+        sections.setdefault(section, {})[name] = tomllib.loads(f"v = {value}" if number else f'v = "{value}"')["v"]
+    return sections
 
 
 def run_case(scene: Scene, fish, xi, time_step: float, spine_force: str) -> dict:
@@ -61,20 +68,24 @@ def run_case(scene: Scene, fish, xi, time_step: float, spine_force: str) -> dict
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--optimum", type=Path, required=True, help="summary.json of `aquarom optimize`")
+    parser.add_argument("--optimum", type=Path, help="summary.json of `aquarom optimize` (default: the scene's start)")
     parser.add_argument("--scene", default="co")
     parser.add_argument("--level", type=int, default=3)
     parser.add_argument("--time-steps", default="0.02,0.01")
     parser.add_argument("--spine-forces", default="source,lagrangian")
     parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "validation")
     parser.add_argument("--name", default="co98")
-    parser.add_argument("--solver", action="append", default=[], metavar="KEY=VALUE",
-                        help="[solver] override, e.g. integrator=newmark, min_time_step=1 (no step cuts)")
+    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                        help="scene override, e.g. solver.integrator=newmark, solver.min_time_step=1.0 (no step "
+                             "cuts), material.young_modulus=52e3")
     parser.add_argument("--no-prom", action="store_true", help="skip the PROM stability verdicts")
     args = parser.parse_args(argv)
     scene = Scene.load(args.scene).replace("mesh", level=args.level)
-    xi, amplitude = design_of(json.loads(args.optimum.read_text()), scene)
-    scene = scene.replace("actuation", amplitude=amplitude).replace("solver", **solver_overrides(args.solver))
+    for section, values in scene_overrides(args.set).items():
+        scene = scene.replace(section, **values)
+    optimum = json.loads(args.optimum.read_text()) if args.optimum else {"optimum": {}}
+    xi, amplitude = design_of(optimum, scene)
+    scene = scene.replace("actuation", amplitude=amplitude)
     fish = load_fish(scene)
     cases, verdicts = [], {}
     for spine_force in [] if args.no_prom else args.spine_forces.split(","):
@@ -90,7 +101,7 @@ def main(argv=None) -> int:
             cases.append(case)
     args.out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(args.out / f"stability_{args.name}.json",
-                      {"scene": args.scene, "level": args.level, "solver": solver_overrides(args.solver), "xi": dict(zip(scene.shape_names, xi)),
+                      {"scene": args.scene, "level": args.level, "overrides": scene_overrides(args.set), "xi": dict(zip(scene.shape_names, xi)),
                        "amplitude": amplitude, "prom_stability": verdicts, "cases": cases})
     return 0
 
