@@ -149,3 +149,47 @@ def energy_balance(result) -> EnergyBalance:
                          dissipated_rayleigh=cumulative["rayleigh"], dissipated_numerical=cumulative["numerical"],
                          kinetic_change=cumulative["kinetic"], strain_change=cumulative["strain"],
                          newton_residual=cumulative["residual"])
+
+
+def spine_spectrum(times, lateral, frequency: float, window: float = 1.0) -> dict:
+    """Which lateral motion of the spine carries the late-time response, and whether it grows.
+
+    ``lateral`` (n_samples, n_spine) holds y_i(t_n) of the spine nodes (tail → head) on a uniform grid.
+    Over the last ``window`` s (mean removed, Hann-weighted), Y_i(f) = Σ_n w_n y_i(t_n) e^{-2πi f t_n}:
+
+        peak         the f maximising P(f) = Σ_i |Y_i(f)|², and its share of Σ_f P(f)
+        shape        Re(Y_i(f_peak) e^{-iφ}) / max_i |Y_i(f_peak)|, φ the phase of the largest entry
+        sign_changes number of sign changes of the shape between neighbouring nodes (n_spine - 1: a
+                     zig-zag at the node spacing, 0: a whole-body bending)
+        high         the same (peak, share, shape, sign_changes) over f ≥ 2.5 f_actuation
+        harmonic_share  share of Σ_f P(f) at f < 2.5 f_actuation (the forced gait and its 2nd harmonic)
+        growth       RMS of the part above 2.5 f_actuation over the window's last quarter ÷ over its
+                     first quarter (> 1: a high-frequency motion grows)
+    """
+    times = np.asarray(times, dtype=float)
+    lateral = np.asarray(lateral, dtype=float)
+    late = times >= times[-1] - window - 1e-12
+    t, y = times[late], lateral[late]
+    y = y - y.mean(axis=0)
+    spectrum = np.fft.rfft(y * np.hanning(t.size)[:, None], axis=0)
+    frequencies = np.fft.rfftfreq(t.size, d=float(t[1] - t[0]))
+    power = (np.abs(spectrum) ** 2).sum(axis=1)
+    above = frequencies >= 2.5 * frequency
+    high = np.fft.irfft(np.where(above[:, None], np.fft.rfft(y, axis=0), 0.0), n=t.size, axis=0)
+    quarter = max(t.size // 4, 1)
+    early, final = (float(np.sqrt(np.mean(part ** 2))) for part in (high[:quarter], high[-quarter:]))
+    return {"window": [float(t[0]), float(t[-1])],
+            **_spectral_peak(frequencies, spectrum, power, frequencies > 0),
+            "high": _spectral_peak(frequencies, spectrum, power, above),
+            "harmonic_share": float(power[~above].sum() / power.sum()),
+            "growth": final / early if early > 0 else float("inf"), "high_frequency_rms": final}
+
+
+def _spectral_peak(frequencies, spectrum, power, selected) -> dict:
+    """Peak of P(f) among the ``selected`` frequencies, its share of Σ_f P(f), its real shape along the spine."""
+    peak = int(np.flatnonzero(selected)[np.argmax(power[selected])])
+    mode = spectrum[peak] * np.exp(-1j * np.angle(spectrum[peak][np.argmax(np.abs(spectrum[peak]))]))
+    shape = mode.real / np.abs(mode).max()
+    return {"peak": float(frequencies[peak]), "peak_share": float(power[peak] / power.sum()),
+            "shape": shape.tolist(),
+            "sign_changes": int(np.count_nonzero(np.diff(np.sign(shape[np.abs(shape) > 1e-3]))))}

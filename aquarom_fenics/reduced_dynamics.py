@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import time as clock
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 import scipy.linalg
@@ -296,3 +297,82 @@ def distance_gradient(system: ReducedSystem, time, states, sensitivities, weight
     mask = window_mask(time, DISTANCE_WINDOW)
     per_sample = states[mask] @ weights_gradient.T + np.einsum("m,smk->sk", system.com_weights, sensitivities[mask])
     return per_sample.mean(axis=0)
+
+
+FLOQUET_LIMIT = 1.01
+"""Largest |μ| of the one-period transition matrix accepted as stable: a perturbation may grow by at most
+1 % per actuation period (the gait at the end of a 2 s horizon is periodic only up to its start-up transient;
+the nominal fish measures |μ| ≈ 1, the rigid translation)."""
+
+
+class Stability(NamedTuple):
+    """Verdict of :func:`reduced_stability`: ``stable`` and the reason, one line."""
+
+    stable: bool
+    reason: str
+
+
+def transition_matrix(system: ReducedSystem, scheme: TimeScheme, n_steps: int, settings: NewtonSettings,
+                      window_start: float, state=None) -> np.ndarray:
+    """Φ = ∂s(T)/∂s(t_w) ∈ R^{3m×3m} of s = (η, η̇, η̈) over [t_w, T] along the run from ``state`` (rest).
+
+    Φ = Π_n ∂s_{n+1}/∂s_n over the (sub-)steps that start at or after t_w = ``window_start``, each the
+    exact derivative of the converged step, ``propagate_sensitivity`` with ∂r/∂ξ = 0. Raises
+    :class:`IntegrationStopped` if the run stops.
+    """
+    m = system.prom.size
+    identity = np.eye(3 * m)
+    columns = [identity[:m], identity[m:2 * m], identity[2 * m:]]     # ∂(η, η̇, η̈)/∂s(t_w)
+
+    def advance(step_scheme: TimeScheme, time: float, old, new):
+        nonlocal columns
+        if time - step_scheme.time_step >= window_start - 1e-9 * step_scheme.time_step:
+            point = step_scheme.evaluation_point(time, old, new)
+            columns = propagate_sensitivity(system, step_scheme, point, columns, np.zeros((m, 3 * m)))
+
+    zero = np.zeros(m)
+    integrate(system, scheme, n_steps, (zero, zero, zero) if state is None else state, settings,
+              lambda *_: None, on_step=advance)
+    return np.vstack(columns)
+
+
+def reduced_stability(prom: ReducedModel, scene: Scene, xi=None, amplitude: float | None = None,
+                      limit: float = FLOQUET_LIMIT) -> Stability:
+    """Is the PROM's gait at design ξ (amplitude A) stable? Floquet test of the discrete reduced system.
+
+    The state of a step is s = (η, η̇, η̈). The transition matrix Φ of the last actuation period
+    [T - 1/f, T] (the whole horizon if T < 1/f; judge horizons of two periods or more, the start-up
+    from rest is no periodic gait) along the converged trajectory (:func:`transition_matrix`):
+
+        stable ⇔ ρ(Φ) = max |μ_i(Φ)| ≤ limit
+
+    A perturbation of the periodic gait is multiplied by μ each period: |μ| > 1 is a growing mode of
+    the model (physical, e.g. energy fed by the thrust, or numerical). The rigid translation along x
+    gives μ = 1. A PROM run that stops is unstable with its stop message as the reason.
+    """
+    from .simulate import check_time_grid
+
+    n_steps = check_time_grid(scene)
+    xi = prom.xi_center if xi is None else np.asarray(xi, dtype=float)
+    scheme = TimeScheme.from_solver(scene.solver)
+    system = ReducedSystem(prom, scene, xi, scheme, amplitude)
+    m = prom.size
+    window_start = max(scene.solver.duration - 1.0 / scene.actuation.frequency, 0.0)
+    try:
+        transition = transition_matrix(system, scheme, n_steps, NewtonSettings.from_solver(scene.solver),
+                                       window_start)
+    except IntegrationStopped as failure:
+        return Stability(False, f"unstable: the PROM stops ({failure})")
+    if not np.all(np.isfinite(transition)):
+        return Stability(False, "unstable: the one-period transition matrix is not finite")
+    multipliers, vectors = np.linalg.eig(transition)
+    largest = int(np.argmax(np.abs(multipliers)))
+    radius = float(np.abs(multipliers[largest]))
+    period = scene.solver.duration - window_start
+    if radius <= limit:
+        return Stability(True, f"stable: largest Floquet multiplier |μ| = {radius:.4f} over [{window_start:g}, "
+                               f"{scene.solver.duration:g}] s (limit {limit:g})")
+    coordinate = int(np.argmax(np.abs(vectors[:m, largest])))
+    return Stability(False, f"unstable: a perturbation grows by |μ| = {radius:.4g} per {period:g} s "
+                            f"(growth rate {np.log(radius) / period:.3g} 1/s), mostly along basis vector "
+                            f"{prom.labels[coordinate]}")
