@@ -3,6 +3,7 @@
 Writes results/bench/fom.json: cells, dofs, wall time, mean Newton iterations, peak memory,
 distance and tail amplitude per element degree, level and rank count, and the -n 2 speed-up.
 Linear tetrahedra on --levels (default 1–5), quadratic ones on --quadratic-levels (default 1–3).
+Each run records the 1-minute load average before it starts: the cores may be shared.
 """
 import argparse
 import json
@@ -34,23 +35,25 @@ def run_level(level: int, ranks: int, work: Path, degree: int = 1) -> dict:
     if ranks > 1:
         command = ["mpirun", "-n", str(ranks)] + command
     environment = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", OMP_NUM_THREADS="1")
+    load = os.getloadavg()[0]
     started = time.perf_counter()
     completed = subprocess.run(command, capture_output=True, text=True, env=environment)
     elapsed = time.perf_counter() - started
     if completed.returncode != 0:
-        return {"degree": degree, "level": level, "ranks": ranks, "failed": completed.stderr.strip().splitlines()[-1:]}
+        return {"degree": degree, "level": level, "ranks": ranks, "load_average": load,
+                "failed": completed.stderr.strip().splitlines()[-1:]}
     summary = json.loads((out / "summary.json").read_text())
     return {"degree": degree, "level": level, "ranks": ranks, "cells": summary["cells"], "dofs": summary["dofs"],
             "wall_time_simulation": summary["wall_time"], "wall_time_process": elapsed,
             "time_integration": summary["timings"]["time_integration"],
             "mean_newton_iterations": summary["mean_newton_iterations"],
             "peak_memory_mb_rank0": summary["peak_memory_mb"], "distance": summary["distance"],
-            "tail_amplitude": summary["tail_amplitude"]}
+            "tail_amplitude": summary["tail_amplitude"], "load_average": load}
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3, 4, 5], help="levels at degree 1")
+    parser.add_argument("--levels", type=int, nargs="*", default=[1, 2, 3, 4, 5], help="levels at degree 1")
     parser.add_argument("--quadratic-levels", type=int, nargs="*", default=[1, 2, 3], help="levels at degree 2")
     parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "bench" / "fom.json")
     args = parser.parse_args()
