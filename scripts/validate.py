@@ -92,11 +92,12 @@ QUICK = Settings(quick=True, levels=(1, 2), stiffnesses=(1.2e4, 6e4, 7.5e4), dur
 
 def base_scene(settings: Settings, name: str = "nominal", level: int | None = None,
                stiffness: float = REFERENCE_STIFFNESS, time_step: float = 0.02, solver: dict | None = None):
-    """A shipped scene at the study's level, stiffness, horizon and step; ``solver`` overrides [solver] values."""
+    """A shipped scene at the study's level (linear tetrahedra: the studies sweep the five levels of
+    SPEC §11), stiffness, horizon and step; ``solver`` overrides [solver] values."""
     from aquarom_fenics.scene import Scene
 
     scene = Scene.load(name)
-    scene = scene.replace("mesh", level=level or settings.reference_level)
+    scene = scene.replace("mesh", level=level or settings.reference_level, degree=1)
     scene = scene.replace("actuation", stiffness=float(stiffness))
     scene = scene.replace("solver", duration=settings.duration, time_step=float(time_step), **(solver or {}))
     return scene.replace("output", plots=False, render=False, xdmf=False)

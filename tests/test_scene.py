@@ -100,11 +100,13 @@ SO8 = {"z_tail": (-0.5, 0.5), "z_head": (-0.5, 0.5), "y_thin": (-0.15, 0.15),
 SO9 = {"z_tail": (-0.5, 0.5), "z_head": (-0.5, 0.5), "z_tail_step": (-0.5, 0.5),
        "z_tail_lin": (-0.5, 0.5), "y_lin_long_tail": (-0.4, 0.4), "y_ellipse": (-0.4, 0.4)}
 
+DEFAULT_MESH = (2, 2)      # (level, degree): the cheapest mesh within 3% of the converged distance (README)
+FINE_MESH = (4, 1)         # SO4–SO6: SO1–SO3 on the 16k-cell level (SPEC §11)
 STUDIES = {
-    "so1": (SO1, 3), "so2": (SO2, 3), "so3": (SO3, 3),
-    "so4": (SO1, 4), "so5": (SO2, 4), "so6": (SO3, 4),
-    "so7": (SO7, 3), "so8": (SO8, 3), "so9": (SO9, 3),
-    "co": (SO2, 3),
+    "so1": (SO1, DEFAULT_MESH), "so2": (SO2, DEFAULT_MESH), "so3": (SO3, DEFAULT_MESH),
+    "so4": (SO1, FINE_MESH), "so5": (SO2, FINE_MESH), "so6": (SO3, FINE_MESH),
+    "so7": (SO7, DEFAULT_MESH), "so8": (SO8, DEFAULT_MESH), "so9": (SO9, DEFAULT_MESH),
+    "co": (SO2, DEFAULT_MESH),
 }
 SHIPPED = sorted(path.stem for path in SCENES_DIR.glob("*.toml"))
 PARETO_WEIGHTS = (0.2, 0.3, 0.4, 0.5, 0.7, 0.9, 0.98)
@@ -128,9 +130,9 @@ def test_shipped_scene_loads_by_name_and_by_path(name):
 
 @pytest.mark.parametrize("name", sorted(STUDIES))
 def test_shipped_study_matches_spec(name):
-    shapes, level = STUDIES[name]
+    shapes, mesh = STUDIES[name]
     scene = Scene.load(name)
-    assert scene.mesh.level == level
+    assert (scene.mesh.level, scene.mesh.degree) == mesh
     assert scene.shape_names == list(shapes)
     assert {shape.name: (shape.lower, shape.upper) for shape in scene.shapes} == shapes
     assert scene.cooptimization.enabled == (name == "co")
@@ -198,7 +200,8 @@ def test_empty_file_gives_the_defaults_and_nominal_spells_them_out(tmp_path):
         assert scene.solver == SolverSection()
         assert scene.cooptimization == CooptimizationSection()
     assert empty.name == "scene"
-    assert nominal.mesh.level == 3 and nominal.shapes == ()
+    assert (nominal.mesh.level, nominal.mesh.degree) == DEFAULT_MESH and nominal.shapes == ()
+    assert (empty.mesh.level, empty.mesh.degree) == (3, 1)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -287,11 +290,11 @@ def test_hash_follows_the_content_of_the_mesh_file(tmp_path):
 def test_replace_changes_one_value_and_keeps_the_rest():
     scene = Scene.load("so1")
     coarse = scene.replace("mesh", level=1)
-    assert coarse.mesh.level == 1 and scene.mesh.level == 3
-    assert coarse.mesh.translate == scene.mesh.translate
+    assert coarse.mesh.level == 1 and scene.mesh.level == 2
+    assert coarse.mesh.translate == scene.mesh.translate and coarse.mesh.degree == scene.mesh.degree
     assert coarse.shapes == scene.shapes and coarse.solver == scene.solver
     assert coarse.hash != scene.hash
-    assert coarse.replace("mesh", level=3).hash == scene.hash
+    assert coarse.replace("mesh", level=2).hash == scene.hash
     shifted = scene.replace("regions", muscle_range=(-0.9, -0.4))
     assert shifted.regions.muscle_range == (-0.9, -0.4)
     assert scene.replace("cooptimization", weights=[0.5]).cooptimization.weights == (0.5,)
