@@ -143,6 +143,10 @@ class OptimizerSection:
     cost_tolerance: float = _spec(1e-4, _positive, "stop when the relative cost change falls below")
     initial_radius: float = _spec(1.0, lambda v: None if 0 < v <= 1 else "must be in (0, 1]", "trust radius as a fraction of the PROM validity radius (trust-region)")
     accept_ratio: float = _spec(0.1, lambda v: None if 0 <= v < 1 else "must be in [0, 1)", "accept a step when actual/predicted reduction exceeds this")
+    optimality_tolerance: float = _spec(1e-2, _positive, "stop when the first-order measure ‖D r‖_∞ / |L| (KKT residual r, D the parameter ranges) falls below")
+    active_tolerance: float = _spec(1e-2, _positive, "a bound or linear constraint is active when its slack is below this fraction of its range")
+    starts: int = _spec(1, _positive, "optimisations from the start point and starts - 1 Latin-hypercube feasible points")
+    seed: int = _spec(0, _non_negative, "seed of the Latin-hypercube starts")
 
 
 @dataclass(frozen=True)
