@@ -469,7 +469,8 @@ def _trust_region(scene, space, builder, weights, history, checkpoint, state, sa
         candidate = safeguard.finite(candidate, state["iteration"] + 1)
         step = candidate - center
         iteration = state["iteration"] + 1
-        if np.abs(step).max() < settings.step_tolerance or current.cost - predicted_cost <= 0:
+        if (np.abs(step).max() < settings.step_tolerance
+                or current.cost - predicted_cost <= settings.cost_tolerance * abs(current.cost)):
             reason = "no predicted improvement inside the trust radius (stalled before optimality)"
             break
         candidate, candidate_prom = _meshable_candidate(builder, center, candidate, settings.step_tolerance)
@@ -543,6 +544,10 @@ def _build_or_stop(builder: PromBuilder, z: np.ndarray) -> ReducedModel:
         raise InputError(f"the PROM cannot be built at {builder.space.as_dict(z)}: {refused}") from None
 
 
+def _within_cuts(z, center, cuts) -> bool:
+    return all(cut @ (z - center) <= 1e-12 for cut in cuts)
+
+
 def _surrogate_step(builder, prom, space, weights, center, radius, cuts=()) -> tuple[np.ndarray, float]:
     """Minimise the surrogate cost (PROM at its centre, simulated at z) inside bounds, constraints,
     radius and the cuts c·(z - z_c) ≤ 0 of directions the design check refused."""
@@ -563,10 +568,16 @@ def _surrogate_step(builder, prom, space, weights, center, radius, cuts=()) -> t
         constraints.append(LinearConstraint(space.constraint_matrix, -np.inf, space.constraint_bound))
     for cut in cuts:
         constraints.append(LinearConstraint(cut[None, :], -np.inf, cut @ center))
-    solution = minimize(lambda z: surrogate(z).cost, center, jac=lambda z: surrogate(z).gradient, method="SLSQP",
-                        bounds=list(zip(lower, upper)), constraints=constraints,
-                        options={"maxiter": 30, "ftol": 1e-10})
-    candidate = np.clip(solution.x, lower, upper)
+    try:
+        solution = minimize(lambda z: surrogate(z).cost, center, jac=lambda z: surrogate(z).gradient, method="SLSQP",
+                            bounds=list(zip(lower, upper)), constraints=constraints,
+                            options={"maxiter": 30, "ftol": 1e-10})
+        candidate = np.clip(solution.x, lower, upper)
+    except SolverError as failed:      # the surrogate cannot be simulated everywhere: its best point so far
+        log.warning("trust region: surrogate solve stopped (%s); taking its best feasible point so far", failed)
+        candidate = np.array(min((key for key in cache if _within_cuts(np.array(key), center, cuts)
+                                  and space.is_feasible(np.array(key), tolerance=1e-9)),
+                                 key=lambda key: cache[key].cost))
     if not space.is_feasible(candidate, tolerance=1e-9):
         raise SolverError(f"the surrogate step left the feasible set at {space.as_dict(candidate)}")
     value = surrogate(candidate).cost
