@@ -343,7 +343,7 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, sa
             scaling /= max(np.abs(total_gradient).max(), 1e-300)
         else:
             scaling = _rescaled(scaling, total_gradient, np.array(previous), barrier_scale * barrier_gradient,
-                                settings)
+                                rebuild, settings)
         step = -settings.step_size * scaling * total_gradient
         fraction, blocking = _fraction_to_boundary(space, z, step)
         if fraction < 1.0:
@@ -372,8 +372,9 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, sa
     return z, final, reason
 
 
-def _rescaled(scaling, gradient, previous, barrier_part, settings) -> np.ndarray:
-    """W_i halves where ∂L_b/∂z_i changed sign (the source's rule). Beyond the source, W_i doubles
+def _rescaled(scaling, gradient, previous, barrier_part, built: bool, settings) -> np.ndarray:
+    """W_i halves where ∂L_b/∂z_i changed sign (the source's rule). Beyond the source, at a design
+    where a PROM was just built (a linearised gradient holds no new information), W_i doubles
     where the sign held, the barrier's part μ ∂B/∂z_i is under half of ∂L_b/∂z_i (away from the
     bounds' barrier layer) and the doubled step γ W_i |∂L_b/∂z_i| stays within the rebuild
     threshold: a parameter with a small gradient still reaches its bound."""
@@ -381,7 +382,7 @@ def _rescaled(scaling, gradient, previous, barrier_part, settings) -> np.ndarray
     scaling = np.where(sign_change < 0, 0.5 * scaling, scaling)
     outside_barrier_layer = np.abs(barrier_part) < 0.5 * np.abs(gradient)
     room = 2 * settings.step_size * scaling * np.abs(gradient) <= settings.rebuild_threshold
-    return np.where((sign_change > 0) & outside_barrier_layer & room, 2.0 * scaling, scaling)
+    return np.where(built & (sign_change > 0) & outside_barrier_layer & room, 2.0 * scaling, scaling)
 
 
 def _final_evaluation(builder: PromBuilder, weights, z, last_built) -> Evaluation:

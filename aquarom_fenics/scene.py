@@ -134,7 +134,7 @@ class ReductionSection:
 @dataclass(frozen=True)
 class OptimizerSection:
     method: str = _spec("paper", _one_of("paper", "trust-region"), "optimisation algorithm")
-    max_iterations: int = _spec(30, _positive, "iterations (a safeguard: the optimisers stop on optimality_tolerance)")
+    max_iterations: int = _spec(100, _positive, "iterations (a safeguard: the optimisers stop on optimality_tolerance)")
     step_size: float = _spec(0.05, _positive, "γ in ξ ← ξ - γ W ∇L; W starts at 1/‖∇L_0‖_∞, so γ is the first step (paper)")
     barrier_weight: float = _spec(1e-3, _positive, "log-barrier weight (paper)")
     rebuild_threshold: float = _spec(0.15, _positive, "rebuild the PROM when any |ξ - ξ_c| exceeds this (paper)")
