@@ -361,15 +361,48 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, sa
             break
     if center is not None and np.allclose(z, center["z"]) and prom is not None:
         final = builder.evaluate(prom, z, weights)
-        if reason.startswith("first-order"):
-            return z, final, reason       # its row is the last one recorded
     else:
         final = _final_evaluation(builder, weights, z, np.array(center["z"]))
-        z = final.z
+    if not reason.startswith("first-order"):        # a converged iterate's row is the last one recorded
+        _record_final(scene, space, history, history[-1]["iteration"] + 1, final, started, on_iteration)
+    closed = _barrier_gap_closed(space, builder, weights, final, settings.barrier_weight)
+    if closed is not None:
+        names, final = closed
+        reason += f"; then {', '.join(names)} moved from the barrier iterate onto the bound"
+        _record_final(scene, space, history, history[-1]["iteration"] + 1, final, started, on_iteration)
+    return final.z, final, reason
+
+
+def _record_final(scene, space, history, iteration, final: Evaluation, started, on_iteration) -> None:
     measure = _optimality(scene, space, final).measure
-    _record(history, history_row(space, state["iteration"], z, final.cost, final.gradient, final.distance,
-                                 "built", started, optimality=measure), on_iteration)
-    return z, final, reason
+    _record(history, history_row(space, iteration, final.z, final.cost, final.gradient, final.distance, "built",
+                                 started, optimality=measure), on_iteration)
+
+
+def _barrier_gap_closed(space: DesignSpace, builder: PromBuilder, weights, final: Evaluation, barrier_weight: float):
+    """The barrier holds a bound off by s_i ≈ μ / |∂L/∂z_i| (complementarity λ_i s_i = μ). A bound
+    within √barrier_weight of its range whose gradient pushes towards it (λ_i = μ / s_i would exceed
+    s_i, both relative) is taken as active: the design with those parameters on their bounds,
+    if feasible and meshing, replaces the iterate when a PROM built there gives a lower cost.
+    Returns (the bounds moved onto, its evaluation) or None."""
+    z, gradient = final.z, final.gradient
+    width = space.upper - space.lower
+    near_lower = space.free & (z - space.lower < np.sqrt(barrier_weight) * width) & (gradient > 0)
+    near_upper = space.free & (space.upper - z < np.sqrt(barrier_weight) * width) & (gradient < 0)
+    if not (near_lower.any() or near_upper.any()):
+        return None
+    snapped = np.where(near_lower, space.lower, np.where(near_upper, space.upper, z))
+    if not (space.is_feasible(snapped) and builder.meshes(snapped)):
+        return None
+    try:
+        evaluation = builder.evaluate(builder.build(snapped), snapped, weights)
+    except InputError:
+        return None
+    if evaluation.cost >= final.cost:
+        return None
+    names = [f"{n} = lower" for n in np.array(space.names)[near_lower]]
+    names += [f"{n} = upper" for n in np.array(space.names)[near_upper]]
+    return names, evaluation
 
 
 def _rescaled(scaling, gradient, previous, barrier_part, built: bool, settings) -> np.ndarray:

@@ -28,12 +28,13 @@ log = logging.getLogger("aquarom")
 class FomCheck:
     """FOM distances [m] of the nominal (start) and optimal designs and their ratio.
 
-    A FOM run that stops leaves its distance None and the reason in ``error``.
+    A FOM run that stops leaves its distance None and the reason in ``error``; the PROM's nominal
+    distance is None for a run from another start (multi-start).
     """
 
     nominal_distance: float | None
     optimal_distance: float | None
-    prom_nominal_distance: float
+    prom_nominal_distance: float | None
     prom_optimal_distance: float
     time: float
     error: str | None = None
@@ -75,14 +76,16 @@ def fom_check(scene: Scene, fish: Fish, result: OptimizationResult) -> FomCheck:
         return dict(zip(space.names[:shapes], map(float, z[:shapes]))), (float(z[-1]) if space.with_amplitude else None)
 
     distances, errors = [], []
-    for z in (design_space(scene).start, result.optimum):
+    nominal = design_space(scene).start
+    for z in (nominal, result.optimum):
         try:
             distances.append(fom_distance(scene, fish, *split(z)))
         except SolverError as failure:
             distances.append(None)
             errors.append(str(failure))
     first_built = next(row for row in result.history if row["prom"] == "built")
-    return FomCheck(*distances, first_built["distance"], result.evaluation.distance,
+    prom_nominal = first_built["distance"] if np.array_equal(space.start, nominal) else None
+    return FomCheck(*distances, prom_nominal, result.evaluation.distance,
                     time.perf_counter() - started, "; ".join(errors) or None)
 
 

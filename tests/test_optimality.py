@@ -134,3 +134,24 @@ def test_multistart_finds_both_local_optima_and_picks_the_better_verified_one(fi
                                                                          summary["multistart"]["local_optima"]))
     for k in range(1, 5):
         assert (tmp_path / f"start_{k}" / "summary.json").exists()
+
+
+class SlopeBuilder(AnalyticBuilder):
+    """d(z) = 0.01 + 0.01 z_tail + 0.01 (1 - (y_thin / 0.05)²): a pull onto z_tail's upper bound,
+    an interior optimum in y_thin."""
+
+    def evaluate(self, prom, z, weights):
+        z = np.array(z, dtype=float)
+        distance = 0.01 + 0.01 * z[0] + 0.01 * (1 - (z[1] / 0.05) ** 2)
+        gradient = np.array([0.01, -0.02 * z[1] / 0.05 ** 2])
+        return Evaluation(z, -distance, -gradient, distance, gradient)
+
+
+def test_paper_method_moves_a_bound_the_barrier_holds_off_onto_it(fish):
+    scene = toy("paper")
+    space = optimize_module.optimization_space(scene, fish)
+    result = optimize(scene, fish=fish, builder=SlopeBuilder(scene, fish, space))
+    assert "z_tail = upper moved from the barrier iterate onto the bound" in result.stop_reason, result.stop_reason
+    assert result.optimum[0] == 0.2 and abs(result.optimum[1]) < 0.01 * 0.2
+    assert result.converged
+    assert [row["constraint"] for row in result.optimality.active] == ["z_tail = upper"]
