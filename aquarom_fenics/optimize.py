@@ -357,8 +357,11 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, sa
             reason = safeguard.reason
             break
         if np.linalg.norm(step) < settings.step_tolerance:
-            reason = f"step {np.linalg.norm(step):.2e} below the step tolerance (stalled before optimality)"
-            break
+            if rebuild:
+                reason = f"step {np.linalg.norm(step):.2e} below the step tolerance (stalled before optimality)"
+                break
+            state["since_build"] = settings.n_rebuild      # a linearised gradient may be stale: rebuild first
+            checkpoint.save(state, history, builder)
     if center is not None and np.allclose(z, center["z"]) and prom is not None:
         final = builder.evaluate(prom, z, weights)
     else:
