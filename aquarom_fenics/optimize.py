@@ -371,7 +371,9 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, sa
     closed = _barrier_gap_closed(space, builder, weights, final, settings.barrier_weight)
     if closed is not None:
         names, final = closed
-        reason += f"; then {', '.join(names)} moved from the barrier iterate onto the bound"
+        measure = _optimality(scene, space, final).measure
+        reason += (f"; then {', '.join(names)} moved from the barrier iterate onto the bound "
+                   f"(first-order measure {measure:.2e} there)")
         _record_final(scene, space, history, history[-1]["iteration"] + 1, final, started, on_iteration)
     return final.z, final, reason
 
