@@ -387,8 +387,9 @@ def _record_final(scene, space, history, iteration, final: Evaluation, started, 
 def _barrier_gap_closed(space: DesignSpace, builder: PromBuilder, weights, final: Evaluation, barrier_weight: float):
     """The barrier holds a bound off by s_i ≈ μ / |∂L/∂z_i| (complementarity λ_i s_i = μ). A bound
     within √barrier_weight of its range whose gradient pushes towards it (λ_i = μ / s_i would exceed
-    s_i, both relative) is taken as active: the design with those parameters on their bounds,
-    if feasible and meshing, replaces the iterate when a PROM built there gives a lower cost.
+    s_i, both relative) is taken as active: the design with those parameters on their bounds
+    (the weakest-held, by |∂L/∂z_i| · range, let go until it is feasible and meshes) replaces the
+    iterate when a PROM built there gives a lower cost.
     Returns (the bounds moved onto, its evaluation) or None."""
     z, gradient = final.z, final.gradient
     width = space.upper - space.lower
@@ -396,8 +397,13 @@ def _barrier_gap_closed(space: DesignSpace, builder: PromBuilder, weights, final
     near_upper = space.free & (space.upper - z < np.sqrt(barrier_weight) * width) & (gradient < 0)
     if not (near_lower.any() or near_upper.any()):
         return None
-    snapped = np.where(near_lower, space.lower, np.where(near_upper, space.upper, z))
-    if not (space.is_feasible(snapped) and builder.meshes(snapped)):
+    # the weakest-held bounds are let go, one at a time, until the design is feasible and meshes
+    for weakest in [i for i in np.argsort(np.abs(gradient) * width) if near_lower[i] or near_upper[i]]:
+        snapped = np.where(near_lower, space.lower, np.where(near_upper, space.upper, z))
+        if not (near_lower.any() or near_upper.any()) or (space.is_feasible(snapped) and builder.meshes(snapped)):
+            break
+        near_lower[weakest] = near_upper[weakest] = False
+    if not (near_lower.any() or near_upper.any()):
         return None
     try:
         evaluation = builder.evaluate(builder.build(snapped), snapped, weights)
