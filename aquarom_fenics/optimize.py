@@ -357,10 +357,14 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, sa
             reason = safeguard.reason
             break
         if np.linalg.norm(step) < settings.step_tolerance:
-            if rebuild:
+            if rebuild and state.get("restarted"):
                 reason = f"step {np.linalg.norm(step):.2e} below the step tolerance (stalled before optimality)"
                 break
-            state["since_build"] = settings.n_rebuild      # a linearised gradient may be stale: rebuild first
+            if rebuild:     # W restarts once, as at the first iteration (1/‖∇L_b‖_∞)
+                state.update(scaling=np.ones(z.size).tolist(), previous_gradient=None, restarted=True)
+                scaling = np.ones(z.size)
+            else:           # a linearised gradient may be stale: rebuild first
+                state["since_build"] = settings.n_rebuild
             checkpoint.save(state, history, builder)
     if center is not None and np.allclose(z, center["z"]) and prom is not None:
         final = builder.evaluate(prom, z, weights)
