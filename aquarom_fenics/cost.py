@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import linprog
+from scipy.optimize import linprog, nnls
 
 from .errors import InputError, SolverError
 from .prom import ReducedModel
@@ -71,14 +71,65 @@ class DesignSpace:
     def is_feasible(self, z: np.ndarray, tolerance: float = 1e-12) -> bool:
         return bool(np.all(self.slacks(z) >= -tolerance))
 
-    def active_bounds(self, z: np.ndarray, tolerance: float = 1e-6) -> list[str]:
+    @property
+    def slack_ranges(self) -> np.ndarray:
+        """Range of every slack over the box: the width for a bound, Σ_j |A_ij| (upper_j - lower_j)
+        for a linear row; activity tolerances are fractions of it."""
         width = self.upper - self.lower
-        active = [f"{n} = lower" for n, v, lo, w in zip(self.names, z, self.lower, width) if v - lo <= tolerance * w]
-        active += [f"{n} = upper" for n, v, hi, w in zip(self.names, z, self.upper, width) if hi - v <= tolerance * w]
-        return active
+        return np.concatenate([width, width, np.abs(self.constraint_matrix) @ width])
+
+    def row_names(self) -> list[str]:
+        """A name for every slack row: ``z_tail = lower``, ``z_tail = upper``, ``constraint 1``, …"""
+        return ([f"{n} = lower" for n in self.names] + [f"{n} = upper" for n in self.names]
+                + [f"constraint row {i + 1}" for i in range(self.constraint_bound.size)])
+
+    def active_rows(self, z: np.ndarray, tolerance: float) -> np.ndarray:
+        """Rows with s_i(z) ≤ tolerance · range_i (fixed parameters' bounds excluded)."""
+        return np.flatnonzero((self.slacks(z) <= tolerance * self.slack_ranges) & self.barrier_rows)
 
     def as_dict(self, z: np.ndarray) -> dict[str, float]:
         return dict(zip(self.names, map(float, z)))
+
+
+@dataclass
+class FirstOrder:
+    """First-order optimality at z of min L(z) s.t. s(z) = s_0 + J z ≥ 0.
+
+    KKT: ∇L = Jᵀ λ, λ ≥ 0, λ_i s_i = 0. The rows within ``tolerance`` of their range are the
+    active set A; λ_A ≥ 0 minimises ‖D(∇L - J_Aᵀ λ_A - J_Iᵀ λ_I)‖ (non-negative least squares),
+    λ_I the barrier's multipliers μ / s_i of the inactive rows (zero without a barrier) and
+    D = diag(upper - lower). ``measure`` = ‖D r‖_∞ / |L| for that residual r: the relative cost
+    change, to first order, still to be had by moving one free parameter across its range.
+    """
+
+    measure: float
+    active: list[dict]          # name, slack / range, multiplier (least squares, its sign free)
+
+
+def first_order(space: DesignSpace, z: np.ndarray, cost: float, gradient: np.ndarray, tolerance: float,
+                barrier_scale: float = 0.0) -> FirstOrder:
+    """The optimality measure and active set of :class:`FirstOrder` (``barrier_scale`` = μ)."""
+    free = space.free
+    scale = space.upper - space.lower
+    slacks, ranges, jacobian = space.slacks(z), space.slack_ranges, space.slack_jacobian
+    active = space.active_rows(z, tolerance)
+    inactive = np.setdiff1d(np.flatnonzero(space.barrier_rows), active)
+    residual = np.asarray(gradient, dtype=float).copy()
+    if barrier_scale > 0 and inactive.size:
+        residual -= jacobian[inactive].T @ (barrier_scale / slacks[inactive])
+    columns = (scale[:, None] * jacobian[active].T)[free]
+    target = (scale * residual)[free]
+    if active.size:
+        positive, _ = nnls(columns, target)
+        stationary = target - columns @ positive
+        multipliers = np.linalg.lstsq(columns, target, rcond=None)[0]
+    else:
+        stationary, multipliers = target, np.zeros(0)
+    names = space.row_names()
+    rows = [{"constraint": names[i], "slack_over_range": float(slacks[i] / max(ranges[i], 1e-300)), "multiplier": float(m)}
+            for i, m in zip(active, multipliers)]
+    measure = float(np.abs(stationary).max(initial=0.0) / max(abs(cost), 1e-300))
+    return FirstOrder(measure, rows)
 
 
 def design_space(scene: Scene) -> DesignSpace:

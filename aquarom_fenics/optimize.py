@@ -11,13 +11,22 @@ Two algorithms over the same cost and design space (``cost.py``):
 * ``trust-region``: the PROM built at the centre is a nonlinear surrogate (simulated at any z in
   the radius, with its own sensitivities); SciPy's SLSQP solves the surrogate problem with bounds
   and linear constraints inside the radius; a PROM built at the candidate gives the actual
-  reduction, ρ = actual / predicted accepts or rejects the step and resizes the radius.
+  reduction, ρ = actual / predicted accepts or rejects the step and resizes the radius (by ρ
+  only). A candidate the design check refuses is pulled back along its step to the last design
+  that meshes (bisection); a direction refused right at the centre becomes a cut of the surrogate
+  problem, the radius unchanged.
+
+Both stop by first-order optimality (``cost.first_order``: KKT residual over the active set,
+relative to |L|, below ``optimality_tolerance``) at a design where a PROM was built; step size and
+``max_iterations`` are safeguards. ``starts`` > 1 repeats the run from Latin-hypercube feasible
+starts (:func:`start_points`), all sharing the PROM cache.
 
 The state after every iteration goes to an atomic checkpoint; a resumed run continues from it to
 the same result (PROM builds are deterministic).
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import time
@@ -26,9 +35,11 @@ from pathlib import Path
 
 import numpy as np
 from scipy.optimize import LinearConstraint, minimize
+from scipy.stats import qmc
 
 from .cache import cached_prom
-from .cost import CostWeights, DesignSpace, Evaluation, design_space, evaluate, meshable_space, require_interior
+from .cost import (CostWeights, DesignSpace, Evaluation, FirstOrder, design_space, evaluate, first_order,
+                   meshable_space, require_interior)
 from .errors import InputError, SolverError
 from .fish import Fish, load_fish
 from .outputs import write_json_atomic
@@ -51,6 +62,12 @@ class OptimizationResult:
     prom_size: int = 0                        # reduced dofs of the last PROM built
     timings: dict = field(default_factory=dict)
     reused: int = 0                           # of the builds, PROMs taken from the cache
+    optimality: FirstOrder | None = None      # at the optimum, from the PROM's exact gradient
+    converged: bool = False                   # optimality.measure ≤ optimality_tolerance
+
+    @property
+    def iterations(self) -> int:
+        return int(self.history[-1]["iteration"])
 
 
 class PromBuilder:
@@ -87,23 +104,32 @@ class PromBuilder:
         finally:
             self.solve_time += time.perf_counter() - started
 
+    def meshes(self, z: np.ndarray) -> bool:
+        """The design check of SPEC §4 (det F_1 > 0.1 everywhere) at the shapes of z."""
+        try:
+            self.fish.design(z[: self.space.n_shapes])
+            return True
+        except InputError:
+            return False
+
 
 def history_columns(space: DesignSpace) -> list[str]:
     """The columns of a history row, in the order :func:`history_row` makes them."""
     return (["iteration", *(f"xi_{name}" for name in space.names), "cost", *(f"grad_{name}" for name in space.names)]
-            + ["distance", "prom", "wall_time", "radius", "ratio"])
+            + ["distance", "prom", "wall_time", "radius", "ratio", "optimality"])
 
 
 def history_row(space: DesignSpace, iteration: int, z, cost, gradient, distance, kind: str, started: float,
-                radius: float | None = None, ratio: float | None = None) -> dict:
-    """One iteration: ξ, cost, gradient, distance [m], how the PROM was used, and for the trust
-    region its radius (fraction of the validity box) and actual/predicted reduction."""
+                radius: float | None = None, ratio: float | None = None, optimality: float | None = None) -> dict:
+    """One iteration: ξ, cost, gradient, distance [m], how the PROM was used, the first-order
+    measure, and for the trust region its radius (fraction of the validity box) and
+    actual/predicted reduction."""
     row = {"iteration": iteration}
     row.update({f"xi_{name}": float(value) for name, value in zip(space.names, z)})
     row["cost"] = float(cost)
     row.update({f"grad_{name}": float(value) for name, value in zip(space.names, gradient)})
     row.update({"distance": float(distance), "prom": kind, "wall_time": time.perf_counter() - started,
-                "radius": radius, "ratio": ratio})
+                "radius": radius, "ratio": ratio, "optimality": optimality})
     return row
 
 
@@ -139,21 +165,33 @@ class Checkpoint:
         return data
 
 
-def optimize(scene: Scene, fish: Fish | None = None, weights: CostWeights | None = None,
-             checkpoint_path: Path | None = None, resume: bool = False,
-             on_iteration=None, write_checkpoint: bool = True, max_time: float = DEFAULT_MAX_TIME) -> OptimizationResult:
-    """Run the scene's optimiser; ``on_iteration(row)`` sees every history row as it is made.
-
-    Every rank reads a checkpoint to resume from; only ranks with ``write_checkpoint`` write one.
-    The run stops after ``scene.optimizer.max_iterations`` iterations or ``max_time`` seconds.
-    """
-    fish = fish or load_fish(scene)
+def optimization_space(scene: Scene, fish: Fish) -> DesignSpace:
+    """The scene's design space with its bounds pulled in to where the design meshes."""
     space, notes = meshable_space(design_space(scene), fish)
     for note in notes:
         log.warning("design space: %s", note)
+    return space
+
+
+def optimize(scene: Scene, fish: Fish | None = None, weights: CostWeights | None = None,
+             checkpoint_path: Path | None = None, resume: bool = False,
+             on_iteration=None, write_checkpoint: bool = True, max_time: float = DEFAULT_MAX_TIME,
+             start: np.ndarray | None = None, builder: PromBuilder | None = None) -> OptimizationResult:
+    """Run the scene's optimiser from ``start`` (the scene's start point by default);
+    ``on_iteration(row)`` sees every history row as it is made.
+
+    Every rank reads a checkpoint to resume from; only ranks with ``write_checkpoint`` write one.
+    The run stops at first-order optimality, or after ``scene.optimizer.max_iterations``
+    iterations or ``max_time`` seconds. ``builder`` gives PROMs and their evaluations (a
+    :class:`PromBuilder` of this scene by default).
+    """
+    fish = fish or load_fish(scene)
+    space = builder.space if builder is not None else optimization_space(scene, fish)
+    if start is not None:
+        space = dataclasses.replace(space, start=np.asarray(start, dtype=float))
     weights = weights or CostWeights()
     method = scene.optimizer.method
-    builder = PromBuilder(scene, fish, space)
+    builder = builder or PromBuilder(scene, fish, space)
     checkpoint = Checkpoint(checkpoint_path, scene, method, write=write_checkpoint)
     saved = checkpoint.load() if resume else None
     history = list(saved["history"]) if saved else []
@@ -168,10 +206,50 @@ def optimize(scene: Scene, fish: Fish | None = None, weights: CostWeights | None
                                             on_iteration or (lambda row: None))
     timings = {"prom_builds": builder.build_time, "prom_solves": builder.solve_time,
                "total": time.perf_counter() - started}
-    log.info("optimisation (%s) stopped: %s; %d PROM builds (%d reused from the cache), %.1f s", method, reason,
-             builder.builds, builder.reused, timings["total"])
+    optimality = _optimality(scene, space, evaluation)
+    log.info("optimisation (%s) stopped: %s; first-order measure %.2e; %d PROM builds (%d reused from the cache), "
+             "%.1f s", method, reason, optimality.measure, builder.builds, builder.reused, timings["total"])
     return OptimizationResult(optimum, evaluation, history, builder.builds, reason, space, builder.last_size, timings,
-                              builder.reused)
+                              builder.reused, optimality, optimality.measure <= scene.optimizer.optimality_tolerance)
+
+
+def _optimality(scene: Scene, space: DesignSpace, evaluation: Evaluation) -> FirstOrder:
+    """First-order measure and active set at an evaluated design; the paper method's barrier
+    multipliers μ / s_i count for its inactive rows."""
+    settings = scene.optimizer
+    barrier_scale = _barrier_scale(settings, evaluation.cost) if settings.method == "paper" else 0.0
+    return first_order(space, evaluation.z, evaluation.cost, evaluation.gradient, settings.active_tolerance,
+                       barrier_scale)
+
+
+def _barrier_scale(settings, cost: float) -> float:
+    """μ = barrier_weight · |L| of the paper method's L_b = L + μ B."""
+    return settings.barrier_weight * max(abs(cost), 1e-12)
+
+
+def optimality_reason(measure: float, tolerance: float) -> str:
+    return f"first-order optimality: measure {measure:.2e} ≤ tolerance {tolerance:g}"
+
+
+def start_points(space: DesignSpace, count: int, seed: int, meshes) -> list[np.ndarray]:
+    """The space's start, then ``count - 1`` Latin-hypercube points of the box (scrambled, seeded)
+    that satisfy the linear constraints and the design check ``meshes(z)``.
+
+    Draws at most 20 batches of ``count`` points; raises InputError if too few qualify.
+    """
+    points = [space.start.copy()]
+    sampler = qmc.LatinHypercube(d=len(space.names), seed=seed)
+    for _ in range(20):
+        if len(points) == count:
+            break
+        for unit in sampler.random(count):
+            z = space.lower + unit * (space.upper - space.lower)
+            if len(points) < count and space.is_feasible(z) and meshes(z):
+                points.append(z)
+    if len(points) < count:
+        raise InputError(f"only {len(points)} of [optimizer] starts = {count} feasible, meshable start points found "
+                         f"in 20 batches of Latin-hypercube samples; lower starts")
+    return points
 
 
 @dataclass
@@ -224,7 +302,7 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, sa
     scaling = np.array(state["scaling"])
     prom = None
     center = state["center"]
-    reason = "maximum number of iterations"
+    reason = "maximum number of iterations (safeguard)"
     while state["iteration"] < settings.max_iterations:
         iteration = state["iteration"]
         drift = np.inf if center is None else np.abs(z - np.array(center["z"])).max()
@@ -246,21 +324,31 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, sa
         distance, distance_gradient = _linearised_distance(center, z)
         cost, gradient = _weighted_cost(space, weights, z, distance, distance_gradient)
         barrier_value, barrier_gradient = barrier(space, z)
-        barrier_scale = settings.barrier_weight * max(abs(cost), 1e-12)
+        barrier_scale = _barrier_scale(settings, cost)
         total_gradient = np.where(space.free, gradient + barrier_scale * barrier_gradient, 0.0)
+        measure = first_order(space, z, cost, gradient, settings.active_tolerance, barrier_scale).measure
+        if measure <= settings.optimality_tolerance and not rebuild:
+            # optimal by the linearised gradient: confirm with a PROM built here before stopping
+            state["since_build"] = settings.n_rebuild
+            continue
         _record(history, history_row(space, iteration, z, cost, gradient, distance,
-                                     "built" if rebuild else "approximated", started), on_iteration)
+                                     "built" if rebuild else "approximated", started, optimality=measure), on_iteration)
+        if measure <= settings.optimality_tolerance:
+            reason = optimality_reason(measure, settings.optimality_tolerance)
+            state.update(iteration=iteration + 1)
+            checkpoint.save(state, history, builder)
+            break
         previous = state["previous_gradient"]
         if previous is None:     # W starts at 1/‖∇L_0‖_∞: the first step changes the leading parameter by γ
             scaling /= max(np.abs(total_gradient).max(), 1e-300)
         else:
-            scaling[np.sign(total_gradient) * np.sign(previous) < 0] *= 0.5
+            scaling = _rescaled(scaling, total_gradient, np.array(previous), barrier_scale * barrier_gradient,
+                                rebuild, settings)
         step = -settings.step_size * scaling * total_gradient
         fraction, blocking = _fraction_to_boundary(space, z, step)
         if fraction < 1.0:
             scaling[blocking] *= 0.5
             step = fraction * step
-        previous_cost = history[-2]["cost"] if len(history) > 1 else None
         z = safeguard.finite(z + step, iteration)
         state.update(z=z.tolist(), iteration=iteration + 1, scaling=scaling.tolist(),
                      previous_gradient=total_gradient.tolist(), since_build=state["since_build"] + 1, center=center)
@@ -269,19 +357,80 @@ def _paper_method(scene, space, builder, weights, history, checkpoint, state, sa
             reason = safeguard.reason
             break
         if np.linalg.norm(step) < settings.step_tolerance:
-            reason = f"step {np.linalg.norm(step):.2e} below the step tolerance"
-            break
-        if previous_cost is not None and abs(cost - previous_cost) < settings.cost_tolerance * abs(cost) and not rebuild:
-            reason = f"cost change below {settings.cost_tolerance:g} of the cost"
-            break
+            if rebuild and state.get("restarted"):
+                reason = f"step {np.linalg.norm(step):.2e} below the step tolerance (stalled before optimality)"
+                break
+            if rebuild:     # W restarts once, as at the first iteration (1/‖∇L_b‖_∞)
+                state.update(scaling=np.ones(z.size).tolist(), previous_gradient=None, restarted=True)
+                scaling = np.ones(z.size)
+            else:           # a linearised gradient may be stale: rebuild first
+                state["since_build"] = settings.n_rebuild
+            checkpoint.save(state, history, builder)
     if center is not None and np.allclose(z, center["z"]) and prom is not None:
         final = builder.evaluate(prom, z, weights)
     else:
         final = _final_evaluation(builder, weights, z, np.array(center["z"]))
-        z = final.z
-    _record(history, history_row(space, state["iteration"], z, final.cost, final.gradient, final.distance,
-                                 "built", started), on_iteration)
-    return z, final, reason
+    if not reason.startswith("first-order"):        # a converged iterate's row is the last one recorded
+        _record_final(scene, space, history, history[-1]["iteration"] + 1, final, started, on_iteration)
+    closed = _barrier_gap_closed(space, builder, weights, final, settings.barrier_weight)
+    if closed is not None:
+        names, final = closed
+        measure = _optimality(scene, space, final).measure
+        reason += (f"; then {', '.join(names)} moved from the barrier iterate onto the bound "
+                   f"(first-order measure {measure:.2e} there)")
+        _record_final(scene, space, history, history[-1]["iteration"] + 1, final, started, on_iteration)
+    return final.z, final, reason
+
+
+def _record_final(scene, space, history, iteration, final: Evaluation, started, on_iteration) -> None:
+    measure = _optimality(scene, space, final).measure
+    _record(history, history_row(space, iteration, final.z, final.cost, final.gradient, final.distance, "built",
+                                 started, optimality=measure), on_iteration)
+
+
+def _barrier_gap_closed(space: DesignSpace, builder: PromBuilder, weights, final: Evaluation, barrier_weight: float):
+    """The barrier holds a bound off by s_i ≈ μ / |∂L/∂z_i| (complementarity λ_i s_i = μ). A bound
+    within √barrier_weight of its range whose gradient pushes towards it (λ_i = μ / s_i would exceed
+    s_i, both relative) is taken as active: the design with those parameters on their bounds
+    (the weakest-held, by |∂L/∂z_i| · range, let go until it is feasible and meshes) replaces the
+    iterate when a PROM built there gives a lower cost.
+    Returns (the bounds moved onto, its evaluation) or None."""
+    z, gradient = final.z, final.gradient
+    width = space.upper - space.lower
+    near_lower = space.free & (z - space.lower < np.sqrt(barrier_weight) * width) & (gradient > 0)
+    near_upper = space.free & (space.upper - z < np.sqrt(barrier_weight) * width) & (gradient < 0)
+    if not (near_lower.any() or near_upper.any()):
+        return None
+    # the weakest-held bounds are let go, one at a time, until the design is feasible and meshes
+    for weakest in [i for i in np.argsort(np.abs(gradient) * width) if near_lower[i] or near_upper[i]]:
+        snapped = np.where(near_lower, space.lower, np.where(near_upper, space.upper, z))
+        if not (near_lower.any() or near_upper.any()) or (space.is_feasible(snapped) and builder.meshes(snapped)):
+            break
+        near_lower[weakest] = near_upper[weakest] = False
+    if not (near_lower.any() or near_upper.any()):
+        return None
+    try:
+        evaluation = builder.evaluate(builder.build(snapped), snapped, weights)
+    except InputError:
+        return None
+    if evaluation.cost >= final.cost:
+        return None
+    names = [f"{n} = lower" for n in np.array(space.names)[near_lower]]
+    names += [f"{n} = upper" for n in np.array(space.names)[near_upper]]
+    return names, evaluation
+
+
+def _rescaled(scaling, gradient, previous, barrier_part, built: bool, settings) -> np.ndarray:
+    """W_i halves where ∂L_b/∂z_i changed sign (the source's rule). Beyond the source, at a design
+    where a PROM was just built (a linearised gradient holds no new information), W_i doubles
+    where the sign held, the barrier's part μ ∂B/∂z_i is under half of ∂L_b/∂z_i (away from the
+    bounds' barrier layer) and the doubled step γ W_i |∂L_b/∂z_i| stays within the rebuild
+    threshold: a parameter with a small gradient still reaches its bound."""
+    sign_change = np.sign(gradient) * np.sign(previous)
+    scaling = np.where(sign_change < 0, 0.5 * scaling, scaling)
+    outside_barrier_layer = np.abs(barrier_part) < 0.5 * np.abs(gradient)
+    room = 2 * settings.step_size * scaling * np.abs(gradient) <= settings.rebuild_threshold
+    return np.where(built & (sign_change > 0) & outside_barrier_layer & room, 2.0 * scaling, scaling)
 
 
 def _final_evaluation(builder: PromBuilder, weights, z, last_built) -> Evaluation:
@@ -347,47 +496,55 @@ def _trust_region(scene, space, builder, weights, history, checkpoint, state, sa
     # actuation exactly (linearly), so its box is its whole range.
     half_widths = np.array(scene.validity_radii() + ([space.upper[-1] - space.lower[-1]] if space.with_amplitude else []))
     if state is None:
-        state = {"center": space.start.tolist(), "radius": settings.initial_radius, "iteration": 0}
+        state = {"center": space.start.tolist(), "radius": settings.initial_radius, "iteration": 0, "cuts": []}
     center = np.array(state["center"])
+    cuts = [np.array(cut) for cut in state.get("cuts", [])]
     prom = _build_or_stop(builder, center)
     current = builder.evaluate(prom, center, weights)
+    measure = _optimality(scene, space, current).measure
     if not history:
         _record(history, history_row(space, 0, center, current.cost, current.gradient, current.distance,
-                                     "built", started, radius=state["radius"]), on_iteration)
-    reason = "maximum number of iterations"
+                                     "built", started, radius=state["radius"], optimality=measure), on_iteration)
+    reason = "maximum number of iterations (safeguard)"
     while state["iteration"] < settings.max_iterations:
+        if measure <= settings.optimality_tolerance:
+            reason = optimality_reason(measure, settings.optimality_tolerance)
+            break
         if safeguard.out_of_time():
             reason = safeguard.reason
             break
         radius = state["radius"]
-        candidate, predicted_cost = _surrogate_step(builder, prom, space, weights, center, radius * half_widths)
+        candidate, predicted_cost = _surrogate_step(builder, prom, space, weights, center, radius * half_widths, cuts)
         candidate = safeguard.finite(candidate, state["iteration"] + 1)
-        predicted = current.cost - predicted_cost
         step = candidate - center
         iteration = state["iteration"] + 1
-        if np.abs(step).max() < settings.step_tolerance or predicted <= settings.cost_tolerance * abs(current.cost):
-            reason = "no predicted improvement inside the trust radius"
+        if (np.abs(step).max() < settings.step_tolerance
+                or current.cost - predicted_cost <= settings.cost_tolerance * abs(current.cost)):
+            reason = "no predicted improvement inside the trust radius (stalled before optimality)"
             break
-        candidate, candidate_prom = _meshable_candidate(builder, center, candidate)
+        candidate, candidate_prom = _meshable_candidate(builder, center, candidate, settings.step_tolerance)
         if candidate_prom is None:
-            trial, ratio = None, -np.inf
-        else:
-            step = candidate - center
-            predicted = current.cost - _surrogate_cost(builder, prom, weights, candidate)
-            trial = builder.evaluate(candidate_prom, candidate, weights)
-            ratio = (current.cost - trial.cost) / predicted if predicted > 0 else -np.inf
+            # refused right at the centre: the half-space step·(z - z_c) ≤ 0 is cut from the surrogate problem
+            if len(cuts) >= 2 * len(space.names):
+                reason = "the design check refuses every descent direction from the centre"
+                break
+            cuts.append(step)
+            state.update(iteration=iteration, cuts=[cut.tolist() for cut in cuts])
+            checkpoint.save(state, history, builder)
+            continue
+        step = candidate - center
+        predicted = current.cost - _surrogate_cost(builder, prom, weights, candidate)
+        trial = builder.evaluate(candidate_prom, candidate, weights)
+        ratio = (current.cost - trial.cost) / predicted if predicted > 0 else -np.inf
         accepted = ratio > settings.accept_ratio
-        if trial is not None:
-            _record(history, history_row(space, iteration, candidate, trial.cost, trial.gradient, trial.distance,
-                                         "built" if accepted else "rejected", started, radius=radius,
-                                         ratio=float(ratio)), on_iteration)
-        if ratio < 0.25:
-            radius *= 0.5
-        elif ratio > 0.75 and np.any(np.abs(step) >= 0.9 * radius * half_widths):
-            radius = min(2 * radius, 1.0)
+        trial_measure = _optimality(scene, space, trial).measure
+        _record(history, history_row(space, iteration, candidate, trial.cost, trial.gradient, trial.distance,
+                                     "built" if accepted else "rejected", started, radius=radius,
+                                     ratio=float(ratio), optimality=trial_measure), on_iteration)
+        radius = _resized_radius(radius, ratio)
         if accepted:
-            center, prom, current = candidate, candidate_prom, trial
-        state.update(center=center.tolist(), radius=radius, iteration=iteration)
+            center, prom, current, measure, cuts = candidate, candidate_prom, trial, trial_measure, []
+        state.update(center=center.tolist(), radius=radius, iteration=iteration, cuts=[cut.tolist() for cut in cuts])
         checkpoint.save(state, history, builder)
         if np.all(radius * half_widths < settings.step_tolerance):
             reason = f"trust radius {radius:.2e} of the validity box below the step tolerance"
@@ -395,15 +552,34 @@ def _trust_region(scene, space, builder, weights, history, checkpoint, state, sa
     return center, current, reason
 
 
-def _meshable_candidate(builder: PromBuilder, center, candidate, attempts: int = 6):
-    """The candidate, or the point halfway back towards the centre, … that the mesh check accepts."""
-    for _ in range(attempts):
-        try:
-            return candidate, builder.build(candidate)
-        except InputError as refused:
-            log.warning("trust region: candidate refused (%s); trying halfway back", refused)
-            candidate = center + 0.5 * (candidate - center)
-    return candidate, None
+def _resized_radius(radius: float, ratio: float) -> float:
+    """ρ < 1/4: halve; ρ > 3/4: double (at most the validity box); otherwise keep."""
+    if ratio < 0.25:
+        return 0.5 * radius
+    if ratio > 0.75:
+        return min(2.0 * radius, 1.0)
+    return radius
+
+
+def _meshable_candidate(builder: PromBuilder, center, candidate, step_tolerance: float, bisections: int = 12):
+    """The candidate and its PROM, or the last design along z_c + t (z - z_c) that the design check
+    accepts (bisection on t ∈ [0, 1]); (candidate, None) when that step is below the tolerance."""
+    step = candidate - center
+    if not builder.meshes(candidate):
+        meshing, refused = 0.0, 1.0
+        for _ in range(bisections):
+            middle = 0.5 * (meshing + refused)
+            meshing, refused = (middle, refused) if builder.meshes(center + middle * step) else (meshing, middle)
+        log.warning("trust region: candidate %s refused by the design check; step shortened to %.3g of it",
+                    builder.space.as_dict(candidate), meshing)
+        candidate = center + meshing * step
+        if np.abs(candidate - center).max() < step_tolerance:
+            return candidate, None
+    try:
+        return candidate, builder.build(candidate)
+    except InputError as refused:
+        log.warning("trust region: candidate refused (%s)", refused)
+        return candidate, None
 
 
 def _surrogate_cost(builder: PromBuilder, prom, weights, z) -> float:
@@ -417,8 +593,13 @@ def _build_or_stop(builder: PromBuilder, z: np.ndarray) -> ReducedModel:
         raise InputError(f"the PROM cannot be built at {builder.space.as_dict(z)}: {refused}") from None
 
 
-def _surrogate_step(builder, prom, space, weights, center, radius) -> tuple[np.ndarray, float]:
-    """Minimise the surrogate cost (PROM at its centre, simulated at z) inside bounds, constraints and radius."""
+def _within_cuts(z, center, cuts) -> bool:
+    return all(cut @ (z - center) <= 1e-12 for cut in cuts)
+
+
+def _surrogate_step(builder, prom, space, weights, center, radius, cuts=()) -> tuple[np.ndarray, float]:
+    """Minimise the surrogate cost (PROM at its centre, simulated at z) inside bounds, constraints,
+    radius and the cuts c·(z - z_c) ≤ 0 of directions the design check refused."""
     cache = {}
 
     lower = np.maximum(space.lower, center - radius)
@@ -434,10 +615,18 @@ def _surrogate_step(builder, prom, space, weights, center, radius) -> tuple[np.n
     constraints = []
     if space.constraint_matrix.size:
         constraints.append(LinearConstraint(space.constraint_matrix, -np.inf, space.constraint_bound))
-    solution = minimize(lambda z: surrogate(z).cost, center, jac=lambda z: surrogate(z).gradient, method="SLSQP",
-                        bounds=list(zip(lower, upper)), constraints=constraints,
-                        options={"maxiter": 30, "ftol": 1e-10})
-    candidate = np.clip(solution.x, lower, upper)
+    for cut in cuts:
+        constraints.append(LinearConstraint(cut[None, :], -np.inf, cut @ center))
+    try:
+        solution = minimize(lambda z: surrogate(z).cost, center, jac=lambda z: surrogate(z).gradient, method="SLSQP",
+                            bounds=list(zip(lower, upper)), constraints=constraints,
+                            options={"maxiter": 30, "ftol": 1e-10})
+        candidate = np.clip(solution.x, lower, upper)
+    except SolverError as failed:      # the surrogate cannot be simulated everywhere: its best point so far
+        log.warning("trust region: surrogate solve stopped (%s); taking its best feasible point so far", failed)
+        candidate = np.array(min((key for key in cache if _within_cuts(np.array(key), center, cuts)
+                                  and space.is_feasible(np.array(key), tolerance=1e-9)),
+                                 key=lambda key: cache[key].cost))
     if not space.is_feasible(candidate, tolerance=1e-9):
         raise SolverError(f"the surrogate step left the feasible set at {space.as_dict(candidate)}")
     value = surrogate(candidate).cost

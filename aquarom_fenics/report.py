@@ -26,6 +26,7 @@ PROM_MARKERS = {
 
 PATH_COLOUR = "0.35"
 BOUND_COLOUR = "black"
+ACTIVE_COLOUR = "tab:red"
 INFEASIBLE_COLOUR = "#f4c7c3"
 START_MARKER = dict(marker="*", markersize=13, color="gold", markeredgecolor="black", linestyle="none",
                     label="start")
@@ -73,12 +74,14 @@ def _pyplot():
 
 
 def plot_optimization_history(rows: list[dict], shape_names: list[str], bounds: list[tuple[float, float]],
-                              out_dir: Path) -> list[Path]:
+                              out_dir: Path, active: list[str] = ()) -> list[Path]:
     """Write cost.png (cost and distance [cm] per iteration) and parameters.png (ξ per iteration).
 
     Each row holds ``iteration``, ``xi_<name>`` for every shape name, ``cost``, ``distance`` [m]
     and ``prom`` (one of PROM_MARKERS). ``bounds`` are the (lower, upper) box bounds of the
-    parameters, in the order of ``shape_names``. Returns [cost.png, parameters.png].
+    parameters, in the order of ``shape_names``; ``active`` names the bounds active at the
+    optimum (``"<name> = lower"`` / ``"<name> = upper"``), drawn solid and written in the panel
+    title. Returns [cost.png, parameters.png].
     """
     if len(bounds) != len(shape_names):
         raise ValueError(f"{len(shape_names)} shape names but {len(bounds)} bounds")
@@ -90,7 +93,7 @@ def plot_optimization_history(rows: list[dict], shape_names: list[str], bounds: 
     out_dir.mkdir(parents=True, exist_ok=True)
     cost_path, parameters_path = out_dir / "cost.png", out_dir / "parameters.png"
     _plot_cost_history(rows, cost_path)
-    _plot_parameter_history(rows, shape_names, bounds, parameters_path)
+    _plot_parameter_history(rows, shape_names, bounds, parameters_path, set(active))
     return [cost_path, parameters_path]
 
 
@@ -111,7 +114,7 @@ def _plot_cost_history(rows: list[dict], path: Path) -> None:
 
 
 def _plot_parameter_history(rows: list[dict], shape_names: list[str], bounds: list[tuple[float, float]],
-                            path: Path) -> None:
+                            path: Path, active: set[str]) -> None:
     plt = _pyplot()
     n_rows, n_columns = _grid_shape(len(shape_names))
     width, height = PARAMETER_PANEL_SIZE
@@ -119,7 +122,8 @@ def _plot_parameter_history(rows: list[dict], shape_names: list[str], bounds: li
     figure_width = max(MIN_FIGURE_WIDTH, n_columns * width)
     figure, axes = plt.subplots(n_rows, n_columns, figsize=(figure_width, figure_height), sharex=True, squeeze=False)
     for axis, name, (lower, upper) in zip(axes.flat, shape_names, bounds):
-        _plot_parameter_panel(axis, rows, name, lower, upper)
+        _plot_parameter_panel(axis, rows, name, lower, upper,
+                              [side for side in ("lower", "upper") if f"{name} = {side}" in active])
     for axis in axes.flat[len(shape_names):]:
         axis.set_visible(False)
     for axis in _lowest_visible(axes):
@@ -144,8 +148,10 @@ def _lowest_visible(axes: np.ndarray) -> list:
     return [next(axis for axis in column[::-1] if axis.get_visible()) for column in axes.T]
 
 
-def _plot_parameter_panel(axis, rows: list[dict], name: str, lower: float, upper: float) -> None:
-    """Path of ξ_name over the iterations between its bounds, the outside shaded, the start starred."""
+def _plot_parameter_panel(axis, rows: list[dict], name: str, lower: float, upper: float,
+                          active_sides: list[str] = ()) -> None:
+    """Path of ξ_name over the iterations between its bounds, the outside shaded, the start
+    starred, a bound active at the optimum drawn solid and named in the title."""
     values = [row[f"xi_{name}"] for row in rows]
     low, high = min(lower, *values), max(upper, *values)
     pad = 0.12 * (high - low or 1.0)
@@ -155,8 +161,11 @@ def _plot_parameter_panel(axis, rows: list[dict], name: str, lower: float, upper
     axis.axhline(upper, color=BOUND_COLOUR, linewidth=1, linestyle="--")
     _plot_iterates(axis, rows, values)
     axis.plot([rows[0]["iteration"]], [values[0]], zorder=4, **START_MARKER)
+    for side in active_sides:
+        axis.axhline(lower if side == "lower" else upper, color=ACTIVE_COLOUR, linewidth=2.5,
+                     label="active at the optimum")
     axis.set_ylim(low - pad, high + pad)
-    axis.set_title(f"ξ  {name}", fontsize=10)
+    axis.set_title(f"ξ  {name}" + "".join(f"  ({side} bound active)" for side in active_sides), fontsize=10)
 
 
 def _plot_iterates(axis, rows: list[dict], values: list[float]) -> None:

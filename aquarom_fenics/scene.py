@@ -139,15 +139,19 @@ class ReductionSection:
 @dataclass(frozen=True)
 class OptimizerSection:
     method: str = _spec("paper", _one_of("paper", "trust-region"), "optimisation algorithm")
-    max_iterations: int = _spec(30, _positive, "iterations")
+    max_iterations: int = _spec(100, _positive, "iterations (a safeguard: the optimisers stop on optimality_tolerance)")
     step_size: float = _spec(0.05, _positive, "γ in ξ ← ξ - γ W ∇L; W starts at 1/‖∇L_0‖_∞, so γ is the first step (paper)")
     barrier_weight: float = _spec(1e-3, _positive, "log-barrier weight (paper)")
     rebuild_threshold: float = _spec(0.15, _positive, "rebuild the PROM when any |ξ - ξ_c| exceeds this (paper)")
     n_rebuild: int = _spec(5, _positive, "rebuild the PROM every n iterations (paper)")
-    step_tolerance: float = _spec(1e-3, _positive, "stop when ‖Δξ‖ falls below")
-    cost_tolerance: float = _spec(1e-4, _positive, "stop when the relative cost change falls below")
+    step_tolerance: float = _spec(1e-3, _positive, "stop (stalled before optimality) when ‖Δξ‖ falls below")
+    cost_tolerance: float = _spec(1e-4, _positive, "stop (stalled before optimality) when the predicted relative cost reduction falls below (trust-region)")
     initial_radius: float = _spec(1.0, lambda v: None if 0 < v <= 1 else "must be in (0, 1]", "trust radius as a fraction of the PROM validity radius (trust-region)")
     accept_ratio: float = _spec(0.1, lambda v: None if 0 <= v < 1 else "must be in [0, 1)", "accept a step when actual/predicted reduction exceeds this")
+    optimality_tolerance: float = _spec(1e-2, _positive, "stop when the first-order measure ‖D r‖_∞ / |L| (KKT residual r, D the parameter ranges) falls below")
+    active_tolerance: float = _spec(1e-2, _positive, "a bound or linear constraint is active when its slack is below this fraction of its range")
+    starts: int = _spec(1, _positive, "optimisations from the start point and starts - 1 Latin-hypercube feasible points")
+    seed: int = _spec(0, _non_negative, "seed of the Latin-hypercube starts")
 
 
 @dataclass(frozen=True)

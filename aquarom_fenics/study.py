@@ -15,7 +15,8 @@ from .cache import cache_root, entry_key, read_intact, require_cache_writable, s
 from .cost import CostWeights, design_space
 from .errors import InputError, Interrupted, SolverError
 from .fish import Fish, load_fish
-from .optimize import DEFAULT_MAX_TIME, Checkpoint, OptimizationResult, history_columns, optimize
+from .optimize import (DEFAULT_MAX_TIME, Checkpoint, OptimizationResult, PromBuilder, history_columns, optimization_space,
+                       optimize, start_points)
 from .outputs import software_versions, write_json_atomic
 from .scene import Scene
 from .simulate import simulate_fom
@@ -27,12 +28,13 @@ log = logging.getLogger("aquarom")
 class FomCheck:
     """FOM distances [m] of the nominal (start) and optimal designs and their ratio.
 
-    A FOM run that stops leaves its distance None and the reason in ``error``.
+    A FOM run that stops leaves its distance None and the reason in ``error``; the PROM's nominal
+    distance is None for a run from another start (multi-start).
     """
 
     nominal_distance: float | None
     optimal_distance: float | None
-    prom_nominal_distance: float
+    prom_nominal_distance: float | None
     prom_optimal_distance: float
     time: float
     error: str | None = None
@@ -65,6 +67,7 @@ def fom_distance(scene: Scene, fish: Fish, design: dict[str, float], amplitude: 
 
 
 def fom_check(scene: Scene, fish: Fish, result: OptimizationResult) -> FomCheck:
+    """FOM distances of the scene's nominal design (its start point) and of the optimum."""
     started = time.perf_counter()
     space = result.space
     shapes = space.n_shapes
@@ -73,25 +76,30 @@ def fom_check(scene: Scene, fish: Fish, result: OptimizationResult) -> FomCheck:
         return dict(zip(space.names[:shapes], map(float, z[:shapes]))), (float(z[-1]) if space.with_amplitude else None)
 
     distances, errors = [], []
-    for z in (space.start, result.optimum):
+    nominal = design_space(scene).start
+    for z in (nominal, result.optimum):
         try:
             distances.append(fom_distance(scene, fish, *split(z)))
         except SolverError as failure:
             distances.append(None)
             errors.append(str(failure))
     first_built = next(row for row in result.history if row["prom"] == "built")
-    return FomCheck(*distances, first_built["distance"], result.evaluation.distance,
+    prom_nominal = first_built["distance"] if np.array_equal(space.start, nominal) else None
+    return FomCheck(*distances, prom_nominal, result.evaluation.distance,
                     time.perf_counter() - started, "; ".join(errors) or None)
 
 
 def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights: CostWeights | None = None,
-                     fish: Fish | None = None, render: bool = True,
-                     max_time: float = DEFAULT_MAX_TIME) -> tuple[OptimizationResult, FomCheck]:
+                     fish: Fish | None = None, render: bool = True, max_time: float = DEFAULT_MAX_TIME,
+                     start: np.ndarray | None = None) -> tuple[OptimizationResult, FomCheck]:
     """Optimise, check with the FOM and write history.csv, summary.json, plots, renders, XDMF.
 
+    From ``start`` when given; otherwise ``[optimizer] starts`` > 1 runs :func:`run_multistart`.
     A checkpoint to resume from is validated before anything is written; Ctrl-C leaves the
     history, a valid checkpoint and a summary.json with the stop reason.
     """
+    if start is None and scene.optimizer.starts > 1:
+        return run_multistart(scene, out_dir, resume, weights, fish, render, max_time)
     out_dir = Path(out_dir)
     is_writer = MPI.COMM_WORLD.rank == 0
     space = design_space(scene)
@@ -108,7 +116,7 @@ def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights:
     try:
         result = optimize(scene, fish=fish, weights=weights, checkpoint_path=checkpoint, resume=resume,
                           on_iteration=writer.write if writer else None, write_checkpoint=is_writer,
-                          max_time=max_time)
+                          max_time=max_time, start=start)
         check = fom_check(scene, fish, result)
     except KeyboardInterrupt as stop:
         rows = writer.rows if writer else 0
@@ -125,6 +133,62 @@ def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights:
         _write_summary(out_dir, scene, result, check, weights or CostWeights())
         _write_figures(out_dir, scene, fish, result, render)
     return result, check
+
+
+def run_multistart(scene: Scene, out_dir: Path, resume: bool = False, weights: CostWeights | None = None,
+                   fish: Fish | None = None, render: bool = True,
+                   max_time: float = DEFAULT_MAX_TIME) -> tuple[OptimizationResult, FomCheck]:
+    """One optimisation per start of :func:`start_points` (in ``start_<k>/``, sharing the PROM
+    cache), each FOM-checked; summary.json lists every local optimum and is the summary of the
+    best FOM-verified one (the best PROM distance when no FOM check finished)."""
+    out_dir = Path(out_dir)
+    fish = fish or load_fish(scene)
+    space = optimization_space(scene, fish)
+    settings = scene.optimizer
+    starts = start_points(space, settings.starts, settings.seed, PromBuilder(scene, fish, space).meshes)
+    runs = [run_optimization(scene, out_dir / f"start_{k + 1}", resume, weights, fish, render=False,
+                             max_time=max_time, start=z) for k, z in enumerate(starts)]
+    best = max(range(len(runs)), key=lambda k: _verified_distance(*runs[k]))
+    result, check = runs[best]
+    if MPI.COMM_WORLD.rank == 0:
+        optima = [_local_optimum(k, z, *run) for k, (z, run) in enumerate(zip(starts, runs))]
+        _write_summary(out_dir, scene, result, check, weights or CostWeights(),
+                       {"starts": settings.starts, "seed": settings.seed, "best_start": best + 1,
+                        "distinct_optima": _distinct_optima(space, [r.optimum for r, _ in runs],
+                                                            settings.active_tolerance),
+                        "local_optima": optima})
+        _write_figures(out_dir, scene, fish, result, render)
+    return result, check
+
+
+def _verified_distance(result: OptimizationResult, check: FomCheck) -> tuple[bool, float]:
+    """Sort key: FOM-verified first, then the distance (FOM, else PROM)."""
+    verified = check.optimal_distance is not None
+    return verified, check.optimal_distance if verified else result.evaluation.distance
+
+
+def _local_optimum(k: int, start, result: OptimizationResult, check: FomCheck) -> dict:
+    space = result.space
+    return {"start_index": k + 1, "directory": f"start_{k + 1}", "start": space.as_dict(start),
+            "optimum": space.as_dict(result.optimum), "prom_distance": result.evaluation.distance,
+            "fom_distance": check.optimal_distance, "fom_error": check.error, "stop_reason": result.stop_reason,
+            "converged": result.converged, "iterations": result.iterations, "prom_builds": result.builds,
+            "active": [row["constraint"] for row in result.optimality.active]}
+
+
+def _distinct_optima(space, optima: list[np.ndarray], tolerance: float) -> list[list[int]]:
+    """Starts grouped by optimum: two optima are the same when every |z_i - z'_i| ≤ tolerance ·
+    (upper_i - lower_i)."""
+    groups: list[list[int]] = []
+    width = space.upper - space.lower
+    for k, z in enumerate(optima):
+        for group in groups:
+            if np.all(np.abs(z - optima[group[0] - 1]) <= tolerance * width):
+                group.append(k + 1)
+                break
+        else:
+            groups.append([k + 1])
+    return groups
 
 
 class HistoryWriter:
@@ -154,14 +218,22 @@ def _csv_value(value):
     return "" if value is None else value
 
 
-def _write_summary(out_dir, scene, result, check, weights):
+def _write_summary(out_dir, scene, result, check, weights, multistart: dict | None = None):
     space = result.space
+    settings = scene.optimizer
     summary = {
-        "scene": scene.name, "scene_hash": scene.hash, "method": scene.optimizer.method,
+        "scene": scene.name, "scene_hash": scene.hash, "method": settings.method,
         "optimum": space.as_dict(result.optimum), "start": space.as_dict(space.start),
         "bounds": {n: [float(lo), float(hi)] for n, lo, hi in zip(space.names, space.lower, space.upper)},
-        "bounds_active": space.active_bounds(result.optimum), "stop_reason": result.stop_reason,
-        "iterations": result.history[-1]["iteration"], "prom_builds": result.builds,
+        "bounds_active": [row["constraint"] for row in result.optimality.active], "stop_reason": result.stop_reason,
+        "converged": result.converged,
+        "optimality": {"measure": result.optimality.measure, "tolerance": settings.optimality_tolerance,
+                       "definition": "‖D r‖_∞ / |L|: KKT residual r over the active set, D the parameter ranges",
+                       "active_tolerance": settings.active_tolerance,
+                       "active_definition": "slack ≤ active_tolerance · range of the bound or constraint row; "
+                                            "multiplier > 0: the constraint holds the optimum",
+                       "active": result.optimality.active},
+        "iterations": result.iterations, "prom_builds": result.builds,
         "prom_builds_reused_from_cache": result.reused, "prom_size": result.prom_size,
         "cost_weights": {"distance": weights.distance, "energy": weights.energy, "alpha": weights.alpha},
         "prom_distance_optimal": result.evaluation.distance,
@@ -172,6 +244,8 @@ def _write_summary(out_dir, scene, result, check, weights):
         "timings": result.timings | {"fom_check": check.time},
         "time_per_build": result.timings["prom_builds"] / max(result.builds, 1),
         "versions": software_versions()}
+    if multistart is not None:
+        summary["multistart"] = multistart
     write_json_atomic(out_dir / "summary.json", summary)
 
 
@@ -180,7 +254,9 @@ def _write_figures(out_dir, scene, fish, result, render):
 
     space = result.space
     if scene.output.plots:
-        plot_optimization_history(result.history, list(space.names), list(zip(space.lower, space.upper)), out_dir)
+        active = [row["constraint"] for row in result.optimality.active]
+        plot_optimization_history(result.history, list(space.names), list(zip(space.lower, space.upper)), out_dir,
+                                  active=active)
     shapes = space.n_shapes
     optimal = dict(zip(space.names[:shapes], map(float, result.optimum[:shapes])))
     if render and scene.output.render and shapes:
