@@ -44,6 +44,7 @@ from .errors import InputError, SolverError
 from .fish import Fish, load_fish
 from .outputs import write_json_atomic
 from .prom import ReducedModel
+from .reduced_dynamics import reduced_stability
 from .reductor import build_prom
 from .scene import Scene
 
@@ -68,6 +69,10 @@ class OptimizationResult:
     @property
     def iterations(self) -> int:
         return int(self.history[-1]["iteration"])
+
+
+STABILITY_STROKES = 2
+"""Strokes the horizon must hold before the gait's stability is judged."""
 
 
 class PromBuilder:
@@ -95,7 +100,20 @@ class PromBuilder:
         self.builds += 1
         self.reused += not built
         self.last_size = prom.size
+        self._refuse_unstable(prom, z)
         return prom
+
+    def _refuse_unstable(self, prom: ReducedModel, z: np.ndarray) -> None:
+        """A design whose PROM gait is unstable (Floquet multiplier |μ| > 1.01 over the last stroke,
+        ``reduced_stability``) is refused like one the mesh check refuses: the optimisers step back.
+        Judged only on horizons of two strokes or more (a start-up from rest is no periodic gait)."""
+        actuation = self.scene.actuation
+        if self.scene.solver.duration * actuation.frequency < STABILITY_STROKES:
+            return
+        amplitude = float(z[-1]) if self.space.with_amplitude else None
+        stable, reason = reduced_stability(prom, self.scene, z[: self.space.n_shapes], amplitude)
+        if not stable:
+            raise InputError(f"design {self.space.as_dict(z)} is infeasible: its PROM is unstable ({reason})")
 
     def evaluate(self, prom, z, weights) -> Evaluation:
         started = time.perf_counter()

@@ -244,3 +244,25 @@ def test_wall_time_safeguard_stops_the_optimiser(method, toy_fish):
 def test_a_non_finite_design_is_refused():
     with pytest.raises(SolverError, match="non-finite design"):
         optimize_module.Safeguard.finite(np.array([0.1, np.nan]), 3)
+
+
+def test_a_design_whose_prom_is_unstable_is_refused_as_infeasible(monkeypatch):
+    """PromBuilder asks reduced_stability at every design it builds a PROM on (horizons of two
+    strokes or more) and refuses an unstable one like the mesh check, naming the reason."""
+    verdicts = []
+
+    def unstable(prom, scene, xi, amplitude):
+        verdicts.append(np.array(xi))
+        return False, "Floquet multiplier |μ| = 2.48 > 1.01"
+
+    monkeypatch.setattr(optimize_module, "reduced_stability", unstable)
+    scene = coarse_scene(shapes=TOY_SHAPES, solver={"duration": 2.0})
+    space = design_space(scene)
+    builder = optimize_module.PromBuilder(scene, load_fish(scene), space)
+    z = np.array([0.1, 0.02])
+    with pytest.raises(InputError, match=r"infeasible: its PROM is unstable \(Floquet multiplier \|μ\| = 2.48"):
+        builder._refuse_unstable(object(), z)
+    np.testing.assert_array_equal(verdicts[0], z[: space.n_shapes])
+    short = optimize_module.PromBuilder(toy_scene(), builder.fish, space)
+    short._refuse_unstable(object(), z)          # one stroke: no periodic gait to judge, not asked
+    assert len(verdicts) == 1
