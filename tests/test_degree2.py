@@ -117,7 +117,7 @@ def test_design_check_judges_the_exact_geometry_not_its_nodal_interpolation():
     from aquarom_fenics.scene import Scene
     from aquarom_fenics.shapes import check_design
 
-    fish = load_fish(Scene.load("so2").replace("mesh", level=3))
+    fish = load_fish(Scene.load("so2").replace("mesh", level=3, degree=1))
     xi = fish.parameter_vector(SO2_CORNER_DESIGN)
     interpolated = fish.mesh.points + fish.shape_displacement(xi)[:fish.nodes.n_vertices]
     with pytest.raises(InputError, match="inverts or flattens [1-9]"):
