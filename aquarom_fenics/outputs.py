@@ -32,16 +32,8 @@ def write_json_atomic(path: Path, data) -> None:
 
 
 def write_text_atomic(path: Path, text: str) -> None:
-    """A uniquely named temporary file beside ``path``, then os.replace (atomic on POSIX)."""
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    try:
-        with os.fdopen(handle, "w") as stream:
-            stream.write(text)
-        os.chmod(temporary, 0o644)
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
+    """UTF-8 text written like :func:`write_bytes_atomic` (atomic on POSIX)."""
+    write_bytes_atomic(path, text.encode("utf-8"))
 
 
 def write_npz_atomic(path: Path, arrays: dict[str, np.ndarray], compressed: bool = False) -> None:

@@ -111,6 +111,10 @@ def test_reduced_newton_matrix_is_the_derivative_of_the_step_residual(scene, pro
 
 
 def test_first_xi_derivative_matches_central_difference_of_the_fom(scene, fish, prom):
+    assert_first_xi_derivative_matches_the_fom(scene, fish, prom)
+
+
+def assert_first_xi_derivative_matches_the_fom(scene, fish, prom):
     """∂/∂ξ_k Vᵀ f_int(Vη; ξ): PROM Taylor term against a 4th-order central difference of the FOM."""
     eta = 0.02 * np.random.default_rng(2).standard_normal(prom.size)
     system = ReducedSystem(prom, scene, prom.xi_center, TimeScheme.newmark(0.02, 0.005))
