@@ -67,21 +67,9 @@ def quadratic_so1():
 
 def test_degree_two_prom_reproduces_the_projected_fom_forces(quadratic_so1):
     """The strains sampled at the quadrature points of the FOM's forms give Vᵀ r exactly (SPEC §8)."""
-    from test_prom import ProjectedFOM, random_states, relative_error
+    from test_prom import assert_prom_reproduces_the_projected_fom_forces
 
-    from aquarom_fenics.integrator import TimeScheme
-    from aquarom_fenics.reduced_dynamics import ReducedSystem
-
-    scene, fish, prom = quadratic_so1
-    projected = ProjectedFOM(scene, fish, prom, prom.xi_center)
-    system = ReducedSystem(prom, scene, prom.xi_center, TimeScheme.newmark(0.02, 0.005))
-    rng = np.random.default_rng(0)
-    for sample in range(5):
-        eta, eta_dot, eta_ddot = random_states(rng, prom.size, 0.02)
-        time = 0.05 * (sample + 1)
-        expected = projected.residual(time, eta, eta_dot, eta_ddot)
-        assert relative_error(system.residual(time, eta, eta_dot, eta_ddot)[0], expected) < 1e-9
-        assert relative_error(system.internal_force(eta), projected.internal_force(eta)) < 1e-9
+    assert_prom_reproduces_the_projected_fom_forces(*quadratic_so1, samples=5)
 
 
 def test_degree_two_first_xi_derivative_matches_central_difference_of_the_fom(quadratic_so1):
