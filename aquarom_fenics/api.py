@@ -14,14 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .cost import CostWeights
-from .fish import Fish, load_fish
-from .prom import ReducedModel
-from .reduced_dynamics import ReducedResult, simulate_reduced
-from .reductor import build_prom as _build_prom
-from .scene import Scene
-from .simulate import SimulationResult, simulate_fom
-from .study import FomCheck, run_optimization
+from aquarom_fenics.optimization.cost import CostWeights
+from aquarom_fenics.geometry.fish import Fish, load_fish
+from aquarom_fenics.reduction.prom import ReducedModel
+from aquarom_fenics.dynamics.reduced_dynamics import ReducedResult, simulate_reduced
+from aquarom_fenics.reduction.reductor import build_prom as _build_prom
+from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.dynamics.simulate import SimulationResult, simulate_fom
+from aquarom_fenics.optimization.study import FomCheck, run_optimization
 
 __all__ = ["Scene", "Fish", "load_fish", "simulate", "build_prom", "optimize", "CostWeights", "ReducedModel",
            "SimulationResult", "ReducedResult"]

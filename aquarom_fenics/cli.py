@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-from .errors import InputError, Interrupted, SolverError
+from aquarom_fenics.errors import InputError, Interrupted, SolverError
 
 EXAMPLES = {
     "mesh": "aquarom mesh scenes/nominal.toml",
@@ -93,7 +93,7 @@ def build_parser() -> argparse.ArgumentParser:
     pareto = command("pareto", "co-optimisation weight sweep: Pareto front of distance against actuation energy")
     pareto.add_argument("--out", type=Path, help="output directory (default results/pareto/SCENE)")
     pareto.add_argument("--force", action="store_true", help="replace existing outputs")
-    from .animate import DEFAULT_FPS
+    from aquarom_fenics.viz.animate import DEFAULT_FPS
 
     animate_help = "animate a simulation run (MP4 and GIF preview): the fish from above and from the side"
     animate = commands.add_parser("animate", help=animate_help, description=animate_help,
@@ -200,7 +200,7 @@ def end_in_agreement(agreement, code: int, line: str) -> int:
 
 
 def run_dry(args) -> int:
-    from .plan import plan
+    from aquarom_fenics.optimization.plan import plan
 
     scene, _ = check_inputs(args, load_scene(args))
     say(f"plan for `aquarom {args.command}` (dry run, nothing is written):")
@@ -213,9 +213,9 @@ def check_inputs(args, scene):
     """The checks a command makes before its work (arguments against the scene, time grid, design
     space), so a dry run refuses what the run would refuse; returns the scene the command uses and
     the --xi values."""
-    from .cost import design_space, require_interior
-    from .scene import parse_xi_assignments
-    from .simulate import check_time_grid
+    from aquarom_fenics.optimization.cost import design_space, require_interior
+    from aquarom_fenics.io.scene import parse_xi_assignments
+    from aquarom_fenics.dynamics.simulate import check_time_grid
 
     xi = parse_xi_assignments(getattr(args, "xi", None), scene)
     if getattr(args, "prom", None) is not None and getattr(args, "model", "prom") != "prom":
@@ -243,7 +243,7 @@ def check_inputs(args, scene):
 def claim_output(args, path: Path, resume: bool = False) -> Path:
     """The folder this run writes to (see :func:`outputs.claim_folder`): the output folder itself,
     or a folder beside it when --force replaces an earlier run's results."""
-    from .outputs import claim_folder
+    from aquarom_fenics.io.outputs import claim_folder
 
     location = on_rank_zero(lambda: claim_folder(path, getattr(args, "force", False), resume))
     args.output = location
@@ -253,7 +253,7 @@ def claim_output(args, path: Path, resume: bool = False) -> Path:
 
 def claim_output_file(args, path: Path) -> Path:
     """An output file (a PROM): an existing one is replaced only with --force and only if it is a PROM file."""
-    from .outputs import claim_file
+    from aquarom_fenics.io.outputs import claim_file
 
     return on_rank_zero(lambda: claim_file(path, args.force, is_prom_file))
 
@@ -296,7 +296,7 @@ def settle_output(args, code: int, wall_time: float) -> None:
     """Finish the output folder on rank 0: a finished run gets its manifest and is swapped into
     place; a stopped or interrupted one keeps its partial results and a manifest (an earlier
     run being replaced stays untouched); a refused one removes the folder it created."""
-    from .outputs import discard, list_outputs, publish
+    from aquarom_fenics.io.outputs import discard, list_outputs, publish
 
     location = vars(args).pop("output", None)     # settled once; not an argument for the manifest
     if location is None or MPI.COMM_WORLD.rank != 0:
@@ -313,8 +313,8 @@ def settle_output(args, code: int, wall_time: float) -> None:
 
 def write_manifest(args, wall_time: float) -> None:
     """manifest.json: scene, versions, git commit, command, host cores, timings per phase."""
-    from .outputs import git_commit, software_versions, write_json_atomic
-    from .scene import REPOSITORY
+    from aquarom_fenics.io.outputs import git_commit, software_versions, write_json_atomic
+    from aquarom_fenics.io.paths import PACKAGE
 
     scene = getattr(args, "scene_used", None)
     write_json_atomic(args.output_dir / "manifest.json", {
@@ -322,7 +322,7 @@ def write_manifest(args, wall_time: float) -> None:
         "arguments": {k: str(v) for k, v in vars(args).items() if k not in ("scene_used", "timings", "output_dir")},
         "scene": None if scene is None else {"name": scene.name, "source": scene.source, "hash": scene.hash,
                                              "values": scene.to_dict()},
-        "versions": software_versions(), "git_commit": git_commit(REPOSITORY),
+        "versions": software_versions(), "git_commit": git_commit(PACKAGE.parent),
         "host_cores": os.cpu_count(), "mpi_ranks": MPI.COMM_WORLD.size,
         "timings": {"total": wall_time} | getattr(args, "timings", {}),
         "date": time.strftime("%Y-%m-%d %H:%M:%S")})
@@ -330,7 +330,7 @@ def write_manifest(args, wall_time: float) -> None:
 
 def load_scene(args):
     """The scene named on the command line, with the --level and --degree overrides applied."""
-    from .scene import Scene
+    from aquarom_fenics.io.scene import Scene
 
     scene = Scene.load(args.scene)
     if args.level is not None:
@@ -347,8 +347,8 @@ def say(text: str) -> None:
 
 
 def run_mesh(args) -> int:
-    from .fish import load_fish
-    from .mesh import cell_quality
+    from aquarom_fenics.geometry.fish import load_fish
+    from aquarom_fenics.geometry.mesh import cell_quality
 
     scene = load_scene(args)
     fish = load_fish(scene)
@@ -370,8 +370,8 @@ def run_mesh(args) -> int:
 
 
 def run_shapes(args) -> int:
-    from .render import render_design, render_shape_sheet
-    from .fish import load_fish
+    from aquarom_fenics.viz.render import render_design, render_shape_sheet
+    from aquarom_fenics.geometry.fish import load_fish
 
     scene, xi = check_inputs(args, load_scene(args))
     if not xi and not scene.shapes:
@@ -388,7 +388,7 @@ def run_shapes(args) -> int:
 
 
 def run_simulate(args) -> int:
-    from .simulate import simulate_fom
+    from aquarom_fenics.dynamics.simulate import simulate_fom
 
     scene, xi = check_inputs(args, load_scene(args))
     out = claim_output(args, args.out or Path("results") / "simulate" / f"{scene.name}-{args.model}")
@@ -406,10 +406,10 @@ def run_simulate(args) -> int:
 
 def reduced_model(scene, xi: dict, model: str, prom_file: Path | None):
     """A ROM built at the design, or the scene's PROM (loaded from ``prom_file`` or built at the start values)."""
-    from .cache import cached_prom
-    from .fish import load_fish
-    from .prom import ReducedModel
-    from .reductor import build_prom
+    from aquarom_fenics.reduction.cache import cached_prom
+    from aquarom_fenics.geometry.fish import load_fish
+    from aquarom_fenics.reduction.prom import ReducedModel
+    from aquarom_fenics.reduction.reductor import build_prom
 
     if prom_file is not None and model == "prom":
         return ReducedModel.load(prom_file, scene_hash=scene.hash)
@@ -425,11 +425,11 @@ def reduced_model(scene, xi: dict, model: str, prom_file: Path | None):
 
 
 def run_reduced_model(scene, xi: dict, model: str, prom_file: Path | None, out: Path):
-    from .animate import DISPLACEMENT_FILE, write_displacement_series
-    from .fish import load_fish
-    from .outputs import write_trajectory_csv
-    from .reduced_dynamics import simulate_reduced
-    from .simulate import write_run_outputs
+    from aquarom_fenics.viz.animate import DISPLACEMENT_FILE, write_displacement_series
+    from aquarom_fenics.geometry.fish import load_fish
+    from aquarom_fenics.io.outputs import write_trajectory_csv
+    from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
+    from aquarom_fenics.dynamics.simulate import write_run_outputs
 
     reduced = reduced_model(scene, xi, model, prom_file)
     xi_vector = np.array([xi.get(name, reduced.design_point.get(name, 0.0)) for name in reduced.shape_names])
@@ -451,9 +451,9 @@ def run_reduced_model(scene, xi: dict, model: str, prom_file: Path | None, out: 
 
 
 def run_build(args) -> int:
-    from .cache import cached_prom
-    from .fish import load_fish
-    from .reductor import build_prom
+    from aquarom_fenics.reduction.cache import cached_prom
+    from aquarom_fenics.geometry.fish import load_fish
+    from aquarom_fenics.reduction.reductor import build_prom
 
     scene, xi = check_inputs(args, load_scene(args))
     xi = {s.name: s.start for s in scene.shapes} | xi
@@ -469,9 +469,9 @@ def run_build(args) -> int:
 
 
 def run_compare(args) -> int:
-    from .compare import model_errors
-    from .outputs import plot_comparison, write_json_atomic
-    from .simulate import simulate_fom
+    from aquarom_fenics.verification.compare import model_errors
+    from aquarom_fenics.io.outputs import plot_comparison, write_json_atomic
+    from aquarom_fenics.dynamics.simulate import simulate_fom
 
     scene, xi = check_inputs(args, load_scene(args))
     out = claim_output(args, args.out or Path("results") / "compare" / scene.name)
@@ -495,9 +495,9 @@ def run_compare(args) -> int:
 
 
 def run_optimize(args) -> int:
-    from .cost import CostWeights
-    from .optimize import DEFAULT_MAX_TIME
-    from .study import run_optimization
+    from aquarom_fenics.optimization.cost import CostWeights
+    from aquarom_fenics.optimization.optimize import DEFAULT_MAX_TIME
+    from aquarom_fenics.optimization.study import run_optimization
 
     scene, _ = check_inputs(args, load_scene(args))
     weights = CostWeights()
@@ -519,7 +519,7 @@ def run_optimize(args) -> int:
 
 
 def run_pareto(args) -> int:
-    from .study import pareto_sweep
+    from aquarom_fenics.optimization.study import pareto_sweep
 
     scene, _ = check_inputs(args, load_scene(args))
     out = claim_output(args, args.out or Path("results") / "pareto" / scene.name)
@@ -532,7 +532,7 @@ def run_pareto(args) -> int:
 
 
 def run_animate(args) -> int:
-    from .animate import animate_run
+    from aquarom_fenics.viz.animate import animate_run
 
     for path in animate_run(args.run_dir, out=args.out, fps=args.fps, stride=args.stride):
         say(f"wrote {path}")
@@ -540,9 +540,9 @@ def run_animate(args) -> int:
 
 
 def run_basis(args) -> int:
-    from .animate import render_basis_sheet
-    from .fish import load_fish
-    from .reductor import build_prom
+    from aquarom_fenics.viz.animate import render_basis_sheet
+    from aquarom_fenics.geometry.fish import load_fish
+    from aquarom_fenics.reduction.reductor import build_prom
 
     scene = load_scene(args)
     fish = load_fish(scene)
@@ -555,10 +555,10 @@ def run_basis(args) -> int:
 
 
 def run_check(args) -> int:
-    from .check import run_checks, table_header, table_row
-    from .fish import load_fish
-    from .prom import ReducedModel
-    from .reductor import build_prom
+    from aquarom_fenics.verification.check import run_checks, table_header, table_row
+    from aquarom_fenics.geometry.fish import load_fish
+    from aquarom_fenics.reduction.prom import ReducedModel
+    from aquarom_fenics.reduction.reductor import build_prom
 
     scene = load_scene(args)
     fish = load_fish(scene)
@@ -579,7 +579,7 @@ def run_check(args) -> int:
 
 
 def run_cache(args) -> int:
-    from .cache import clear, listing
+    from aquarom_fenics.reduction.cache import clear, listing
 
     if args.action == "list":
         for kind, entries, size in listing():

@@ -23,14 +23,14 @@ import numpy as np
 REPOSITORY = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPOSITORY))
 
-from aquarom_fenics.cache import cache_root  # noqa: E402
+from aquarom_fenics.reduction.cache import cache_root  # noqa: E402
 from aquarom_fenics.errors import InputError  # noqa: E402
-from aquarom_fenics.fish import load_fish  # noqa: E402
-from aquarom_fenics.outputs import software_versions, write_json_atomic  # noqa: E402
-from aquarom_fenics.reduced_dynamics import simulate_reduced  # noqa: E402
-from aquarom_fenics.reductor import build_prom  # noqa: E402
-from aquarom_fenics.scene import Scene  # noqa: E402
-from aquarom_fenics.study import fom_distance, run_optimization  # noqa: E402
+from aquarom_fenics.geometry.fish import load_fish  # noqa: E402
+from aquarom_fenics.io.outputs import software_versions, write_json_atomic  # noqa: E402
+from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced  # noqa: E402
+from aquarom_fenics.reduction.reductor import build_prom  # noqa: E402
+from aquarom_fenics.io.scene import Scene  # noqa: E402
+from aquarom_fenics.optimization.study import fom_distance, run_optimization  # noqa: E402
 
 
 def grid_search(scene: Scene, fish, spacing: float = 0.15) -> dict:

@@ -1,8 +1,8 @@
 """Stability of one design's FOM: completion, per-force energy balance and the spine's dominant mode.
 
 For each time step and spine-force form: the PROM's stability verdict at the design, does the FOM at the design complete (cut steps), where
-does the energy come from (``aquarom_fenics.energy``), and which spine motion carries the late-time
-response (``aquarom_fenics.energy.spine_spectrum``). Writes <out>/stability_<name>.json.
+does the energy come from (``aquarom_fenics.verification.energy``), and which spine motion carries the late-time
+response (``aquarom_fenics.verification.energy.spine_spectrum``). Writes <out>/stability_<name>.json.
 
     .venv/bin/python scripts/stability_co.py --optimum results/optimize/co/summary.json --level 3
     .venv/bin/python scripts/stability_co.py --scene nominal --set material.young_modulus=52e3 \
@@ -22,13 +22,13 @@ REPOSITORY = Path(__file__).resolve().parent.parent
 if str(REPOSITORY) not in sys.path:
     sys.path.insert(0, str(REPOSITORY))
 
-from aquarom_fenics.energy import energy_balance, spine_spectrum  # noqa: E402
-from aquarom_fenics.fish import load_fish  # noqa: E402
-from aquarom_fenics.outputs import write_json_atomic  # noqa: E402
-from aquarom_fenics.reduced_dynamics import reduced_stability  # noqa: E402
-from aquarom_fenics.reductor import build_prom  # noqa: E402
-from aquarom_fenics.scene import Scene  # noqa: E402
-from aquarom_fenics.simulate import simulate_fom  # noqa: E402
+from aquarom_fenics.verification.energy import energy_balance, spine_spectrum  # noqa: E402
+from aquarom_fenics.geometry.fish import load_fish  # noqa: E402
+from aquarom_fenics.io.outputs import write_json_atomic  # noqa: E402
+from aquarom_fenics.dynamics.reduced_dynamics import reduced_stability  # noqa: E402
+from aquarom_fenics.reduction.reductor import build_prom  # noqa: E402
+from aquarom_fenics.io.scene import Scene  # noqa: E402
+from aquarom_fenics.dynamics.simulate import simulate_fom  # noqa: E402
 
 
 def design_of(summary: dict, scene: Scene) -> tuple[list[float], float]:

@@ -13,10 +13,10 @@ from pathlib import Path
 REPOSITORY = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPOSITORY))
 
-from aquarom_fenics.fish import load_fish  # noqa: E402
-from aquarom_fenics.outputs import software_versions  # noqa: E402
-from aquarom_fenics.scene import Scene  # noqa: E402
-from aquarom_fenics.study import pareto_sweep, run_optimization  # noqa: E402
+from aquarom_fenics.geometry.fish import load_fish  # noqa: E402
+from aquarom_fenics.io.outputs import software_versions  # noqa: E402
+from aquarom_fenics.io.scene import Scene  # noqa: E402
+from aquarom_fenics.optimization.study import pareto_sweep, run_optimization  # noqa: E402
 
 STARTS = {"so2": 3}      # [optimizer] starts per case (1 when not listed)
 

@@ -18,7 +18,7 @@ Studies (SPEC §11 "Validation studies", the validation issue):
           the nominal FOM for degree 1 on levels 1–5 and degree 2 on levels 1–3: distance, tail
           amplitude, first frequency, static peak-muscle tail deflection, wall time; Richardson
           reference per quantity (observed order, error estimate) and the cheapest (degree, level)
-          within 3% of the reference distance (`aquarom_fenics.convergence`).
+          within 3% of the reference distance (`aquarom_fenics.verification.convergence`).
 
 Every case is cached in <out>/cases/<kind>-<key>.json (key: scene hash + model settings +
 toolkit version), so a rerun computes only what is missing; each study writes <out>/<study>.json,
@@ -94,7 +94,7 @@ def base_scene(settings: Settings, name: str = "nominal", level: int | None = No
                stiffness: float = REFERENCE_STIFFNESS, time_step: float = 0.02, solver: dict | None = None):
     """A shipped scene at the study's level (linear tetrahedra: the studies sweep the five levels of
     SPEC §11), stiffness, horizon and step; ``solver`` overrides [solver] values."""
-    from aquarom_fenics.scene import Scene
+    from aquarom_fenics.io.scene import Scene
 
     scene = Scene.load(name)
     scene = scene.replace("mesh", level=level or settings.reference_level, degree=1)
@@ -304,7 +304,7 @@ class ConvergenceScheme:
 
     def facts(self) -> dict:
         """integrator and ρ∞ or α_N, as written with each quantity."""
-        from aquarom_fenics.scene import SolverSection
+        from aquarom_fenics.io.scene import SolverSection
 
         values = {**vars(SolverSection()), **dict(self.solver)}
         key = "rho_infinity" if values["integrator"] == "generalized-alpha" else "newmark_alpha"
@@ -316,7 +316,7 @@ def convergence_schemes() -> tuple[ConvergenceScheme, ...]:
 
     With γ = ½ + α_N Newmark's error has an O(α_N h) term, so for α_N > 0 the ratios tend to 2
     as h → 0; how soon depends on α_N against h."""
-    from aquarom_fenics.scene import SolverSection
+    from aquarom_fenics.io.scene import SolverSection
 
     defaults = SolverSection()
     return (ConvergenceScheme(f"generalized-α ρ∞ = {defaults.rho_infinity:g}", (), True),
@@ -510,7 +510,7 @@ def stress_row(record: dict) -> dict:
 
 def study_mesh_convergence(runner: Runner, settings: Settings) -> dict:
     """Mesh convergence of the nominal FOM per element degree and level; Richardson reference."""
-    from aquarom_fenics.convergence import MeshCase, mesh_convergence
+    from aquarom_fenics.verification.convergence import MeshCase, mesh_convergence
 
     cases = [mesh_case(f"degree {degree}, level {level}",
                        base_scene(settings, level=level).replace("mesh", degree=degree))
@@ -543,7 +543,7 @@ def run(settings: Settings, out: Path, report_path: Path, studies=STUDIES, recom
             except CasesCollected:
                 pass
         parallel = compute_in_parallel(runner, collector.collected, jobs)
-    from aquarom_fenics.outputs import software_versions, write_json_atomic
+    from aquarom_fenics.io.outputs import software_versions, write_json_atomic
 
     functions = STUDY_FUNCTIONS
     for study in studies:

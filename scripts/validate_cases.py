@@ -35,8 +35,8 @@ if str(REPOSITORY) not in sys.path:
     sys.path.insert(0, str(REPOSITORY))
 
 from aquarom_fenics import __version__  # noqa: E402
-from aquarom_fenics.outputs import write_json_atomic  # noqa: E402
-from aquarom_fenics.scene import Scene  # noqa: E402
+from aquarom_fenics.io.outputs import write_json_atomic  # noqa: E402
+from aquarom_fenics.io.scene import Scene  # noqa: E402
 
 CASE_FORMAT = 1
 """Version of the case records; part of every key (bump it when a record's content changes)."""
@@ -214,7 +214,7 @@ class Runner:
 
     def fish(self, scene: Scene):
         """load_fish, shared by cases with the same mesh, regions and shape set."""
-        from aquarom_fenics.fish import load_fish
+        from aquarom_fenics.geometry.fish import load_fish
 
         key = json.dumps([scene.to_dict()["mesh"], scene.to_dict()["regions"], scene.shape_names], sort_keys=True)
         if key not in self._fish:
@@ -236,12 +236,12 @@ class Runner:
         coarse = scene.replace("mesh", level=1) if not scene.mesh.file else scene
         coarse = coarse.replace("solver", duration=0.1, time_step=0.02)
         if parametric is None:
-            from aquarom_fenics.simulate import simulate_fom
+            from aquarom_fenics.dynamics.simulate import simulate_fom
 
             simulate_fom(coarse, fish=self.fish(coarse), progress=False)
         else:
-            from aquarom_fenics.reduced_dynamics import simulate_reduced
-            from aquarom_fenics.reductor import build_prom
+            from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
+            from aquarom_fenics.reduction.reductor import build_prom
 
             simulate_reduced(build_prom(coarse, fish=self.fish(coarse), parametric=parametric), coarse,
                              sensitivities=True)
@@ -396,7 +396,7 @@ def _outcome(completed: bool, error: str | None, *numbers) -> tuple[str, str | N
 
 
 def compute_fom(runner: Runner, case: Case) -> dict:
-    from aquarom_fenics.simulate import simulate_fom
+    from aquarom_fenics.dynamics.simulate import simulate_fom
 
     scene, options = case.scene, case.options
     fish = runner.fish(scene)
@@ -416,7 +416,7 @@ def compute_fom(runner: Runner, case: Case) -> dict:
     if energy:
         record["energy"] = energy_balance(result)
         if not result.cut_steps:
-            from aquarom_fenics.energy import energy_balance as per_force_balance
+            from aquarom_fenics.verification.energy import energy_balance as per_force_balance
 
             record["energy"]["per_force"] = per_force_balance(result).summary()
         if not _finite(record["energy"]["imbalance_relative"]):
@@ -426,7 +426,7 @@ def compute_fom(runner: Runner, case: Case) -> dict:
 
 
 def compute_mesh(runner: Runner, case: Case) -> dict:
-    from aquarom_fenics.convergence import measure
+    from aquarom_fenics.verification.convergence import measure
 
     runner.warm_up(case.scene, None)
     measured = asdict(measure(case.scene, runner.fish(case.scene)))
@@ -435,9 +435,9 @@ def compute_mesh(runner: Runner, case: Case) -> dict:
 
 
 def compute_reduced(runner: Runner, case: Case) -> dict:
-    from aquarom_fenics.prom import TAYLOR_FIELDS
-    from aquarom_fenics.reduced_dynamics import simulate_reduced
-    from aquarom_fenics.reductor import build_prom
+    from aquarom_fenics.reduction.prom import TAYLOR_FIELDS
+    from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
+    from aquarom_fenics.reduction.reductor import build_prom
 
     scene, options = case.scene, case.options
     parametric = options["parametric"]
@@ -592,7 +592,7 @@ def _toml_value(value) -> str:
 
 def compute_mpi(runner: Runner, case: Case) -> dict:
     """``mpirun -n R aquarom simulate`` on the case's scene; the summary and trajectory it writes."""
-    from aquarom_fenics.outputs import read_trajectory_csv
+    from aquarom_fenics.io.outputs import read_trajectory_csv
 
     ranks = case.options["ranks"]
     work = runner.out / "mpi-runs" / f"{case.key}"

@@ -15,12 +15,12 @@ REPOSITORY = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPOSITORY))
 
 from aquarom_fenics.errors import InputError  # noqa: E402
-from aquarom_fenics.fish import load_fish  # noqa: E402
-from aquarom_fenics.outputs import software_versions, write_json_atomic  # noqa: E402
-from aquarom_fenics.reduced_dynamics import simulate_reduced  # noqa: E402
-from aquarom_fenics.reductor import build_prom  # noqa: E402
-from aquarom_fenics.scene import Scene  # noqa: E402
-from aquarom_fenics.simulate import simulate_fom  # noqa: E402
+from aquarom_fenics.geometry.fish import load_fish  # noqa: E402
+from aquarom_fenics.io.outputs import software_versions, write_json_atomic  # noqa: E402
+from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced  # noqa: E402
+from aquarom_fenics.reduction.reductor import build_prom  # noqa: E402
+from aquarom_fenics.io.scene import Scene  # noqa: E402
+from aquarom_fenics.dynamics.simulate import simulate_fom  # noqa: E402
 
 FRACTIONS = (0.125, 0.25, 0.5)
 TOLERANCE = 0.05

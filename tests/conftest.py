@@ -3,7 +3,7 @@ import os
 
 import pytest
 
-from aquarom_fenics.scene import scene_from_dict
+from aquarom_fenics.io.scene import scene_from_dict
 
 os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
 os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")

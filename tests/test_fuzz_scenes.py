@@ -13,7 +13,7 @@ import tomllib
 import pytest
 
 from aquarom_fenics.cli import main
-from aquarom_fenics.scene import SCENES_DIR
+from aquarom_fenics.io.scene import SCENES_DIR
 
 SEED = 2026
 SCENES = 300

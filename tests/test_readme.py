@@ -3,11 +3,13 @@ keys table names every key of every section with the code's default."""
 import dataclasses
 import re
 import tomllib
+from pathlib import Path
 
 import pytest
 
-from aquarom_fenics.scene import REPOSITORY, SECTIONS, scene_from_dict
+from aquarom_fenics.io.scene import SECTIONS, scene_from_dict
 
+REPOSITORY = Path(__file__).resolve().parents[1]
 README = (REPOSITORY / "README.md").read_text()
 
 

@@ -6,10 +6,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+REPOSITORY = Path(__file__).resolve().parents[1]
+
 import pytest
 
-from aquarom_fenics.outputs import git_commit
-from aquarom_fenics.scene import REPOSITORY
+from aquarom_fenics.io.outputs import git_commit
+
 
 DRIVER = REPOSITORY / "scripts" / "docker_test.py"
 TOY = "[mesh]\nlevel = 1\n[solver]\nduration = 0.2\n[fluid]\ndrag = false\n"

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from aquarom_fenics.cli import main
-from aquarom_fenics.outputs import read_trajectory_csv
-from aquarom_fenics.simulate import simulate_fom
+from aquarom_fenics.io.outputs import read_trajectory_csv
+from aquarom_fenics.dynamics.simulate import simulate_fom
 from conftest import coarse_scene
 
 SHORT_SCENE = """

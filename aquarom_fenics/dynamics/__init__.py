@@ -1,0 +1,1 @@
+"""Time integration shared by every model, FOM runs and reduced runs with sensitivities."""

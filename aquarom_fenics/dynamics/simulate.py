@@ -1,0 +1,206 @@
+"""Run a model over the scene's horizon and write its outputs (trajectory, summary, plot, XDMF)."""
+from __future__ import annotations
+
+import logging
+import resource
+import signal
+import time as clock
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from aquarom_fenics.viz.animate import DISPLACEMENT_FILE, write_displacement_series
+from aquarom_fenics.dynamics.diagnostics import newton_failure_hints, scene_warnings
+from aquarom_fenics.errors import InputError, Interrupted
+from aquarom_fenics.geometry.fish import Fish, load_fish
+from aquarom_fenics.fem.fom import FullOrderModel
+from aquarom_fenics.dynamics.integrator import IntegrationStopped, NewtonSettings, StepReport, integrate
+from aquarom_fenics.io.outputs import TrajectoryCSV, plot_trajectory, software_versions, write_json_atomic
+from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.dynamics.trajectory import DISTANCE_WINDOW, Trajectory, swimming_distance, tail_amplitude
+
+log = logging.getLogger("aquarom")
+
+
+@dataclass
+class SimulationResult:
+    """What one simulation produced; ``error`` says why it stopped early, if it did."""
+
+    trajectory: Trajectory
+    distance: float | None
+    tail_amplitude: float | None
+    completed: bool
+    wall_time: float
+    n_cells: int
+    n_dofs: int
+    error: str | None = None
+    cut_steps: int = 0                            # sub-steps shorter than h taken by the step control
+    timings: dict = field(default_factory=dict)
+    states: list = field(default_factory=list)    # owned (u, u̇) per stored sample, when asked for
+    model: FullOrderModel | None = None
+
+    def summary(self) -> dict:
+        iterations = np.asarray(self.trajectory.newton_iterations[1:])
+        return {"distance": self.distance, "tail_amplitude": self.tail_amplitude, "completed": self.completed,
+                "error": self.error, "stop_reason": self.error or "completed", "wall_time": self.wall_time,
+                "cells": self.n_cells, "dofs": self.n_dofs, "steps": len(self.trajectory) - 1,
+                "cut_steps": self.cut_steps,
+                "mean_newton_iterations": float(iterations.mean()) if iterations.size else None,
+                "timings": self.timings}
+
+
+def check_time_grid(scene: Scene) -> int:
+    """Number of steps; the horizon must be a whole number of steps and cover the 0.1 s window."""
+    solver = scene.solver
+    steps = solver.duration / solver.time_step
+    if abs(steps - round(steps)) > 1e-9 * max(steps, 1.0):
+        raise InputError(f"scene {scene.source}: [solver] duration = {solver.duration} is not a whole number "
+                         f"of time steps h = {solver.time_step}")
+    if solver.duration < DISTANCE_WINDOW - 1e-12:
+        raise InputError(f"scene {scene.source}: [solver] duration = {solver.duration} s is shorter than the "
+                         f"{DISTANCE_WINDOW} s averaging window of the swimming distance")
+    return int(round(steps))
+
+
+def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bool = False,
+                 out_dir: Path | None = None, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True,
+                 initial_velocity: np.ndarray | None = None, keep_states: bool = False) -> SimulationResult:
+    """Integrate the FOM of design ξ over [0, T]; outputs go to ``out_dir`` (rank 0 writes).
+
+    A solver failure is reported in the result (``completed`` False, ``error`` the message) after
+    the converged steps have been written; :class:`InputError` propagates.
+    """
+    n_steps = check_time_grid(scene)
+    started = clock.perf_counter()
+    fish = fish or load_fish(scene, comm)
+    for warning in scene_warnings(scene, fish):
+        log.warning("scene %s: %s", scene.source, warning)
+    model = FullOrderModel(scene, fish, xi, moved_mesh=moved_mesh, comm=comm)
+    setup_time = clock.perf_counter() - started
+    log.info("FOM: %d cells, %d dofs, %d steps of %g s (set-up %.2f s)", model.n_cells, model.n_global_dofs,
+             n_steps, scene.solver.time_step, setup_time)
+    is_writer = comm.rank == 0 and out_dir is not None
+    csv = TrajectoryCSV(Path(out_dir) / "trajectory.csv") if is_writer else None
+    xdmf = _open_xdmf(model, out_dir, comm) if out_dir is not None and scene.output.xdmf else None
+    trajectory = Trajectory()
+    states = []
+    displacements = [] if out_dir is not None else None
+    cut_steps = 0
+
+    def record(report: StepReport, u, v, a):
+        nonlocal cut_steps
+        cut_steps = report.cut_steps
+        values = model.observables(u)
+        trajectory.append(report.time, values["head_x"], values["tail_y"], values["com_x"], report.iterations)
+        if csv:
+            csv.write(report.time, values["head_x"], values["tail_y"], values["com_x"], report.iterations)
+        if xdmf:
+            _write_xdmf_sample(model, xdmf, u, report.time)
+        if keep_states:
+            states.append((u.copy(), v.copy()))
+        if displacements is not None:
+            displacements.append(model.nodal_displacement(u)[:fish.nodes.n_vertices])
+        if bar:
+            bar.update(1)
+        if stop_requested():     # Ctrl-C: end after this complete sample
+            raise KeyboardInterrupt
+
+    bar = _progress_bar(n_steps, "FOM", progress and comm.rank == 0)
+    stop_requested = bool        # () → False until the time loop listens for Ctrl-C
+    velocity = np.zeros(model.n_owned_dofs) if initial_velocity is None else model.owned_from_nodal(initial_velocity)
+    zero = np.zeros(model.n_owned_dofs)
+    record(StepReport(0, 0.0, 0, 0), zero, velocity, zero)
+    settings = NewtonSettings.from_solver(scene.solver)
+    error = interruption = None
+    try:
+        with _stop_between_steps() as stop_requested:
+            integrate(model, model.scheme, n_steps, (zero, velocity, zero), settings, record,
+                      explain=lambda: "; ".join(newton_failure_hints(scene, model)))
+    except IntegrationStopped as failure:
+        error, cut_steps = str(failure), failure.cut_steps
+    except KeyboardInterrupt:
+        error = interruption = f"interrupted at t = {trajectory.time[-1]:g} s (Ctrl-C)"
+    finally:
+        if bar:
+            bar.close()
+        if csv:
+            csv.close()
+        if xdmf:
+            xdmf.close()
+    arrays = trajectory.arrays()
+    completed = error is None
+    result = SimulationResult(
+        trajectory=trajectory,
+        distance=swimming_distance(arrays["time"], arrays["com_x"]) if completed else None,
+        tail_amplitude=tail_amplitude(arrays["time"], arrays["tail_y"]) if completed else None,
+        completed=completed, wall_time=clock.perf_counter() - started, n_cells=model.n_cells,
+        n_dofs=model.n_global_dofs, error=error, cut_steps=cut_steps,
+        timings={"setup": setup_time, "time_integration": clock.perf_counter() - started - setup_time},
+        states=states, model=model)
+    if is_writer:
+        write_displacement_series(Path(out_dir) / DISPLACEMENT_FILE, model.rest_points[:fish.nodes.n_vertices],
+                                  fish.mesh.cells,
+                                  arrays["time"], displacements)
+        write_run_outputs(Path(out_dir), scene, result, "fom", fish.parameter_vector(xi), fish.shape_names, comm)
+    if interruption:
+        raise Interrupted(interruption)
+    return result
+
+
+def write_run_outputs(out_dir: Path, scene: Scene, result, model_name: str, xi, shape_names, comm,
+                      extra: dict | None = None):
+    """summary.json (and trajectory.png) of a FOM or reduced run; ``extra`` adds model facts."""
+    summary = result.summary() | (extra or {}) | {
+        "model": model_name, "scene": scene.name, "scene_hash": scene.hash, "scene_values": scene.to_dict(),
+        "xi": dict(zip(shape_names, map(float, xi))), "mpi_ranks": comm.size,
+        "peak_memory_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "versions": software_versions()}
+    write_json_atomic(out_dir / "summary.json", summary)
+    if scene.output.plots and len(result.trajectory) > 1:
+        title = f"{scene.name} ({model_name}): distance " + (
+            f"{100 * result.distance:.2f} cm" if result.completed else "n/a (stopped early)")
+        plot_trajectory(out_dir / "trajectory.png", result.trajectory.arrays(), title)
+
+
+@contextmanager
+def _stop_between_steps():
+    """While the time loop runs, Ctrl-C (SIGINT) only asks it to stop after the current step, so
+    trajectory, displacements and summary stay consistent; yields the "was it asked?" test."""
+    requested = []
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        if previous is not signal.default_int_handler:      # Ctrl-C ignored or handled by the caller
+            raise ValueError
+        signal.signal(signal.SIGINT, lambda number, frame: requested.append(number))
+    except ValueError:       # or not the main thread: Ctrl-C does not reach this loop
+        yield lambda: False
+        return
+    try:
+        yield lambda: bool(requested)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _progress_bar(total: int, label: str, enabled: bool):
+    if not enabled:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=label, unit="step", leave=False, disable=None)
+
+
+def _open_xdmf(model: FullOrderModel, out_dir, comm):
+    from aquarom_fenics.fem.dolfinx_adapter import XDMFTimeSeries
+
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    return XDMFTimeSeries(comm, Path(out_dir) / "displacement.xdmf", model.mesh)
+
+
+def _write_xdmf_sample(model: FullOrderModel, xdmf, u, time):
+    from aquarom_fenics.fem.dolfinx_adapter import set_owned_values
+
+    set_owned_values(model.displacement, u)
+    xdmf.write(model.displacement, time)

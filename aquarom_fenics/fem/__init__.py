@@ -1,0 +1,1 @@
+"""Finite elements: the dolfinx adapter, the full-order model and point-wise form sampling."""

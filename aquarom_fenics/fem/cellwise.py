@@ -1,0 +1,244 @@
+"""Reduced internal-force tensors by sampling the SVK forms point by point (SPEC §8).
+
+The FOM integrates the elastic energy with a quadrature rule: Π = Σ_c Σ_q w_cq ψ(E_cq), with
+w_cq = |det J_c| ω_q det F_1(x_cq) (ω_q the reference weights). At every quadrature point c, q
+(a "sample" s below) the strain of u = V η is a quadratic polynomial of η:
+
+    E_s(η) = Σ_j e_sj η_j + ½ Σ_jk q_sjk η_j η_k,
+
+and the energy density ψ(E) = ½ E:ℂ_s:E is a quadratic form of E. The coefficients e, q are
+obtained by evaluating the UFL strain of ``forms/`` at the quadrature points for u = ±V_j and
+u = V_j + V_k, and ℂ_s by evaluating the UFL energy density at unit strains: the physics stays in
+the forms, this module only samples and contracts. Sampling at the FOM's own quadrature points
+with its weights makes the reduced energy equal the FOM's quadrature sum exactly:
+
+    Π(η) = ½ P2(η,η) + ½ P3(η,η,η) + ⅛ P4(η,η,η,η),
+    P2_ij = Σ_s w_s e_si:ℂ_s:e_sj,  P3_ijk = Σ_s w_s e_si:ℂ_s:q_sjk,  P4_ijkl = Σ_s w_s q_sij:ℂ_s:q_skl.
+
+ξ-derivatives (Taylor terms) come from the UFL derivatives of the same expressions with respect
+to the shape gradient ∇u_ξ in the directions ∇U_k (``FullOrderModel.shape_derivative``).
+"""
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+from aquarom_fenics.fem import dolfinx_adapter as fx
+from aquarom_fenics.forms.elasticity import svk_energy_density
+from aquarom_fenics.forms.kinematics import green_lagrange_strain, volume_ratio
+
+# Orthonormal basis of symmetric 3×3 tensors: E = Σ_a s_a B_a with s_a = E:B_a.
+_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+SYMMETRIC_BASIS = np.zeros((6, 3, 3))
+for _a, (_i, _j) in enumerate(_PAIRS):
+    SYMMETRIC_BASIS[_a, _i, _j] = SYMMETRIC_BASIS[_a, _j, _i] = 1.0 if _i == _j else 1.0 / np.sqrt(2.0)
+
+
+_TO_SYMMETRIC = np.ascontiguousarray(SYMMETRIC_BASIS.reshape(6, 9).T)   # contiguous: a fast matmul
+
+
+def symmetric_coordinates(tensors: np.ndarray) -> np.ndarray:
+    """(..., 9) row-major 3×3 tensors → (..., 6) coordinates s_a = E:B_a."""
+    return tensors @ _TO_SYMMETRIC
+
+
+class CellSampler:
+    """Compiled expressions of the strain, its ξ-derivatives, the weight and ψ at the quadrature
+    points of the FOM's elastic energy; every array has one row per (owned cell, point)."""
+
+    def __init__(self, fom, taylor_order: int):
+        self.fom = fom
+        self.cells = fx.owned_cells(fom.mesh)
+        self.degree = fom.quadrature_degrees["stiffness"]
+        self.reference_weights = fx.quadrature_rule(self.degree)[1]
+        self.n_samples = self.cells.size * self.reference_weights.size
+        self.direction = fx.new_function(fom.space, "direction")
+        self.shape_directions = [fom.shape_direction(f"shape_direction_{i}") for i in range(2)]
+        shape_gradient = fom.shape_gradients["stiffness"]
+        strain = green_lagrange_strain(self.direction, shape_gradient)
+        weight = abs(ufl.JacobianDeterminant(fom.mesh)) * volume_ratio(shape_gradient)
+        self.strain = [self._compile(strain)]
+        self.weight = [self._compile(weight)]
+        first_strain = fom.shape_derivative(strain, self.shape_directions[0])
+        first_weight = fom.shape_derivative(weight, self.shape_directions[0])
+        if taylor_order >= 1:
+            self.strain.append(self._compile(first_strain))
+            self.weight.append(self._compile(first_weight))
+        if taylor_order >= 2:
+            self.strain.append(self._compile(fom.shape_derivative(first_strain, self.shape_directions[1])))
+            self.weight.append(self._compile(fom.shape_derivative(first_weight, self.shape_directions[1])))
+        self.unit_strain = fx.tensor_constant(fom.mesh, (3, 3))
+        self.energy_density = self._compile(svk_energy_density(
+            self.unit_strain, fom.young_modulus, fx.constant(fom.mesh, fom.scene.material.poisson_ratio)))
+
+    def _compile(self, expression):
+        return fx.compile_quadrature_expression(expression, self.degree)
+
+    def evaluate(self, expression, value_size: int = 1) -> np.ndarray:
+        """(n_samples, value_size) values at every owned cell's quadrature points."""
+        return fx.evaluate_expression(expression, self.cells).reshape(self.n_samples, value_size)
+
+    def weights(self, expression) -> np.ndarray:
+        """w_s = ω_q × (the expression, e.g. |det J| det F_1, or a ξ-derivative of it)."""
+        values = self.evaluate(expression).reshape(self.cells.size, -1)
+        return (values * self.reference_weights).ravel()
+
+    def set_shape_directions(self, *parameters) -> None:
+        """Directions δξ = e_k for the given parameter indices k."""
+        for direction, k in zip(self.shape_directions, parameters):
+            direction.set_parameter(k)
+
+    def elasticity(self) -> np.ndarray:
+        """ℂ_s in symmetric coordinates, (n_samples, 6, 6): ψ(s) = ½ sᵀ ℂ_s s."""
+        def density(tensor):
+            self.unit_strain.value = tensor
+            return self.evaluate(self.energy_density)[:, 0]
+
+        single = [density(SYMMETRIC_BASIS[a]) for a in range(6)]
+        moduli = np.empty((self.n_samples, 6, 6))
+        for a in range(6):
+            moduli[:, a, a] = 2.0 * single[a]
+            for b in range(a + 1, 6):
+                moduli[:, a, b] = moduli[:, b, a] = density(SYMMETRIC_BASIS[a] + SYMMETRIC_BASIS[b]) - single[a] - single[b]
+        return moduli
+
+    def strain_coefficients(self, vectors: np.ndarray, expression) -> tuple[np.ndarray, np.ndarray]:
+        """(e, q) of E(V η) = e η + ½ q η η: shapes (m, n_samples, 6) and (n_pairs, n_samples, 6).
+
+        q is stored for the pairs j ≤ k of :func:`pair_index`. Sampled at u = ±V_j and
+        u = V_j + V_k; exact because E is quadratic in u (the ξ-derivative expressions as well).
+        """
+        m = vectors.shape[1]
+
+        def strain_of(owned):
+            fx.set_owned_values(self.direction, owned)
+            return symmetric_coordinates(self.evaluate(expression, 9))
+
+        plus = [strain_of(vectors[:, j]) for j in range(m)]
+        minus = [strain_of(-vectors[:, j]) for j in range(m)]
+        linear = np.stack([(p - n) / 2.0 for p, n in zip(plus, minus)])
+        diagonal = [p + n for p, n in zip(plus, minus)]
+        pairs = pair_list(m)
+        quadratic = np.empty((len(pairs), self.n_samples, 6))
+        for number, (j, k) in enumerate(pairs):
+            if j == k:
+                quadratic[number] = diagonal[j]
+            else:
+                both = strain_of(vectors[:, j] + vectors[:, k])
+                quadratic[number] = both - linear[j] - linear[k] - 0.5 * (diagonal[j] + diagonal[k])
+        return linear, quadratic
+
+
+def pair_list(m: int) -> list[tuple[int, int]]:
+    return [(j, k) for j in range(m) for k in range(j, m)]
+
+
+def pair_index(m: int) -> np.ndarray:
+    """(m, m) → position of the pair (min, max) in :func:`pair_list`."""
+    index = np.empty((m, m), dtype=np.int64)
+    for number, (j, k) in enumerate(pair_list(m)):
+        index[j, k] = index[k, j] = number
+    return index
+
+
+def whitening(weight: np.ndarray, moduli: np.ndarray) -> np.ndarray:
+    """R_c with w_c ℂ_c = R_c R_cᵀ (Cholesky), so that w x:ℂ:y = (R_cᵀ x)·(R_cᵀ y)."""
+    return np.sqrt(weight)[:, None, None] * np.linalg.cholesky(moduli)
+
+
+def whiten(factor: np.ndarray, transform: np.ndarray) -> np.ndarray:
+    """R_cᵀ x for every cell of an (n, n_cells, 6) array, flattened to (n, 6 n_cells)."""
+    whitened = np.matmul(factor.transpose(1, 0, 2), transform)        # (c, n, 6): x R = (Rᵀ x)ᵀ
+    return np.ascontiguousarray(whitened.transpose(1, 0, 2)).reshape(factor.shape[0], -1)
+
+
+def energy_tensors(left, right, m: int):
+    """Symmetrised Σ_c w (e_l·ℂ·e_r, ½(e_l·ℂ·q_r + e_r·ℂ·q_l), q_l·ℂ·q_r) from whitened factors.
+
+    ``left`` and ``right`` are (ẽ, q̃) pairs; P3 and P4 are expanded from the pairs j ≤ k.
+    """
+    (e_left, q_left), (e_right, q_right) = left, right
+    p2 = e_left @ e_right.T
+    p3_pairs = 0.5 * (e_left @ q_right.T + e_right @ q_left.T)
+    p4_pairs = q_left @ q_right.T
+    index = pair_index(m)
+    p2 = 0.5 * (p2 + p2.T)
+    p3 = p3_pairs[:, index]
+    p4_pairs = 0.5 * (p4_pairs + p4_pairs.T)
+    p4 = p4_pairs[index[:, :, None, None], index[None, None, :, :]]
+    return p2, p3, p4
+
+
+def force_tensors(p2, p3, p4):
+    """Symmetric force tensors of f(η) = ∂Π/∂η = K1 η + K2 η η + K3 η η η."""
+    p3_sym = (p3 + p3.transpose(1, 0, 2) + p3.transpose(1, 2, 0)) / 3.0   # T_ijk + T_jik + T_kij
+    p4_sym = (p4 + p4.transpose(0, 2, 1, 3) + p4.transpose(0, 3, 2, 1)) / 3.0
+    return p2, 1.5 * p3_sym, 0.5 * p4_sym
+
+
+def internal_force_taylor(sampler: CellSampler, vectors: np.ndarray, n_parameters: int,
+                          order: int, comm: MPI.Comm):
+    """Taylor coefficients in Δξ of (K1, K2, K3): lists [constant, first (p, ...), second (p, p, ...)].
+
+    Π = ½ Σ_c w_c E_c:ℂ_c:E_c; its ξ-derivatives follow Leibniz' rule over the three factors
+    (w, E, E). The weight enters as w_I / w_0 on the left factor of strains whitened with w_0.
+    """
+    m = vectors.shape[1]
+    moduli = sampler.elasticity()
+    base_weight = sampler.weights(sampler.weight[0])
+    transform = whitening(base_weight, moduli)
+    p = n_parameters if order >= 1 else 0
+    whitened, weight_ratio = {}, {}
+
+    def strain(indices):
+        if indices not in whitened:
+            sampler.set_shape_directions(*indices)
+            linear, quadratic = sampler.strain_coefficients(vectors, sampler.strain[len(indices)])
+            whitened[indices] = (whiten(linear, transform), whiten(quadratic, transform))
+        return whitened[indices]
+
+    def weight(indices):
+        if indices not in weight_ratio:
+            sampler.set_shape_directions(*indices)
+            ratio = sampler.weights(sampler.weight[len(indices)]) / base_weight
+            weight_ratio[indices] = np.repeat(ratio, 6)
+        return weight_ratio[indices]
+
+    def tensors_for(derivative_indices):
+        totals = [np.zeros((m, m)), np.zeros((m, m, m)), np.zeros((m, m, m, m))]
+        # energy_tensors is symmetric in its two factors: (w, E_a, E_b) and (w, E_b, E_a) are equal.
+        terms: dict[tuple, int] = {}
+        for weight_indices, left_indices, right_indices in _leibniz(derivative_indices):
+            key = (weight_indices,) + ((left_indices, right_indices) if weight_indices
+                                       else tuple(sorted((left_indices, right_indices))))
+            terms[key] = terms.get(key, 0) + 1
+        for (weight_indices, left_indices, right_indices), count in terms.items():
+            left = strain(left_indices)
+            if weight_indices:
+                left = tuple(part * weight(weight_indices) for part in left)
+            for total, part in zip(totals, energy_tensors(left, strain(right_indices), m)):
+                total += count * part
+        return force_tensors(*(comm.allreduce(total, op=MPI.SUM) for total in totals))
+
+    taylor = [tensors_for(())]
+    if p:
+        first = [tensors_for((k,)) for k in range(p)]
+        taylor.append(tuple(np.stack(parts) for parts in zip(*first)))
+    if order >= 2 and p:
+        second = {}
+        for k in range(p):
+            for l in range(k, p):
+                second[k, l] = second[l, k] = tensors_for((k, l))
+        taylor.append(tuple(np.stack([np.stack([second[k, l][i] for l in range(p)]) for k in range(p)])
+                            for i in range(3)))
+    return taylor
+
+
+def _leibniz(derivative_indices):
+    """Every way to distribute the ξ-derivative indices among the factors (w, E_left, E_right)."""
+    count = len(derivative_indices)
+    for assignment in itertools.product(range(3), repeat=count):
+        yield tuple(tuple(derivative_indices[i] for i in range(count) if assignment[i] == slot) for slot in range(3))

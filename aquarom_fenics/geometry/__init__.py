@@ -1,0 +1,1 @@
+"""Geometry: meshes, regions and spine nodes, shape variations, the fish of a scene."""

@@ -1,0 +1,128 @@
+"""The fish of a scene: nominal mesh, tags and shape-variation matrix U (SPEC §3–§4).
+
+Rank 0 reads or generates the mesh (the mesh cache is written once) and broadcasts it, so every
+rank holds the same small numpy description; dolfinx distributes the cells afterwards.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from mpi4py import MPI
+
+from aquarom_fenics.errors import InputError
+from aquarom_fenics.fem import dolfinx_adapter as fx
+from aquarom_fenics.geometry.mesh import FishMesh, LagrangeNodes, block_mesh, lagrange_nodes, read_mesh
+from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.geometry.shapes import check_exact_design, design_points, reference_to_cells, shape_gradients, shape_matrix
+from aquarom_fenics.geometry.tags import FishTags, tag_fish
+
+
+MASS_QUADRATURE_DEGREE = {1: 2, 2: 6}
+"""Per element degree k: the lowest rule degree ≥ 2k (exact for φ_i·φ_j) whose default rule has
+only interior points and positive weights; the degree-4 and -5 rules of the tetrahedron have
+points on its edges, where the √ profiles of SPEC §4 have an infinite slope on the end faces."""
+
+
+def quadrature_degrees(degree: int) -> dict[str, int]:
+    """Quadrature degree of the volume forms per element degree k (one rule per family).
+
+    "stiffness" (elastic and muscle energies): 2(k - 1), at least 1: the centroid for linear
+    elements (∇u constant per cell), the 4-point interior rule for quadratic ones (exact for the
+    tangent at rest). "mass" (mass, centre of mass, total mass, drag): MASS_QUADRATURE_DEGREE.
+    """
+    return {"stiffness": max(1, 2 * (degree - 1)), "mass": MASS_QUADRATURE_DEGREE[degree]}
+
+
+@dataclass(frozen=True)
+class Fish:
+    mesh: FishMesh
+    tags: FishTags
+    shape_names: tuple[str, ...]
+    shape_matrix: np.ndarray     # U, (3 n_nodes, p), node-major, at the displacement nodes
+    nodes: LagrangeNodes         # displacement nodes (vertices first, then edge midpoints at degree 2)
+
+    @property
+    def degree(self) -> int:
+        return self.nodes.degree
+
+    def parameter_vector(self, xi: dict[str, float] | np.ndarray | None) -> np.ndarray:
+        """ξ as an array ordered like ``shape_names`` (a dict may give a subset; missing = 0)."""
+        if xi is None:
+            return np.zeros(len(self.shape_names))
+        if isinstance(xi, dict):
+            unknown = set(xi) - set(self.shape_names)
+            if unknown:
+                raise InputError(f"design: {', '.join(sorted(unknown))} not among the scene's shape variations "
+                                 f"({', '.join(self.shape_names) or 'none'})")
+            return np.array([float(xi.get(name, 0.0)) for name in self.shape_names])
+        xi = np.asarray(xi, dtype=float)
+        if xi.shape != (len(self.shape_names),):
+            raise InputError(f"design: expected {len(self.shape_names)} parameters, got {xi.shape}")
+        return xi
+
+    def shape_displacement(self, xi) -> np.ndarray:
+        """u_ξ = U ξ as an (n_nodes, 3) array [m]."""
+        return (self.shape_matrix @ self.parameter_vector(xi)).reshape(-1, 3)
+
+    def shape_gradient(self, xi, points: np.ndarray) -> np.ndarray:
+        """∇u_ξ = Σ_k ξ_k ∇U_k, exact, at (n, 3) nominal positions: (n, 3, 3)."""
+        xi = self.parameter_vector(xi)
+        gradient = np.zeros((len(points), 3, 3))
+        active = [k for k in range(len(xi)) if xi[k] != 0.0]
+        if active:
+            names = [self.shape_names[k] for k in active]
+            fields = shape_gradients(names, self.tags.box.relative(points), self.tags.box)
+            gradient += np.einsum("k,knij->nij", xi[active], fields)
+        return gradient
+
+    def shape_direction_gradient(self, k: int, points: np.ndarray) -> np.ndarray:
+        """∇U_k at (n, 3) nominal positions: (n, 3, 3)."""
+        return shape_gradients([self.shape_names[k]], self.tags.box.relative(points), self.tags.box)[0]
+
+    def integration_points(self) -> np.ndarray:
+        """(n_cells, n_q, 3) nominal positions of every quadrature point the forms use.
+
+        The rules used (degrees 1, 2, 6) are symmetric under permutations of the vertices, so these
+        are the FOM's points whatever vertex order dolfinx keeps per cell.
+        """
+        reference = np.vstack([fx.quadrature_rule(q)[0] for q in quadrature_degrees(self.degree).values()])
+        return reference_to_cells(self.mesh.points, self.mesh.cells, reference)
+
+    def design(self, xi) -> np.ndarray:
+        """Checked nodal positions x_0 + U ξ of the design.
+
+        InputError unless det F_1 = det(I + ∇u_ξ) > 0.1 at every quadrature point of the forms,
+        with ∇u_ξ of the exact shape fields (SPEC §4).
+        """
+        xi = self.parameter_vector(xi)
+        moved = design_points(self.nodes.points, self.shape_matrix, xi)
+        check_exact_design(self.mesh.points, self.mesh.cells, lambda points: self.shape_gradient(xi, points),
+                           self.integration_points(), dict(zip(self.shape_names, xi)), regions=self.tags)
+        return moved
+
+
+def load_mesh(scene: Scene) -> FishMesh:
+    if scene.mesh_file is not None:
+        return read_mesh(scene.mesh_file, scale=scene.mesh.scale, translate=scene.mesh.translate)
+    return block_mesh(scene.mesh.level, scene.mesh.length, scene.mesh.width, scene.mesh.height)
+
+
+def load_fish(scene: Scene, comm: MPI.Comm = MPI.COMM_WORLD) -> Fish:
+    """Mesh (rank 0, broadcast), tags and U of a scene."""
+    mesh_or_error = None
+    if comm.rank == 0:
+        try:
+            mesh_or_error = load_mesh(scene)
+        except InputError as error:
+            mesh_or_error = error
+    mesh = comm.bcast(mesh_or_error, root=0)
+    if isinstance(mesh, InputError):
+        raise mesh
+    nodes = lagrange_nodes(mesh, scene.mesh.degree)
+    tags = tag_fish(mesh, head_fraction=scene.regions.head_fraction, muscle_range=scene.regions.muscle_range,
+                    nodes=nodes)
+    names = tuple(scene.shape_names)
+    relative = tags.box.relative(nodes.points)
+    matrix = shape_matrix(names, relative, tags.box) if names else np.zeros((nodes.points.size, 0))
+    return Fish(mesh, tags, names, matrix, nodes)

@@ -1,0 +1,222 @@
+"""Regions and special nodes of the fish (SPEC §3), found from coordinates.
+
+Every comparison uses a tolerance relative to the mesh size (`mesh_tolerance`), never exact
+float equality. Positions are taken relative to the bounding box (`FishBox.relative`), so that
+the reference fish has x ∈ [-L, 0], y ∈ [-W/2, W/2], z ∈ [-H/2, H/2] whatever its placement.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from aquarom_fenics.errors import InputError
+from aquarom_fenics.geometry.mesh import FishMesh, LagrangeNodes, lagrange_nodes, mean_edge_length
+
+RELATIVE_TOLERANCE = 1e-4
+"""Tolerance as a fraction of the mean edge length: far below any node spacing, far above the
+rounding of coordinates written in single precision by other meshers."""
+
+_OUTWARD_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+"""Local vertices of the four faces of a positively oriented tetrahedron, each ordered so that
+its right-hand normal points out of the tetrahedron."""
+
+
+@dataclass(frozen=True)
+class FishBox:
+    """Bounding box of the fish: head face at x_max, tail face at x_min, axis at the y/z centre."""
+
+    x_head: float
+    x_tail: float
+    y_axis: float
+    z_axis: float
+    length: float
+    width: float
+    height: float
+
+    @classmethod
+    def of(cls, points) -> "FishBox":
+        points = np.asarray(points, dtype=float)
+        lower, upper = points.min(axis=0), points.max(axis=0)
+        return cls(
+            x_head=float(upper[0]),
+            x_tail=float(lower[0]),
+            y_axis=float((lower[1] + upper[1]) / 2),
+            z_axis=float((lower[2] + upper[2]) / 2),
+            length=float(upper[0] - lower[0]),
+            width=float(upper[1] - lower[1]),
+            height=float(upper[2] - lower[2]),
+        )
+
+    def relative(self, points) -> np.ndarray:
+        """(n, 3) positions (x - x_head, y - y_axis, z - z_axis) in metres."""
+        origin = np.array([self.x_head, self.y_axis, self.z_axis])
+        return np.asarray(points, dtype=float).reshape(-1, 3) - origin
+
+
+@dataclass(frozen=True)
+class FishTags:
+    """Regions and special nodes of a fish mesh; cell arrays index `FishMesh.cells`, node arrays
+    the displacement nodes (`LagrangeNodes.points`: the vertices, and at degree 2 the edge
+    midpoints as well, so that spine segments halve)."""
+
+    box: FishBox
+    tolerance: float  # metres
+    head_cells: np.ndarray  # cell indices, centroid x_rel >= -head_fraction L
+    head_nodes: np.ndarray  # nodes of head cells
+    left_muscle_cells: np.ndarray  # muscle_range[0] L < x_c < muscle_range[1] L and y_c > 0
+    right_muscle_cells: np.ndarray  # same, y_c < 0
+    skin_facets: np.ndarray  # (n_facets, 3) exterior boundary triangles, normals pointing out
+    skin_nodes: np.ndarray
+    spine_nodes: np.ndarray  # nodes with y_rel = z_rel = 0, sorted tail -> head
+    spine_segments: np.ndarray  # (n_spine - 1, 2): [rear, front] consecutive spine nodes
+    tail_node: int  # spine node at x_rel = -L
+    head_spine_node: int  # spine node at x_rel = 0
+    dorsal_nodes: np.ndarray  # (n_segments,) skin node on y_rel = 0, z_rel > 0, x nearest rear
+
+
+def mesh_tolerance(points, cells) -> float:
+    """Length tolerance (m) for coordinate comparisons: RELATIVE_TOLERANCE × mean edge length."""
+    return RELATIVE_TOLERANCE * mean_edge_length(points, cells)
+
+
+def cell_centroids(points, cells) -> np.ndarray:
+    """(n_cells, 3) centroids: the mean of the four vertices."""
+    return np.asarray(points, dtype=float)[np.asarray(cells)].mean(axis=1)
+
+
+def head_cell_mask(centroids, box: FishBox, tolerance: float, head_fraction=0.35) -> np.ndarray:
+    """True for cells whose centroid has x_rel ≥ -head_fraction L (within the tolerance)."""
+    x_rel = box.relative(centroids)[:, 0]
+    return x_rel >= -head_fraction * box.length - tolerance
+
+
+def muscle_cell_masks(
+    centroids, box: FishBox, tolerance: float, muscle_range=(-0.95, -0.35)
+) -> tuple[np.ndarray, np.ndarray]:
+    """(left, right) masks: muscle_range[0] L < x_rel < muscle_range[1] L, and y_rel > 0 (left)
+    or y_rel < 0 (right). Centroids within the tolerance of a bound are outside the muscle."""
+    relative = box.relative(centroids)
+    rear, front = (bound * box.length for bound in muscle_range)
+    along = (relative[:, 0] > rear + tolerance) & (relative[:, 0] < front - tolerance)
+    return along & (relative[:, 1] > tolerance), along & (relative[:, 1] < -tolerance)
+
+
+def skin_facets(cells) -> np.ndarray:
+    """(n_facets, 3) faces that belong to exactly one tetrahedron, in the vertex order of that
+    tetrahedron's outward face (right-hand normal pointing out for positively oriented cells)."""
+    faces = np.asarray(cells, dtype=np.int64)[:, _OUTWARD_FACES].reshape(-1, 3)
+    _, first, counts = np.unique(
+        np.sort(faces, axis=1), axis=0, return_index=True, return_counts=True
+    )
+    return faces[np.sort(first[counts == 1])]
+
+
+def _check_fractions(source: str, head_fraction: float, muscle_range) -> None:
+    if not 0.0 < head_fraction < 1.0:
+        raise InputError(
+            f"mesh {source}: head_fraction = {head_fraction!r}; it must lie between 0 and 1"
+        )
+    rear, front = muscle_range
+    if not -1.0 <= rear < front <= 0.0:
+        raise InputError(
+            f"mesh {source}: muscle_range = {tuple(muscle_range)!r}; it must be (rear, front) "
+            "with -1 <= rear < front <= 0 (units of L from the head face)"
+        )
+
+
+def _spine(mesh: FishMesh, nodes: LagrangeNodes, box: FishBox, tolerance: float) -> np.ndarray:
+    """Nodes on the body axis y_rel = z_rel = 0 sorted tail → head, checked to span [-L, 0]."""
+    relative = box.relative(nodes.points)
+    on_axis = np.flatnonzero(
+        (np.abs(relative[:, 1]) <= tolerance) & (np.abs(relative[:, 2]) <= tolerance)
+    )
+    spine_nodes = on_axis[np.argsort(relative[on_axis, 0], kind="stable")]
+    remedy = "mesh the box cut by the planes y = 0 and z = 0"
+    if len(spine_nodes) < 2:
+        raise InputError(
+            f"mesh {mesh.source}: no nodes on the body axis y = 0, z = 0 (within {tolerance:.3g}"
+            f" m); {remedy}"
+        )
+    ends = (("tail", spine_nodes[0], -box.length), ("head", spine_nodes[-1], 0.0))
+    for end, node, x_rel in ends:
+        if abs(relative[node, 0] - x_rel) > tolerance:
+            raise InputError(
+                f"mesh {mesh.source}: no node on the body axis y = 0, z = 0 at the {end} face "
+                f"x = {box.x_head + x_rel:.6g} m (within {tolerance:.3g} m); {remedy}"
+            )
+    return spine_nodes
+
+
+def _dorsal_nodes(
+    mesh: FishMesh, nodes: LagrangeNodes, box: FishBox, tolerance: float, skin_nodes, rear_nodes
+) -> np.ndarray:
+    """Per rear node: the skin node on y_rel = 0 with z_rel > 0 whose x is nearest (ties within
+    the tolerance: the largest z)."""
+    relative = box.relative(nodes.points)
+    candidates = skin_nodes[
+        (np.abs(relative[skin_nodes, 1]) <= tolerance) & (relative[skin_nodes, 2] > tolerance)
+    ]
+    if len(candidates) == 0:
+        raise InputError(
+            f"mesh {mesh.source}: no skin nodes on the plane y = 0 above the axis; mesh the box "
+            "cut by the planes y = 0 and z = 0"
+        )
+    distance = np.abs(relative[candidates, 0][None, :] - relative[rear_nodes, 0][:, None])
+    nearest = distance <= distance.min(axis=1, keepdims=True) + tolerance
+    height = np.where(nearest, relative[candidates, 2][None, :], -np.inf)
+    return candidates[np.argmax(height, axis=1)]
+
+
+def _nonempty(mesh: FishMesh, name: str, cells: np.ndarray, rule: str) -> np.ndarray:
+    if len(cells) == 0:
+        raise InputError(
+            f"mesh {mesh.source}: the {name} is empty (no cell centroid with {rule}); refine "
+            "the mesh or widen the region"
+        )
+    return cells
+
+
+def tag_fish(mesh: FishMesh, head_fraction=0.35, muscle_range=(-0.95, -0.35),
+             nodes: LagrangeNodes | None = None) -> FishTags:
+    """All tags of SPEC §3 for a fish mesh (head, muscles, skin, spine, tail, dorsal nodes).
+
+    Node tags refer to ``nodes`` (default: the vertices, i.e. linear elements).
+    """
+    _check_fractions(mesh.source, head_fraction, muscle_range)
+    nodes = nodes or lagrange_nodes(mesh, 1)
+    box = FishBox.of(mesh.points)
+    tolerance = mesh_tolerance(mesh.points, mesh.cells)
+    spine_nodes = _spine(mesh, nodes, box, tolerance)
+    spine_segments = np.column_stack([spine_nodes[:-1], spine_nodes[1:]])
+    centroids = cell_centroids(mesh.points, mesh.cells)
+    head_cells = _nonempty(
+        mesh,
+        "head",
+        np.flatnonzero(head_cell_mask(centroids, box, tolerance, head_fraction)),
+        f"x >= {-head_fraction:g} L",
+    )
+    left_mask, right_mask = muscle_cell_masks(centroids, box, tolerance, muscle_range)
+    rule = f"{muscle_range[0]:g} L < x < {muscle_range[1]:g} L and y"
+    left_muscle_cells = _nonempty(mesh, "left muscle", np.flatnonzero(left_mask), rule + " > 0")
+    right_muscle_cells = _nonempty(
+        mesh, "right muscle", np.flatnonzero(right_mask), rule + " < 0"
+    )
+    facets = skin_facets(mesh.cells)
+    skin_nodes = nodes.facet_nodes(facets)
+    return FishTags(
+        box=box,
+        tolerance=tolerance,
+        head_cells=head_cells,
+        head_nodes=np.unique(nodes.cell_nodes[head_cells]),
+        left_muscle_cells=left_muscle_cells,
+        right_muscle_cells=right_muscle_cells,
+        skin_facets=facets,
+        skin_nodes=skin_nodes,
+        spine_nodes=spine_nodes,
+        spine_segments=spine_segments,
+        tail_node=int(spine_nodes[0]),
+        head_spine_node=int(spine_nodes[-1]),
+        dorsal_nodes=_dorsal_nodes(mesh, nodes, box, tolerance, skin_nodes, spine_segments[:, 0]),
+    )

@@ -1,0 +1,1 @@
+"""Scene files, where data lives, and the files a run writes."""

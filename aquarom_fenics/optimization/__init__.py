@@ -1,0 +1,1 @@
+"""Cost, optimisers, dry-run plans and optimisation studies."""

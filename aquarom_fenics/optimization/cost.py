@@ -1,0 +1,258 @@
+"""Cost of a design and its gradient from the PROM (SPEC §10), and the feasible set.
+
+The design vector z is ξ (the scene's shape parameters), followed by the actuation amplitude A
+when co-optimisation is on. Cost L(z) = w_1 (-d(z)) + w_2 α A², d the swimming distance [m].
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linprog, nnls
+
+from aquarom_fenics.errors import InputError, SolverError
+from aquarom_fenics.reduction.prom import ReducedModel
+from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
+from aquarom_fenics.io.scene import Scene
+
+
+@dataclass(frozen=True)
+class DesignSpace:
+    """Names, box bounds and linear constraints A z ≤ b of the design vector z."""
+
+    names: tuple[str, ...]
+    lower: np.ndarray
+    upper: np.ndarray
+    start: np.ndarray
+    constraint_matrix: np.ndarray     # (n_rows, n) rows of A z ≤ b
+    constraint_bound: np.ndarray      # (n_rows,)
+    with_amplitude: bool
+
+    @property
+    def n_shapes(self) -> int:
+        return len(self.names) - int(self.with_amplitude)
+
+    def slacks(self, z: np.ndarray) -> np.ndarray:
+        """Every inequality as s(z) ≥ 0: z - lower, upper - z, b - A z."""
+        return np.concatenate([z - self.lower, self.upper - z, self.constraint_bound - self.constraint_matrix @ z])
+
+    @property
+    def free(self) -> np.ndarray:
+        """Parameters with room to move (lower < upper); the others are fixed at their bound."""
+        return self.upper > self.lower
+
+    @property
+    def slack_jacobian(self) -> np.ndarray:
+        """∂s/∂z of :meth:`slacks`: rows I, -I, -A."""
+        n = len(self.names)
+        return np.vstack([np.eye(n), -np.eye(n), -self.constraint_matrix])
+
+    @property
+    def barrier_rows(self) -> np.ndarray:
+        """The slacks that must stay positive inside the set: all but the box rows of fixed parameters."""
+        return np.concatenate([self.free, self.free, np.ones(self.constraint_bound.size, dtype=bool)])
+
+    def most_interior_point(self) -> np.ndarray:
+        """argmax_z min_i s_i(z) over the barrier rows (a linear programme in (z, t))."""
+        rows = self.barrier_rows
+        jacobian, n = self.slack_jacobian[rows], len(self.names)
+        offsets = self.slacks(np.zeros(n))[rows]            # s(z) = offsets + J z
+        # maximise t subject to t - J z <= offsets  (every slack >= t)
+        bounds = [(lo, hi) for lo, hi in zip(self.lower, self.upper)] + [(None, None)]
+        solution = linprog(np.r_[np.zeros(n), -1.0], A_ub=np.hstack([-jacobian, np.ones((rows.sum(), 1))]),
+                           b_ub=offsets, bounds=bounds, method="highs")
+        return solution.x[:n]
+
+    def interior_depth(self) -> float:
+        """max_z min_i s_i(z) over the barrier rows: > 0 when the feasible set has an interior."""
+        z = self.most_interior_point()
+        return float(self.slacks(z)[self.barrier_rows].min()) if self.barrier_rows.any() else 0.0
+
+    def is_feasible(self, z: np.ndarray, tolerance: float = 1e-12) -> bool:
+        return bool(np.all(self.slacks(z) >= -tolerance))
+
+    @property
+    def slack_ranges(self) -> np.ndarray:
+        """Range of every slack over the box: the width for a bound, Σ_j |A_ij| (upper_j - lower_j)
+        for a linear row; activity tolerances are fractions of it."""
+        width = self.upper - self.lower
+        return np.concatenate([width, width, np.abs(self.constraint_matrix) @ width])
+
+    def row_names(self) -> list[str]:
+        """A name for every slack row: ``z_tail = lower``, ``z_tail = upper``, ``constraint 1``, …"""
+        return ([f"{n} = lower" for n in self.names] + [f"{n} = upper" for n in self.names]
+                + [f"constraint row {i + 1}" for i in range(self.constraint_bound.size)])
+
+    def active_rows(self, z: np.ndarray, tolerance: float) -> np.ndarray:
+        """Rows with s_i(z) ≤ tolerance · range_i (fixed parameters' bounds excluded)."""
+        return np.flatnonzero((self.slacks(z) <= tolerance * self.slack_ranges) & self.barrier_rows)
+
+    def as_dict(self, z: np.ndarray) -> dict[str, float]:
+        return dict(zip(self.names, map(float, z)))
+
+
+@dataclass
+class FirstOrder:
+    """First-order optimality at z of min L(z) s.t. s(z) = s_0 + J z ≥ 0.
+
+    KKT: ∇L = Jᵀ λ, λ ≥ 0, λ_i s_i = 0. The rows within ``tolerance`` of their range are the
+    active set A; λ_A ≥ 0 minimises ‖D(∇L - J_Aᵀ λ_A - J_Iᵀ λ_I)‖ (non-negative least squares),
+    λ_I the barrier's multipliers μ / s_i of the inactive rows (zero without a barrier) and
+    D = diag(upper - lower). ``measure`` = ‖D r‖_∞ / |L| for that residual r: the relative cost
+    change, to first order, still to be had by moving one free parameter across its range.
+    """
+
+    measure: float
+    active: list[dict]          # name, slack / range, multiplier (least squares, its sign free)
+
+
+def first_order(space: DesignSpace, z: np.ndarray, cost: float, gradient: np.ndarray, tolerance: float,
+                barrier_scale: float = 0.0) -> FirstOrder:
+    """The optimality measure and active set of :class:`FirstOrder` (``barrier_scale`` = μ)."""
+    free = space.free
+    scale = space.upper - space.lower
+    slacks, ranges, jacobian = space.slacks(z), space.slack_ranges, space.slack_jacobian
+    active = space.active_rows(z, tolerance)
+    inactive = np.setdiff1d(np.flatnonzero(space.barrier_rows), active)
+    residual = np.asarray(gradient, dtype=float).copy()
+    if barrier_scale > 0 and inactive.size:
+        residual -= jacobian[inactive].T @ (barrier_scale / slacks[inactive])
+    columns = (scale[:, None] * jacobian[active].T)[free]
+    target = (scale * residual)[free]
+    if active.size:
+        positive, _ = nnls(columns, target)
+        stationary = target - columns @ positive
+        multipliers = np.linalg.lstsq(columns, target, rcond=None)[0]
+    else:
+        stationary, multipliers = target, np.zeros(0)
+    names = space.row_names()
+    rows = [{"constraint": names[i], "slack_over_range": float(slacks[i] / max(ranges[i], 1e-300)), "multiplier": float(m)}
+            for i, m in zip(active, multipliers)]
+    measure = float(np.abs(stationary).max(initial=0.0) / max(abs(cost), 1e-300))
+    return FirstOrder(measure, rows)
+
+
+def design_space(scene: Scene) -> DesignSpace:
+    """The scene's design space; refuses infeasible constraints and an infeasible start."""
+    names = list(scene.shape_names)
+    lower = [s.lower for s in scene.shapes]
+    upper = [s.upper for s in scene.shapes]
+    start = [s.start for s in scene.shapes]
+    co = scene.cooptimization
+    if co.enabled:
+        names.append("amplitude")
+        lower.append(co.amplitude_bounds[0])
+        upper.append(co.amplitude_bounds[1])
+        start.append(float(np.clip(scene.actuation.amplitude, *co.amplitude_bounds)))
+    rows, bounds = [], []
+    for constraint in scene.constraints:
+        row = np.zeros(len(names))
+        for name, coefficient in constraint.coefficients:
+            row[names.index(name)] = coefficient
+        if np.isfinite(constraint.upper):
+            rows.append(row)
+            bounds.append(constraint.upper)
+        if np.isfinite(constraint.lower):
+            rows.append(-row)
+            bounds.append(-constraint.lower)
+    space = DesignSpace(tuple(names), np.array(lower), np.array(upper), np.array(start),
+                        np.array(rows).reshape(-1, len(names)), np.array(bounds), co.enabled)
+    if space.constraint_matrix.size:
+        feasible = linprog(np.zeros(len(names)), A_ub=space.constraint_matrix, b_ub=space.constraint_bound,
+                           bounds=list(zip(space.lower, space.upper)), method="highs")
+        if feasible.status == 2:
+            raise InputError(f"scene {scene.source}: the linear constraints and the bounds leave no feasible design")
+    if not space.free.any():
+        raise InputError(f"scene {scene.source}: every design parameter has equal bounds "
+                         f"({', '.join(space.names)}): nothing to optimise; widen a bound")
+    violated = np.flatnonzero(space.constraint_bound - space.constraint_matrix @ space.start < -1e-12)
+    if violated.size:
+        raise InputError(f"scene {scene.source}: the start point {space.as_dict(space.start)} violates linear "
+                         f"constraint row(s) {', '.join(str(i + 1) for i in violated)}; move the start values inside")
+    return space
+
+
+def require_interior(space: DesignSpace, scene: Scene) -> None:
+    """The paper method's log-barrier needs a feasible set with an interior (max_z min_i s_i(z) > 0)."""
+    if space.interior_depth() <= 1e-12:
+        raise InputError(f"scene {scene.source}: the linear constraints leave no interior to the design space "
+                         "(an equality, or bounds that meet); the paper method's log-barrier needs one: "
+                         "use [optimizer] method = \"trust-region\" or loosen the constraints")
+
+
+def meshable_space(space: DesignSpace, fish) -> tuple[DesignSpace, list[str]]:
+    """The design space with each shape bound pulled in to where the design still meshes.
+
+    One parameter at a time (the others at their start values), bisection on the mesh check of
+    SPEC §4 between the start value and the bound. Returns the space and one note per change.
+    """
+    lower, upper, notes = space.lower.copy(), space.upper.copy(), []
+    for k in range(space.n_shapes):
+        for bounds, side in ((lower, "lower"), (upper, "upper")):
+            if _meshes(fish, space, k, bounds[k]):
+                continue
+            good, bad = space.start[k], bounds[k]
+            for _ in range(30):
+                middle = 0.5 * (good + bad)
+                good, bad = (middle, bad) if _meshes(fish, space, k, middle) else (good, middle)
+            notes.append(f"{space.names[k]} {side} bound {bounds[k]:g} → {good:.4g} (beyond it the design check "
+                         "refuses: det F_1 < 0.1 at a quadrature point)")
+            bounds[k] = good
+    restricted = DesignSpace(space.names, lower, upper, space.start, space.constraint_matrix, space.constraint_bound,
+                             space.with_amplitude)
+    return restricted, notes
+
+
+def _meshes(fish, space: DesignSpace, index: int, value: float) -> bool:
+    xi = space.start[: space.n_shapes].copy()
+    xi[index] = value
+    try:
+        fish.design(xi)
+        return True
+    except InputError:
+        return False
+
+
+@dataclass
+class Evaluation:
+    """Cost, its gradient and the swimming distance at one design, as the PROM predicts them."""
+
+    z: np.ndarray
+    cost: float
+    gradient: np.ndarray
+    distance: float
+    distance_gradient: np.ndarray
+
+
+@dataclass(frozen=True)
+class CostWeights:
+    """L = w_1 (-d) + w_2 α A²."""
+
+    distance: float = 1.0
+    energy: float = 0.0
+    alpha: float = 1.0
+
+    def energy_term(self, amplitude: float) -> float:
+        return self.alpha * amplitude ** 2
+
+
+def evaluate(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarray, weights: CostWeights) -> Evaluation:
+    """PROM simulation with sensitivities at z; raises SolverError if it stops or turns non-finite."""
+    xi = z[: space.n_shapes]
+    amplitude = float(z[-1]) if space.with_amplitude else None
+    result = simulate_reduced(prom, scene, xi, sensitivities=True, amplitude=amplitude,
+                              amplitude_sensitivity=space.with_amplitude)
+    if not result.completed:
+        raise SolverError(f"PROM simulation at {space.as_dict(z)} stopped: {result.error}")
+    distance_gradient = result.distance_gradient
+    if distance_gradient is None:
+        distance_gradient = np.zeros(len(z))
+    cost = -weights.distance * result.distance
+    gradient = -weights.distance * distance_gradient
+    if space.with_amplitude:
+        cost += weights.energy * weights.energy_term(z[-1])
+        gradient = gradient.copy()
+        gradient[-1] += weights.energy * 2 * weights.alpha * z[-1]
+    if not (np.isfinite(cost) and np.all(np.isfinite(gradient))):
+        raise SolverError(f"non-finite cost or gradient at {space.as_dict(z)}: cost {cost}, gradient {gradient}")
+    return Evaluation(z.copy(), float(cost), gradient, float(result.distance), distance_gradient)

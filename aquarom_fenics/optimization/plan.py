@@ -1,0 +1,125 @@
+"""`--dry-run`: what a command would build or reuse, what it skips, and how long it should take.
+
+Time estimates come from the benchmark JSON files under results/bench/ when they exist (fitted
+power laws in the number of cells), otherwise from the reference figures measured on 2 cores.
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from aquarom_fenics.geometry.mesh import LEVEL_TARGET_CELLS, block_cache_path
+from aquarom_fenics.io.paths import bench_results
+from aquarom_fenics.io.scene import Scene
+
+# Reference costs at 7944 cells (level 3, 2 cores): FOM 2 s simulation, PROM build with p
+# parameters ≈ 0.5 + 0.33 p s, reduced solve ≈ 0.1 s (0.2 s with sensitivities).
+REFERENCE_CELLS = 7944
+REFERENCE_FOM_SECONDS = 10.3
+REFERENCE_FOM_EXPONENT = 1.1
+QUADRATIC_COST_FACTOR = {1: 1.0, 2: 8.6}
+"""Cost of a quadratic mesh against the linear one on the same cells (level 1 FOM: 16.4 s against 1.9 s)."""
+
+
+def fom_seconds(cells: int, steps: int, degree: int = 1) -> float:
+    """Estimated FOM wall time [s] for ``steps`` Newmark steps."""
+    runs = _bench_runs("fom.json", lambda r: r.get("ranks") == 1 and "failed" not in r
+                       and r.get("degree", 1) == degree)
+    if len(runs) >= 2:
+        exponent, scale = np.polyfit(np.log([r["cells"] for r in runs]),
+                                     np.log([r["time_integration"] for r in runs]), 1)
+        return float(np.exp(scale) * cells ** exponent) * steps / 100
+    return (QUADRATIC_COST_FACTOR[degree] * REFERENCE_FOM_SECONDS * (cells / REFERENCE_CELLS) ** REFERENCE_FOM_EXPONENT
+            * steps / 100)
+
+
+def prom_build_seconds(cells: int, parameters: int, degree: int = 1) -> float:
+    runs = _bench_runs("prom.json", lambda r: r["parameters"] == parameters and r.get("degree", 1) == degree)
+    if len(runs) >= 2:
+        exponent, scale = np.polyfit(np.log([r["cells"] for r in runs]), np.log([r["build_time"] for r in runs]), 1)
+        return float(np.exp(scale) * cells ** exponent)
+    return QUADRATIC_COST_FACTOR[degree] * (0.5 + 0.33 * parameters) * cells / REFERENCE_CELLS
+
+
+def _bench_runs(name: str, keep) -> list[dict]:
+    folder = bench_results()
+    path = folder / name if folder else None
+    if path is None or not path.exists():
+        return []
+    try:
+        return [r for r in json.loads(path.read_text())["runs"] if keep(r)]
+    except (json.JSONDecodeError, KeyError):
+        return []
+
+
+def expected_basis(scene: Scene, parametric: bool) -> list[str]:
+    """Candidate basis vectors (SPEC §7); dependent ones are dropped at build time."""
+    reduction = scene.reduction
+    modes = reduction.vibration_modes
+    labels = ["rigid_x"] + [f"mode_{i + 1}" for i in range(modes)]
+    if reduction.modal_derivatives:
+        labels += [f"theta_{i + 1}_{j + 1}" for j in range(modes) for i in range(j + 1)]
+    if parametric:
+        labels += [f"xi_{i + 1}_{shape.name}" for shape in scene.shapes for i in range(modes)]
+    if reduction.basis == "default" and scene.actuation.stiffness > 0 and scene.actuation.amplitude > 0:
+        labels += ["psi", "theta_psi"]
+    return labels
+
+
+def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
+    """Lines describing the work of ``command`` on ``scene``."""
+    cells = LEVEL_TARGET_CELLS.get(scene.mesh.level, 0) if not scene.mesh.file else None
+    lines = [f"scene {scene.name} (hash {scene.hash})"]
+    if scene.mesh_file:
+        lines.append(f"mesh: read {scene.mesh_file} (scale {scene.mesh.scale:g})")
+        cells = cells or REFERENCE_CELLS
+    else:
+        cached = block_cache_path(scene.mesh.level, scene.mesh.length, scene.mesh.width, scene.mesh.height).exists()
+        lines.append(f"mesh: level {scene.mesh.level} (~{cells} cells), "
+                     + ("reused from the mesh cache" if cached else "generated with gmsh and cached"))
+    if command in ("mesh", "shapes"):
+        lines.append("work: tags" + (", design check, XDMF and PNG renders" if command == "shapes" else ""))
+        return lines + ["estimate: a few seconds"]
+    lines.append("forms: SVK energy, muscle energy, mass, drag (compiled once by FFCx, then reused)")
+    steps = scene.n_steps
+    degree = scene.mesh.degree
+    fom_time = fom_seconds(cells, steps, degree)
+    reduced = model in ("rom", "prom") or command in ("build", "optimize", "pareto", "basis", "check")
+    if reduced:
+        parametric = model != "rom"
+        p = len(scene.shapes) if parametric else 0
+        lines.append("basis (at most): " + ", ".join(expected_basis(scene, parametric)))
+        tensors = ["internal force (cubic in η)", "mass and damping", "centre of mass"]
+        skipped = []
+        (tensors if scene.actuation.stiffness > 0 and scene.actuation.amplitude > 0 else skipped).append("actuation")
+        (tensors if scene.fluid.drag else skipped).append("drag")
+        (tensors if scene.fluid.thrust else skipped).append("thrust")
+        if p:
+            tensors.append(f"Taylor terms in ξ of order {scene.reduction.taylor_order} for {p} parameters")
+        else:
+            skipped.append("ξ-terms")
+        lines.append("tensors: " + ", ".join(tensors))
+        lines.append("skipped: " + (", ".join(skipped) or "nothing"))
+        build_time = prom_build_seconds(cells, p, degree)
+        lines.append(f"PROM: from the PROM cache when an identical one was built before, else ~{build_time:.1f} s")
+    if command == "simulate" and model == "fom" or command == "compare":
+        lines.append(f"FOM: {steps} steps of {scene.solver.time_step:g} s, ~{fom_time:.0f} s")
+    if command in ("simulate", "compare") and reduced:
+        lines.append("reduced solve: ~0.1 s; sensitivities: not computed")
+    if command in ("optimize", "pareto"):
+        settings = scene.optimizer
+        runs = len(scene.cooptimization.weights) if command == "pareto" else 1
+        builds = max(2, settings.max_iterations // max(settings.n_rebuild, 1)) if settings.method == "paper" else 8
+        lines.append(f"optimiser: {settings.method}, at most {settings.max_iterations} iterations, ~{builds} PROM "
+                     f"builds per run ({runs} run{'s' if runs > 1 else ''}), sensitivities dη/dξ at every built PROM")
+        lines.append(f"FOM checks: start and optimal design per run (~{fom_time:.0f} s each; the start is cached)")
+        total = runs * (builds * (prom_build_seconds(cells, len(scene.shapes), degree) + 0.2) + 2 * fom_time)
+        lines.append(f"estimate: ~{total:.0f} s")
+    elif command == "build":
+        lines.append(f"estimate: ~{prom_build_seconds(cells, len(scene.shapes), degree):.1f} s")
+    elif command in ("simulate", "compare"):
+        fom_part = fom_time if model == "fom" or command == "compare" else 0
+        prom_part = prom_build_seconds(cells, len(scene.shapes), degree) if reduced else 0
+        lines.append(f"estimate: ~{fom_part + prom_part:.0f} s")
+    return lines

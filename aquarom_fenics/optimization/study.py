@@ -1,0 +1,292 @@
+"""An optimisation study end to end: optimise with the PROM, verify with the FOM, write the report."""
+from __future__ import annotations
+
+import csv
+import json
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from aquarom_fenics.reduction.cache import cache_root, entry_key, read_intact, require_cache_writable, store
+from aquarom_fenics.optimization.cost import CostWeights, design_space
+from aquarom_fenics.errors import InputError, Interrupted, SolverError
+from aquarom_fenics.geometry.fish import Fish, load_fish
+from aquarom_fenics.optimization.optimize import (DEFAULT_MAX_TIME, Checkpoint, OptimizationResult, PromBuilder, history_columns, optimization_space,
+                       optimize, start_points)
+from aquarom_fenics.io.outputs import software_versions, write_json_atomic
+from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.dynamics.simulate import simulate_fom
+
+log = logging.getLogger("aquarom")
+
+
+@dataclass
+class FomCheck:
+    """FOM distances [m] of the nominal (start) and optimal designs and their ratio.
+
+    A FOM run that stops leaves its distance None and the reason in ``error``; the PROM's nominal
+    distance is None for a run from another start (multi-start).
+    """
+
+    nominal_distance: float | None
+    optimal_distance: float | None
+    prom_nominal_distance: float | None
+    prom_optimal_distance: float
+    time: float
+    error: str | None = None
+
+    @property
+    def ratio(self) -> float | None:
+        if self.nominal_distance is None or self.optimal_distance is None:
+            return None
+        return self.optimal_distance / self.nominal_distance
+
+
+def fom_distance(scene: Scene, fish: Fish, design: dict[str, float], amplitude: float | None) -> float:
+    """Swimming distance of the FOM at a design, cached by scene hash, design and amplitude."""
+    if amplitude is not None:
+        scene = scene.replace("actuation", amplitude=amplitude)
+    path = cache_root() / "fom" / f"{entry_key('fom', scene.hash, sorted(design.items()))}.json"
+    if path.exists():
+        distance = read_intact(path, lambda entry: json.loads(entry.read_text())["distance"])
+        if distance is not None:
+            log.info("FOM at %s: reused from the cache (%s)", design, path.name)
+            return distance
+    require_cache_writable("fom")
+    result = simulate_fom(scene, design, fish=fish, progress=MPI.COMM_WORLD.rank == 0)
+    if not result.completed:
+        raise SolverError(f"FOM at {design} stopped: {result.error}")
+    if MPI.COMM_WORLD.rank == 0:
+        entry = {"design": design, "scene_hash": scene.hash, "distance": result.distance}
+        store(path, lambda target: write_json_atomic(target, entry))
+    return result.distance
+
+
+def fom_check(scene: Scene, fish: Fish, result: OptimizationResult) -> FomCheck:
+    """FOM distances of the scene's nominal design (its start point) and of the optimum."""
+    started = time.perf_counter()
+    space = result.space
+    shapes = space.n_shapes
+
+    def split(z):
+        return dict(zip(space.names[:shapes], map(float, z[:shapes]))), (float(z[-1]) if space.with_amplitude else None)
+
+    distances, errors = [], []
+    nominal = design_space(scene).start
+    for z in (nominal, result.optimum):
+        try:
+            distances.append(fom_distance(scene, fish, *split(z)))
+        except SolverError as failure:
+            distances.append(None)
+            errors.append(str(failure))
+    first_built = next(row for row in result.history if row["prom"] == "built")
+    prom_nominal = first_built["distance"] if np.array_equal(space.start, nominal) else None
+    return FomCheck(*distances, prom_nominal, result.evaluation.distance,
+                    time.perf_counter() - started, "; ".join(errors) or None)
+
+
+def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights: CostWeights | None = None,
+                     fish: Fish | None = None, render: bool = True, max_time: float = DEFAULT_MAX_TIME,
+                     start: np.ndarray | None = None) -> tuple[OptimizationResult, FomCheck]:
+    """Optimise, check with the FOM and write history.csv, summary.json, plots, renders, XDMF.
+
+    From ``start`` when given; otherwise ``[optimizer] starts`` > 1 runs :func:`run_multistart`.
+    A checkpoint to resume from is validated before anything is written; Ctrl-C leaves the
+    history, a valid checkpoint and a summary.json with the stop reason.
+    """
+    if start is None and scene.optimizer.starts > 1:
+        return run_multistart(scene, out_dir, resume, weights, fish, render, max_time)
+    out_dir = Path(out_dir)
+    is_writer = MPI.COMM_WORLD.rank == 0
+    space = design_space(scene)
+    checkpoint = out_dir / "checkpoint.json"
+    if resume and not checkpoint.exists():
+        raise InputError(f"--resume: no checkpoint in {out_dir}; run without --resume")
+    saved = Checkpoint(checkpoint, scene, scene.optimizer.method).load() if resume else None
+    require_cache_writable()
+    fish = fish or load_fish(scene)
+    if is_writer:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    history_file = out_dir / "history.csv"
+    writer = HistoryWriter(history_file, history_columns(space), saved["history"] if saved else []) if is_writer else None
+    try:
+        result = optimize(scene, fish=fish, weights=weights, checkpoint_path=checkpoint, resume=resume,
+                          on_iteration=writer.write if writer else None, write_checkpoint=is_writer,
+                          max_time=max_time, start=start)
+        check = fom_check(scene, fish, result)
+    except KeyboardInterrupt as stop:
+        rows = writer.rows if writer else 0
+        reason = f"{stop or 'interrupted'}" if isinstance(stop, Interrupted) else "interrupted (Ctrl-C)"
+        if is_writer:
+            writer.close()
+            write_json_atomic(out_dir / "summary.json", {
+                "scene": scene.name, "scene_hash": scene.hash, "method": scene.optimizer.method, "completed": False,
+                "stop_reason": f"{reason} after {rows} history row(s)", "history": history_file.name,
+                "resume": f"aquarom optimize {scene.source} --out {out_dir} --resume"})
+        raise Interrupted(f"{reason} after {rows} history row(s); continue with --resume") from None
+    if is_writer:
+        writer.close()
+        _write_summary(out_dir, scene, result, check, weights or CostWeights())
+        _write_figures(out_dir, scene, fish, result, render)
+    return result, check
+
+
+def run_multistart(scene: Scene, out_dir: Path, resume: bool = False, weights: CostWeights | None = None,
+                   fish: Fish | None = None, render: bool = True,
+                   max_time: float = DEFAULT_MAX_TIME) -> tuple[OptimizationResult, FomCheck]:
+    """One optimisation per start of :func:`start_points` (in ``start_<k>/``, sharing the PROM
+    cache), each FOM-checked; summary.json lists every local optimum and is the summary of the
+    best FOM-verified one (the best PROM distance when no FOM check finished)."""
+    out_dir = Path(out_dir)
+    fish = fish or load_fish(scene)
+    space = optimization_space(scene, fish)
+    settings = scene.optimizer
+    starts = start_points(space, settings.starts, settings.seed, PromBuilder(scene, fish, space).meshes)
+    runs = [run_optimization(scene, out_dir / f"start_{k + 1}", resume, weights, fish, render=False,
+                             max_time=max_time, start=z) for k, z in enumerate(starts)]
+    best = max(range(len(runs)), key=lambda k: _verified_distance(*runs[k]))
+    result, check = runs[best]
+    if MPI.COMM_WORLD.rank == 0:
+        optima = [_local_optimum(k, z, *run) for k, (z, run) in enumerate(zip(starts, runs))]
+        _write_summary(out_dir, scene, result, check, weights or CostWeights(),
+                       {"starts": settings.starts, "seed": settings.seed, "best_start": best + 1,
+                        "distinct_optima": _distinct_optima(space, [r.optimum for r, _ in runs],
+                                                            settings.active_tolerance),
+                        "local_optima": optima})
+        _write_figures(out_dir, scene, fish, result, render)
+    return result, check
+
+
+def _verified_distance(result: OptimizationResult, check: FomCheck) -> tuple[bool, float]:
+    """Sort key: FOM-verified first, then the distance (FOM, else PROM)."""
+    verified = check.optimal_distance is not None
+    return verified, check.optimal_distance if verified else result.evaluation.distance
+
+
+def _local_optimum(k: int, start, result: OptimizationResult, check: FomCheck) -> dict:
+    space = result.space
+    return {"start_index": k + 1, "directory": f"start_{k + 1}", "start": space.as_dict(start),
+            "optimum": space.as_dict(result.optimum), "prom_distance": result.evaluation.distance,
+            "fom_distance": check.optimal_distance, "fom_error": check.error, "stop_reason": result.stop_reason,
+            "converged": result.converged, "iterations": result.iterations, "prom_builds": result.builds,
+            "active": [row["constraint"] for row in result.optimality.active]}
+
+
+def _distinct_optima(space, optima: list[np.ndarray], tolerance: float) -> list[list[int]]:
+    """Starts grouped by optimum: two optima are the same when every |z_i - z'_i| ≤ tolerance ·
+    (upper_i - lower_i)."""
+    groups: list[list[int]] = []
+    width = space.upper - space.lower
+    for k, z in enumerate(optima):
+        for group in groups:
+            if np.all(np.abs(z - optima[group[0] - 1]) <= tolerance * width):
+                group.append(k + 1)
+                break
+        else:
+            groups.append([k + 1])
+    return groups
+
+
+class HistoryWriter:
+    """history.csv, one row per iteration in the columns of :func:`history_columns`, flushed at
+    once; a resumed run starts from the checkpoint's rows (a row written after the last
+    checkpoint is made again, not duplicated)."""
+
+    def __init__(self, path: Path, columns: list[str], checkpoint_rows: list[dict]):
+        self.stream = open(path, "w", newline="")
+        self.header = columns
+        self.rows = 0
+        csv.writer(self.stream).writerow(self.header)
+        for row in checkpoint_rows:
+            self.write(row)
+
+    def write(self, row: dict) -> None:
+        csv.writer(self.stream).writerow([_csv_value(row.get(key)) for key in self.header])
+        self.stream.flush()
+        self.rows += 1
+
+    def close(self) -> None:
+        self.stream.close()
+
+
+def _csv_value(value):
+    """An empty cell for a missing value (a JSON null in a resumed row is the same as None)."""
+    return "" if value is None else value
+
+
+def _write_summary(out_dir, scene, result, check, weights, multistart: dict | None = None):
+    space = result.space
+    settings = scene.optimizer
+    summary = {
+        "scene": scene.name, "scene_hash": scene.hash, "method": settings.method,
+        "optimum": space.as_dict(result.optimum), "start": space.as_dict(space.start),
+        "bounds": {n: [float(lo), float(hi)] for n, lo, hi in zip(space.names, space.lower, space.upper)},
+        "bounds_active": [row["constraint"] for row in result.optimality.active], "stop_reason": result.stop_reason,
+        "converged": result.converged,
+        "optimality": {"measure": result.optimality.measure, "tolerance": settings.optimality_tolerance,
+                       "definition": "‖D r‖_∞ / |L|: KKT residual r over the active set, D the parameter ranges",
+                       "active_tolerance": settings.active_tolerance,
+                       "active_definition": "slack ≤ active_tolerance · range of the bound or constraint row; "
+                                            "multiplier > 0: the constraint holds the optimum",
+                       "active": result.optimality.active},
+        "iterations": result.iterations, "prom_builds": result.builds,
+        "prom_builds_reused_from_cache": result.reused, "prom_size": result.prom_size,
+        "cost_weights": {"distance": weights.distance, "energy": weights.energy, "alpha": weights.alpha},
+        "prom_distance_optimal": result.evaluation.distance,
+        "fom_check": {"nominal_distance": check.nominal_distance, "optimal_distance": check.optimal_distance,
+                      "prom_nominal_distance": check.prom_nominal_distance,
+                      "prom_optimal_distance": check.prom_optimal_distance, "ratio": check.ratio,
+                      "error": check.error},
+        "timings": result.timings | {"fom_check": check.time},
+        "time_per_build": result.timings["prom_builds"] / max(result.builds, 1),
+        "versions": software_versions()}
+    if multistart is not None:
+        summary["multistart"] = multistart
+    write_json_atomic(out_dir / "summary.json", summary)
+
+
+def _write_figures(out_dir, scene, fish, result, render):
+    from aquarom_fenics.viz.report import plot_optimization_history, render_nominal_and_optimal
+
+    space = result.space
+    if scene.output.plots:
+        active = [row["constraint"] for row in result.optimality.active]
+        plot_optimization_history(result.history, list(space.names), list(zip(space.lower, space.upper)), out_dir,
+                                  active=active)
+    shapes = space.n_shapes
+    optimal = dict(zip(space.names[:shapes], map(float, result.optimum[:shapes])))
+    if render and scene.output.render and shapes:
+        from aquarom_fenics.viz.render import render_design
+
+        render_design(fish, fish.design(optimal), optimal, out_dir / "optimal")
+        nominal = dict(zip(space.names[:shapes], map(float, space.start[:shapes])))
+        render_nominal_and_optimal(fish, fish.design(nominal), fish.design(optimal), out_dir / "nominal_vs_optimal.png",
+                                   f"{scene.name}: nominal and optimal design")
+
+
+def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None) -> list[dict]:
+    """Co-optimisation over the scene's weights w_1 (w_2 = 1 - w_1): pareto.csv and pareto.png."""
+    fish = fish or load_fish(scene)
+    co = scene.cooptimization
+    points = []
+    for w1 in co.weights:
+        weights = CostWeights(distance=w1, energy=1.0 - w1, alpha=co.energy_weight)
+        result, check = run_optimization(scene, Path(out_dir) / f"w1_{w1:g}", weights=weights, fish=fish, render=False)
+        amplitude = float(result.optimum[-1])
+        points.append({"w1": w1, "amplitude": amplitude, "energy": weights.energy_term(amplitude),
+                       "distance": check.optimal_distance if check.optimal_distance is not None else float("nan"),
+                       "prom_distance": result.evaluation.distance,
+                       **{f"xi_{n}": float(v) for n, v in zip(result.space.names[:-1], result.optimum[:-1])}})
+    if MPI.COMM_WORLD.rank == 0:
+        with open(Path(out_dir) / "pareto.csv", "w", newline="") as stream:
+            writer = csv.DictWriter(stream, fieldnames=list(points[0]))
+            writer.writeheader()
+            writer.writerows(points)
+        from aquarom_fenics.viz.report import plot_pareto
+
+        plot_pareto(points, Path(out_dir) / "pareto.png")
+    return points

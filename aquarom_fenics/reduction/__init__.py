@@ -1,0 +1,1 @@
+"""Model reduction: the basis, the reductor, the reduced model and its cache."""

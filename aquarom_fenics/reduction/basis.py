@@ -1,0 +1,188 @@
+"""Data-free reduction basis (SPEC §7), built on the design the model is centred on.
+
+With the head clamped in all directions:
+  1. rigid x-translation (u_x = 1 at every node);
+  2. vibration modes (K_0 - ω² M) φ = 0 (SLEPc, shift-invert at 0);
+  3. static modal derivatives θ_ij = -K_0⁻¹ (∂K/∂u[φ_j]) φ_i, i ≤ j;
+  4. static parameter sensitivities Ξ_ik = -K_0⁻¹ (∂K/∂ξ_k) φ_i;
+  5. actuation modes ψ = K_0⁻¹ f_act,1 and θ_ψ = -K_0⁻¹ (∂K/∂u[ψ]) ψ (not in ``basis = "paper"``).
+Each vector is normalised, then mass-orthonormalised; vectors whose remaining mass-norm falls
+below the drop tolerance are dropped and reported.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+from slepc4py import SLEPc
+
+from aquarom_fenics.fem import dolfinx_adapter as fx
+from aquarom_fenics.fem.fom import LEFT, RIGHT, FullOrderModel, direct_solver
+
+log = logging.getLogger("aquarom")
+
+
+@dataclass
+class ReductionBasis:
+    vectors: np.ndarray           # V, (n_owned_dofs, m), Vᵀ M V = I
+    labels: list[str]
+    dropped: list[str] = field(default_factory=list)
+    frequencies: np.ndarray = field(default_factory=lambda: np.zeros(0))   # Hz, of the vibration modes
+    timings: dict = field(default_factory=dict)
+
+
+class _SecondVariations:
+    """Vector forms d²f_int(0)[a, b] and ∂/∂ξ (d f_int(0)[a]) in the directions of two functions."""
+
+    def __init__(self, fom: FullOrderModel):
+        self.fom = fom
+        self.direction_a = fx.new_function(fom.space, "direction_a")
+        self.direction_b = fx.new_function(fom.space, "direction_b")
+        self.shape_direction = fom.shape_direction("shape_direction")
+        internal = fom.ufl_forms["internal_force"]
+        first = ufl.derivative(internal, fom.displacement, self.direction_a)
+        self.modal = fx.compile_form(ufl.derivative(first, fom.displacement, self.direction_b))
+        self.shape = fx.compile_form(fom.shape_derivative(first, self.shape_direction))
+        self.vector = fx.create_vector(self.modal)
+
+    def evaluate(self, compiled, a: np.ndarray, b: np.ndarray | None = None) -> np.ndarray:
+        fx.set_owned_values(self.fom.displacement, np.zeros(self.fom.n_owned_dofs))
+        fx.set_owned_values(self.direction_a, a)
+        if b is not None:
+            fx.set_owned_values(self.direction_b, b)
+        return fx.assemble_vector_into(self.vector, compiled).copy()
+
+    def shape_variation(self, a: np.ndarray, k: int) -> np.ndarray:
+        """∂/∂ξ_k (d f_int(0)[a])."""
+        self.shape_direction.set_parameter(k)
+        return self.evaluate(self.shape, a)
+
+
+def clamped_stiffness(fom: FullOrderModel) -> PETSc.Mat:
+    """K_0 of the design at rest with the head clamped (identity rows on the clamped dofs)."""
+    matrix = fom.rest_stiffness.copy()
+    matrix.zeroRowsColumns(fom.global_dofs(fom.clamped_dofs), diag=1.0)
+    return matrix
+
+
+def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ``count`` lowest modes (owned dofs, columns) and their frequencies ω/2π [Hz]."""
+    mass = fom.mass_matrix.copy()
+    mass.zeroRowsColumns(fom.global_dofs(fom.clamped_dofs), diag=0.0)
+    solver = SLEPc.EPS().create(fom.comm)
+    solver.setOperators(stiffness, mass)
+    solver.setProblemType(SLEPc.EPS.ProblemType.GHEP)
+    solver.setDimensions(count)
+    solver.setWhichEigenpairs(SLEPc.EPS.Which.TARGET_MAGNITUDE)
+    solver.setTarget(0.0)
+    spectral = solver.getST()
+    spectral.setType(SLEPc.ST.Type.SINVERT)
+    spectral.setShift(0.0)
+    inner = spectral.getKSP()
+    inner.setType("preonly")
+    inner.getPC().setType("lu")
+    inner.getPC().setFactorSolverType("mumps")
+    solver.setTolerances(1e-12, 200)
+    solver.solve()
+    if solver.getConverged() < count:
+        raise RuntimeError(f"SLEPc converged {solver.getConverged()} of {count} vibration modes")
+    vector = stiffness.createVecRight()
+    modes, frequencies = [], []
+    for index in range(count):
+        eigenvalue = solver.getEigenpair(index, vector).real
+        modes.append(vector.array.copy())
+        frequencies.append(np.sqrt(max(eigenvalue, 0.0)) / (2 * np.pi))
+    return np.column_stack(modes), np.array(frequencies)
+
+
+def build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
+    """Basis of SPEC §7 for the FOM's design, with sensitivities to the first ``n_parameters`` ξ_k."""
+    settings = fom.scene.reduction
+    timings = {}
+    started = time.perf_counter()
+    stiffness = clamped_stiffness(fom)
+    solver = direct_solver(fom.comm)
+    solver.setOperators(stiffness)
+    clamped = fom.clamped_dofs
+
+    def static_solve(rhs):
+        rhs = rhs.copy()
+        rhs[clamped] = 0.0
+        return fom.solve_with(solver, rhs)
+
+    candidates: list[tuple[str, np.ndarray]] = []
+    rigid = np.zeros(fom.n_owned_dofs)
+    rigid[0::3] = 1.0
+    candidates.append(("rigid_x", rigid))
+    modes, frequencies = vibration_modes(fom, stiffness, settings.vibration_modes)
+    timings["vibration_modes"] = time.perf_counter() - started
+    modes = [modes[:, i] / fom.norm(modes[:, i]) for i in range(modes.shape[1])]
+    candidates += [(f"mode_{i + 1}", mode) for i, mode in enumerate(modes)]
+
+    variations = _SecondVariations(fom)
+    if settings.modal_derivatives:
+        for i, j in ((i, j) for j in range(len(modes)) for i in range(j + 1)):
+            theta = -static_solve(variations.evaluate(variations.modal, modes[i], modes[j]))
+            candidates.append((f"theta_{i + 1}_{j + 1}", theta))
+    for k in range(n_parameters):
+        for i, mode in enumerate(modes):
+            sensitivity = -static_solve(variations.shape_variation(mode, k))
+            candidates.append((f"xi_{i + 1}_{k + 1}", sensitivity))
+    if settings.basis == "default" and fom.actuation_on:
+        psi = static_solve(unit_actuation_force(fom))
+        candidates.append(("psi", psi))
+        candidates.append(("theta_psi", -static_solve(variations.evaluate(variations.modal, psi, psi))))
+    timings["static_solves"] = time.perf_counter() - started - timings["vibration_modes"]
+    vectors, labels, dropped = mass_orthonormalise(fom, candidates, settings.drop_tolerance)
+    timings["basis_total"] = time.perf_counter() - started
+    if dropped:
+        log.warning("basis: dropped numerically dependent vectors %s", ", ".join(dropped))
+    log.info("basis: %d vectors (%s), first frequency %.3f Hz, %.2f s", len(labels), ", ".join(labels),
+             frequencies[0], timings["basis_total"])
+    return ReductionBasis(vectors, labels, dropped, frequencies, timings)
+
+
+def unit_actuation_force(fom: FullOrderModel) -> np.ndarray:
+    """f_act at rest with a_left = 1, a_right = -1 (left contracting, right extending)."""
+    fom.activations[LEFT].value, fom.activations[RIGHT].value = 1.0, -1.0
+    fx.set_owned_values(fom.displacement, np.zeros(fom.n_owned_dofs))
+    return fom._actuation_force_at_current_state()
+
+
+def mass_orthonormalise(fom: FullOrderModel, candidates, tolerance: float):
+    """Gram-Schmidt in ⟨a, b⟩_M (twice), after normalising each candidate.
+
+    A candidate is dropped when its mass-norm is zero or below ``tolerance`` times the largest of
+    its family (θ, Ξ, ...), or when less than ``tolerance`` of it remains after orthogonalisation.
+    """
+    norms = [np.sqrt(mass_inner(fom, vector, vector)) for _, vector in candidates]
+    family_scale = {}
+    for (label, _), norm in zip(candidates, norms):
+        family = label.split("_")[0]
+        family_scale[family] = max(family_scale.get(family, 0.0), norm)
+    accepted, labels, dropped = [], [], []
+    for (label, vector), norm in zip(candidates, norms):
+        if not np.isfinite(norm) or norm <= tolerance * family_scale[label.split("_")[0]]:
+            dropped.append(label)
+            continue
+        vector = vector / norm
+        for _ in range(2):
+            for basis_vector in accepted:
+                vector = vector - mass_inner(fom, basis_vector, vector) * basis_vector
+        remaining = np.sqrt(mass_inner(fom, vector, vector))
+        if remaining < tolerance:
+            dropped.append(label)
+            continue
+        accepted.append(vector / remaining)
+        labels.append(label)
+    return np.column_stack(accepted), labels, dropped
+
+
+def mass_inner(fom: FullOrderModel, a: np.ndarray, b: np.ndarray) -> float:
+    """aᵀ M b over all ranks."""
+    return float(fom.comm.allreduce(float(a @ fom.matvec(fom.mass_matrix, b)), op=MPI.SUM))

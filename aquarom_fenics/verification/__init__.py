@@ -1,0 +1,1 @@
+"""Checks against the FOM: Taylor tests, comparisons, mesh convergence, energy balance."""

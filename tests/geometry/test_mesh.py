@@ -1,0 +1,435 @@
+"""Block meshes, mesh import and the tags of SPEC §3."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from aquarom_fenics.geometry import mesh as mesh_module
+from aquarom_fenics.errors import InputError
+from aquarom_fenics.io.paths import shipped_meshes
+from aquarom_fenics.geometry.mesh import (
+    LEVEL_TARGET_CELLS,
+    FishMesh,
+    block_axis_segments,
+    block_mesh,
+    cell_quality,
+    read_mesh,
+    signed_cell_volumes,
+)
+from aquarom_fenics.geometry.tags import cell_centroids, head_cell_mask, muscle_cell_masks, tag_fish
+
+L, W, H = 0.20, 0.04, 0.10
+SHIPPED_MESHES = shipped_meshes()
+ABAQUS_FISH = SHIPPED_MESHES / "3d_rectangle_1272el.inp"
+
+
+@pytest.fixture(scope="module")
+def cache_dir(tmp_path_factory):
+    return tmp_path_factory.mktemp("mesh_cache")
+
+
+@pytest.fixture(scope="module")
+def coarse(cache_dir):
+    return block_mesh(1, cache_dir=cache_dir)
+
+
+@pytest.fixture(scope="module")
+def coarse_tags(coarse):
+    return tag_fish(coarse)
+
+
+def gmsh_module():
+    return mesh_module._import_gmsh()
+
+
+def mirror(points, axis):
+    mirrored = np.array(points, dtype=float)
+    mirrored[:, axis] *= -1.0
+    return mirrored
+
+
+def distance_to_nearest(points, candidates):
+    distances, _ = cKDTree(candidates).query(points)
+    return distances
+
+
+def write_msh(path, points, cells, boundary_triangles=(), isolated_point=None):
+    """A gmsh .msh file with the tetrahedra, optional boundary triangles and an isolated node."""
+    gmsh = gmsh_module()
+    gmsh.initialize(readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add("written")
+        volume = gmsh.model.addDiscreteEntity(3)
+        node_tags = np.arange(1, len(points) + 1)
+        gmsh.model.mesh.addNodes(3, volume, node_tags, np.asarray(points).ravel())
+        gmsh.model.mesh.addElementsByType(volume, 4, [], (np.asarray(cells) + 1).ravel())
+        if len(boundary_triangles):
+            surface = gmsh.model.addDiscreteEntity(2)
+            triangles = (np.asarray(boundary_triangles) + 1).ravel()
+            gmsh.model.mesh.addElementsByType(surface, 2, [], triangles)
+        if isolated_point is not None:
+            point = gmsh.model.addDiscreteEntity(0)
+            gmsh.model.mesh.addNodes(0, point, [len(points) + 1], list(isolated_point))
+            gmsh.model.mesh.addElementsByType(point, 15, [], [len(points) + 1])
+        gmsh.write(str(path))
+    finally:
+        gmsh.finalize()
+
+
+def write_inp(path, points, cells, node_labels, element_labels):
+    """An Abaqus input file with C3D4 elements, a comment, an Nset and a continued element line."""
+    lines = ["*Heading", "** written by the tests", "*Part, name=fish", "*Node"]
+    lines += [f"{label}, {x!r}, {y!r}, {z!r}" for label, (x, y, z) in zip(node_labels, points)]
+    lines.append("*Element, type=C3D4")
+    element_lines = [
+        f"{label}, " + ", ".join(str(node_labels[node]) for node in cell)
+        for label, cell in zip(element_labels, cells)
+    ]
+    first_label, *first_nodes = element_lines[0].split(", ")
+    element_lines[0] = f"{first_label}, {first_nodes[0]}, {first_nodes[1]},\n" + ", ".join(
+        first_nodes[2:]
+    )
+    lines += element_lines
+    lines += ["*Nset, nset=all, generate", "1, 100, 1", "*End Part"]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def write_uncut_box_msh(path):
+    """A structured tetrahedral box mesh with 3 divisions in y and z: no node on the axis."""
+    gmsh = gmsh_module()
+    gmsh.initialize(readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add("uncut")
+        gmsh.model.occ.addBox(-L, -W / 2, -H / 2, L, W, H)
+        gmsh.model.occ.synchronize()
+        for _, curve in gmsh.model.getEntities(1):
+            low = np.array(gmsh.model.getBoundingBox(1, curve)[:3])
+            high = np.array(gmsh.model.getBoundingBox(1, curve)[3:])
+            along_x = high[0] - low[0] > 0.5 * L
+            gmsh.model.mesh.setTransfiniteCurve(curve, 9 if along_x else 4)
+        for _, surface in gmsh.model.getEntities(2):
+            gmsh.model.mesh.setTransfiniteSurface(surface)
+        gmsh.model.mesh.setTransfiniteVolume(1)
+        gmsh.model.mesh.generate(3)
+        gmsh.write(str(path))
+    finally:
+        gmsh.finalize()
+
+
+# ---------------------------------------------------------------------------------------------
+# Block meshes
+
+
+def test_five_levels_land_near_their_targets(tmp_path):
+    for level, target in LEVEL_TARGET_CELLS.items():
+        fish = block_mesh(level, cache_dir=tmp_path)
+        assert abs(len(fish.cells) / target - 1.0) <= 0.15, (level, len(fish.cells))
+        assert np.all(signed_cell_volumes(fish.points, fish.cells) > 0.0)
+        assert cell_quality(fish.points, fish.cells).min() > 0.2
+
+
+@pytest.mark.parametrize("level", [1, 3])
+def test_block_is_mirror_symmetric_about_y_and_z(level, cache_dir):
+    fish = block_mesh(level, cache_dir=cache_dir)
+    for axis in (1, 2):
+        assert distance_to_nearest(mirror(fish.points, axis), fish.points).max() <= 1e-12
+
+
+def test_block_cells_are_positive_and_fill_the_box(coarse):
+    volumes = signed_cell_volumes(coarse.points, coarse.cells)
+    assert np.all(volumes > 0.0)
+    assert volumes.sum() == pytest.approx(L * W * H, rel=1e-12)
+    np.testing.assert_array_equal(coarse.points.min(axis=0), [-L, -W / 2, -H / 2])
+    np.testing.assert_array_equal(coarse.points.max(axis=0), [0.0, W / 2, H / 2])
+    assert coarse.points.dtype == np.float64 and coarse.cells.dtype == np.int64
+    assert len(np.unique(coarse.cells)) == len(coarse.points)
+
+
+def test_spine_nodes_are_equally_spaced_from_tail_to_head(coarse, coarse_tags):
+    spine = coarse.points[coarse_tags.spine_nodes]
+    assert len(spine) == block_axis_segments(1, L, W, H) + 1
+    np.testing.assert_array_equal(spine[:, 1:], 0.0)
+    np.testing.assert_allclose(np.diff(spine[:, 0]), L / (len(spine) - 1), rtol=1e-12)
+    assert coarse.points[coarse_tags.tail_node, 0] == -L
+    assert coarse.points[coarse_tags.head_spine_node, 0] == 0.0
+    np.testing.assert_array_equal(coarse_tags.spine_segments[:, 0], coarse_tags.spine_nodes[:-1])
+    np.testing.assert_array_equal(coarse_tags.spine_segments[:, 1], coarse_tags.spine_nodes[1:])
+
+
+def test_every_segment_has_a_dorsal_node_above_its_rear_node(coarse, coarse_tags):
+    dorsal = coarse.points[coarse_tags.dorsal_nodes]
+    rear = coarse.points[coarse_tags.spine_segments[:, 0]]
+    assert len(dorsal) == len(coarse_tags.spine_segments)
+    np.testing.assert_array_equal(dorsal[:, 2], H / 2)
+    np.testing.assert_array_equal(dorsal[:, 1], 0.0)
+    np.testing.assert_allclose(dorsal[:, 0], rear[:, 0], atol=1e-15)
+    assert np.all(np.isin(coarse_tags.dorsal_nodes, coarse_tags.skin_nodes))
+
+
+def test_head_and_muscles_mirror_left_and_right(coarse, coarse_tags):
+    centroids = cell_centroids(coarse.points, coarse.cells)
+    left = centroids[coarse_tags.left_muscle_cells]
+    right = centroids[coarse_tags.right_muscle_cells]
+    head = centroids[coarse_tags.head_cells]
+    assert len(left) == len(right) > 0
+    assert distance_to_nearest(mirror(left, 1), right).max() <= 1e-12
+    assert np.all(left[:, 1] > 0.0) and np.all(left[:, 0] > -0.95 * L)
+    assert np.all(left[:, 0] < -0.35 * L)
+    assert distance_to_nearest(mirror(head, 1), head).max() <= 1e-12
+    assert np.all(head[:, 0] >= -0.35 * L)
+    assert not set(coarse_tags.head_cells) & set(coarse_tags.left_muscle_cells)
+    head_nodes = np.unique(coarse.cells[coarse_tags.head_cells])
+    np.testing.assert_array_equal(coarse_tags.head_nodes, head_nodes)
+
+
+def test_region_masks_are_functions_of_coordinates_only(coarse, coarse_tags):
+    centroids = cell_centroids(coarse.points, coarse.cells)
+    order = np.random.default_rng(0).permutation(len(centroids))
+    box, tolerance = coarse_tags.box, coarse_tags.tolerance
+    head = head_cell_mask(centroids[order], box, tolerance)
+    left, right = muscle_cell_masks(centroids[order], box, tolerance)
+    np.testing.assert_array_equal(np.sort(order[head]), coarse_tags.head_cells)
+    np.testing.assert_array_equal(np.sort(order[left]), coarse_tags.left_muscle_cells)
+    np.testing.assert_array_equal(np.sort(order[right]), coarse_tags.right_muscle_cells)
+
+
+def test_skin_facets_close_the_box_with_outward_normals(coarse, coarse_tags):
+    triangles = coarse.points[coarse_tags.skin_facets]
+    edges = triangles[:, 1:] - triangles[:, :1]
+    area_normals = 0.5 * np.cross(edges[:, 0], edges[:, 1])
+    centres = triangles.mean(axis=1)
+    assert np.abs(area_normals.sum(axis=0)).max() <= 1e-15
+    enclosed_volume = np.sum(centres * area_normals) / 3.0
+    assert enclosed_volume == pytest.approx(L * W * H, rel=1e-12)
+    areas = np.linalg.norm(area_normals, axis=1)
+    assert areas.sum() == pytest.approx(2 * (L * W + L * H + W * H), rel=1e-12)
+    on_surface = np.isclose(np.abs(coarse.points[coarse_tags.skin_nodes]), [L, W / 2, H / 2])
+    on_surface[:, 0] |= np.isclose(coarse.points[coarse_tags.skin_nodes, 0], 0.0)
+    assert np.all(on_surface.any(axis=1))
+
+
+def test_cell_quality_is_one_for_regular_and_zero_for_flat_tetrahedra():
+    regular = np.array([[1, 1, 1], [-1, 1, -1], [1, -1, -1], [-1, -1, 1]], dtype=float)
+    flat = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], dtype=float)
+    cell = np.array([[0, 1, 2, 3]])
+    assert cell_quality(regular, cell)[0] == pytest.approx(1.0, rel=1e-12)
+    assert cell_quality(flat, cell)[0] == pytest.approx(0.0, abs=1e-15)
+    assert cell_quality(regular, cell[:, [0, 1, 3, 2]])[0] == pytest.approx(-1.0, rel=1e-12)
+
+
+# ---------------------------------------------------------------------------------------------
+# Cache and gmsh state
+
+
+def test_second_call_reads_the_cache(tmp_path, monkeypatch):
+    first = block_mesh(1, cache_dir=tmp_path)
+    cached = list(tmp_path.iterdir())
+    assert len(cached) == 1 and cached[0].suffix == ".npz"
+    assert f"gmsh{gmsh_module().__version__}" in cached[0].name
+
+    def no_meshing(*args):
+        raise AssertionError("block_mesh meshed again instead of reading the cache")
+
+    monkeypatch.setattr(mesh_module, "_generate_block", no_meshing)
+    second = block_mesh(1, cache_dir=tmp_path)
+    np.testing.assert_array_equal(second.points, first.points)
+    np.testing.assert_array_equal(second.cells, first.cells)
+
+
+def test_corrupt_cache_file_is_regenerated(tmp_path, monkeypatch):
+    first = block_mesh(1, cache_dir=tmp_path)
+    (cache_file,) = tmp_path.iterdir()
+    cache_file.write_bytes(b"not a zip archive")
+    generate = mesh_module._generate_block
+    calls = []
+    monkeypatch.setattr(
+        mesh_module, "_generate_block", lambda *args: calls.append(args) or generate(*args)
+    )
+    again = block_mesh(1, cache_dir=tmp_path)
+    assert len(calls) == 1
+    np.testing.assert_array_equal(again.points, first.points)
+    np.testing.assert_array_equal(again.cells, first.cells)
+    assert [path.name for path in tmp_path.iterdir()] == [cache_file.name]
+    block_mesh(1, cache_dir=tmp_path)
+    assert len(calls) == 1
+
+
+def test_unwritable_cache_still_gives_the_mesh(tmp_path, coarse):
+    blocking_file = tmp_path / "not_a_directory"
+    blocking_file.write_text("")
+    with pytest.warns(UserWarning, match="block mesh not cached"):
+        fish = block_mesh(1, cache_dir=blocking_file / "cache")
+    np.testing.assert_array_equal(fish.cells, coarse.cells)
+
+
+def test_gmsh_is_left_as_found(tmp_path):
+    gmsh = gmsh_module()
+    block_mesh(1, cache_dir=tmp_path / "first")
+    assert not mesh_module._gmsh_is_initialized(gmsh)
+    gmsh.initialize(readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add("caller")
+        gmsh.model.occ.addSphere(0, 0, 0, 1)
+        gmsh.model.occ.synchronize()
+        gmsh.option.setNumber("Mesh.Algorithm3D", 4)
+        block_mesh(1, cache_dir=tmp_path / "second")
+        assert mesh_module._gmsh_is_initialized(gmsh)
+        assert gmsh.model.getCurrent() == "caller"
+        assert gmsh.model.getEntities(3) == [(3, 1)]
+        assert gmsh.option.getNumber("Mesh.Algorithm3D") == 4
+    finally:
+        gmsh.finalize()
+
+
+# ---------------------------------------------------------------------------------------------
+# Imported meshes
+
+
+def test_abaqus_fish_in_centimetres_imports_and_tags():
+    fish = read_mesh(ABAQUS_FISH, scale=0.01)
+    assert len(fish.cells) == 1272
+    assert fish.source == str(ABAQUS_FISH)
+    np.testing.assert_allclose(fish.points.min(axis=0), [-0.35, -0.05, -0.10], atol=1e-12)
+    np.testing.assert_allclose(fish.points.max(axis=0), [0.0, 0.05, 0.10], atol=1e-12)
+    volumes = signed_cell_volumes(fish.points, fish.cells)
+    assert np.all(volumes > 0.0)
+    assert volumes.sum() == pytest.approx(0.35 * 0.10 * 0.20, rel=1e-6)
+
+    tags = tag_fish(fish)
+    length = tags.box.length
+    assert fish.points[tags.tail_node, 0] == pytest.approx(-length, abs=1e-12)
+    assert fish.points[tags.head_spine_node, 0] == pytest.approx(0.0, abs=1e-12)
+    assert len(tags.spine_nodes) >= 2
+    np.testing.assert_allclose(fish.points[tags.spine_nodes, 1:], 0.0, atol=1e-12)
+    assert len(tags.head_cells) > 0
+    centroids = cell_centroids(fish.points, fish.cells)
+    assert np.all(centroids[tags.left_muscle_cells, 1] > 0.0)
+    assert np.all(centroids[tags.right_muscle_cells, 1] < 0.0)
+    left_volume = volumes[tags.left_muscle_cells].sum()
+    right_volume = volumes[tags.right_muscle_cells].sum()
+    assert left_volume == pytest.approx(right_volume, rel=0.02)
+    assert left_volume == pytest.approx(0.6 * length * 0.05 * 0.20, rel=0.05)
+    np.testing.assert_allclose(fish.points[tags.dorsal_nodes, 2], 0.10, atol=1e-12)
+
+
+def test_msh_round_trip_keeps_tetrahedra_and_their_nodes_only(tmp_path, coarse, coarse_tags):
+    path = tmp_path / "fish.msh"
+    write_msh(
+        path,
+        coarse.points,
+        coarse.cells,
+        boundary_triangles=coarse_tags.skin_facets,
+        isolated_point=(5.0, 5.0, 5.0),
+    )
+    fish = read_mesh(path)
+    assert fish.source == str(path)
+    np.testing.assert_allclose(fish.points, coarse.points, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(fish.cells, coarse.cells)
+
+
+def test_inp_round_trip_with_sparse_labels_scale_and_translate(tmp_path, coarse):
+    path = tmp_path / "fish.inp"
+    node_labels = 7 + 3 * np.arange(len(coarse.points))
+    element_labels = 1000 + 2 * np.arange(len(coarse.cells))
+    inverted = coarse.cells.copy()
+    inverted[::2] = inverted[::2][:, [1, 0, 2, 3]]
+    write_inp(path, coarse.points * 100.0, inverted, node_labels, element_labels)
+    fish = read_mesh(path, scale=0.01, translate=(1.0, 2.0, 3.0))
+    np.testing.assert_allclose(fish.points, coarse.points + [1.0, 2.0, 3.0], atol=1e-14)
+    assert np.all(signed_cell_volumes(fish.points, fish.cells) > 0.0)
+    np.testing.assert_array_equal(np.sort(fish.cells, axis=1), np.sort(coarse.cells, axis=1))
+    tags = tag_fish(fish)
+    assert len(tags.spine_nodes) == block_axis_segments(1, L, W, H) + 1
+
+
+# ---------------------------------------------------------------------------------------------
+# Bad input
+
+
+def test_missing_file_is_an_input_error(tmp_path):
+    for name in ("absent.inp", "absent.msh"):
+        with pytest.raises(InputError, match=f"{name}: not found"):
+            read_mesh(tmp_path / name)
+
+
+def test_corrupt_inp_is_an_input_error(tmp_path):
+    path = tmp_path / "garbage.inp"
+    path.write_text("this is not\nan Abaqus file\n")
+    with pytest.raises(InputError, match="garbage.inp: no \\*Node section"):
+        read_mesh(path)
+    path.write_text("*Node\n1, 0., 0., zero\n*Element, type=C3D4\n1, 1, 1, 1, 1\n")
+    with pytest.raises(InputError, match="garbage.inp, line 2: cannot read"):
+        read_mesh(path)
+    path.write_text("*Node\n1, 0., 0.,\n")
+    with pytest.raises(InputError, match="garbage.inp: the file ends inside a record"):
+        read_mesh(path)
+    path.write_bytes(b"\xff\xfe\x00garbage")
+    with pytest.raises(InputError, match="garbage.inp: cannot read it as text"):
+        read_mesh(path)
+
+
+def test_inp_without_tetrahedra_or_with_undefined_nodes_is_an_input_error(tmp_path):
+    path = tmp_path / "bricks.inp"
+    path.write_text("*Node\n1, 0., 0., 0.\n*Element, type=C3D8\n1, 1, 1, 1, 1, 1, 1, 1, 1\n")
+    with pytest.raises(InputError, match="bricks.inp: no \\*Element, type=C3D4 section"):
+        read_mesh(path)
+    path.write_text("*Node\n1, 0., 0., 0.\n*Element, type=C3D4\n1, 1, 2, 3, 4\n")
+    with pytest.raises(InputError, match="bricks.inp: an element refers to the undefined node"):
+        read_mesh(path)
+
+
+def test_corrupt_msh_is_an_input_error(tmp_path):
+    path = tmp_path / "garbage.msh"
+    path.write_text("this is not\na gmsh file\n")
+    with pytest.raises(InputError, match="garbage.msh: gmsh cannot read it"):
+        read_mesh(path)
+    assert not mesh_module._gmsh_is_initialized(gmsh_module())
+
+
+def test_unsupported_suffix_is_an_input_error(tmp_path):
+    path = tmp_path / "fish.stl"
+    path.write_text("solid fish\nendsolid fish\n")
+    with pytest.raises(InputError, match="fish.stl: unsupported suffix '.stl'"):
+        read_mesh(path)
+
+
+def test_bad_transform_and_level_are_input_errors(tmp_path):
+    path = tmp_path / "fish.inp"
+    with pytest.raises(InputError, match="fish.inp: scale = -1.0"):
+        read_mesh(path, scale=-1.0)
+    with pytest.raises(InputError, match="fish.inp: translate"):
+        read_mesh(path, translate=(0.0, 1.0))
+    with pytest.raises(InputError, match="level 6 does not exist"):
+        block_mesh(6, cache_dir=tmp_path)
+    with pytest.raises(InputError, match="width = 0.0 m"):
+        block_mesh(1, width=0.0, cache_dir=tmp_path)
+
+
+def test_mesh_without_nodes_on_the_axis_is_an_input_error(tmp_path):
+    path = tmp_path / "uncut.msh"
+    write_uncut_box_msh(path)
+    fish = read_mesh(path)
+    assert len(fish.cells) > 0
+    with pytest.raises(InputError, match="uncut.msh: no nodes on the body axis y = 0, z = 0"):
+        tag_fish(fish)
+
+
+def test_empty_regions_are_input_errors(coarse):
+    with pytest.raises(InputError, match="the head is empty"):
+        tag_fish(coarse, head_fraction=0.001)
+    with pytest.raises(InputError, match="the left muscle is empty"):
+        tag_fish(coarse, muscle_range=(-1.0, -0.995))
+    with pytest.raises(InputError, match="head_fraction = 1.5"):
+        tag_fish(coarse, head_fraction=1.5)
+
+
+def test_tail_without_axis_node_is_an_input_error(coarse, coarse_tags):
+    points = coarse.points.copy()
+    points[coarse_tags.tail_node, 1] += W / 8
+    with pytest.raises(InputError, match="moved: no node on the body axis .* at the tail face"):
+        tag_fish(FishMesh(points=points, cells=coarse.cells, source="moved"))

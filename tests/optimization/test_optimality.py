@@ -1,0 +1,157 @@
+"""First-order optimality, active sets and multi-start (SPEC §10) on analytic costs.
+
+The multi-start test runs the optimiser and the study driver unchanged, with the PROM builder and
+the FOM distance replaced by an analytic two-well swimming distance (a seam of ``optimize``)."""
+import json
+
+import numpy as np
+import pytest
+
+from aquarom_fenics.optimization import optimize as optimize_module
+from aquarom_fenics.optimization import study
+from aquarom_fenics.optimization.cost import CostWeights, Evaluation, design_space, first_order
+from aquarom_fenics.geometry.fish import load_fish
+from aquarom_fenics.optimization.optimize import PromBuilder, optimize, start_points
+from aquarom_fenics.io.scene import scene_from_dict
+
+SHAPES = {"z_tail": {"bounds": [-0.2, 0.2]}, "y_thin": {"bounds": [-0.1, 0.1]}}
+WIDTHS = np.array([0.4, 0.2])
+# two wells of the distance in u = z / (upper - lower) · 2: the deeper at A, the shallower at B
+WELL_A, WELL_B = np.array([-0.5, -0.5]), np.array([0.5, 0.5])
+DEPTH_A, DEPTH_B, SPREAD, OFFSET = 0.03, 0.024, 0.18, 0.01
+
+
+def two_wells(z: np.ndarray) -> tuple[float, np.ndarray]:
+    """d(z) = offset + Σ_w depth_w exp(-‖u - u_w‖² / spread), u = 2 z / width; and ∂d/∂z."""
+    u = 2 * np.asarray(z, dtype=float) / WIDTHS
+    distance, gradient = OFFSET, np.zeros(2)
+    for centre, depth in ((WELL_A, DEPTH_A), (WELL_B, DEPTH_B)):
+        bump = depth * np.exp(-np.sum((u - centre) ** 2) / SPREAD)
+        distance += bump
+        gradient += bump * (-2 * (u - centre) / SPREAD) * 2 / WIDTHS
+    return distance, gradient
+
+
+class AnalyticBuilder(PromBuilder):
+    """A builder whose 'PROM' is the analytic distance: same counters, no mesh work."""
+
+    def build(self, z):
+        self.builds += 1
+        return np.array(z, dtype=float)
+
+    def evaluate(self, prom, z, weights):
+        distance, gradient = two_wells(z)
+        return Evaluation(np.array(z, dtype=float), -distance, -gradient, distance, gradient)
+
+    def meshes(self, z):
+        return True
+
+
+def toy(method, **optimizer):
+    """The toy scene; the paper method's linearised steps re-linearise within a tenth of the wells' spacing."""
+    paper = {"rebuild_threshold": 0.02, "n_rebuild": 2, "step_tolerance": 1e-5} if method == "paper" else {}
+    return scene_from_dict({"mesh": {"level": 1}, "shapes": SHAPES, "solver": {"duration": 1.0},
+                            "optimizer": {"method": method, "max_iterations": 60, **paper, **optimizer}},
+                           source="<toy>")
+
+
+@pytest.fixture(scope="module")
+def fish():
+    return load_fish(toy("paper"))
+
+
+def test_measure_is_zero_at_a_bound_optimum_and_names_it_active_with_a_positive_multiplier():
+    space = design_space(toy("trust-region"))
+    z = np.array([0.2, 0.0])                      # z_tail on its upper bound, y_thin interior
+    gradient = np.array([-0.5, 0.0])              # L decreases beyond the bound: held by it
+    result = first_order(space, z, -1.0, gradient, tolerance=1e-2)
+    assert result.measure < 1e-14
+    assert [row["constraint"] for row in result.active] == ["z_tail = upper"]
+    assert result.active[0]["multiplier"] > 0
+
+
+def test_measure_sees_a_gradient_pointing_into_the_set_and_the_multiplier_turns_negative():
+    space = design_space(toy("trust-region"))
+    z = np.array([0.2, 0.0])
+    gradient = np.array([0.5, 0.1])               # L decreases inwards: the bound does not hold
+    result = first_order(space, z, -1.0, gradient, tolerance=1e-2)
+    # ‖D r‖_∞ / |L| with r the whole gradient (λ ≥ 0 cannot absorb it): 0.4 · 0.5 / 1
+    assert result.measure == pytest.approx(0.2)
+    assert result.active[0]["multiplier"] < 0
+
+
+def test_linear_constraint_rows_are_active_within_a_fraction_of_their_range():
+    data = {"mesh": {"level": 1}, "shapes": SHAPES,
+            "constraints": [{"coefficients": {"z_tail": 1.0, "y_thin": 1.0}, "upper": 0.1}]}
+    space = design_space(scene_from_dict(data, source="<toy>"))
+    # row range Σ|A_ij| width_j = 0.6; slack 0.003 = 0.5 % of it
+    z = np.array([0.05, 0.047])
+    gradient = -np.array([1.0, 1.0])
+    result = first_order(space, z, -1.0, gradient, tolerance=1e-2)
+    assert [row["constraint"] for row in result.active] == ["constraint row 1"]
+    assert result.active[0]["slack_over_range"] == pytest.approx(0.005)
+    assert result.measure < 1e-12 and result.active[0]["multiplier"] == pytest.approx(1.0)
+    assert first_order(space, z, -1.0, gradient, tolerance=1e-3).measure > 0.1
+
+
+@pytest.mark.parametrize("method", ["paper", "trust-region"])
+def test_both_methods_stop_by_optimality_at_the_deeper_well(method, fish):
+    scene = toy(method)
+    space = optimize_module.optimization_space(scene, fish)
+    result = optimize(scene, fish=fish, builder=AnalyticBuilder(scene, fish, space), start=np.array([-0.02, -0.01]))
+    assert result.stop_reason.startswith("first-order optimality"), result.stop_reason
+    assert result.converged and result.iterations < scene.optimizer.max_iterations
+    assert np.all(np.abs(result.optimum - WELL_A * WIDTHS / 2) < 0.01 * WIDTHS), result.optimum
+
+
+def test_start_points_are_seeded_feasible_and_begin_with_the_scene_start(fish):
+    data = {"mesh": {"level": 1}, "shapes": SHAPES,
+            "constraints": [{"coefficients": {"z_tail": 1.0, "y_thin": 1.0}, "upper": 0.0}]}
+    space = design_space(scene_from_dict(data, source="<toy>"))
+    points = start_points(space, 6, seed=3, meshes=lambda z: True)
+    again = start_points(space, 6, seed=3, meshes=lambda z: True)
+    assert len(points) == 6 and np.all(points[0] == space.start)
+    assert all(space.is_feasible(z) for z in points)
+    np.testing.assert_array_equal(np.array(points), np.array(again))
+
+
+def test_multistart_finds_both_local_optima_and_picks_the_better_verified_one(fish, tmp_path, monkeypatch):
+    monkeypatch.setattr(optimize_module, "PromBuilder", AnalyticBuilder)
+    monkeypatch.setattr(study, "PromBuilder", AnalyticBuilder)
+    monkeypatch.setattr(study, "fom_distance", lambda scene, fish, design, amplitude: two_wells(
+        np.array([design["z_tail"], design["y_thin"]]))[0])
+    scene = toy("trust-region", starts=4, seed=0)
+    study.run_optimization(scene, tmp_path, fish=fish, render=False)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    optima = np.array([[row["optimum"]["z_tail"], row["optimum"]["y_thin"]]
+                       for row in summary["multistart"]["local_optima"]])
+    for well in (WELL_A, WELL_B):
+        assert np.any(np.all(np.abs(optima - well * WIDTHS / 2) < 0.01 * WIDTHS, axis=1)), (well, optima)
+    assert len(summary["multistart"]["distinct_optima"]) == 2
+    best = summary["multistart"]["local_optima"][summary["multistart"]["best_start"] - 1]
+    assert np.allclose([best["optimum"]["z_tail"], best["optimum"]["y_thin"]], WELL_A * WIDTHS / 2, atol=0.004)
+    assert summary["fom_check"]["optimal_distance"] == pytest.approx(max(r["fom_distance"] for r in
+                                                                         summary["multistart"]["local_optima"]))
+    for k in range(1, 5):
+        assert (tmp_path / f"start_{k}" / "summary.json").exists()
+
+
+class SlopeBuilder(AnalyticBuilder):
+    """d(z) = 0.01 + 0.01 z_tail + 0.01 (1 - (y_thin / 0.05)²): a pull onto z_tail's upper bound,
+    an interior optimum in y_thin."""
+
+    def evaluate(self, prom, z, weights):
+        z = np.array(z, dtype=float)
+        distance = 0.01 + 0.01 * z[0] + 0.01 * (1 - (z[1] / 0.05) ** 2)
+        gradient = np.array([0.01, -0.02 * z[1] / 0.05 ** 2])
+        return Evaluation(z, -distance, -gradient, distance, gradient)
+
+
+def test_paper_method_moves_a_bound_the_barrier_holds_off_onto_it(fish):
+    scene = toy("paper")
+    space = optimize_module.optimization_space(scene, fish)
+    result = optimize(scene, fish=fish, builder=SlopeBuilder(scene, fish, space))
+    assert "z_tail = upper moved from the barrier iterate onto the bound" in result.stop_reason, result.stop_reason
+    assert result.optimum[0] == 0.2 and abs(result.optimum[1]) < 0.01 * 0.2
+    assert result.converged
+    assert [row["constraint"] for row in result.optimality.active] == ["z_tail = upper"]

@@ -1,0 +1,268 @@
+"""Shape optimisation (SPEC §10) on the coarsest mesh with a short horizon."""
+import json
+
+import numpy as np
+import pytest
+
+from aquarom_fenics.optimization import optimize as optimize_module
+from aquarom_fenics.cli import main
+from aquarom_fenics.optimization.cost import CostWeights, design_space, evaluate
+from aquarom_fenics.errors import InputError, SolverError
+from aquarom_fenics.geometry.fish import load_fish
+from aquarom_fenics.optimization.optimize import optimize
+from aquarom_fenics.reduction.reductor import build_prom
+from aquarom_fenics.optimization.study import run_optimization
+from conftest import coarse_scene
+
+TOY_SHAPES = {"z_tail": {"bounds": [-0.2, 0.2]}, "y_thin": {"bounds": [-0.1, 0.1]}}
+CONSTRAINED_SHAPES = {"z_tail": {"bounds": [-0.3, 0.3]}, "z_tail_lin": {"bounds": [-0.3, 0.3]},
+                      "y_thin": {"bounds": [-0.1, 0.1]}}
+CONSTRAINT = [{"coefficients": {"z_tail": 1.0, "z_tail_lin": 1.0}, "lower": -0.25, "upper": 0.25}]
+
+
+def toy_scene(method="trust-region", tolerance=1e-6, **sections):
+    return coarse_scene(shapes=TOY_SHAPES, solver={"duration": 1.0, "tolerance": tolerance},
+                        optimizer={"method": method, "max_iterations": 12}, **sections)
+
+
+def constrained_scene(method):
+    scene = coarse_scene(shapes=CONSTRAINED_SHAPES, solver={"duration": 1.0},
+                         optimizer={"method": method, "max_iterations": 10})
+    from aquarom_fenics.io.scene import scene_from_dict
+
+    data = {"mesh": {"level": 1}, "shapes": CONSTRAINED_SHAPES, "constraints": CONSTRAINT,
+            "solver": {"duration": 1.0}, "optimizer": {"method": method, "max_iterations": 10}}
+    return scene_from_dict(data, source="<test>") if scene else None
+
+
+@pytest.fixture(scope="module")
+def toy_fish():
+    return load_fish(toy_scene())
+
+
+def test_cost_gradient_matches_central_differences_of_the_prom_cost(toy_fish):
+    scene = toy_scene(tolerance=1e-11)   # finite differences of the cost need a converged Newton
+    space = design_space(scene)
+    prom = build_prom(scene, fish=toy_fish)
+    z = np.array([-0.03, 0.02])
+    evaluation = evaluate(prom, scene, space, z, CostWeights())
+    step = 1e-5
+    for k in range(2):
+        shift = step * np.eye(2)[k]
+        central = (evaluate(prom, scene, space, z + shift, CostWeights()).cost
+                   - evaluate(prom, scene, space, z - shift, CostWeights()).cost) / (2 * step)
+        assert abs(evaluation.gradient[k] - central) < 1e-6 * abs(central)
+
+
+def test_amplitude_gradient_of_the_cooptimisation_cost(toy_fish):
+    scene = toy_scene(tolerance=1e-11, cooptimization={"enabled": True})
+    space = design_space(scene)
+    prom = build_prom(scene, fish=toy_fish)
+    weights = CostWeights(0.7, 0.3, 1.0)
+    z = np.array([-0.03, 0.02, 0.25])
+    evaluation = evaluate(prom, scene, space, z, weights)
+    step = 1e-5 * np.eye(3)[2]
+    central = (evaluate(prom, scene, space, z + step, weights).cost
+               - evaluate(prom, scene, space, z - step, weights).cost) / (2 * 1e-5)
+    assert abs(evaluation.gradient[2] - central) < 1e-6 * abs(central)
+
+
+@pytest.mark.parametrize("method", ["paper", "trust-region"])
+def test_iterates_stay_inside_bounds_and_linear_constraints(method):
+    scene = constrained_scene(method)
+    space = design_space(scene)
+    rows = []
+    optimize(scene, on_iteration=rows.append)
+    assert len(rows) > 2
+    for row in rows:
+        z = np.array([row[f"xi_{name}"] for name in space.names])
+        assert space.is_feasible(z, tolerance=1e-9), row
+
+
+def test_both_methods_reach_the_same_optimum_of_a_two_parameter_scene(toy_fish):
+    # a log-barrier descent approaches an active bound geometrically: ask both for a converged point
+    scenes = [coarse_scene(shapes=TOY_SHAPES, solver={"duration": 1.0},
+                           optimizer={"method": method, "max_iterations": 30, "step_tolerance": 1e-4})
+              for method in ("paper", "trust-region")]
+    optima = [optimize(scene, fish=toy_fish).optimum for scene in scenes]
+    widths = np.array([0.4, 0.2])
+    assert np.all(np.abs(optima[0] - optima[1]) < 0.02 * widths), optima
+
+
+def test_killed_and_resumed_run_ends_at_the_same_optimum(tmp_path, toy_fish, monkeypatch):
+    scene = toy_scene("paper")
+    uninterrupted, _ = run_optimization(scene, tmp_path / "straight", fish=toy_fish, render=False)
+
+    original_save = optimize_module.Checkpoint.save
+    calls = {"count": 0}
+
+    def save_then_die(self, *args):
+        original_save(self, *args)
+        calls["count"] += 1
+        if calls["count"] == 4:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(optimize_module.Checkpoint, "save", save_then_die)
+    with pytest.raises(KeyboardInterrupt):
+        run_optimization(scene, tmp_path / "killed", fish=toy_fish, render=False)
+    monkeypatch.setattr(optimize_module.Checkpoint, "save", original_save)
+    resumed, _ = run_optimization(scene, tmp_path / "killed", resume=True, fish=toy_fish, render=False)
+    np.testing.assert_allclose(resumed.optimum, uninterrupted.optimum, rtol=0, atol=1e-12)
+    straight_history = (tmp_path / "straight" / "history.csv").read_text().splitlines()
+    resumed_history = (tmp_path / "killed" / "history.csv").read_text().splitlines()
+    assert len(resumed_history) == len(straight_history)
+
+
+def test_optimize_command_writes_its_outputs(tmp_path, capsys):
+    scene = tmp_path / "toy.toml"
+    scene.write_text('[mesh]\nlevel = 1\n[solver]\nduration = 1.0\n[optimizer]\nmethod = "trust-region"\n'
+                     'max_iterations = 3\n[shapes]\nz_tail = { bounds = [-0.2, 0.2] }\n'
+                     'y_thin = { bounds = [-0.1, 0.1] }\n')
+    out = tmp_path / "run"
+    assert main(["optimize", str(scene), "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["fom_check"]["ratio"] > 1.0 and summary["prom_builds"] >= 2
+    for name in ("history.csv", "checkpoint.json", "cost.png", "parameters.png", "nominal_vs_optimal.png",
+                 "optimal/design.xdmf"):
+        assert (out / name).exists(), name
+    assert "FOM check" in capsys.readouterr().out
+
+
+def test_infeasible_constraints_are_refused():
+    from aquarom_fenics.io.scene import scene_from_dict
+
+    scene = scene_from_dict({"mesh": {"level": 1}, "shapes": TOY_SHAPES,
+                             "constraints": [{"coefficients": {"z_tail": 1.0}, "lower": 0.5}]})
+    with pytest.raises(InputError, match="no feasible design"):
+        design_space(scene)
+
+
+def test_start_violating_the_constraints_is_refused():
+    from aquarom_fenics.io.scene import scene_from_dict
+
+    shapes = {"z_tail": {"bounds": [-0.2, 0.2], "start": 0.15}, "y_thin": {"bounds": [-0.1, 0.1]}}
+    scene = scene_from_dict({"mesh": {"level": 1}, "shapes": shapes,
+                             "constraints": [{"coefficients": {"z_tail": 1.0}, "upper": 0.1}]})
+    with pytest.raises(InputError, match="violates"):
+        design_space(scene)
+
+
+def test_non_finite_gradient_stops_with_history_and_checkpoint_intact(tmp_path, toy_fish, monkeypatch):
+    scene = toy_scene("paper")
+    original = optimize_module.PromBuilder.evaluate
+    calls = {"count": 0}
+
+    def poisoned(self, prom, z, weights):
+        calls["count"] += 1
+        if calls["count"] == 3:
+            raise SolverError(f"non-finite cost or gradient at {self.space.as_dict(z)}: cost nan")
+        return original(self, prom, z, weights)
+
+    monkeypatch.setattr(optimize_module.PromBuilder, "evaluate", poisoned)
+    with pytest.raises(SolverError, match="non-finite"):
+        run_optimization(scene, tmp_path / "run", fish=toy_fish, render=False)
+    checkpoint = json.loads((tmp_path / "run" / "checkpoint.json").read_text())
+    history = (tmp_path / "run" / "history.csv").read_text().splitlines()
+    assert len(history) - 1 == len(checkpoint["history"]) >= 2
+
+
+def test_prom_build_failing_mid_run_keeps_history_and_checkpoint(tmp_path, toy_fish, monkeypatch, capsys):
+    scene = toy_scene("trust-region")
+    original = optimize_module.PromBuilder.build
+    calls = {"count": 0}
+
+    def failing(self, z):
+        calls["count"] += 1
+        if calls["count"] == 3:
+            raise SolverError("Newton did not converge at t = 0.1 s (step 5 of 50) in the basis solve")
+        return original(self, z)
+
+    monkeypatch.setattr(optimize_module.PromBuilder, "build", failing)
+    with pytest.raises(SolverError):
+        run_optimization(scene, tmp_path / "run", fish=toy_fish, render=False)
+    checkpoint = json.loads((tmp_path / "run" / "checkpoint.json").read_text())
+    assert checkpoint["builds"] == 2 and len(checkpoint["history"]) >= 2
+
+
+def test_fom_check_that_stops_is_reported_and_the_outputs_are_kept(tmp_path, capsys, monkeypatch):
+    from aquarom_fenics.optimization import study
+
+    original = study.simulate_fom
+
+    def diverging(scene, design, **options):
+        result = original(scene.replace("actuation", stiffness=1e6), design, **options)
+        assert not result.completed
+        return result
+
+    monkeypatch.setattr(study, "simulate_fom", diverging)
+    scene = tmp_path / "toy.toml"
+    scene.write_text('[mesh]\nlevel = 1\n[solver]\nduration = 1.0\n[optimizer]\nmax_iterations = 2\n'
+                     '[shapes]\nz_tail = { bounds = [-0.2, 0.2] }\n')
+    out = tmp_path / "run"
+    assert main(["optimize", str(scene), "--out", str(out)]) == 3
+    message = capsys.readouterr().err.strip()
+    assert len(message.splitlines()) == 1 and "FOM check" in message and "step 13" in message
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["fom_check"]["ratio"] is None and "stopped" in summary["fom_check"]["error"]
+    assert (out / "history.csv").exists()
+
+
+@pytest.mark.parametrize("method", ["paper", "trust-region"])
+def test_a_parameter_with_equal_bounds_stays_fixed_and_no_design_is_nan(method, toy_fish):
+    scene = coarse_scene(shapes={"z_tail": {"bounds": [0.0, 0.0]}, "y_thin": {"bounds": [-0.1, 0.1]}},
+                         solver={"duration": 1.0}, optimizer={"method": method, "max_iterations": 4})
+    result = optimize(scene, fish=toy_fish)
+    designs = np.array([[row["xi_z_tail"], row["xi_y_thin"]] for row in result.history])
+    assert np.all(np.isfinite(designs)) and np.all(designs[:, 0] == 0.0)
+    assert result.optimum[1] > 0.05          # thinner swims further (the free parameter still moves)
+
+
+def test_every_bound_equal_is_refused():
+    scene = coarse_scene(shapes={"z_tail": {"bounds": [0.1, 0.1], "start": 0.1}})
+    with pytest.raises(InputError, match="nothing to optimise"):
+        design_space(scene)
+
+
+def test_paper_method_refuses_a_feasible_set_without_interior(toy_fish):
+    from aquarom_fenics.io.scene import scene_from_dict
+
+    scene = scene_from_dict({"mesh": {"level": 1}, "shapes": TOY_SHAPES, "solver": {"duration": 1.0},
+                             "optimizer": {"method": "paper", "max_iterations": 3},
+                             "constraints": [{"coefficients": {"z_tail": 1.0, "y_thin": 1.0}, "lower": 0.0,
+                                              "upper": 0.0}]})
+    with pytest.raises(InputError, match="no interior"):
+        optimize(scene, fish=toy_fish)
+
+
+@pytest.mark.parametrize("method", ["paper", "trust-region"])
+def test_wall_time_safeguard_stops_the_optimiser(method, toy_fish):
+    result = optimize(toy_scene(method), fish=toy_fish, max_time=0.0)
+    assert result.stop_reason == "wall-time limit of 0 s reached"
+    assert all(np.isfinite(row["cost"]) for row in result.history)
+
+
+def test_a_non_finite_design_is_refused():
+    with pytest.raises(SolverError, match="non-finite design"):
+        optimize_module.Safeguard.finite(np.array([0.1, np.nan]), 3)
+
+
+def test_a_design_whose_prom_is_unstable_is_refused_as_infeasible(monkeypatch):
+    """PromBuilder asks reduced_stability at every design it builds a PROM on (horizons of two
+    strokes or more) and refuses an unstable one like the mesh check, naming the reason."""
+    verdicts = []
+
+    def unstable(prom, scene, xi, amplitude):
+        verdicts.append(np.array(xi))
+        return False, "Floquet multiplier |μ| = 2.48 > 1.01"
+
+    monkeypatch.setattr(optimize_module, "reduced_stability", unstable)
+    scene = coarse_scene(shapes=TOY_SHAPES, solver={"duration": 2.0})
+    space = design_space(scene)
+    builder = optimize_module.PromBuilder(scene, load_fish(scene), space)
+    z = np.array([0.1, 0.02])
+    with pytest.raises(InputError, match=r"infeasible: its PROM is unstable \(Floquet multiplier \|μ\| = 2.48"):
+        builder._refuse_unstable(object(), z)
+    np.testing.assert_array_equal(verdicts[0], z[: space.n_shapes])
+    short = optimize_module.PromBuilder(toy_scene(), builder.fish, space)
+    short._refuse_unstable(object(), z)          # one stroke: no periodic gait to judge, not asked
+    assert len(verdicts) == 1

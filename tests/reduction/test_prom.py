@@ -1,0 +1,221 @@
+"""PROM tensors, Taylor terms and sensitivities against the FOM forms (SPEC §7–§9), coarsest mesh."""
+import numpy as np
+import pytest
+
+from aquarom_fenics.geometry.fish import load_fish
+from aquarom_fenics.fem.fom import FullOrderModel
+from aquarom_fenics.dynamics.integrator import TimeScheme
+from aquarom_fenics.reduction.prom import ReducedModel
+from aquarom_fenics.dynamics.reduced_dynamics import ReducedSystem, simulate_reduced
+from aquarom_fenics.reduction.reductor import build_prom
+from aquarom_fenics.dynamics.simulate import simulate_fom
+from conftest import coarse_scene
+
+SO1_SHAPES = {"z_tail": {"bounds": [-0.5, 0.5]}, "z_head": {"bounds": [-0.5, 0.5]},
+              "y_thin": {"bounds": [-0.15, 0.15]}}
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return coarse_scene(shapes=SO1_SHAPES)
+
+
+@pytest.fixture(scope="module")
+def fish(scene):
+    return load_fish(scene)
+
+
+@pytest.fixture(scope="module")
+def prom(scene, fish):
+    return build_prom(scene, fish=fish)
+
+
+@pytest.fixture(scope="module")
+def second_order_prom(fish):
+    scene = coarse_scene(shapes=SO1_SHAPES, reduction={"taylor_order": 2})
+    return build_prom(scene, fish=fish)
+
+
+def relative_error(actual, expected):
+    return np.linalg.norm(np.asarray(actual) - np.asarray(expected)) / np.linalg.norm(expected)
+
+
+class ProjectedFOM:
+    """Vᵀ r_FOM(V η, V η̇, V η̈) of a design (pulled back with its exact shape gradient, the
+    reference of SPEC §5, or meshed directly), with the PROM's basis V."""
+
+    def __init__(self, scene, fish, prom, xi, moved_mesh=False):
+        self.model = FullOrderModel(scene, fish, xi, moved_mesh=moved_mesh)
+        self.vectors = np.column_stack([self.model.owned_values(prom.basis[:, :, j]) for j in range(prom.size)])
+
+    def residual(self, time, eta, eta_dot, eta_ddot):
+        V = self.vectors
+        return V.T @ self.model.residual(time, V @ eta, V @ eta_dot, V @ eta_ddot)[0]
+
+    def internal_force(self, eta):
+        return self.vectors.T @ self.model.internal_force(self.vectors @ eta)
+
+
+def random_states(rng, m, scale):
+    return [scale * rng.standard_normal(m) for _ in range(3)]
+
+
+def test_sampled_tensors_reproduce_every_projected_fom_force(scene, fish, prom):
+    assert_prom_reproduces_the_projected_fom_forces(scene, fish, prom, samples=20)
+
+
+def assert_prom_reproduces_the_projected_fom_forces(scene, fish, prom, samples):
+    """Vᵀ r of the FOM and the PROM's residual and internal force agree to 1e-9 at random states (SPEC §8)."""
+    projected = ProjectedFOM(scene, fish, prom, prom.xi_center)
+    system = ReducedSystem(prom, scene, prom.xi_center, TimeScheme.newmark(0.02, 0.005))
+    rng = np.random.default_rng(0)
+    for sample in range(samples):
+        eta, eta_dot, eta_ddot = random_states(rng, prom.size, 0.02)
+        time = 0.05 * (sample + 1)
+        expected = projected.residual(time, eta, eta_dot, eta_ddot)
+        assert relative_error(system.residual(time, eta, eta_dot, eta_ddot)[0], expected) < 1e-9
+        assert relative_error(system.internal_force(eta), projected.internal_force(eta)) < 1e-9
+
+
+def test_reduced_jacobians_match_finite_differences(scene, prom):
+    system = ReducedSystem(prom, scene, prom.xi_center + 0.01, TimeScheme.newmark(0.02, 0.005))
+    rng = np.random.default_rng(1)
+    state = random_states(rng, prom.size, 0.02)
+    tangents = system.tangents(0.3, *state)
+    # r is cubic in η but at most quadratic in η̇ and linear in η̈: central differences are exact there.
+    for slot, step in ((0, 1e-6), (1, 1e-2), (2, 1e-2)):
+        columns = []
+        for direction in np.eye(prom.size):
+            plus = [s + step * direction * (i == slot) for i, s in enumerate(state)]
+            minus = [s - step * direction * (i == slot) for i, s in enumerate(state)]
+            columns.append((system.residual(0.3, *plus)[0] - system.residual(0.3, *minus)[0]) / (2 * step))
+        assert relative_error(tangents[slot], np.column_stack(columns)) < 1e-7
+
+
+INTEGRATOR_AND_SPINE_FORCE = [("generalized-alpha", "source"), ("newmark", "source"), ("generalized-alpha", "lagrangian")]
+
+
+@pytest.mark.parametrize("integrator, spine_force", INTEGRATOR_AND_SPINE_FORCE)
+def test_reduced_newton_matrix_is_the_derivative_of_the_step_residual(scene, prom, integrator, spine_force):
+    """S = d/dη_{n+1} r(t_{n+1-α_f}, η_{n+1-α_f}, η̇_{n+1-α_f}, η̈_{n+1-α_m}) with the scheme's kinematics."""
+    scene = scene.replace("solver", integrator=integrator).replace("fluid", spine_force=spine_force)
+    scheme = TimeScheme.from_solver(scene.solver)
+    system = ReducedSystem(prom, scene, prom.xi_center + 0.01, scheme)
+    rng = np.random.default_rng(5)
+    old = random_states(rng, prom.size, 0.02)
+    u_predicted, v_predicted = scheme.predict(*old)
+    eta = u_predicted + 1e-3 * rng.standard_normal(prom.size)
+
+    def point(trial):
+        return scheme.evaluation_point(0.3, old, (trial, *scheme.correct(trial, u_predicted, v_predicted)))
+
+    step = 1e-7
+    columns = [(system.residual(*point(eta + step * direction))[0]
+                - system.residual(*point(eta - step * direction))[0]) / (2 * step) for direction in np.eye(prom.size)]
+    assert relative_error(system.newton_matrix(*point(eta)), np.column_stack(columns)) < 1e-7
+
+
+def test_first_xi_derivative_matches_central_difference_of_the_fom(scene, fish, prom):
+    assert_first_xi_derivative_matches_the_fom(scene, fish, prom)
+
+
+def assert_first_xi_derivative_matches_the_fom(scene, fish, prom):
+    """∂/∂ξ_k Vᵀ f_int(Vη; ξ): PROM Taylor term against a 4th-order central difference of the FOM."""
+    eta = 0.02 * np.random.default_rng(2).standard_normal(prom.size)
+    system = ReducedSystem(prom, scene, prom.xi_center, TimeScheme.newmark(0.02, 0.005))
+    derivative = system.internal_force_gradient(eta)
+    step = 2e-3
+
+    def projected_force(offset):
+        return ProjectedFOM(scene, fish, prom, prom.xi_center + offset).internal_force(eta)
+
+    force_scale = np.linalg.norm(projected_force(0.0))
+    for k, name in enumerate(prom.shape_names):
+        unit = step * np.eye(prom.n_parameters)[k]
+        central = (8 * (projected_force(unit) - projected_force(-unit))
+                   - (projected_force(2 * unit) - projected_force(-2 * unit))) / (12 * step)
+        # z_head only moves the clamped head, where no basis vector deforms: both sides are zero.
+        reference = max(np.linalg.norm(central), 1e-9 * force_scale)
+        assert np.linalg.norm(derivative[k] - central) < 1e-5 * reference, name
+
+
+@pytest.mark.parametrize("order_fixture, expected_ratio", [("prom", 4.0), ("second_order_prom", 8.0)])
+def test_taylor_error_falls_with_the_order(request, scene, fish, order_fixture, expected_ratio):
+    """At ξ = ε d the internal-force error against the FOM falls like ε^(order+1)."""
+    model = request.getfixturevalue(order_fixture)
+    direction = np.array([0.6, 0.3, 0.75])
+    rng = np.random.default_rng(3)
+    eta = 0.02 * rng.standard_normal(model.size)
+    errors = []
+    for epsilon in (0.04, 0.02, 0.01):
+        xi = model.xi_center + epsilon * direction
+        system = ReducedSystem(model, scene, xi, TimeScheme.newmark(0.02, 0.005))
+        projected = ProjectedFOM(scene, fish, model, xi)
+        errors.append(np.linalg.norm(system.internal_force(eta) - projected.internal_force(eta)))
+    ratios = [errors[0] / errors[1], errors[1] / errors[2]]
+    assert all(0.8 * expected_ratio < ratio < 1.25 * expected_ratio for ratio in ratios), ratios
+
+
+@pytest.mark.parametrize("integrator, spine_force", INTEGRATOR_AND_SPINE_FORCE)
+def test_sensitivities_match_central_differences_of_the_prom(scene, prom, integrator, spine_force):
+    short = scene.replace("solver", duration=0.4, tolerance=1e-11, integrator=integrator)   # converged Newton
+    short = short.replace("fluid", spine_force=spine_force)
+    xi = prom.xi_center + np.array([0.05, -0.03, 0.03])
+    result = simulate_reduced(prom, short, xi, sensitivities=True)
+    step = 1e-5
+    for k in range(prom.n_parameters):
+        shift = step * np.eye(prom.n_parameters)[k]
+        plus = simulate_reduced(prom, short, xi + shift).states
+        minus = simulate_reduced(prom, short, xi - shift).states
+        central = (plus - minus) / (2 * step)
+        assert relative_error(result.sensitivities[:, :, k], central) < 1e-5, prom.shape_names[k]
+
+
+def test_sensitivities_follow_the_cut_steps(scene, prom):
+    """Three Newton iterations at h = 0.04 are not enough for some steps: they are cut, and dη/dξ follows
+    every sub-step (the same cuts happen at ξ ± ε)."""
+    cut = scene.replace("solver", duration=0.4, tolerance=1e-10, max_iterations=3, time_step=0.04)
+    xi = prom.xi_center + np.array([0.05, -0.03, 0.03])
+    result = simulate_reduced(prom, cut, xi, sensitivities=True)
+    assert result.completed and result.cut_steps > 0
+    assert result.summary()["cut_steps"] == result.cut_steps
+    step = 1e-5
+    for k in range(prom.n_parameters):
+        shift = step * np.eye(prom.n_parameters)[k]
+        plus, minus = simulate_reduced(prom, cut, xi + shift), simulate_reduced(prom, cut, xi - shift)
+        assert plus.cut_steps == minus.cut_steps == result.cut_steps
+        central = (plus.states - minus.states) / (2 * step)
+        assert relative_error(result.sensitivities[:, :, k], central) < 1e-5, prom.shape_names[k]
+
+
+def test_saved_prom_reloads_and_reproduces_the_trajectory_bit_for_bit(tmp_path, scene, prom):
+    path = tmp_path / "so1.npz"
+    prom.save(path)
+    reloaded = ReducedModel.load(path, scene_hash=scene.hash)
+    short = scene.replace("solver", duration=0.3)
+    xi = prom.xi_center + 0.02
+    original = simulate_reduced(prom, short, xi).states
+    again = simulate_reduced(reloaded, short, xi).states
+    assert np.array_equal(original, again)
+
+
+def test_prom_at_its_building_point_equals_the_rom_with_the_same_basis(fish):
+    """Rigid mode, one mode and its modal derivative: z_head adds no basis vector (head clamped)."""
+    scene = coarse_scene(shapes={"z_head": {"bounds": [-0.5, 0.5]}}, reduction={"basis": "paper"},
+                         solver={"duration": 0.5})
+    parametric = build_prom(scene, fish=load_fish(scene))
+    plain = build_prom(scene, fish=load_fish(scene), parametric=False)
+    assert parametric.labels == plain.labels == ["rigid_x", "mode_1", "theta_1_1"]
+    assert parametric.dropped == ["xi_1_1"]
+    trajectory_prom = simulate_reduced(parametric, scene).trajectory.arrays()
+    trajectory_rom = simulate_reduced(plain, scene).trajectory.arrays()
+    for name in ("head_x", "tail_y", "com_x"):
+        np.testing.assert_allclose(trajectory_prom[name], trajectory_rom[name], rtol=1e-10, atol=1e-14)
+
+
+def test_rom_swims_within_five_percent_of_the_fom(scene):
+    nominal = coarse_scene()
+    rom = simulate_reduced(build_prom(nominal, parametric=False), nominal)
+    fom = simulate_fom(nominal, progress=False)
+    assert abs(rom.distance / fom.distance - 1) < 0.05
+    assert abs(rom.tail_amplitude / fom.tail_amplitude - 1) < 0.05
