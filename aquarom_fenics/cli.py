@@ -313,7 +313,8 @@ def settle_output(args, code: int, wall_time: float) -> None:
 
 def write_manifest(args, wall_time: float) -> None:
     """manifest.json: scene, versions, git commit, command, host cores, timings per phase."""
-    from aquarom_fenics.io.outputs import git_commit, software_versions, write_json_atomic
+    from aquarom_fenics.io.outputs import git_commit, software_versions
+    from aquarom_fenics.io.persistence import write_json_atomic
     from aquarom_fenics.io.paths import PACKAGE
 
     scene = getattr(args, "scene_used", None)
@@ -425,25 +426,20 @@ def reduced_model(scene, xi: dict, model: str, prom_file: Path | None):
 
 
 def run_reduced_model(scene, xi: dict, model: str, prom_file: Path | None, out: Path):
-    from aquarom_fenics.viz.animate import DISPLACEMENT_FILE, write_displacement_series
-    from aquarom_fenics.geometry.fish import load_fish
-    from aquarom_fenics.io.outputs import write_trajectory_csv
+    """Simulate the ROM or PROM at the design and write its run outputs to ``out``."""
     from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
-    from aquarom_fenics.dynamics.simulate import write_run_outputs
+    from aquarom_fenics.geometry.fish import load_fish
+    from aquarom_fenics.io.run_outputs import write_run_outputs
 
     reduced = reduced_model(scene, xi, model, prom_file)
     xi_vector = np.array([xi.get(name, reduced.design_point.get(name, 0.0)) for name in reduced.shape_names])
     result = simulate_reduced(reduced, scene, xi_vector)
     fish = load_fish(scene)
     if MPI.COMM_WORLD.rank == 0:
-        out.mkdir(parents=True, exist_ok=True)
-        write_trajectory_csv(out / "trajectory.csv", result.trajectory.arrays())
         design = reduced.design_point | xi
         vertices = fish.nodes.n_vertices
-        write_displacement_series(out / DISPLACEMENT_FILE, fish.design(design)[:vertices], fish.mesh.cells,
-                                  result.trajectory.arrays()["time"],
-                                  np.einsum("ndm,sm->snd", reduced.basis[:vertices], result.states))
-        write_run_outputs(out, scene, result, model, list(design.values()), list(design), MPI.COMM_WORLD,
+        write_run_outputs(out, scene, result, model, design, fish.design(design)[:vertices], fish.mesh.cells,
+                          np.einsum("ndm,sm->snd", reduced.basis[:vertices], result.states), MPI.COMM_WORLD,
                           extra={"cells": reduced.cells, "dofs": reduced.dofs, "reduced_size": reduced.size,
                                  "basis": reduced.labels, "basis_dropped": reduced.dropped,
                                  "build_timings": reduced.timings})
@@ -470,7 +466,8 @@ def run_build(args) -> int:
 
 def run_compare(args) -> int:
     from aquarom_fenics.verification.compare import model_errors
-    from aquarom_fenics.io.outputs import plot_comparison, write_json_atomic
+    from aquarom_fenics.io.outputs import plot_comparison
+    from aquarom_fenics.io.persistence import write_json_atomic
     from aquarom_fenics.dynamics.simulate import simulate_fom
 
     scene, xi = check_inputs(args, load_scene(args))

@@ -23,10 +23,11 @@ import numpy as np
 REPOSITORY = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPOSITORY))
 
-from aquarom_fenics.reduction.cache import cache_root  # noqa: E402
+from aquarom_fenics.io.paths import cache_root  # noqa: E402
 from aquarom_fenics.errors import InputError  # noqa: E402
 from aquarom_fenics.geometry.fish import load_fish  # noqa: E402
-from aquarom_fenics.io.outputs import software_versions, write_json_atomic  # noqa: E402
+from aquarom_fenics.io.outputs import software_versions  # noqa: E402
+from aquarom_fenics.io.persistence import write_json_atomic  # noqa: E402
 from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced  # noqa: E402
 from aquarom_fenics.reduction.reductor import build_prom  # noqa: E402
 from aquarom_fenics.io.scene import Scene  # noqa: E402

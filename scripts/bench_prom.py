@@ -17,7 +17,8 @@ sys.path.insert(0, str(REPOSITORY))
 
 from aquarom_fenics.fem import dolfinx_adapter as adapter  # noqa: E402
 from aquarom_fenics.geometry.fish import load_fish  # noqa: E402
-from aquarom_fenics.io.outputs import software_versions, write_json_atomic  # noqa: E402
+from aquarom_fenics.io.outputs import software_versions  # noqa: E402
+from aquarom_fenics.io.persistence import write_json_atomic  # noqa: E402
 from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced  # noqa: E402
 from aquarom_fenics.reduction.reductor import build_prom  # noqa: E402
 from aquarom_fenics.io.scene import Scene  # noqa: E402

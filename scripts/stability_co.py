@@ -24,7 +24,7 @@ if str(REPOSITORY) not in sys.path:
 
 from aquarom_fenics.verification.energy import energy_balance, spine_spectrum  # noqa: E402
 from aquarom_fenics.geometry.fish import load_fish  # noqa: E402
-from aquarom_fenics.io.outputs import write_json_atomic  # noqa: E402
+from aquarom_fenics.io.persistence import write_json_atomic  # noqa: E402
 from aquarom_fenics.dynamics.reduced_dynamics import reduced_stability  # noqa: E402
 from aquarom_fenics.reduction.reductor import build_prom  # noqa: E402
 from aquarom_fenics.io.scene import Scene  # noqa: E402

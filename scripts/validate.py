@@ -543,7 +543,8 @@ def run(settings: Settings, out: Path, report_path: Path, studies=STUDIES, recom
             except CasesCollected:
                 pass
         parallel = compute_in_parallel(runner, collector.collected, jobs)
-    from aquarom_fenics.io.outputs import software_versions, write_json_atomic
+    from aquarom_fenics.io.outputs import software_versions
+    from aquarom_fenics.io.persistence import write_json_atomic
 
     functions = STUDY_FUNCTIONS
     for study in studies:

@@ -35,7 +35,7 @@ if str(REPOSITORY) not in sys.path:
     sys.path.insert(0, str(REPOSITORY))
 
 from aquarom_fenics import __version__  # noqa: E402
-from aquarom_fenics.io.outputs import write_json_atomic  # noqa: E402
+from aquarom_fenics.io.persistence import write_json_atomic  # noqa: E402
 from aquarom_fenics.io.scene import Scene  # noqa: E402
 
 CASE_FORMAT = 1

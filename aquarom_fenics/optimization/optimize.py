@@ -42,7 +42,7 @@ from aquarom_fenics.optimization.cost import (CostWeights, DesignSpace, Evaluati
                    meshable_space, require_interior)
 from aquarom_fenics.errors import InputError, SolverError
 from aquarom_fenics.geometry.fish import Fish, load_fish
-from aquarom_fenics.io.outputs import write_json_atomic
+from aquarom_fenics.io.persistence import write_json_atomic
 from aquarom_fenics.reduction.prom import ReducedModel
 from aquarom_fenics.dynamics.reduced_dynamics import reduced_stability
 from aquarom_fenics.reduction.reductor import build_prom

@@ -9,7 +9,7 @@ import json
 
 import numpy as np
 
-from aquarom_fenics.geometry.mesh import LEVEL_TARGET_CELLS, block_cache_path
+from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS, block_cache_path
 from aquarom_fenics.io.paths import bench_results
 from aquarom_fenics.io.scene import Scene
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.io.outputs import write_npz_atomic
+from aquarom_fenics.io.persistence import write_npz_atomic
 
 FORMAT_VERSION = 1
 ZIP_MAGIC = b"PK\x03\x04"       # first bytes of a .npz (zip) archive
