@@ -14,8 +14,10 @@ from mpi4py import MPI
 from aquarom_fenics.optimization.cost import CostWeights, design_space
 from aquarom_fenics.errors import InputError, Interrupted, SolverError
 from aquarom_fenics.geometry.fish import Fish, load_fish
-from aquarom_fenics.optimization.optimize import (DEFAULT_MAX_TIME, Checkpoint, OptimizationResult, PromBuilder, history_columns, optimization_space,
-                       optimize, start_points)
+from aquarom_fenics.optimization.history import Checkpoint, history_columns
+from aquarom_fenics.optimization.optimize import (DEFAULT_MAX_TIME, OptimizationResult, optimization_space, optimize,
+                                                  start_points)
+from aquarom_fenics.optimization.prom_builder import PromBuilder
 from aquarom_fenics.io.outputs import software_versions
 from aquarom_fenics.io.paths import cache_root
 from aquarom_fenics.io.persistence import entry_key, get_or_compute, require_cache_writable, write_json_atomic

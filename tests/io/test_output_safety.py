@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aquarom_fenics.optimization import optimize as optimize_module
+from aquarom_fenics.optimization import history
 from aquarom_fenics.io import outputs as outputs_module
 from aquarom_fenics.io import persistence as persistence_module
 from aquarom_fenics.cli import main
@@ -185,7 +185,7 @@ def test_resume_without_a_checkpoint_creates_nothing(optimized, tmp_path, capsys
 def test_interrupted_optimisation_exits_130_and_resumes_with_the_fresh_column_order(optimized, tmp_path, capsys,
                                                                                       monkeypatch):
     _, scene, fresh = optimized
-    original = optimize_module.Checkpoint.save
+    original = history.Checkpoint.save
     calls = []
 
     def save_then_interrupt(self, *args):
@@ -194,7 +194,7 @@ def test_interrupted_optimisation_exits_130_and_resumes_with_the_fresh_column_or
         if len(calls) == 2:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(optimize_module.Checkpoint, "save", save_then_interrupt)
+    monkeypatch.setattr(history.Checkpoint, "save", save_then_interrupt)
     out = tmp_path / "o"
     assert main(["optimize", scene, "--out", str(out)]) == 130
     message = one_line(capsys)
@@ -202,7 +202,7 @@ def test_interrupted_optimisation_exits_130_and_resumes_with_the_fresh_column_or
     summary = json.loads((out / "summary.json").read_text())
     assert not summary["completed"] and "interrupted" in summary["stop_reason"]
     assert json.loads((out / "checkpoint.json").read_text())["state"]["iteration"] == 2
-    monkeypatch.setattr(optimize_module.Checkpoint, "save", original)
+    monkeypatch.setattr(history.Checkpoint, "save", original)
     assert main(["optimize", scene, "--out", str(out), "--resume"]) == 0
     resumed = (out / "history.csv").read_text().splitlines()
     straight = (fresh / "history.csv").read_text().splitlines()
