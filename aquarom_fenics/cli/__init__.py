@@ -18,6 +18,7 @@ from aquarom_fenics.cli.outputs import os_error_text, settle_output
 from aquarom_fenics.cli.parser import build_parser
 from aquarom_fenics.errors import InputError, Interrupted, SolverError
 
+
 AGREEMENT_SECONDS = 10.0   # how long a failing rank waits for the others to fail too before aborting all
 
 

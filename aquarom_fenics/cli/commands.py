@@ -9,6 +9,7 @@ from aquarom_fenics.cli.outputs import claim_output, shown
 from aquarom_fenics.cli.runs import run_build, run_compare, run_simulate
 from aquarom_fenics.errors import InputError, SolverError
 
+
 def run_dry(args) -> int:
     from aquarom_fenics.optimization.plan import plan
 

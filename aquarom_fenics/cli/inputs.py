@@ -5,6 +5,7 @@ from mpi4py import MPI
 
 from aquarom_fenics.errors import InputError
 
+
 def load_scene(args):
     """The scene named on the command line, with the --level and --degree overrides applied."""
     from aquarom_fenics.io.scene import Scene

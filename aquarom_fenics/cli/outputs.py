@@ -11,6 +11,7 @@ from mpi4py import MPI
 
 from aquarom_fenics.errors import InputError, Interrupted, SolverError
 
+
 def os_error_text(error: OSError, unnamed: str = "a file") -> str:
     """'PATH: what went wrong' for an operating-system error (permission, missing folder, full disk)."""
     where = error.filename if error.filename is not None else unnamed

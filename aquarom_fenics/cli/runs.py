@@ -10,6 +10,7 @@ from aquarom_fenics.cli.inputs import check_inputs, load_scene, say
 from aquarom_fenics.cli.outputs import claim_output, claim_output_file, shown
 from aquarom_fenics.errors import SolverError
 
+
 def run_simulate(args) -> int:
     from aquarom_fenics.dynamics.simulate import simulate_fom
 

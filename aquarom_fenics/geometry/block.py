@@ -20,6 +20,7 @@ from aquarom_fenics.geometry.mesh import FishMesh, oriented_positively
 from aquarom_fenics.io.paths import mesh_cache, shipped_meshes
 from aquarom_fenics.io.persistence import get_or_compute, write_npz_atomic
 
+
 BLOCK_RECIPE = tomllib.loads((shipped_meshes() / "block.toml").read_text())
 """The reference block's recipe (``meshes/block.toml``): levels, element sizes, gmsh options."""
 

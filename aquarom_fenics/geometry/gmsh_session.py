@@ -11,6 +11,7 @@ import numpy as np
 
 from aquarom_fenics.geometry.mesh import used_nodes_only
 
+
 GMSH_TETRAHEDRON = 4
 """gmsh element type of the linear tetrahedron."""
 

@@ -17,6 +17,7 @@ from aquarom_fenics.errors import InputError
 from aquarom_fenics.io.outputs import plot_trajectory, software_versions, write_trajectory_csv
 from aquarom_fenics.io.persistence import write_json_atomic, write_npz_atomic
 
+
 DISPLACEMENT_FILE = "displacement.npz"
 """Nodal displacement time series of a run, written next to trajectory.csv."""
 

@@ -14,6 +14,7 @@ from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.optimization.cost import DesignSpace
 from aquarom_fenics.optimization.prom_builder import PromBuilder
 
+
 def history_columns(space: DesignSpace) -> list[str]:
     """The columns of a history row, in the order :func:`history_row` makes them."""
     return (["iteration", *(f"xi_{name}" for name in space.names), "cost", *(f"grad_{name}" for name in space.names)]

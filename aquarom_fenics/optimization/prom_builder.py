@@ -14,6 +14,7 @@ from aquarom_fenics.reduction.cache import cached_prom
 from aquarom_fenics.reduction.prom import ReducedModel
 from aquarom_fenics.reduction.reductor import build_prom
 
+
 STABILITY_STROKES = 2
 """Strokes the horizon must hold before the gait's stability is judged."""
 

@@ -1,7 +1,5 @@
 """Block meshes, mesh import and the tags of SPEC §3."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
