@@ -195,11 +195,13 @@ def discard_entry(path: Path) -> None:
 
 
 def read_intact(path: Path, load: Callable[[Path], Value]) -> Value | None:
-    """``load(path)`` of an entry that matches its checksum; None (logged) for a damaged one."""
+    """``load(path)`` of an entry that matches its checksum; None (logged) for a damaged or unsealed one."""
     with entry_lock(path, shared=True):
         if is_intact(path):
             return load(path)
-    log.warning("cache: entry %s does not match its checksum (corrupted); rebuilding it", path.name)
+        sealed = _sidecar(path).exists()
+    problem = "does not match its checksum (corrupted)" if sealed else "has no checksum"
+    log.warning("cache: entry %s %s; rebuilding it", path.name, problem)
     return None
 
 
