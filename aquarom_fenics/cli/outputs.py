@@ -19,8 +19,8 @@ def os_error_text(error: OSError, unnamed: str = "a file") -> str:
 
 
 def claim_output(args, path: Path, resume: bool = False) -> Path:
-    """The folder this run writes to (see :func:`outputs.claim_folder`): the output folder itself,
-    or a folder beside it when --force replaces an earlier run's results."""
+    """The folder this run writes to (see :func:`aquarom_fenics.io.outputs.claim_folder`): the output
+    folder itself, or a folder beside it when --force replaces an earlier run's results."""
     from aquarom_fenics.io.outputs import claim_folder
 
     location = on_rank_zero(lambda: claim_folder(path, getattr(args, "force", False), resume))

@@ -8,7 +8,8 @@ import numpy as np
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.gmsh_session import GMSH_TETRAHEDRON, gmsh_model, points_and_cells_from_gmsh
-from aquarom_fenics.geometry.mesh import FishMesh, mean_edge_length, oriented_positively, signed_cell_volumes, used_nodes_only
+from aquarom_fenics.geometry.mesh import (FishMesh, mean_edge_length, oriented_positively, signed_cell_volumes,
+                                           used_nodes_only)
 
 
 _GMSH_READ_OPTIONS = {"General.Terminal": 0, "General.NumThreads": 1}

@@ -207,14 +207,17 @@ def read_intact(path: Path, load: Callable[[Path], Value]) -> Value | None:
 
 def get_or_compute(path: Path, compute: Callable[[], Value], save: Callable[[Value, Path], None],
                    load: Callable[[Path], Value], comm=None, label: str = "cache",
-                   on_store_error: Callable[[OSError], None] | None = None) -> Value:
+                   on_store_error: Callable[[OSError], None] | None = None,
+                   store_if: Callable[[Value], bool] | None = None) -> Value:
     """The value of the cache entry ``path`` when it matches its checksum, else ``compute()``, stored there.
 
     ``load(path)`` reads an entry (InputError or ValueError: unusable, rebuilt with a warning);
     ``save(value, path)`` writes one atomically. With an MPI communicator ``comm`` every rank reads
     and computes (``compute`` may be collective) and rank 0 alone removes and stores entries, the
-    ranks meeting at a barrier after each. ``on_store_error(error)`` takes an OSError of the cache
+    ranks meeting at barriers around that. ``on_store_error(error)`` takes an OSError of the cache
     (read-only or blocked folder) instead of raising it: the value is then returned unstored.
+    ``store_if(value)`` False keeps a value out of the cache (an outcome that is no answer of the
+    model, such as a time limit, is computed again next time).
     ``label`` starts the log lines ("PROM cache: reused from the cache (NAME)").
     """
     path = Path(path)
@@ -230,6 +233,8 @@ def get_or_compute(path: Path, compute: Callable[[], Value], save: Callable[[Val
             return value
         _on_writer(comm, is_writer, lambda: discard_entry(path), on_store_error)
     value = compute()
+    if store_if is not None and not store_if(value):
+        return value
 
     def store_value():
         store(path, lambda target: save(value, target))

@@ -76,6 +76,18 @@ def test_a_cache_that_cannot_be_written_gives_the_value_unstored_or_raises(tmp_p
         get_or_compute(entry, Counter(), save, load)
 
 
+def test_a_value_kept_out_of_the_cache_is_computed_again(tmp_path):
+    compute, entry = Counter(), tmp_path / "entry.json"
+
+    def from_a_later_call(value) -> bool:
+        return value["call"] > 1
+
+    assert get_or_compute(entry, compute, save, load, store_if=from_a_later_call)["call"] == 1
+    assert not entry.exists()
+    assert get_or_compute(entry, compute, save, load, store_if=from_a_later_call)["call"] == 2
+    assert get_or_compute(entry, compute, save, load, store_if=from_a_later_call)["call"] == 2 and compute.calls == 2
+
+
 def test_a_read_only_cache_is_read_without_a_lock(tmp_path, monkeypatch):
     compute, entry = Counter(), tmp_path / "cache" / "entry.json"
     get_or_compute(entry, compute, save, load)
