@@ -270,3 +270,13 @@ def test_report_writer_on_synthetic_results(tmp_path):
 def test_report_without_results_says_what_is_missing(tmp_path):
     text = write_report(tmp_path / "validation", tmp_path / "REPORT.md").read_text()
     assert text.count("*Not run yet*") == 7
+
+
+def test_energy_balance_of_a_run_with_cut_steps_is_not_available():
+    from types import SimpleNamespace
+
+    from aquarom_fenics.verification.validation.compute import energy_record
+
+    record = energy_record(SimpleNamespace(cut_steps=2))
+    assert record == {"available": False, "message": record["message"]}
+    assert "not available" in record["message"] and "2 steps" in record["message"]
