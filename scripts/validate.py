@@ -24,7 +24,7 @@ The studies, the case cache and the report live in `aquarom_fenics.verification.
 this script parses the command line.
 
 Every case is cached in <out>/cases/<kind>-<key>.json (key: scene hash + model settings +
-toolkit version), so a rerun computes only what is missing; each study writes <out>/<study>.json,
+software versions), so a rerun computes only what is missing; each study writes <out>/<study>.json,
 figures go to <out>/, and the report to results/REPORT.md (--report-only rewrites figures and
 report from what is cached).
 

@@ -118,7 +118,7 @@ def write_report(out: Path, report: Path, studies_summary: Path | None = None) -
               "    .venv/bin/python scripts/validate.py --only c,d # selected studies",
               "    .venv/bin/python scripts/validate.py --report-only", "",
               f"Cases are cached in `{link(out / 'cases', report)}/` (one JSON file per case, keyed by the scene "
-              "hash, the model settings and the toolkit version); delete a file to recompute that case.", ""]
+              "hash, the model settings and the software versions); delete a file to recompute that case.", ""]
     report.parent.mkdir(parents=True, exist_ok=True)
     write_text_atomic(report, "\n".join(lines))
     return report
