@@ -30,7 +30,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--verbose", "-v", action="store_true", help="log details (solver set-up, timings)")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    def command(name, help_text):
+    shape_parameter = "shape parameter (repeatable)"
+
+    def command(name, help_text, out: str | None = None, xi: str | None = None, prom: str | None = None,
+                progress: bool = False):
+        """A sub-command on a scene; ``out``, ``xi`` and ``prom`` are the help texts of the options
+        --out (with --force), --xi and --prom where the command has them."""
         sub = commands.add_parser(name, help=help_text, description=help_text,
                                   epilog=f"example:\n  {EXAMPLES[name]}", formatter_class=argparse.RawDescriptionHelpFormatter)
         sub.add_argument("scene", help="scene file (.toml) or shipped scene name")
@@ -40,44 +45,41 @@ def build_parser() -> argparse.ArgumentParser:
                          help="override the scene's element degree (1: linear, 2: quadratic tetrahedra)")
         sub.add_argument("--dry-run", action="store_true",
                          help="print what would be built, reused and skipped, and a time estimate; write nothing")
+        if xi:
+            sub.add_argument("--xi", action="append", metavar="NAME=VALUE", help=xi)
+        if prom:
+            sub.add_argument("--prom", type=Path, help=prom)
+        if out:
+            sub.add_argument("--out", type=Path, help=out)
+            sub.add_argument("--force", action="store_true", help="replace existing outputs")
+        if progress:
+            sub.add_argument("--no-progress", action="store_true", help="no progress bar")
         return sub
 
     command("mesh", "report the scene's mesh: cells, nodes, tags, cell quality")
-    shapes = command("shapes", "write a design mesh (XDMF + PNG), or a sheet of every shape variation at ± its bound")
-    shapes.add_argument("--xi", action="append", metavar="NAME=VALUE", help="shape parameter (repeatable)")
-    shapes.add_argument("--out", type=Path, help="output directory (default results/shapes/SCENE)")
-    shapes.add_argument("--force", action="store_true", help="replace existing outputs")
-    simulate = command("simulate", "simulate the swimmer over the scene's horizon")
+    command("shapes", "write a design mesh (XDMF + PNG), or a sheet of every shape variation at ± its bound",
+            out="output directory (default results/shapes/SCENE)", xi=shape_parameter)
+    simulate = command("simulate", "simulate the swimmer over the scene's horizon",
+                       out="output directory (default results/simulate/SCENE-MODEL)", xi=shape_parameter,
+                       prom="PROM file from `aquarom build` (model prom; built if absent)", progress=True)
     simulate.add_argument("--model", choices=["fom", "rom", "prom"], default="fom",
                           help="full-order model, ROM of the design, or PROM of the scene (default fom)")
-    simulate.add_argument("--xi", action="append", metavar="NAME=VALUE", help="shape parameter (repeatable)")
-    simulate.add_argument("--prom", type=Path, help="PROM file from `aquarom build` (model prom; built if absent)")
-    simulate.add_argument("--out", type=Path, help="output directory (default results/simulate/SCENE-MODEL)")
-    simulate.add_argument("--force", action="store_true", help="replace existing outputs")
-    simulate.add_argument("--no-progress", action="store_true", help="no progress bar")
-    build = command("build", "build the scene's PROM (basis and reduced tensors) and save it to one file")
-    build.add_argument("--xi", action="append", metavar="NAME=VALUE", help="building point (default: start values)")
-    build.add_argument("--out", type=Path, help="PROM file (default results/build/SCENE-prom.npz)")
-    build.add_argument("--force", action="store_true", help="replace existing outputs")
-    compare = command("compare", "run the FOM and the reduced model at one design and report their errors")
+    command("build", "build the scene's PROM (basis and reduced tensors) and save it to one file",
+            out="PROM file (default results/build/SCENE-prom.npz)", xi="building point (default: start values)")
+    compare = command("compare", "run the FOM and the reduced model at one design and report their errors",
+                      out="output directory (default results/compare/SCENE)", xi=shape_parameter,
+                      prom="PROM file from `aquarom build` (built if absent)", progress=True)
     compare.add_argument("--model", choices=["rom", "prom"], default="prom", help="reduced model to check")
-    compare.add_argument("--xi", action="append", metavar="NAME=VALUE", help="shape parameter (repeatable)")
-    compare.add_argument("--prom", type=Path, help="PROM file from `aquarom build` (built if absent)")
-    compare.add_argument("--out", type=Path, help="output directory (default results/compare/SCENE)")
-    compare.add_argument("--force", action="store_true", help="replace existing outputs")
-    compare.add_argument("--no-progress", action="store_true", help="no progress bar")
-    optimize = command("optimize", "optimise the shape (and the amplitude, for co-optimisation scenes) with the PROM")
-    optimize.add_argument("--out", type=Path, help="output directory (default results/optimize/SCENE)")
-    optimize.add_argument("--force", action="store_true", help="replace existing outputs")
+    optimize = command("optimize", "optimise the shape (and the amplitude, for co-optimisation scenes) with the PROM",
+                       out="output directory (default results/optimize/SCENE)")
     optimize.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out")
     optimize.add_argument("--method", choices=["paper", "trust-region"], help="override the scene's method")
     optimize.add_argument("--weight", type=float, default=0.5,
                           help="w_1 of L = w_1(-d) + (1-w_1) α A² for co-optimisation scenes (default 0.5)")
     optimize.add_argument("--max-time", type=float, metavar="SECONDS",
                           help="stop the optimiser after this wall time (default 86400 s, one day)")
-    pareto = command("pareto", "co-optimisation weight sweep: Pareto front of distance against actuation energy")
-    pareto.add_argument("--out", type=Path, help="output directory (default results/pareto/SCENE)")
-    pareto.add_argument("--force", action="store_true", help="replace existing outputs")
+    command("pareto", "co-optimisation weight sweep: Pareto front of distance against actuation energy",
+            out="output directory (default results/pareto/SCENE)")
     from aquarom_fenics.viz.animate import DEFAULT_FPS
 
     animate_help = "animate a simulation run (MP4 and GIF preview): the fish from above and from the side"
@@ -88,12 +90,10 @@ def build_parser() -> argparse.ArgumentParser:
     animate.add_argument("--out", type=Path, help="MP4 file (default RUN_DIR/animation.mp4; the GIF goes next to it)")
     animate.add_argument("--fps", type=int, default=DEFAULT_FPS, help=f"frames per second (default {DEFAULT_FPS})")
     animate.add_argument("--stride", type=int, default=1, help="one frame every K stored samples (default 1)")
-    basis = command("basis", "build the scene's PROM and draw every basis vector on the fish (basis.png)")
-    basis.add_argument("--out", type=Path, help="output directory (default results/basis/SCENE)")
-    basis.add_argument("--force", action="store_true", help="replace existing outputs")
-    check = command("check", "Taylor tests of the scene's PROM against its FOM forms and finite differences "
-                             "(exit 1 on a FAIL)")
-    check.add_argument("--prom", type=Path, help="PROM file from `aquarom build` to check (default: build one)")
+    command("basis", "build the scene's PROM and draw every basis vector on the fish (basis.png)",
+            out="output directory (default results/basis/SCENE)")
+    command("check", "Taylor tests of the scene's PROM against its FOM forms and finite differences (exit 1 on a FAIL)",
+            prom="PROM file from `aquarom build` to check (default: build one)")
     cache_help = "list or clear the caches of meshes, PROMs and FOM checks (content-addressed, checksummed)"
     cache = commands.add_parser("cache", help=cache_help, description=cache_help,
                                 epilog=f"example:\n  {EXAMPLES['cache']}", formatter_class=argparse.RawDescriptionHelpFormatter)
