@@ -52,10 +52,11 @@ class ElasticTerm:
         tangent = fx.compile_form(self.tangent_form)
         return fx.assemble_matrix_into(fx.create_matrix(tangent), tangent)
 
-    def reduce(self, vectors: np.ndarray, n_parameters: int, order: int) -> "ElasticTensors":
-        """(K1, K2, K3) with their Taylor terms in ξ, sampled at the quadrature points."""
-        sampler = CellSampler(self.fom, order)
-        taylor = internal_force_taylor(sampler, vectors, n_parameters, order, self.fom.comm)
+    def reduce(self, projector) -> "ElasticTensors":
+        """(K1, K2, K3) on the projector's basis with their Taylor terms in ξ, sampled at the quadrature points."""
+        sampler = CellSampler(self.fom, projector.order)
+        taylor = internal_force_taylor(sampler, projector.vectors, projector.n_parameters, projector.order,
+                                       self.fom.comm)
         terms = list(taylor) + [None] * (3 - len(taylor))     # (constant, first, second), each (K1, K2, K3)
         return ElasticTensors(*(Taylor(*(term[i] if term is not None else None for term in terms))
                                 for i in range(3)))

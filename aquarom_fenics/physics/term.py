@@ -19,9 +19,11 @@ import numpy as np
 
 
 class FullOrderTerm(Protocol):
-    """A term of the FOM: its reduced tensors on the projector's basis (see ``reduction.projection``)."""
+    """A term of the FOM. Each also assembles its force (or matrices) and, where it has one, its part of
+    the Newton matrix (``add_newton_matrix``); the FOM sums them."""
 
-    def reduce(self, projector): ...
+    def reduce(self, projector):
+        """Its reduced tensors on the projector's basis V, Taylor in ξ (``reduction.projection.Projector``)."""
 
 
 class ReducedTerm(Protocol):

@@ -69,12 +69,12 @@ class ThrustTerm:
             values = block[np.ix_(2 * index + np.arange(2), (2 * neighbours[:, None] + np.arange(2)).ravel())]
             matrix.setValues(rows, columns, values, addv=PETSc.InsertMode.ADD_VALUES)
 
-    def reduce(self, vectors: np.ndarray, n_parameters: int) -> "ThrustData":
+    def reduce(self, projector) -> "ThrustData":
         """The spine rows of V, the rest spine and the dorsal heights with their exact ξ-gradient."""
         fom, tags = self.fom, self.fom.fish.tags
-        spine_rows = np.stack([fom.rows_at(vectors, node) for node in tags.spine_nodes])[:, :2]
+        spine_rows = np.stack([fom.rows_at(projector.vectors, node) for node in tags.spine_nodes])[:, :2]
         return ThrustData(spine_rows=spine_rows, spine_rest_xy=self.spine.rest_xy, dorsal_z=self.dorsal_z,
-                          dorsal_z_gradient=shape_rows(fom.fish)[tags.dorsal_nodes, 2, :n_parameters],
+                          dorsal_z_gradient=shape_rows(fom.fish)[tags.dorsal_nodes, 2, :projector.n_parameters],
                           fluid_density=fom.scene.fluid.density)
 
 

@@ -44,16 +44,16 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
     basis = build_basis(fom, p)
     vectors = basis.vectors
     timings.update(basis.timings)
+    projector = Projector(fom, vectors, p, order)
     mark = time.perf_counter()
-    elastic = fom.elastic.reduce(vectors, p, order)
+    elastic = fom.elastic.reduce(projector)
     timings["internal_force_tensors"] = time.perf_counter() - mark
 
     mark = time.perf_counter()
-    projector = Projector(fom, vectors, p, order)
     inertia = fom.inertia.reduce(projector)
     muscle = fom.muscle.reduce(projector)
     drag = fom.drag.reduce(projector) if fom.drag else None
-    thrust = fom.thrust.reduce(vectors, p) if fom.thrust else None
+    thrust = fom.thrust.reduce(projector) if fom.thrust else None
     built, skipped = ["mass", "internal force (cubic)", "centre of mass"], []
     for name, present, reason in (("actuation", fom.muscle.on, "k or A is zero"), ("drag", drag, "off in the scene"),
                                   ("thrust (exact on the reduced spine)", thrust, "off in the scene")):
