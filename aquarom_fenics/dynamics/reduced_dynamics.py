@@ -33,8 +33,8 @@ class ReducedSystem:
         self.inertia = prom.inertia.at(d, prom.elastic.linear, self.elastic.k1)
         self.muscle = prom.muscle.at(d, scene.actuation.amplitude if amplitude is None else amplitude,
                                      scene.actuation.frequency)
-        self.thrust = prom.thrust.at(d, scene.fluid.spine_force) if prom.thrust else None
-        self.drag = prom.drag.at(d, prom.observation.head_x_row) if prom.drag else None
+        self.thrust = prom.thrust.at(d, scene.fluid.spine_force) if prom.thrust is not None else None
+        self.drag = prom.drag.at(d, prom.observation.head_x_row) if prom.drag is not None else None
         self.terms = [term for term in (self.elastic, self.muscle, self.inertia, self.thrust, self.drag)
                       if term is not None]
         self.com_weights = self.inertia.com_weights
@@ -52,9 +52,9 @@ class ReducedSystem:
         inertia = self.inertia.mass @ eta_ddot
         internal = self.elastic.force(eta)
         external = self.muscle.force(time, eta)
-        if self.thrust:
+        if self.thrust is not None:
             external = external + self.thrust.force(eta, eta_dot, eta_ddot)
-        if self.drag:
+        if self.drag is not None:
             external = external + self.drag.force(eta_dot)
         residual = inertia + self.inertia.damping @ eta_dot + internal - external
         return residual, max(self.norm(internal), self.norm(external), self.norm(inertia))

@@ -231,11 +231,11 @@ class FullOrderModel:
 
     def thrust_force(self, u, v, a) -> np.ndarray:
         """Lighthill thrust scattered to the owned spine dofs (x, y) [N]."""
-        return self.thrust.force(u, v, a) if self.thrust else np.zeros(self.n_owned_dofs)
+        return self.thrust.force(u, v, a) if self.thrust is not None else np.zeros(self.n_owned_dofs)
 
     def drag_force(self, v) -> np.ndarray:
         """f_drag = g(ξ) v_x² with v_x the head's x-velocity [N]."""
-        return self.drag.force(v) if self.drag else np.zeros(self.n_owned_dofs)
+        return self.drag.force(v) if self.drag is not None else np.zeros(self.n_owned_dofs)
 
     def residual(self, time, u, v, a):
         """r = M ü + C u̇ + f_int - f_act - f_thrust - f_drag (zero on fixed dofs), and the force scale."""
@@ -255,9 +255,9 @@ class FullOrderModel:
         matrix = fx.assemble_matrix_into(self.tangent_matrix, self._tangent)
         if self.scheme.stiffness_factor != 1.0:
             matrix.scale(self.scheme.stiffness_factor)
-        if self.thrust:
+        if self.thrust is not None:
             self.thrust.add_newton_matrix(matrix, self.scheme, u, v, a)
-        if self.drag:
+        if self.drag is not None:
             self.drag.add_newton_matrix(matrix, self.scheme.velocity_factor, v)
         matrix.assemble()
         matrix.axpy(1.0, self._inertia_damping_on(matrix), structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)

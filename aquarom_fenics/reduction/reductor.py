@@ -52,15 +52,16 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
     mark = time.perf_counter()
     inertia = fom.inertia.reduce(projector)
     muscle = fom.muscle.reduce(projector)
-    drag = fom.drag.reduce(projector) if fom.drag else None
-    thrust = fom.thrust.reduce(projector) if fom.thrust else None
+    drag = fom.drag.reduce(projector) if fom.drag is not None else None
+    thrust = fom.thrust.reduce(projector) if fom.thrust is not None else None
     built, skipped = ["mass", "internal force (cubic)", "centre of mass"], []
-    for name, present, reason in (("actuation", fom.muscle.on, "k or A is zero"), ("drag", drag, "off in the scene"),
-                                  ("thrust (exact on the reduced spine)", thrust, "off in the scene")):
+    optional = (("actuation", fom.muscle.on, "k or A is zero"), ("drag", drag is not None, "off in the scene"),
+                ("thrust", thrust is not None, "off in the scene"))
+    for name, present, reason in optional:
         if present:
-            built.append(name)
+            built.append("thrust (exact on the reduced spine)" if name == "thrust" else name)
         else:
-            skipped.append(f"{name.split()[0]} ({reason})")
+            skipped.append(f"{name} ({reason})")
     if not p:
         skipped.append("ξ-terms (no shape parameters)" if parametric else "ξ-terms (plain ROM)")
     timings["other_tensors"] = time.perf_counter() - mark
