@@ -77,6 +77,8 @@ class FullOrderModel:
         self.n_global_dofs = 3 * self.space.dofmap.index_map.size_global
         self.n_cells = fish.mesh.cells.shape[0]
 
+        # One pair of arguments for every term: the Newton matrix's form sums the terms' tangent forms.
+        self.test_function, self.trial_function = ufl.TestFunction(self.space), ufl.TrialFunction(self.space)
         self.displacement = fx.new_function(self.space, "displacement")
         self.shape_displacement = fx.new_function(self.space, "shape_displacement")
         fx.set_nodal_values(self.shape_displacement, self.layout, shape_displacement)

@@ -35,7 +35,7 @@ class DragTerm:
         fluid_density = fx.constant(fom.mesh, fom.scene.fluid.density)
         # The skin of the rest shape: u_ξ interpolated at the displacement nodes (SPEC §5).
         self.direction_form = fom.mass_rule(drag_direction_form(
-            ufl.TestFunction(fom.space), ufl.grad(fom.shape_displacement), fluid_density, fom.mesh))
+            fom.test_function, ufl.grad(fom.shape_displacement), fluid_density, fom.mesh))
         compiled = fx.compile_form(self.direction_form)
         self.direction = fx.assemble_vector_into(fx.create_vector(compiled), compiled).copy()
         self.rows = np.flatnonzero(self.direction)

@@ -32,8 +32,8 @@ class ElasticTerm:
         u = fom.displacement
         self.energy_form = fom.stiffness_rule(strain_energy(u, fom.shape_gradients["stiffness"],
                                                             self.young_modulus, self.poisson_ratio))
-        self.force_form = ufl.derivative(self.energy_form, u, ufl.TestFunction(fom.space))
-        self.tangent_form = ufl.derivative(self.force_form, u, ufl.TrialFunction(fom.space))
+        self.force_form = ufl.derivative(self.energy_form, u, fom.test_function)
+        self.tangent_form = ufl.derivative(self.force_form, u, fom.trial_function)
         self._energy = fx.compile_form(self.energy_form)
         self._force = fx.compile_form(self.force_form)
         self._vector = fx.create_vector(self._force)

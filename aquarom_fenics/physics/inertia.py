@@ -11,7 +11,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import ufl
 from petsc4py import PETSc
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
@@ -56,7 +55,7 @@ class InertiaTerm:
         self.lumped = material.mass == "lumped"
         density = fx.constant(fom.mesh, material.density)
         shape_gradient = fom.shape_gradients["mass"]
-        test, trial = ufl.TestFunction(fom.space), ufl.TrialFunction(fom.space)
+        test, trial = fom.test_function, fom.trial_function
         self.mass_form = fom.mass_rule(mass_form(trial, test, shape_gradient, density))
         self.mass_moment_form = fom.mass_rule(mass_moment_x(test, shape_gradient, density))
         self.total_mass_form = fom.mass_rule(total_mass(shape_gradient, density, fom.mesh))

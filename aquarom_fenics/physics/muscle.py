@@ -54,8 +54,8 @@ class MuscleTerm:
             energy = fom.stiffness_rule(muscle_energy(
                 u, fom.shape_gradients["stiffness"], fx.constant(fom.mesh, scene.actuation.stiffness),
                 self._activations, self.indicators, nominal_volume=scene.actuation.muscle_volume == "nominal"))
-            self.negative_force_form = ufl.derivative(energy, u, ufl.TestFunction(fom.space))
-            self.tangent_form = ufl.derivative(self.negative_force_form, u, ufl.TrialFunction(fom.space))
+            self.negative_force_form = ufl.derivative(energy, u, fom.test_function)
+            self.tangent_form = ufl.derivative(self.negative_force_form, u, fom.trial_function)
             self._negative_force = fx.compile_form(self.negative_force_form)
             self._vector = fx.create_vector(self._negative_force)
 

@@ -25,7 +25,7 @@ LAWS = {
     # (a_left, a_right) = A sin(2π f t) (1, -1)
     "activation law": (r"sin\(\s*2(\.0)?\s*\*\s*np\.pi", "physics/muscle.py"),
     # C = α_R M + β_R K_0 needs the scene's α_R, β_R
-    "Rayleigh damping": (r"\.rayleigh_(alpha|beta)\b(?!\s*:)", "physics/inertia.py"),
+    "Rayleigh damping": (r"\.rayleigh_(alpha|beta)\b", "physics/inertia.py"),
 }
 
 
