@@ -14,10 +14,10 @@ import sys
 import time
 from pathlib import Path
 
-REPOSITORY = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPOSITORY))
+from aquarom_fenics.io.outputs import software_versions
+from aquarom_fenics.io.persistence import write_json_atomic
 
-from aquarom_fenics.io.outputs import software_versions, write_json_atomic  # noqa: E402
+REPOSITORY = Path(__file__).resolve().parents[1]
 
 SCENE = """name = "bench-degree{degree}-level{level}"
 [mesh]

@@ -12,7 +12,6 @@ time and best point. Writes results/bench/optimize.json.
 import argparse
 import itertools
 import os
-import sys
 import tempfile
 import time
 from contextlib import contextmanager
@@ -20,17 +19,17 @@ from pathlib import Path
 
 import numpy as np
 
-REPOSITORY = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPOSITORY))
+from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
+from aquarom_fenics.errors import InputError
+from aquarom_fenics.geometry.fish import load_fish
+from aquarom_fenics.io.outputs import software_versions
+from aquarom_fenics.io.persistence import write_json_atomic
+from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.optimization.study import fom_distance, run_optimization
+from aquarom_fenics.io.paths import cache_root
+from aquarom_fenics.reduction.reductor import build_prom
 
-from aquarom_fenics.reduction.cache import cache_root  # noqa: E402
-from aquarom_fenics.errors import InputError  # noqa: E402
-from aquarom_fenics.geometry.fish import load_fish  # noqa: E402
-from aquarom_fenics.io.outputs import software_versions, write_json_atomic  # noqa: E402
-from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced  # noqa: E402
-from aquarom_fenics.reduction.reductor import build_prom  # noqa: E402
-from aquarom_fenics.io.scene import Scene  # noqa: E402
-from aquarom_fenics.optimization.study import fom_distance, run_optimization  # noqa: E402
+REPOSITORY = Path(__file__).resolve().parents[1]
 
 
 def grid_search(scene: Scene, fish, spacing: float = 0.15) -> dict:

@@ -8,20 +8,19 @@ Writes results/bench/prom.json.
 """
 import argparse
 import os
-import sys
 import time
 from pathlib import Path
 
-REPOSITORY = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPOSITORY))
+from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
+from aquarom_fenics.dynamics.simulate import simulate_fom
+from aquarom_fenics.fem import dolfinx_adapter as adapter
+from aquarom_fenics.geometry.fish import load_fish
+from aquarom_fenics.io.outputs import software_versions
+from aquarom_fenics.io.persistence import write_json_atomic
+from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.reduction.reductor import build_prom
 
-from aquarom_fenics.fem import dolfinx_adapter as adapter  # noqa: E402
-from aquarom_fenics.geometry.fish import load_fish  # noqa: E402
-from aquarom_fenics.io.outputs import software_versions, write_json_atomic  # noqa: E402
-from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced  # noqa: E402
-from aquarom_fenics.reduction.reductor import build_prom  # noqa: E402
-from aquarom_fenics.io.scene import Scene  # noqa: E402
-from aquarom_fenics.dynamics.simulate import simulate_fom  # noqa: E402
+REPOSITORY = Path(__file__).resolve().parents[1]
 
 SHAPE_SETS = {0: "nominal", 3: "so1", 5: "so2", 8: "so3"}
 

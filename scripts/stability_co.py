@@ -18,17 +18,15 @@ from pathlib import Path
 
 import numpy as np
 
-REPOSITORY = Path(__file__).resolve().parent.parent
-if str(REPOSITORY) not in sys.path:
-    sys.path.insert(0, str(REPOSITORY))
+from aquarom_fenics.dynamics.reduced_dynamics import reduced_stability
+from aquarom_fenics.dynamics.simulate import simulate_fom
+from aquarom_fenics.geometry.fish import load_fish
+from aquarom_fenics.io.persistence import write_json_atomic
+from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.reduction.reductor import build_prom
+from aquarom_fenics.verification.energy import energy_balance, spine_spectrum
 
-from aquarom_fenics.verification.energy import energy_balance, spine_spectrum  # noqa: E402
-from aquarom_fenics.geometry.fish import load_fish  # noqa: E402
-from aquarom_fenics.io.outputs import write_json_atomic  # noqa: E402
-from aquarom_fenics.dynamics.reduced_dynamics import reduced_stability  # noqa: E402
-from aquarom_fenics.reduction.reductor import build_prom  # noqa: E402
-from aquarom_fenics.io.scene import Scene  # noqa: E402
-from aquarom_fenics.dynamics.simulate import simulate_fom  # noqa: E402
+REPOSITORY = Path(__file__).resolve().parent.parent
 
 
 def design_of(summary: dict, scene: Scene) -> tuple[list[float], float]:

@@ -7,16 +7,14 @@ reports two local optima); its row is the best FOM-verified one.
 """
 import argparse
 import json
-import sys
 from pathlib import Path
 
-REPOSITORY = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPOSITORY))
+from aquarom_fenics.geometry.fish import load_fish
+from aquarom_fenics.io.outputs import software_versions
+from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.optimization.study import pareto_sweep, run_optimization
 
-from aquarom_fenics.geometry.fish import load_fish  # noqa: E402
-from aquarom_fenics.io.outputs import software_versions  # noqa: E402
-from aquarom_fenics.io.scene import Scene  # noqa: E402
-from aquarom_fenics.optimization.study import pareto_sweep, run_optimization  # noqa: E402
+REPOSITORY = Path(__file__).resolve().parents[1]
 
 STARTS = {"so2": 3}      # [optimizer] starts per case (1 when not listed)
 

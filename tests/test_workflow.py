@@ -3,7 +3,7 @@ import json
 import logging
 import time
 
-from aquarom_fenics.reduction.cache import cache_root
+from aquarom_fenics.io.paths import cache_root
 from aquarom_fenics.cli import main
 
 TOY = """

@@ -1,8 +1,7 @@
-"""Run a model over the scene's horizon and write its outputs (trajectory, summary, plot, XDMF)."""
+"""Run the FOM over the scene's horizon and write its outputs (trajectory, summary, plot, XDMF)."""
 from __future__ import annotations
 
 import logging
-import resource
 import signal
 import time as clock
 from contextlib import contextmanager
@@ -12,13 +11,13 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-from aquarom_fenics.viz.animate import DISPLACEMENT_FILE, write_displacement_series
 from aquarom_fenics.dynamics.diagnostics import newton_failure_hints, scene_warnings
 from aquarom_fenics.errors import InputError, Interrupted
 from aquarom_fenics.geometry.fish import Fish, load_fish
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.dynamics.integrator import IntegrationStopped, NewtonSettings, StepReport, integrate
-from aquarom_fenics.io.outputs import TrajectoryCSV, plot_trajectory, software_versions, write_json_atomic
+from aquarom_fenics.io.outputs import TrajectoryCSV
+from aquarom_fenics.io.run_outputs import write_run_outputs
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.dynamics.trajectory import DISTANCE_WINDOW, Trajectory, swimming_distance, tail_amplitude
 
@@ -141,28 +140,12 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
         timings={"setup": setup_time, "time_integration": clock.perf_counter() - started - setup_time},
         states=states, model=model)
     if is_writer:
-        write_displacement_series(Path(out_dir) / DISPLACEMENT_FILE, model.rest_points[:fish.nodes.n_vertices],
-                                  fish.mesh.cells,
-                                  arrays["time"], displacements)
-        write_run_outputs(Path(out_dir), scene, result, "fom", fish.parameter_vector(xi), fish.shape_names, comm)
+        vertices = fish.nodes.n_vertices
+        write_run_outputs(Path(out_dir), scene, result, "fom", dict(zip(fish.shape_names, fish.parameter_vector(xi))),
+                          model.rest_points[:vertices], fish.mesh.cells, displacements, comm, trajectory_written=True)
     if interruption:
         raise Interrupted(interruption)
     return result
-
-
-def write_run_outputs(out_dir: Path, scene: Scene, result, model_name: str, xi, shape_names, comm,
-                      extra: dict | None = None):
-    """summary.json (and trajectory.png) of a FOM or reduced run; ``extra`` adds model facts."""
-    summary = result.summary() | (extra or {}) | {
-        "model": model_name, "scene": scene.name, "scene_hash": scene.hash, "scene_values": scene.to_dict(),
-        "xi": dict(zip(shape_names, map(float, xi))), "mpi_ranks": comm.size,
-        "peak_memory_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
-        "versions": software_versions()}
-    write_json_atomic(out_dir / "summary.json", summary)
-    if scene.output.plots and len(result.trajectory) > 1:
-        title = f"{scene.name} ({model_name}): distance " + (
-            f"{100 * result.distance:.2f} cm" if result.completed else "n/a (stopped early)")
-        plot_trajectory(out_dir / "trajectory.png", result.trajectory.arrays(), title)
 
 
 @contextmanager

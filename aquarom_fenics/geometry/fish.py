@@ -12,9 +12,12 @@ from mpi4py import MPI
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.fem import dolfinx_adapter as fx
-from aquarom_fenics.geometry.mesh import FishMesh, LagrangeNodes, block_mesh, lagrange_nodes, read_mesh
+from aquarom_fenics.geometry.block import block_mesh
+from aquarom_fenics.geometry.mesh import FishMesh, LagrangeNodes, lagrange_nodes
+from aquarom_fenics.geometry.mesh_files import read_mesh
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.geometry.shapes import check_exact_design, design_points, reference_to_cells, shape_gradients, shape_matrix
+from aquarom_fenics.geometry.design_check import check_exact_design
+from aquarom_fenics.geometry.shapes import design_points, reference_to_cells, shape_gradients, shape_matrix
 from aquarom_fenics.geometry.tags import FishTags, tag_fish
 
 

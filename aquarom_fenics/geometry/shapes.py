@@ -16,7 +16,7 @@ Nodal arrays are (n_nodes, 3); ``U`` is (3 n_nodes, p) in node-major order (x0, 
 
 from __future__ import annotations
 
-from typing import Callable, Mapping, Protocol, Sequence
+from typing import Callable, Protocol, Sequence
 
 import numpy as np
 
@@ -31,25 +31,10 @@ class BoxDimensions(Protocol):
     height: float
 
 
-class RegionTags(Protocol):
-    """Anything with the cell indices of the head and of the two muscles (e.g. ``FishTags``)."""
-
-    head_cells: np.ndarray
-    left_muscle_cells: np.ndarray
-    right_muscle_cells: np.ndarray
-
-
 ShapeField = Callable[
     [np.ndarray, np.ndarray, np.ndarray, BoxDimensions], tuple[np.ndarray, np.ndarray, np.ndarray]
 ]
 """(x, y, z) relative coordinates, box -> (dx, dy, dz) nodal displacement [m]."""
-
-MIN_VOLUME_RATIO = 0.1
-"""A design may shrink no cell below this fraction of its nominal volume (SPEC §4)."""
-
-CELLS_NAMED = 3
-"""A refused design names at most this many of its worst cells."""
-
 
 def _zero(x: np.ndarray) -> np.ndarray:
     return np.zeros(np.shape(x))
@@ -360,83 +345,8 @@ def design_points(points: np.ndarray, U: np.ndarray, xi: np.ndarray) -> np.ndarr
     return points + (U @ np.asarray(xi, dtype=float)).reshape(points.shape)
 
 
-def cell_region(cell: int, regions: RegionTags) -> str:
-    """'head', 'left muscle', 'right muscle' or 'passive' (the rest of the body)."""
-    for name, region_cells in (("head", regions.head_cells), ("left muscle", regions.left_muscle_cells),
-                               ("right muscle", regions.right_muscle_cells)):
-        if cell in region_cells:
-            return name
-    return "passive"
-
-
-def describe_cell(cell: int, points: np.ndarray, cells: np.ndarray, volume_ratio: float,
-                  regions: RegionTags | None = None) -> str:
-    """'cell 17 (left muscle) at x=…, y=…, z=… [m], volume ratio …' of a nominal-mesh cell."""
-    centroid = np.asarray(points, dtype=float)[np.asarray(cells)[cell]].mean(axis=0)
-    region = f" ({cell_region(cell, regions)})" if regions is not None else ""
-    return (f"cell {cell}{region} at x={centroid[0]:.4g}, y={centroid[1]:.4g}, z={centroid[2]:.4g}, "
-            f"volume ratio {volume_ratio:.3g}")
-
-
-def check_design(points: np.ndarray, cells: np.ndarray, moved_points: np.ndarray,
-                 xi_by_name: Mapping[str, float], label: str = "design",
-                 regions: RegionTags | None = None) -> None:
-    """Raise InputError if the moved mesh inverts, flattens or shrinks a cell below 10%.
-
-    Volumes are compared with the nominal cell's signed volume, so the check holds for
-    either orientation of the nominal cells. The message names the worst cells with their
-    centroids in the nominal mesh [m] and, given ``regions``, the region of each.
-    """
-    from aquarom_fenics.geometry.mesh import signed_cell_volumes
-
-    if not np.all(np.isfinite(moved_points)):
-        names = ", ".join(f"{name}={value:g}" for name, value in xi_by_name.items())
-        raise InputError(f"{label} {names} has non-finite node coordinates; give finite parameters")
-    nominal = signed_cell_volumes(points, cells)
-    check_volume_ratios(signed_cell_volumes(moved_points, cells) / nominal, points, cells, xi_by_name, label, regions)
-
-
 def reference_to_cells(points: np.ndarray, cells: np.ndarray, reference_points: np.ndarray) -> np.ndarray:
     """(n_cells, n_q, 3) physical positions x = x_0 + Σ_a X_a (x_a - x_0) of reference points X."""
     vertices = np.asarray(points, dtype=float)[np.asarray(cells)]
     edges = vertices[:, 1:, :] - vertices[:, :1, :]
     return vertices[:, None, 0, :] + np.einsum("qa,cai->cqi", reference_points, edges)
-
-
-def check_exact_design(points: np.ndarray, cells: np.ndarray, gradient_at, sample_points: np.ndarray,
-                       xi_by_name: Mapping[str, float], label: str = "design",
-                       regions: RegionTags | None = None) -> None:
-    """Raise InputError unless det F_1 = det(I + ∇u_ξ) > 0.1 at every sample point (SPEC §4).
-
-    ``sample_points`` (n_cells, n_q, 3) are where the forms are integrated; ``gradient_at`` maps
-    (n, 3) positions to ∇u_ξ (n, 3, 3) of the exact shape field. The message names the cells with
-    the smallest det F_1 (their "volume ratio").
-    """
-    if not all(np.isfinite(value) for value in xi_by_name.values()):
-        names = ", ".join(f"{name}={value:g}" for name, value in xi_by_name.items())
-        raise InputError(f"{label} {names} has non-finite node coordinates; give finite parameters")
-    n_cells, n_points = sample_points.shape[:2]
-    gradient = gradient_at(sample_points.reshape(-1, 3))
-    with np.errstate(invalid="ignore"):
-        determinant = np.linalg.det(np.eye(3) + gradient).reshape(n_cells, n_points)
-    determinant = np.where(np.isfinite(determinant), determinant, -np.inf)
-    check_volume_ratios(determinant.min(axis=1), points, cells, xi_by_name, label, regions)
-
-
-def check_volume_ratios(volume_ratio: np.ndarray, points: np.ndarray, cells: np.ndarray,
-                        xi_by_name: Mapping[str, float], label: str = "design",
-                        regions: RegionTags | None = None) -> None:
-    """Raise InputError if a cell's volume ratio is ≤ 0 (inverted) or below MIN_VOLUME_RATIO."""
-    inverted = volume_ratio <= 0.0
-    shrunk = ~inverted & (volume_ratio < MIN_VOLUME_RATIO)
-    if not (inverted.any() or shrunk.any()):
-        return
-    n_offending = int(inverted.sum() + shrunk.sum())
-    worst = np.argsort(volume_ratio, kind="stable")[:min(CELLS_NAMED, n_offending)]
-    named = "; ".join(describe_cell(int(cell), points, cells, volume_ratio[cell], regions) for cell in worst)
-    parameters = ", ".join(f"{name}={value:g}" for name, value in xi_by_name.items())
-    raise InputError(
-        f"{label} {parameters} inverts or flattens {int(inverted.sum())} and shrinks "
-        f"{int(shrunk.sum())} more of {len(volume_ratio)} cells below {MIN_VOLUME_RATIO:g} of their "
-        f"nominal volume (worst, in the nominal mesh: {named}); reduce the parameters"
-    )

@@ -1,16 +1,13 @@
-"""Files a run leaves behind: incremental CSV, atomic JSON, versions, plots."""
+"""Files a run leaves behind: incremental CSV, versions, plots, output folders (atomic writes: ``persistence``)."""
 from __future__ import annotations
 
 import csv
 import ctypes
-import io
 import json
-import math
 import os
 import platform
 import shutil
 import subprocess
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,69 +15,7 @@ import numpy as np
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.dynamics.trajectory import COLUMNS
-
-
-def write_json_atomic(path: Path, data) -> None:
-    """Write JSON through a temporary file and os.replace, so a reader never sees half a file.
-
-    Non-finite numbers become null (standard JSON has no Infinity or NaN).
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps(_finite_or_null(data), indent=2, sort_keys=True, default=_json_default, allow_nan=False)
-    write_text_atomic(path, text + "\n")
-
-
-def write_text_atomic(path: Path, text: str) -> None:
-    """UTF-8 text written like :func:`write_bytes_atomic` (atomic on POSIX)."""
-    write_bytes_atomic(path, text.encode("utf-8"))
-
-
-def write_npz_atomic(path: Path, arrays: dict[str, np.ndarray], compressed: bool = False) -> None:
-    """A .npz archive built in memory, then written like :func:`write_bytes_atomic` (a full disk
-    fails on one plain write that names the file, never halfway through the archive)."""
-    buffer = io.BytesIO()
-    (np.savez_compressed if compressed else np.savez)(buffer, **arrays)
-    write_bytes_atomic(path, buffer.getvalue())
-
-
-def write_bytes_atomic(path: Path, content: bytes) -> None:
-    """A uniquely named temporary file beside ``path``, then os.replace; an OS error names ``path``."""
-    path = Path(path)
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            stream.write(content)
-        os.chmod(temporary, 0o644)
-        os.replace(temporary, path)
-    except OSError as error:
-        Path(temporary).unlink(missing_ok=True)
-        raise OSError(error.errno, error.strerror, str(path)) from None
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
-
-
-def _finite_or_null(value):
-    if isinstance(value, dict):
-        return {key: _finite_or_null(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_finite_or_null(item) for item in value]
-    if isinstance(value, np.ndarray):
-        return _finite_or_null(value.tolist())
-    if isinstance(value, (float, np.floating)) and not math.isfinite(value):
-        return None
-    return value
-
-
-def _json_default(value):
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, tuple):
-        return list(value)
-    raise TypeError(f"not JSON serialisable: {type(value)}")
+from aquarom_fenics.io.persistence import require_writable, write_json_atomic
 
 
 class TrajectoryCSV:
@@ -319,13 +254,3 @@ def _make_folder(path: Path) -> None:
         for folder in created:
             folder.rmdir()
         raise
-
-
-def require_writable(folder: Path, what: str = "output") -> None:
-    """A probe file is created and removed, so a read-only or full location fails before any work."""
-    try:
-        handle, probe = tempfile.mkstemp(dir=folder, prefix=".write-probe-")
-        os.close(handle)
-        os.unlink(probe)
-    except OSError as error:
-        raise InputError(f"{what} {folder}: not writable ({error.strerror}); choose a writable location") from None

@@ -1,8 +1,10 @@
 """Scene files: one TOML file that fully describes a study (SPEC §1).
 
-Every section is a frozen dataclass whose fields carry the SPEC defaults. Loading checks every
-key and value and raises :class:`InputError` with one line naming the file, the key and what
-would be valid. ``Scene.hash`` identifies the resolved study (values, not formatting).
+Every section is a frozen dataclass whose fields carry the SPEC defaults
+(:mod:`aquarom_fenics.io.scene_sections`). Loading checks every key and value and raises
+:class:`InputError` with one line naming the file, the key and what would be valid.
+``Scene.hash`` identifies the resolved study (values, not formatting); ``Scene.to_toml`` writes
+a file that loads back to the same scene and hash.
 """
 from __future__ import annotations
 
@@ -12,174 +14,18 @@ import json
 import logging
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.io.paths import shipped_scenes
+from aquarom_fenics.io.scene_sections import (SECTIONS, ActuationSection, CooptimizationSection, FluidSection,
+                                              LinearConstraint, MaterialSection, MeshSection, OptimizerSection,
+                                              OutputSection, ReductionSection, RegionsSection, ShapeSpec,
+                                              SolverSection)
 
 SCENES_DIR = shipped_scenes()
-
-
-def _positive(value) -> str | None:
-    return None if value > 0 else "must be > 0"
-
-
-def _non_negative(value) -> str | None:
-    return None if value >= 0 else "must be >= 0"
-
-
-def _one_of(*choices):
-    def check(value) -> str | None:
-        return None if value in choices else f"must be one of {', '.join(map(repr, choices))}"
-    return check
-
-
-def _spec(default, check=None, doc="", variable_length=False):
-    """A scene field: its default, an optional validity check and a unit/meaning for the docs."""
-    return field(default=default, metadata={"check": check, "doc": doc, "variable_length": variable_length})
-
-
-def _interval_within(low, high):
-    def check(value) -> str | None:
-        lower, upper = value
-        return None if low <= lower < upper <= high else f"must be [lower, upper] with {low} <= lower < upper <= {high}"
-    return check
-
-
-@dataclass(frozen=True)
-class MeshSection:
-    level: int = _spec(3, _one_of(1, 2, 3, 4, 5), "refinement level of the built-in block (1: ~1.3k … 5: ~25k cells)")
-    degree: int = _spec(1, _one_of(1, 2), "Lagrange degree of the displacement (1: linear, 2: quadratic tetrahedra)")
-    file: str = _spec("", None, "external mesh (.msh or .inp), relative to the scene file; overrides level")
-    scale: float = _spec(1.0, _positive, "factor applied to the file's coordinates (to metres)")
-    translate: tuple[float, float, float] = _spec((0.0, 0.0, 0.0), None, "shift after scaling [m]")
-    length: float = _spec(0.20, _positive, "block length L along x [m]")
-    width: float = _spec(0.04, _positive, "block width W along y [m]")
-    height: float = _spec(0.10, _positive, "block height H along z [m]")
-
-
-@dataclass(frozen=True)
-class MaterialSection:
-    young_modulus: float = _spec(260e3, _positive, "E [Pa]")
-    poisson_ratio: float = _spec(0.4, lambda v: None if -1 < v < 0.5 else "must be in (-1, 0.5)", "ν")
-    density: float = _spec(1070.0, _positive, "ρ [kg/m³]")
-    head_stiffness_factor: float = _spec(100.0, _positive, "head E = factor × E")
-    rayleigh_alpha: float = _spec(3.1, _non_negative, "α_R [1/s] in C = α_R M + β_R K_0")
-    rayleigh_beta: float = _spec(6.3e-6, _non_negative, "β_R [s]")
-    mass: str = _spec("consistent", _one_of("consistent", "lumped"), "mass matrix")
-
-
-@dataclass(frozen=True)
-class RegionsSection:
-    head_fraction: float = _spec(0.35, lambda v: None if 0 < v < 1 else "must be in (0, 1)", "head: centroid x ≥ -fraction·L")
-    muscle_range: tuple[float, float] = _spec((-0.95, -0.35), _interval_within(-1.0, 0.0), "muscles: -a·L < centroid x < -b·L, as [-a, -b]")
-
-
-@dataclass(frozen=True)
-class ActuationSection:
-    stiffness: float = _spec(6e4, _non_negative, "muscle stiffness k [Pa]")
-    amplitude: float = _spec(0.2, _non_negative, "A in a_left = A sin(2π f t), a_right = -a_left")
-    frequency: float = _spec(1.0, _positive, "f [Hz]")
-    muscle_volume: str = _spec("shape", _one_of("shape", "nominal"), "muscle energy over the shape-varied (SPEC default) or nominal volume")
-
-
-@dataclass(frozen=True)
-class FluidSection:
-    density: float = _spec(1000.0, _positive, "ρ_w [kg/m³]")
-    thrust: bool = _spec(True, None, "Lighthill reactive thrust on the spine")
-    drag: bool = _spec(True, None, "form drag on the skin")
-    spine_force: str = _spec("source", _one_of("source", "lagrangian"), "spine force -d/dt(∂T_a/∂v) ('source') or with +∂T_a/∂x ('lagrangian', exchanges no energy by itself)")
-
-
-@dataclass(frozen=True)
-class ShapeSpec:
-    name: str
-    lower: float
-    upper: float
-    start: float = 0.0
-    radius: float | None = None     # PROM validity radius; None: [reduction] validity_fraction × max |bound|
-
-
-@dataclass(frozen=True)
-class LinearConstraint:
-    """lower ≤ Σ_k coefficients[k] ξ_k ≤ upper (either bound may be infinite)."""
-    coefficients: tuple[tuple[str, float], ...]
-    lower: float = -math.inf
-    upper: float = math.inf
-
-
-@dataclass(frozen=True)
-class SolverSection:
-    time_step: float = _spec(0.02, _positive, "time step h [s]")
-    duration: float = _spec(2.0, lambda v: None if v >= 0.1 else "must be ≥ 0.1 s (the distance averages the last 0.1 s)", "horizon T [s]")
-    integrator: str = _spec("generalized-alpha", _one_of("generalized-alpha", "newmark"), "time scheme (SPEC §6)")
-    rho_infinity: float = _spec(0.8, lambda v: None if 0 <= v <= 1 else "must be in [0, 1]", "ρ∞ of generalized-α: spectral radius at h ω → ∞ (README: how it was chosen)")
-    # SPEC §6 gives α_N = 0.005 for the source's Newmark; with it a high-frequency oscillation of the
-    # spine nodes grows under the Lighthill forces on finer meshes (levels 4-5) and on thin optimal
-    # designs, and the FOM stops near t = 1.9 s. α_N = 0.02 damps it (nominal distance -2 %).
-    newmark_alpha: float = _spec(0.02, lambda v: None if 0 <= v < 0.5 else "must be in [0, 0.5)", "α_N of integrator = \"newmark\": γ = ½ + α_N, β = (1 + α_N)²/4 (SPEC: 0.005)")
-    min_time_step: float = _spec(1e-3, _positive, "a step whose Newton fails is retried with h/2, h/4, … down to this [s]")
-    tolerance: float = _spec(1e-6, _positive, "relative Newton tolerance")
-    max_iterations: int = _spec(30, _positive, "Newton iterations per step")
-
-
-@dataclass(frozen=True)
-class ReductionSection:
-    basis: str = _spec("default", _one_of("default", "paper"), "'paper' drops the actuation modes ψ, θ_ψ")
-    vibration_modes: int = _spec(1, _positive, "number of vibration modes n_vm")
-    modal_derivatives: bool = _spec(True, None, "static modal derivatives θ_ij")
-    taylor_order: int = _spec(1, _one_of(1, 2), "order of the PROM's Taylor expansion in ξ")
-    drop_tolerance: float = _spec(1e-8, _positive, "basis vectors whose remaining mass-norm is below this are dropped")
-    validity_fraction: float = _spec(0.25, _positive, "PROM validity radius of a parameter as a fraction of its largest |bound| (a shape's own `radius` overrides it)")
-
-
-@dataclass(frozen=True)
-class OptimizerSection:
-    method: str = _spec("paper", _one_of("paper", "trust-region"), "optimisation algorithm")
-    max_iterations: int = _spec(100, _positive, "iterations (a safeguard: the optimisers stop on optimality_tolerance)")
-    step_size: float = _spec(0.05, _positive, "γ in ξ ← ξ - γ W ∇L; W starts at 1/‖∇L_0‖_∞, so γ is the first step (paper)")
-    barrier_weight: float = _spec(1e-3, _positive, "log-barrier weight (paper)")
-    rebuild_threshold: float = _spec(0.15, _positive, "rebuild the PROM when any |ξ - ξ_c| exceeds this (paper)")
-    n_rebuild: int = _spec(5, _positive, "rebuild the PROM every n iterations (paper)")
-    step_tolerance: float = _spec(1e-3, _positive, "stop (stalled before optimality) when ‖Δξ‖ falls below")
-    cost_tolerance: float = _spec(1e-4, _positive, "stop (stalled before optimality) when the predicted relative cost reduction falls below (trust-region)")
-    initial_radius: float = _spec(1.0, lambda v: None if 0 < v <= 1 else "must be in (0, 1]", "trust radius as a fraction of the PROM validity radius (trust-region)")
-    accept_ratio: float = _spec(0.1, lambda v: None if 0 <= v < 1 else "must be in [0, 1)", "accept a step when actual/predicted reduction exceeds this")
-    optimality_tolerance: float = _spec(1e-2, _positive, "stop when the first-order measure ‖D r‖_∞ / |L| (KKT residual r, D the parameter ranges) falls below")
-    active_tolerance: float = _spec(1e-2, _positive, "a bound or linear constraint is active when its slack is below this fraction of its range")
-    starts: int = _spec(1, _positive, "optimisations from the start point and starts - 1 Latin-hypercube feasible points")
-    seed: int = _spec(0, _non_negative, "seed of the Latin-hypercube starts")
-
-
-@dataclass(frozen=True)
-class CooptimizationSection:
-    enabled: bool = _spec(False, None, "optimise the actuation amplitude A too")
-    amplitude_bounds: tuple[float, float] = _spec((0.05, 0.4), _interval_within(0.0, math.inf), "bounds of A")
-    weights: tuple[float, ...] = _spec((0.2, 0.3, 0.4, 0.5, 0.7, 0.9, 0.98), lambda v: None if v and all(0 <= w <= 1 for w in v) else "must be a non-empty list of numbers in [0, 1]", "w_1 sweep, w_2 = 1 - w_1", variable_length=True)
-    energy_weight: float = _spec(1.0, _non_negative, "α in L = w_1 (-d) + w_2 α A²")
-
-
-@dataclass(frozen=True)
-class OutputSection:
-    xdmf: bool = _spec(False, None, "write displacement time series as XDMF")
-    render: bool = _spec(True, None, "render PNG pictures with pyvista")
-    plots: bool = _spec(True, None, "write matplotlib PNG plots")
-
-
-SECTIONS = {
-    "mesh": MeshSection,
-    "material": MaterialSection,
-    "regions": RegionsSection,
-    "actuation": ActuationSection,
-    "fluid": FluidSection,
-    "solver": SolverSection,
-    "reduction": ReductionSection,
-    "optimizer": OptimizerSection,
-    "cooptimization": CooptimizationSection,
-    "output": OutputSection,
-}
 
 
 @dataclass(frozen=True)
@@ -252,11 +98,46 @@ class Scene:
             digest.update(self.mesh_file.read_bytes())
         return digest.hexdigest()[:16]
 
+    def to_toml(self) -> str:
+        """The TOML text of the resolved scene (every section, defaults written out): the inverse of
+        :meth:`load`, read back with the same hash (an external mesh is written as its absolute path)."""
+        data = self.to_dict()
+        lines = [f"name = {_toml_value(self.name)}", f"description = {_toml_value(self.description)}"]
+        for section in SECTIONS:
+            lines.append(f"\n[{section}]")
+            lines += [f"{key} = {_toml_value(value)}" for key, value in data[section].items()]
+        if self.shapes:
+            lines.append("\n[shapes]")
+        for shape in self.shapes:
+            radius = "" if shape.radius is None else f", radius = {_toml_value(shape.radius)}"
+            lines.append(f"{shape.name} = {{ bounds = [{_toml_value(shape.lower)}, {_toml_value(shape.upper)}], "
+                         f"start = {_toml_value(shape.start)}{radius} }}")
+        for constraint in self.constraints:
+            lines.append("\n[[constraints]]")
+            lines.append("coefficients = { " + ", ".join(f"{name} = {_toml_value(value)}"
+                                                          for name, value in constraint.coefficients) + " }")
+            lines += [f"{bound} = {_toml_value(getattr(constraint, bound))}" for bound in ("lower", "upper")
+                      if math.isfinite(getattr(constraint, bound))]
+        return "\n".join(lines) + "\n"
+
     def replace(self, section: str, **values) -> "Scene":
         """A copy with some values of one section changed (validated like a file)."""
         current = getattr(self, section)
         merged = dataclasses.asdict(current) | values
         return dataclasses.replace(self, **{section: _section_from_dict(SECTIONS[section], merged, f"scene {self.source}", section)})
+
+
+def _toml_value(value) -> str:
+    """A TOML literal of a scene value (booleans, numbers, strings and lists of them)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False)    # a JSON string is a TOML basic string
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(item) for item in value) + "]"
+    raise TypeError(f"no TOML literal for {value!r}")
 
 
 def resolve_scene_path(path: str | Path) -> Path:

@@ -256,3 +256,17 @@ def evaluate(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarray
     if not (np.isfinite(cost) and np.all(np.isfinite(gradient))):
         raise SolverError(f"non-finite cost or gradient at {space.as_dict(z)}: cost {cost}, gradient {gradient}")
     return Evaluation(z.copy(), float(cost), gradient, float(result.distance), distance_gradient)
+
+
+def barrier_scale_at(settings, cost: float) -> float:
+    """μ = barrier_weight · |L| of the paper method's L_b = L + μ B."""
+    return settings.barrier_weight * max(abs(cost), 1e-12)
+
+
+def first_order_at(scene: Scene, space: DesignSpace, evaluation: Evaluation) -> FirstOrder:
+    """First-order measure and active set at an evaluated design; the paper method's barrier
+    multipliers μ / s_i count for its inactive rows."""
+    settings = scene.optimizer
+    barrier_scale = barrier_scale_at(settings, evaluation.cost) if settings.method == "paper" else 0.0
+    return first_order(space, evaluation.z, evaluation.cost, evaluation.gradient, settings.active_tolerance,
+                       barrier_scale)

@@ -9,7 +9,7 @@ import json
 
 import numpy as np
 
-from aquarom_fenics.geometry.mesh import LEVEL_TARGET_CELLS, block_cache_path
+from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS, block_cache_path
 from aquarom_fenics.io.paths import bench_results
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.reduction.basis import candidate_labels
@@ -23,23 +23,33 @@ QUADRATIC_COST_FACTOR = {1: 1.0, 2: 8.6}
 """Cost of a quadratic mesh against the linear one on the same cells (level 1 FOM: 16.4 s against 1.9 s)."""
 
 
+def power_law_fit(sizes, times) -> dict | None:
+    """Least squares of log t = log c + e log n over the positive, finite pairs: exponent e, prefactor c
+    and the number of points (None below two distinct sizes)."""
+    sizes, times = np.asarray(sizes, dtype=float), np.asarray(times, dtype=float)
+    keep = np.isfinite(sizes) & np.isfinite(times) & (sizes > 0) & (times > 0)
+    if np.unique(sizes[keep]).size < 2:
+        return None
+    exponent, intercept = np.polyfit(np.log(sizes[keep]), np.log(times[keep]), 1)
+    return {"exponent": float(exponent), "prefactor": float(np.exp(intercept)), "points": int(keep.sum())}
+
+
 def fom_seconds(cells: int, steps: int, degree: int = 1) -> float:
     """Estimated FOM wall time [s] for ``steps`` Newmark steps."""
     runs = _bench_runs("fom.json", lambda r: r.get("ranks") == 1 and "failed" not in r
                        and r.get("degree", 1) == degree)
-    if len(runs) >= 2:
-        exponent, scale = np.polyfit(np.log([r["cells"] for r in runs]),
-                                     np.log([r["time_integration"] for r in runs]), 1)
-        return float(np.exp(scale) * cells ** exponent) * steps / 100
+    fit = power_law_fit([r["cells"] for r in runs], [r["time_integration"] for r in runs])
+    if fit:
+        return fit["prefactor"] * cells ** fit["exponent"] * steps / 100
     return (QUADRATIC_COST_FACTOR[degree] * REFERENCE_FOM_SECONDS * (cells / REFERENCE_CELLS) ** REFERENCE_FOM_EXPONENT
             * steps / 100)
 
 
 def prom_build_seconds(cells: int, parameters: int, degree: int = 1) -> float:
     runs = _bench_runs("prom.json", lambda r: r["parameters"] == parameters and r.get("degree", 1) == degree)
-    if len(runs) >= 2:
-        exponent, scale = np.polyfit(np.log([r["cells"] for r in runs]), np.log([r["build_time"] for r in runs]), 1)
-        return float(np.exp(scale) * cells ** exponent)
+    fit = power_law_fit([r["cells"] for r in runs], [r["build_time"] for r in runs])
+    if fit:
+        return fit["prefactor"] * cells ** fit["exponent"]
     return QUADRATIC_COST_FACTOR[degree] * (0.5 + 0.33 * parameters) * cells / REFERENCE_CELLS
 
 

@@ -11,13 +11,16 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-from aquarom_fenics.reduction.cache import cache_root, entry_key, read_intact, require_cache_writable, store
 from aquarom_fenics.optimization.cost import CostWeights, design_space
 from aquarom_fenics.errors import InputError, Interrupted, SolverError
 from aquarom_fenics.geometry.fish import Fish, load_fish
-from aquarom_fenics.optimization.optimize import (DEFAULT_MAX_TIME, Checkpoint, OptimizationResult, PromBuilder, history_columns, optimization_space,
-                       optimize, start_points)
-from aquarom_fenics.io.outputs import software_versions, write_json_atomic
+from aquarom_fenics.optimization.history import Checkpoint, history_columns
+from aquarom_fenics.optimization.optimize import (DEFAULT_MAX_TIME, OptimizationResult, optimization_space, optimize,
+                                                  start_points)
+from aquarom_fenics.optimization.prom_builder import PromBuilder
+from aquarom_fenics.io.outputs import software_versions
+from aquarom_fenics.io.paths import cache_root
+from aquarom_fenics.io.persistence import entry_key, get_or_compute, require_cache_writable, write_json_atomic
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.dynamics.simulate import simulate_fom
 
@@ -50,20 +53,20 @@ def fom_distance(scene: Scene, fish: Fish, design: dict[str, float], amplitude: 
     """Swimming distance of the FOM at a design, cached by scene hash, design and amplitude."""
     if amplitude is not None:
         scene = scene.replace("actuation", amplitude=amplitude)
-    path = cache_root() / "fom" / f"{entry_key('fom', scene.hash, sorted(design.items()))}.json"
-    if path.exists():
-        distance = read_intact(path, lambda entry: json.loads(entry.read_text())["distance"])
-        if distance is not None:
-            log.info("FOM at %s: reused from the cache (%s)", design, path.name)
-            return distance
-    require_cache_writable("fom")
-    result = simulate_fom(scene, design, fish=fish, progress=MPI.COMM_WORLD.rank == 0)
-    if not result.completed:
-        raise SolverError(f"FOM at {design} stopped: {result.error}")
-    if MPI.COMM_WORLD.rank == 0:
-        entry = {"design": design, "scene_hash": scene.hash, "distance": result.distance}
-        store(path, lambda target: write_json_atomic(target, entry))
-    return result.distance
+
+    def simulate() -> float:
+        require_cache_writable("fom")
+        result = simulate_fom(scene, design, fish=fish, progress=MPI.COMM_WORLD.rank == 0)
+        if not result.completed:
+            raise SolverError(f"FOM at {design} stopped: {result.error}")
+        return result.distance
+
+    def save(distance: float, path: Path) -> None:
+        write_json_atomic(path, {"design": design, "scene_hash": scene.hash, "distance": distance})
+
+    return get_or_compute(cache_root() / "fom" / f"{entry_key('fom', scene.hash, sorted(design.items()))}.json",
+                          simulate, save, load=lambda path: json.loads(path.read_text())["distance"],
+                          comm=MPI.COMM_WORLD, label=f"FOM at {design}")
 
 
 def fom_check(scene: Scene, fish: Fish, result: OptimizationResult) -> FomCheck:

@@ -16,7 +16,7 @@ from typing import get_args, get_type_hints
 import numpy as np
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.io.outputs import write_npz_atomic
+from aquarom_fenics.io.persistence import write_npz_atomic
 from aquarom_fenics.physics.drag import DragTensors
 from aquarom_fenics.physics.elastic import ElasticTensors
 from aquarom_fenics.physics.inertia import InertiaTensors

@@ -6,13 +6,19 @@ import numpy as np
 ERROR_SIGNALS = ("head_x", "tail_y", "com_x")
 
 
+def deviation(value: float, reference: float) -> tuple[float, float | None]:
+    """The error of ``value`` against ``reference``: (value - reference, (value - reference) / |reference|);
+    the relative error is None for a zero reference."""
+    difference = value - reference
+    return difference, (difference / abs(reference) if reference else None)
+
+
 def model_errors(reference, approximation) -> dict:
     """Relative and absolute errors of the reduced run against the FOM run [m]."""
     errors = {}
-    for name, ref, value in (("distance", reference.distance, approximation.distance),
-                             ("tail_amplitude", reference.tail_amplitude, approximation.tail_amplitude)):
-        errors[f"{name}_absolute"] = value - ref
-        errors[f"{name}_relative"] = (value - ref) / abs(ref)
+    for name in ("distance", "tail_amplitude"):
+        errors[f"{name}_absolute"], errors[f"{name}_relative"] = deviation(getattr(approximation, name),
+                                                                           getattr(reference, name))
     ref_arrays, arrays = reference.trajectory.arrays(), approximation.trajectory.arrays()
     for name in ERROR_SIGNALS:
         scale = np.abs(ref_arrays[name]).max()

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import math
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,11 +18,8 @@ import numpy as np
 from mpi4py import MPI
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.io.outputs import write_npz_atomic
+from aquarom_fenics.io.run_outputs import DISPLACEMENT_FILE, DisplacementSeries, read_displacement_series
 from aquarom_fenics.viz.render import EDGE_COLOUR, EDGE_OPACITY, _frame_camera, _plotter, _save, tetra_grid
-
-DISPLACEMENT_FILE = "displacement.npz"
-"""Nodal displacement time series of a run, written next to trajectory.csv."""
 
 ANIMATION_FILE = "animation.mp4"
 """Default animation name inside the run directory; the GIF preview has the same stem."""
@@ -83,74 +79,6 @@ class _View:
 VIEWS = (_View("from above; grey outline at t = 0", (0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
          _View("from the right side; grey outline at t = 0", (0.0, -1.0, 0.0), (0.0, 0.0, 1.0)))
 """The two views side by side: from above (+z, left of the fish up) and from its right flank (-y, z up)."""
-
-
-@dataclass(frozen=True)
-class DisplacementSeries:
-    """Nodal displacements of one run on its design mesh."""
-
-    points: np.ndarray        # (n_nodes, 3) design positions x_0 + U ξ [m]
-    cells: np.ndarray         # (n_cells, 4) node indices of the linear tetrahedra
-    time: np.ndarray          # (n_samples,) sample times [s]
-    displacement: np.ndarray  # (n_samples, n_nodes, 3) displacement from the design [m]
-
-    def deformed(self, sample: int) -> np.ndarray:
-        """Nodal positions [m] at one sample (true scale)."""
-        return self.points + self.displacement[sample]
-
-
-def write_displacement_series(path: Path, points, cells, time, nodal_displacements) -> Path:
-    """Write ``displacement.npz`` (through a temporary file, so a reader never sees half of it).
-
-    ``points`` (n_nodes, 3) are the design positions x_0 + U ξ [m], ``cells`` (n_cells, 4) the
-    tetrahedra, ``time`` the n_samples sample times [s] and ``nodal_displacements`` the
-    (n_samples, n_nodes, 3) nodal displacements from the design [m] (a list of (n_nodes, 3)
-    arrays will do). Returns ``path``.
-    """
-    series = DisplacementSeries(np.asarray(points, dtype=np.float64), np.asarray(cells, dtype=np.int64),
-                                np.asarray(time, dtype=np.float64),
-                                np.asarray(nodal_displacements, dtype=np.float64))
-    problem = _shape_problem(series)
-    if problem:
-        raise ValueError(f"displacement series for {path}: {problem}")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_npz_atomic(path, {"points": series.points, "cells": series.cells, "time": series.time,
-                            "displacement": series.displacement}, compressed=True)
-    return path
-
-
-def read_displacement_series(path: Path) -> DisplacementSeries:
-    """The series written by :func:`write_displacement_series` (InputError if it is not one)."""
-    path = Path(path)
-    try:
-        with np.load(path) as data:
-            series = DisplacementSeries(data["points"], data["cells"], data["time"], data["displacement"])
-    except FileNotFoundError:
-        raise InputError(f"{path} does not exist") from None
-    except (KeyError, OSError, ValueError, zipfile.BadZipFile) as error:
-        raise InputError(f"{path} is not a displacement series (points, cells, time, displacement): {error}") from None
-    problem = _shape_problem(series)
-    if problem:
-        raise InputError(f"{path}: {problem}")
-    return series
-
-
-def _shape_problem(series: DisplacementSeries) -> str:
-    """What is inconsistent about the arrays' shapes, or an empty string."""
-    n_nodes = series.points.shape[0] if series.points.ndim == 2 else -1
-    if series.points.shape != (n_nodes, 3) or n_nodes < 4:
-        return f"points must be (n_nodes, 3), got {series.points.shape}"
-    if series.cells.ndim != 2 or series.cells.shape[1] != 4:
-        return f"cells must be (n_cells, 4), got {series.cells.shape}"
-    if series.cells.size and not 0 <= series.cells.min() <= series.cells.max() < n_nodes:
-        return f"cells refer to nodes outside 0 … {n_nodes - 1}"
-    if series.time.ndim != 1 or series.time.size == 0:
-        return f"time must be a non-empty 1-d array, got {series.time.shape}"
-    expected = (series.time.size, n_nodes, 3)
-    if series.displacement.shape != expected:
-        return f"displacement must be (n_samples, n_nodes, 3) = {expected}, got {series.displacement.shape}"
-    return ""
 
 
 # ---------------------------------------------------------------------------------- animation

@@ -13,7 +13,7 @@ from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.fem.fom import FullOrderModel, describe_linear_solve, direct_solver
 from aquarom_fenics.dynamics.integrator import NewtonSettings, TimeScheme, integrate
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.geometry.shapes import cell_region, check_design
+from aquarom_fenics.geometry.design_check import cell_region, check_design
 from aquarom_fenics.dynamics.simulate import simulate_fom
 from conftest import coarse_scene
 

@@ -85,7 +85,7 @@ although the exact map has det F_1 = (1 + ∂Δy/∂y)(1 + ∂Δz/∂z) > 0 for 
 
 def test_design_check_judges_the_exact_geometry_not_its_nodal_interpolation():
     from aquarom_fenics.io.scene import Scene
-    from aquarom_fenics.geometry.shapes import check_design
+    from aquarom_fenics.geometry.design_check import check_design
 
     fish = load_fish(Scene.load("so2").replace("mesh", level=3, degree=1))
     xi = fish.parameter_vector(SO2_CORNER_DESIGN)

@@ -1,23 +1,16 @@
 """Block meshes, mesh import and the tags of SPEC §3."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from aquarom_fenics.geometry import mesh as mesh_module
+from aquarom_fenics.geometry import block as block_module
+from aquarom_fenics.geometry import gmsh_session
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.io.paths import shipped_meshes
-from aquarom_fenics.geometry.mesh import (
-    LEVEL_TARGET_CELLS,
-    FishMesh,
-    block_axis_segments,
-    block_mesh,
-    cell_quality,
-    read_mesh,
-    signed_cell_volumes,
-)
+from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS, block_axis_segments, block_mesh
+from aquarom_fenics.geometry.mesh import FishMesh, cell_quality, signed_cell_volumes
+from aquarom_fenics.geometry.mesh_files import read_mesh
 from aquarom_fenics.geometry.tags import cell_centroids, head_cell_mask, muscle_cell_masks, tag_fish
 
 L, W, H = 0.20, 0.04, 0.10
@@ -41,7 +34,7 @@ def coarse_tags(coarse):
 
 
 def gmsh_module():
-    return mesh_module._import_gmsh()
+    return gmsh_session.import_gmsh()
 
 
 def mirror(points, axis):
@@ -227,14 +220,14 @@ def test_cell_quality_is_one_for_regular_and_zero_for_flat_tetrahedra():
 
 def test_second_call_reads_the_cache(tmp_path, monkeypatch):
     first = block_mesh(1, cache_dir=tmp_path)
-    cached = list(tmp_path.iterdir())
-    assert len(cached) == 1 and cached[0].suffix == ".npz"
+    cached = list(tmp_path.glob("*.npz"))
+    assert len(cached) == 1 and (tmp_path / f"{cached[0].name}.sha256").is_file()
     assert f"gmsh{gmsh_module().__version__}" in cached[0].name
 
     def no_meshing(*args):
         raise AssertionError("block_mesh meshed again instead of reading the cache")
 
-    monkeypatch.setattr(mesh_module, "_generate_block", no_meshing)
+    monkeypatch.setattr(block_module, "_generate_block", no_meshing)
     second = block_mesh(1, cache_dir=tmp_path)
     np.testing.assert_array_equal(second.points, first.points)
     np.testing.assert_array_equal(second.cells, first.cells)
@@ -242,18 +235,19 @@ def test_second_call_reads_the_cache(tmp_path, monkeypatch):
 
 def test_corrupt_cache_file_is_regenerated(tmp_path, monkeypatch):
     first = block_mesh(1, cache_dir=tmp_path)
-    (cache_file,) = tmp_path.iterdir()
+    (cache_file,) = tmp_path.glob("*.npz")
     cache_file.write_bytes(b"not a zip archive")
-    generate = mesh_module._generate_block
+    generate = block_module._generate_block
     calls = []
     monkeypatch.setattr(
-        mesh_module, "_generate_block", lambda *args: calls.append(args) or generate(*args)
+        block_module, "_generate_block", lambda *args: calls.append(args) or generate(*args)
     )
     again = block_mesh(1, cache_dir=tmp_path)
     assert len(calls) == 1
     np.testing.assert_array_equal(again.points, first.points)
     np.testing.assert_array_equal(again.cells, first.cells)
-    assert [path.name for path in tmp_path.iterdir()] == [cache_file.name]
+    assert sorted(path.name for path in tmp_path.iterdir()) == [
+        cache_file.name, f"{cache_file.name}.lock", f"{cache_file.name}.sha256"]
     block_mesh(1, cache_dir=tmp_path)
     assert len(calls) == 1
 
@@ -269,7 +263,7 @@ def test_unwritable_cache_still_gives_the_mesh(tmp_path, coarse):
 def test_gmsh_is_left_as_found(tmp_path):
     gmsh = gmsh_module()
     block_mesh(1, cache_dir=tmp_path / "first")
-    assert not mesh_module._gmsh_is_initialized(gmsh)
+    assert not gmsh_session.gmsh_is_initialized(gmsh)
     gmsh.initialize(readConfigFiles=False)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
@@ -278,7 +272,7 @@ def test_gmsh_is_left_as_found(tmp_path):
         gmsh.model.occ.synchronize()
         gmsh.option.setNumber("Mesh.Algorithm3D", 4)
         block_mesh(1, cache_dir=tmp_path / "second")
-        assert mesh_module._gmsh_is_initialized(gmsh)
+        assert gmsh_session.gmsh_is_initialized(gmsh)
         assert gmsh.model.getCurrent() == "caller"
         assert gmsh.model.getEntities(3) == [(3, 1)]
         assert gmsh.option.getNumber("Mesh.Algorithm3D") == 4
@@ -388,7 +382,7 @@ def test_corrupt_msh_is_an_input_error(tmp_path):
     path.write_text("this is not\na gmsh file\n")
     with pytest.raises(InputError, match="garbage.msh: gmsh cannot read it"):
         read_mesh(path)
-    assert not mesh_module._gmsh_is_initialized(gmsh_module())
+    assert not gmsh_session.gmsh_is_initialized(gmsh_module())
 
 
 def test_unsupported_suffix_is_an_input_error(tmp_path):

@@ -8,9 +8,8 @@ import numpy as np
 import pytest
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.geometry.shapes import (
-    CATALOG, check_design, design_points, shape_displacement, shape_matrix, shape_names,
-)
+from aquarom_fenics.geometry.design_check import check_design
+from aquarom_fenics.geometry.shapes import CATALOG, design_points, shape_displacement, shape_matrix, shape_names
 
 L, W, H = 0.20, 0.04, 0.10
 

@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aquarom_fenics.optimization import optimize as optimize_module
+from aquarom_fenics.optimization import history
 from aquarom_fenics.io import outputs as outputs_module
+from aquarom_fenics.io import persistence as persistence_module
 from aquarom_fenics.cli import main
 
 SHORT = """
@@ -184,7 +185,7 @@ def test_resume_without_a_checkpoint_creates_nothing(optimized, tmp_path, capsys
 def test_interrupted_optimisation_exits_130_and_resumes_with_the_fresh_column_order(optimized, tmp_path, capsys,
                                                                                       monkeypatch):
     _, scene, fresh = optimized
-    original = optimize_module.Checkpoint.save
+    original = history.Checkpoint.save
     calls = []
 
     def save_then_interrupt(self, *args):
@@ -193,7 +194,7 @@ def test_interrupted_optimisation_exits_130_and_resumes_with_the_fresh_column_or
         if len(calls) == 2:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(optimize_module.Checkpoint, "save", save_then_interrupt)
+    monkeypatch.setattr(history.Checkpoint, "save", save_then_interrupt)
     out = tmp_path / "o"
     assert main(["optimize", scene, "--out", str(out)]) == 130
     message = one_line(capsys)
@@ -201,7 +202,7 @@ def test_interrupted_optimisation_exits_130_and_resumes_with_the_fresh_column_or
     summary = json.loads((out / "summary.json").read_text())
     assert not summary["completed"] and "interrupted" in summary["stop_reason"]
     assert json.loads((out / "checkpoint.json").read_text())["state"]["iteration"] == 2
-    monkeypatch.setattr(optimize_module.Checkpoint, "save", original)
+    monkeypatch.setattr(history.Checkpoint, "save", original)
     assert main(["optimize", scene, "--out", str(out), "--resume"]) == 0
     resumed = (out / "history.csv").read_text().splitlines()
     straight = (fresh / "history.csv").read_text().splitlines()
@@ -247,7 +248,7 @@ def test_unwritable_output_is_refused_before_any_work(tmp_path, capsys, monkeypa
     def no_permission(*args, **kwargs):
         raise PermissionError(errno.EACCES, "Permission denied", str(tmp_path / "run"))
 
-    monkeypatch.setattr(outputs_module.tempfile, "mkstemp", no_permission)
+    monkeypatch.setattr(persistence_module.tempfile, "mkstemp", no_permission)
     monkeypatch.setattr("aquarom_fenics.dynamics.simulate.simulate_fom", lambda *a, **k: pytest.fail("simulated"))
     assert simulate(scene, tmp_path / "run") == 2
     assert "not writable (Permission denied)" in one_line(capsys)
@@ -319,8 +320,8 @@ def test_scene_name_cannot_leave_the_results_folder(tmp_path, capsys, monkeypatc
 
 
 def test_json_outputs_hold_no_infinity(tmp_path):
-    outputs_module.write_json_atomic(tmp_path / "x.json", {"a": float("inf"), "b": [np.float64("-inf"), 1.0],
-                                                           "c": np.array([np.nan, 2.0])})
+    persistence_module.write_json_atomic(tmp_path / "x.json", {"a": float("inf"), "b": [np.float64("-inf"), 1.0],
+                                                               "c": np.array([np.nan, 2.0])})
     text = (tmp_path / "x.json").read_text()
     assert "Infinity" not in text and "NaN" not in text
     assert json.loads(text) == {"a": None, "b": [None, 1.0], "c": [None, 2.0]}
@@ -333,7 +334,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aquarom_fenics.reduction.cache import read_intact, store
+from aquarom_fenics.io.persistence import read_intact, store
 from aquarom_fenics.reduction.prom import ReducedModel
 
 model, entry, count = ReducedModel.load(Path(sys.argv[1])), Path(sys.argv[2]), int(sys.argv[3])

@@ -11,7 +11,8 @@ from aquarom_fenics.optimization import optimize as optimize_module
 from aquarom_fenics.optimization import study
 from aquarom_fenics.optimization.cost import CostWeights, Evaluation, design_space, first_order
 from aquarom_fenics.geometry.fish import load_fish
-from aquarom_fenics.optimization.optimize import PromBuilder, optimize, start_points
+from aquarom_fenics.optimization.optimize import optimize, start_points
+from aquarom_fenics.optimization.prom_builder import PromBuilder
 from aquarom_fenics.io.scene import scene_from_dict
 
 SHAPES = {"z_tail": {"bounds": [-0.2, 0.2]}, "y_thin": {"bounds": [-0.1, 0.1]}}

@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from aquarom_fenics.optimization import optimize as optimize_module
+from aquarom_fenics.optimization import history, prom_builder
 from aquarom_fenics.cli import main
 from aquarom_fenics.optimization.cost import CostWeights, design_space, evaluate
 from aquarom_fenics.errors import InputError, SolverError
@@ -93,7 +93,7 @@ def test_killed_and_resumed_run_ends_at_the_same_optimum(tmp_path, toy_fish, mon
     scene = toy_scene("paper")
     uninterrupted, _ = run_optimization(scene, tmp_path / "straight", fish=toy_fish, render=False)
 
-    original_save = optimize_module.Checkpoint.save
+    original_save = history.Checkpoint.save
     calls = {"count": 0}
 
     def save_then_die(self, *args):
@@ -102,10 +102,10 @@ def test_killed_and_resumed_run_ends_at_the_same_optimum(tmp_path, toy_fish, mon
         if calls["count"] == 4:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(optimize_module.Checkpoint, "save", save_then_die)
+    monkeypatch.setattr(history.Checkpoint, "save", save_then_die)
     with pytest.raises(KeyboardInterrupt):
         run_optimization(scene, tmp_path / "killed", fish=toy_fish, render=False)
-    monkeypatch.setattr(optimize_module.Checkpoint, "save", original_save)
+    monkeypatch.setattr(history.Checkpoint, "save", original_save)
     resumed, _ = run_optimization(scene, tmp_path / "killed", resume=True, fish=toy_fish, render=False)
     np.testing.assert_allclose(resumed.optimum, uninterrupted.optimum, rtol=0, atol=1e-12)
     straight_history = (tmp_path / "straight" / "history.csv").read_text().splitlines()
@@ -149,7 +149,7 @@ def test_start_violating_the_constraints_is_refused():
 
 def test_non_finite_gradient_stops_with_history_and_checkpoint_intact(tmp_path, toy_fish, monkeypatch):
     scene = toy_scene("paper")
-    original = optimize_module.PromBuilder.evaluate
+    original = prom_builder.PromBuilder.evaluate
     calls = {"count": 0}
 
     def poisoned(self, prom, z, weights):
@@ -158,7 +158,7 @@ def test_non_finite_gradient_stops_with_history_and_checkpoint_intact(tmp_path, 
             raise SolverError(f"non-finite cost or gradient at {self.space.as_dict(z)}: cost nan")
         return original(self, prom, z, weights)
 
-    monkeypatch.setattr(optimize_module.PromBuilder, "evaluate", poisoned)
+    monkeypatch.setattr(prom_builder.PromBuilder, "evaluate", poisoned)
     with pytest.raises(SolverError, match="non-finite"):
         run_optimization(scene, tmp_path / "run", fish=toy_fish, render=False)
     checkpoint = json.loads((tmp_path / "run" / "checkpoint.json").read_text())
@@ -168,7 +168,7 @@ def test_non_finite_gradient_stops_with_history_and_checkpoint_intact(tmp_path, 
 
 def test_prom_build_failing_mid_run_keeps_history_and_checkpoint(tmp_path, toy_fish, monkeypatch, capsys):
     scene = toy_scene("trust-region")
-    original = optimize_module.PromBuilder.build
+    original = prom_builder.PromBuilder.build
     calls = {"count": 0}
 
     def failing(self, z):
@@ -177,7 +177,7 @@ def test_prom_build_failing_mid_run_keeps_history_and_checkpoint(tmp_path, toy_f
             raise SolverError("Newton did not converge at t = 0.1 s (step 5 of 50) in the basis solve")
         return original(self, z)
 
-    monkeypatch.setattr(optimize_module.PromBuilder, "build", failing)
+    monkeypatch.setattr(prom_builder.PromBuilder, "build", failing)
     with pytest.raises(SolverError):
         run_optimization(scene, tmp_path / "run", fish=toy_fish, render=False)
     checkpoint = json.loads((tmp_path / "run" / "checkpoint.json").read_text())
@@ -243,7 +243,7 @@ def test_wall_time_safeguard_stops_the_optimiser(method, toy_fish):
 
 def test_a_non_finite_design_is_refused():
     with pytest.raises(SolverError, match="non-finite design"):
-        optimize_module.Safeguard.finite(np.array([0.1, np.nan]), 3)
+        history.Safeguard.finite(np.array([0.1, np.nan]), 3)
 
 
 def test_a_design_whose_prom_is_unstable_is_refused_as_infeasible(monkeypatch):
@@ -255,14 +255,14 @@ def test_a_design_whose_prom_is_unstable_is_refused_as_infeasible(monkeypatch):
         verdicts.append(np.array(xi))
         return False, "Floquet multiplier |μ| = 2.48 > 1.01"
 
-    monkeypatch.setattr(optimize_module, "reduced_stability", unstable)
+    monkeypatch.setattr(prom_builder, "reduced_stability", unstable)
     scene = coarse_scene(shapes=TOY_SHAPES, solver={"duration": 2.0})
     space = design_space(scene)
-    builder = optimize_module.PromBuilder(scene, load_fish(scene), space)
+    builder = prom_builder.PromBuilder(scene, load_fish(scene), space)
     z = np.array([0.1, 0.02])
     with pytest.raises(InputError, match=r"infeasible: its PROM is unstable \(Floquet multiplier \|μ\| = 2.48"):
         builder._refuse_unstable(object(), z)
     np.testing.assert_array_equal(verdicts[0], z[: space.n_shapes])
-    short = optimize_module.PromBuilder(toy_scene(), builder.fish, space)
+    short = prom_builder.PromBuilder(toy_scene(), builder.fish, space)
     short._refuse_unstable(object(), z)          # one stroke: no periodic gait to judge, not asked
     assert len(verdicts) == 1

@@ -10,6 +10,7 @@ import pytest
 from matplotlib.image import imread
 from PIL import Image
 
+from aquarom_fenics.io import run_outputs
 from aquarom_fenics.viz import animate
 from aquarom_fenics.cli import main
 from aquarom_fenics.errors import InputError
@@ -34,7 +35,7 @@ def run_dir(tmp_path_factory):
     scene = Scene.load("nominal").replace("mesh", level=1).replace("solver", duration=0.2)
     result = simulate_fom(scene, out_dir=out, progress=False, keep_states=True)
     model = result.model
-    animate.write_displacement_series(out / animate.DISPLACEMENT_FILE, model.fish.design(None),
+    run_outputs.write_displacement_series(out / run_outputs.DISPLACEMENT_FILE, model.fish.design(None),
                                       model.fish.mesh.cells, result.trajectory.arrays()["time"],
                                       [model.nodal_displacement(u) for u, _ in result.states])
     return out
@@ -54,14 +55,14 @@ def drawn_fraction(image: np.ndarray) -> float:
 
 
 def test_displacement_series_round_trip(run_dir):
-    series = animate.read_displacement_series(run_dir / animate.DISPLACEMENT_FILE)
+    series = run_outputs.read_displacement_series(run_dir / run_outputs.DISPLACEMENT_FILE)
     n_nodes = series.points.shape[0]
     assert series.time.shape == (N_SAMPLES,) and series.time[-1] == pytest.approx(0.2)
     assert series.displacement.shape == (N_SAMPLES, n_nodes, 3) and series.cells.shape[1] == 4
     assert np.all(series.displacement[0] == 0.0) and np.abs(series.displacement[-1]).max() > 1e-5
-    copy = animate.write_displacement_series(run_dir.parent / "copy.npz", series.points, series.cells,
+    copy = run_outputs.write_displacement_series(run_dir.parent / "copy.npz", series.points, series.cells,
                                              series.time, series.displacement)
-    again = animate.read_displacement_series(copy)
+    again = run_outputs.read_displacement_series(copy)
     for name in ("points", "cells", "time", "displacement"):
         assert np.array_equal(getattr(again, name), getattr(series, name)), name
 
@@ -69,10 +70,10 @@ def test_displacement_series_round_trip(run_dir):
 def test_inconsistent_series_are_refused(tmp_path):
     points, cells = np.zeros((4, 3)), np.array([[0, 1, 2, 3]])
     with pytest.raises(ValueError, match="displacement must be"):
-        animate.write_displacement_series(tmp_path / "bad.npz", points, cells, [0.0, 0.1], np.zeros((1, 4, 3)))
+        run_outputs.write_displacement_series(tmp_path / "bad.npz", points, cells, [0.0, 0.1], np.zeros((1, 4, 3)))
     np.savez(tmp_path / "other.npz", points=points)
     with pytest.raises(InputError, match="not a displacement series"):
-        animate.read_displacement_series(tmp_path / "other.npz")
+        run_outputs.read_displacement_series(tmp_path / "other.npz")
 
 
 def test_animate_writes_an_mp4_and_a_gif_with_one_frame_per_sample(run_dir, tmp_path, capsys):
@@ -151,5 +152,5 @@ def test_animate_without_displacements_names_the_file_and_how_to_get_it(run_dir,
     assert main(["animate", str(tmp_path)]) == 2
     error = capsys.readouterr().err
     assert error.count("\n") == 1
-    assert animate.DISPLACEMENT_FILE in error and "aquarom simulate" in error
+    assert run_outputs.DISPLACEMENT_FILE in error and "aquarom simulate" in error
     assert not (tmp_path / animate.ANIMATION_FILE).exists()

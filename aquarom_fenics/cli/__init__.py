@@ -1,0 +1,94 @@
+"""The ``aquarom`` command: scene files in, results, plots and pictures out.
+
+Bad input ends in one line on stderr and exit code 2; a solver that stops early keeps what it
+computed, says when it stopped and exits with code 3. The parser is in ``parser.py``, the
+commands in ``commands.py`` and ``runs.py``, the output folders in ``outputs.py``.
+"""
+from __future__ import annotations
+
+import logging
+import sys
+import time
+import traceback
+
+from mpi4py import MPI
+
+from aquarom_fenics.cli.commands import COMMANDS, run_dry
+from aquarom_fenics.cli.outputs import os_error_text, settle_output
+from aquarom_fenics.cli.parser import build_parser
+from aquarom_fenics.errors import InputError, Interrupted, SolverError
+
+
+AGREEMENT_SECONDS = 10.0   # how long a failing rank waits for the others to fail too before aborting all
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    comm = MPI.COMM_WORLD
+    agreement = comm.Dup() if comm.size > 1 else None
+    console = logging.StreamHandler()          # details (INFO) only with --verbose
+    console.setFormatter(logging.Formatter("%(message)s"))
+    console.setLevel(logging.INFO if args.verbose else logging.WARNING)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, handlers=[console])
+    logging.getLogger("aquarom").setLevel(logging.INFO if comm.rank == 0 else logging.ERROR)
+    started = time.perf_counter()
+    line = None
+    try:
+        code = run_dry(args) if getattr(args, "dry_run", False) else COMMANDS[args.command](args)
+    except (Exception, KeyboardInterrupt) as error:
+        code, line = describe_failure(args, error)
+    try:
+        settle_output(args, code, time.perf_counter() - started)
+    except (OSError, InputError) as problem:
+        text = os_error_text(problem) if isinstance(problem, OSError) else str(problem)
+        code, line = InputError.exit_code, f"{line + '; ' if line else ''}error: the outputs could not be finished ({text})"
+    if line is None:
+        return code
+    return end_in_agreement(agreement, code, f"aquarom {args.command}: {line}")
+
+
+def describe_failure(args, error: BaseException) -> tuple[int, str]:
+    """Exit code and the one line for the user: 2 bad input or OS error, 3 solver stop, 130 Ctrl-C.
+
+    Anything else is a bug: its traceback is printed and the exit code is 1.
+    """
+    if isinstance(error, KeyboardInterrupt):
+        location = getattr(args, "output", None)
+        written = location is not None and location.working.is_dir() and any(location.working.iterdir())
+        where = f"; partial results in {location.working}/" if written else "; nothing written"
+        return Interrupted.exit_code, f"{str(error) or 'interrupted'}{where}"
+    if isinstance(error, InputError):
+        return InputError.exit_code, f"error: {error}"
+    if isinstance(error, SolverError):
+        return SolverError.exit_code, f"solver stopped: {error}"
+    if isinstance(error, OSError):
+        location = getattr(args, "output", None)
+        unnamed = f"writing in {location.working}/" if location is not None else "a file"
+        return InputError.exit_code, f"error: {os_error_text(error, unnamed)}"
+    if MPI.COMM_WORLD.size == 1:
+        raise error
+    traceback.print_exc()
+    return 1, f"internal error on rank {MPI.COMM_WORLD.rank}: {type(error).__name__}: {error}"
+
+
+def end_in_agreement(agreement, code: int, line: str) -> int:
+    """Print the one line and return the exit code, on every rank alike.
+
+    Under MPI the failing ranks wait (on their own communicator) for the others: when every rank
+    failed, rank 0 prints its line and all return its code; when some rank is still busy (a
+    failure on one rank only), this rank prints its line and aborts every rank with its code.
+    """
+    if agreement is None:
+        print(line, file=sys.stderr, flush=True)
+        return code
+    request = agreement.Ibarrier()
+    deadline = time.monotonic() + AGREEMENT_SECONDS
+    while not request.Test():
+        if time.monotonic() > deadline:
+            print(line, file=sys.stderr, flush=True)
+            MPI.COMM_WORLD.Abort(code)
+        time.sleep(0.01)
+    code, line = agreement.bcast((code, line))
+    if agreement.rank == 0:
+        print(line, file=sys.stderr, flush=True)
+    return code

@@ -1,0 +1,6 @@
+"""``python -m aquarom_fenics.cli``: the ``aquarom`` command."""
+import sys
+
+from aquarom_fenics.cli import main
+
+sys.exit(main())

@@ -1,0 +1,162 @@
+"""The commands of ``aquarom`` (those that run models at one design are in ``runs.py``)."""
+from __future__ import annotations
+
+import textwrap
+from pathlib import Path
+
+from aquarom_fenics.cli.inputs import check_inputs, load_scene, say
+from aquarom_fenics.cli.outputs import claim_output, shown
+from aquarom_fenics.cli.runs import run_build, run_compare, run_simulate
+from aquarom_fenics.errors import InputError, SolverError
+
+
+def run_dry(args) -> int:
+    from aquarom_fenics.optimization.plan import plan
+
+    scene, _ = check_inputs(args, load_scene(args))
+    say(f"plan for `aquarom {args.command}` (dry run, nothing is written):")
+    for line in plan(args.command, scene, getattr(args, "model", None)):
+        say(f"  {line}")
+    return 0
+
+
+def run_mesh(args) -> int:
+    from aquarom_fenics.geometry.fish import load_fish
+    from aquarom_fenics.geometry.mesh import cell_quality
+
+    scene = load_scene(args)
+    fish = load_fish(scene)
+    mesh, tags = fish.mesh, fish.tags
+    quality = cell_quality(mesh.points, mesh.cells)
+    box, nodes = tags.box, fish.nodes.points.shape[0]
+    say(textwrap.dedent(f"""\
+        scene {scene.name}: {mesh.source}
+          box          L = {box.length:.4g} m, W = {box.width:.4g} m, H = {box.height:.4g} m
+          cells        {mesh.cells.shape[0]}
+          nodes        {nodes} of degree {fish.degree} ({mesh.points.shape[0]} vertices, {3 * nodes} dofs)
+          head         {tags.head_cells.size} cells, {tags.head_nodes.size} nodes
+          muscles      left {tags.left_muscle_cells.size} cells, right {tags.right_muscle_cells.size} cells
+          skin         {tags.skin_facets.shape[0]} facets, {tags.skin_nodes.size} nodes
+          spine        {tags.spine_nodes.size} nodes, {tags.spine_segments.shape[0]} segments, tail node {tags.tail_node}
+          dorsal nodes {tags.dorsal_nodes.size}
+          quality      min {quality.min():.3f}, mean {quality.mean():.3f} (1 = regular tetrahedron)"""))
+    return 0
+
+
+def run_shapes(args) -> int:
+    from aquarom_fenics.viz.render import render_design, render_shape_sheet
+    from aquarom_fenics.geometry.fish import load_fish
+
+    scene, xi = check_inputs(args, load_scene(args))
+    if not xi and not scene.shapes:
+        raise InputError(f"scene {scene.source} has no [shapes]: nothing to show (add shape variations or use --xi)")
+    fish = load_fish(scene)
+    out = claim_output(args, args.out or Path("results") / "shapes" / scene.name)
+    if xi:
+        files = render_design(fish, fish.design(xi), xi, out)
+    else:
+        files = render_shape_sheet(fish, scene, out)
+    for path in files:
+        say(f"wrote {shown(args, path)}")
+    return 0
+
+
+def run_optimize(args) -> int:
+    from aquarom_fenics.optimization.cost import CostWeights
+    from aquarom_fenics.optimization.optimize import DEFAULT_MAX_TIME
+    from aquarom_fenics.optimization.study import run_optimization
+
+    scene, _ = check_inputs(args, load_scene(args))
+    weights = CostWeights()
+    if scene.cooptimization.enabled:
+        weights = CostWeights(args.weight, 1.0 - args.weight, scene.cooptimization.energy_weight)
+    out = claim_output(args, args.out or Path("results") / "optimize" / scene.name, resume=args.resume)
+    result, check = run_optimization(scene, out, resume=args.resume, weights=weights,
+                                     max_time=DEFAULT_MAX_TIME if args.max_time is None else args.max_time)
+    args.timings = result.timings | {"fom_check": check.time}
+    space = result.space
+    say(f"{scene.name} ({scene.optimizer.method}): optimum "
+        + ", ".join(f"{n} = {v:.4g}" for n, v in zip(space.names, result.optimum))
+        + f"; {result.builds} PROM builds, {result.timings['total']:.1f} s ({result.stop_reason})")
+    if check.error:
+        raise SolverError(f"FOM check: {check.error}; the optimisation outputs are in {out}/")
+    say(f"FOM check: nominal {100 * check.nominal_distance:.3f} cm, optimal {100 * check.optimal_distance:.3f} cm "
+        f"(PROM {100 * check.prom_optimal_distance:.3f} cm), ratio {check.ratio:.2f}; outputs in {shown(args, out)}/")
+    return 0
+
+
+def run_pareto(args) -> int:
+    from aquarom_fenics.optimization.study import pareto_sweep
+
+    scene, _ = check_inputs(args, load_scene(args))
+    out = claim_output(args, args.out or Path("results") / "pareto" / scene.name)
+    points = pareto_sweep(scene, out)
+    for point in points:
+        say(f"w1 = {point['w1']:.2f}: amplitude {point['amplitude']:.3f}, energy {point['energy']:.4f}, "
+            f"FOM distance {100 * point['distance']:.3f} cm")
+    say(f"outputs in {shown(args, out)}/ (pareto.csv, pareto.png, one folder per weight)")
+    return 0
+
+
+def run_animate(args) -> int:
+    from aquarom_fenics.viz.animate import animate_run
+
+    for path in animate_run(args.run_dir, out=args.out, fps=args.fps, stride=args.stride):
+        say(f"wrote {path}")
+    return 0
+
+
+def run_basis(args) -> int:
+    from aquarom_fenics.viz.animate import render_basis_sheet
+    from aquarom_fenics.geometry.fish import load_fish
+    from aquarom_fenics.reduction.reductor import build_prom
+
+    scene = load_scene(args)
+    fish = load_fish(scene)
+    out = claim_output(args, args.out or Path("results") / "basis" / scene.name)
+    prom = build_prom(scene, xi_center={s.name: s.start for s in scene.shapes}, fish=fish)
+    files = render_basis_sheet(prom, fish, out)
+    dropped = f"; dropped as dependent: {', '.join(prom.dropped)}" if prom.dropped else ""
+    say(f"basis of {scene.name}: m = {prom.size} ({', '.join(prom.labels)}){dropped}; wrote {shown(args, files[0])}")
+    return 0
+
+
+def run_check(args) -> int:
+    from aquarom_fenics.verification.check import run_checks, table_header, table_row
+    from aquarom_fenics.geometry.fish import load_fish
+    from aquarom_fenics.reduction.prom import ReducedModel
+    from aquarom_fenics.reduction.reductor import build_prom
+
+    scene = load_scene(args)
+    fish = load_fish(scene)
+    if args.prom is not None:
+        prom = ReducedModel.load(args.prom, scene_hash=scene.hash)
+    else:
+        prom = build_prom(scene, xi_center={s.name: s.start for s in scene.shapes}, fish=fish)
+    say(f"PROM of {scene.name} ({args.prom or 'built'}): m = {prom.size}, p = {prom.n_parameters}, "
+        f"{prom.cells} cells; mesh of the scene: {fish.mesh.cells.shape[0]} cells")
+    say(table_header())
+    failed = []
+    for result in run_checks(scene, prom, fish):
+        say(table_row(result))
+        if result.passed is False:
+            failed.append(result.check)
+    say(f"{len(failed)} check(s) failed: {', '.join(failed)}" if failed else "all checks passed")
+    return 1 if failed else 0
+
+
+def run_cache(args) -> int:
+    from aquarom_fenics.reduction.cache import clear, listing
+
+    if args.action == "list":
+        for kind, entries, size in listing():
+            say(f"{kind:15s} {entries:5d} entries {size / 1e6:9.1f} MB")
+        return 0
+    for folder in clear(args.kind or ["prom", "fom"]):
+        say(f"removed {folder}")
+    return 0
+
+
+COMMANDS = {"mesh": run_mesh, "shapes": run_shapes, "simulate": run_simulate, "build": run_build,
+            "compare": run_compare, "optimize": run_optimize, "pareto": run_pareto, "cache": run_cache, "animate": run_animate,
+            "basis": run_basis, "check": run_check}

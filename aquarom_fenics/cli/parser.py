@@ -1,0 +1,103 @@
+"""The ``aquarom`` command line: sub-commands, their options and examples."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+EXAMPLES = {
+    "mesh": "aquarom mesh scenes/nominal.toml",
+    "shapes": "aquarom shapes so1 --xi y_thin=0.1 --xi z_tail=-0.3 --out results/shapes",
+    "simulate": "aquarom simulate nominal --model fom --level 1 --out results/nominal-fom\n"
+                "  mpirun -n 2 aquarom simulate so1 --xi y_thin=0.1 --out results/so1-thin\n"
+                "  aquarom simulate so1 --model prom --prom results/so1-prom.npz --xi y_thin=0.05",
+    "build": "aquarom build so1 --out results/so1-prom.npz",
+    "compare": "aquarom compare so1 --xi y_thin=0.05 --level 1 --out results/so1-compare",
+    "optimize": "aquarom optimize so1 --level 1 --out results/so1-opt\n  aquarom optimize so1 --out results/so1-opt --resume",
+    "pareto": "aquarom pareto co --level 1 --out results/co-pareto",
+    "animate": "aquarom animate results/nominal-fom --fps 20 --stride 2",
+    "basis": "aquarom basis so1 --level 1 --out results/so1-basis",
+    "check": "aquarom check so1 --level 1\n  aquarom check so1 --level 1 --degree 2\n"
+             "  aquarom check so1 --prom results/so1-prom.npz",
+    "cache": "aquarom cache list\n  aquarom cache clear --kind prom",
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="aquarom", description="Shape optimisation of soft swimmers with FEniCSx and parametric ROMs.",
+        epilog="Scenes: a path to a TOML file, or the name of a shipped scene (nominal, so1 … so9, co).")
+    parser.add_argument("--verbose", "-v", action="store_true", help="log details (solver set-up, timings)")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def command(name, help_text):
+        sub = commands.add_parser(name, help=help_text, description=help_text,
+                                  epilog=f"example:\n  {EXAMPLES[name]}", formatter_class=argparse.RawDescriptionHelpFormatter)
+        sub.add_argument("scene", help="scene file (.toml) or shipped scene name")
+        sub.add_argument("--level", type=int, choices=range(1, 6), metavar="{1..5}",
+                         help="override the scene's mesh level (1 is the coarsest)")
+        sub.add_argument("--degree", type=int, choices=(1, 2),
+                         help="override the scene's element degree (1: linear, 2: quadratic tetrahedra)")
+        sub.add_argument("--dry-run", action="store_true",
+                         help="print what would be built, reused and skipped, and a time estimate; write nothing")
+        return sub
+
+    command("mesh", "report the scene's mesh: cells, nodes, tags, cell quality")
+    shapes = command("shapes", "write a design mesh (XDMF + PNG), or a sheet of every shape variation at ± its bound")
+    shapes.add_argument("--xi", action="append", metavar="NAME=VALUE", help="shape parameter (repeatable)")
+    shapes.add_argument("--out", type=Path, help="output directory (default results/shapes/SCENE)")
+    shapes.add_argument("--force", action="store_true", help="replace existing outputs")
+    simulate = command("simulate", "simulate the swimmer over the scene's horizon")
+    simulate.add_argument("--model", choices=["fom", "rom", "prom"], default="fom",
+                          help="full-order model, ROM of the design, or PROM of the scene (default fom)")
+    simulate.add_argument("--xi", action="append", metavar="NAME=VALUE", help="shape parameter (repeatable)")
+    simulate.add_argument("--prom", type=Path, help="PROM file from `aquarom build` (model prom; built if absent)")
+    simulate.add_argument("--out", type=Path, help="output directory (default results/simulate/SCENE-MODEL)")
+    simulate.add_argument("--force", action="store_true", help="replace existing outputs")
+    simulate.add_argument("--no-progress", action="store_true", help="no progress bar")
+    build = command("build", "build the scene's PROM (basis and reduced tensors) and save it to one file")
+    build.add_argument("--xi", action="append", metavar="NAME=VALUE", help="building point (default: start values)")
+    build.add_argument("--out", type=Path, help="PROM file (default results/build/SCENE-prom.npz)")
+    build.add_argument("--force", action="store_true", help="replace existing outputs")
+    compare = command("compare", "run the FOM and the reduced model at one design and report their errors")
+    compare.add_argument("--model", choices=["rom", "prom"], default="prom", help="reduced model to check")
+    compare.add_argument("--xi", action="append", metavar="NAME=VALUE", help="shape parameter (repeatable)")
+    compare.add_argument("--prom", type=Path, help="PROM file from `aquarom build` (built if absent)")
+    compare.add_argument("--out", type=Path, help="output directory (default results/compare/SCENE)")
+    compare.add_argument("--force", action="store_true", help="replace existing outputs")
+    compare.add_argument("--no-progress", action="store_true", help="no progress bar")
+    optimize = command("optimize", "optimise the shape (and the amplitude, for co-optimisation scenes) with the PROM")
+    optimize.add_argument("--out", type=Path, help="output directory (default results/optimize/SCENE)")
+    optimize.add_argument("--force", action="store_true", help="replace existing outputs")
+    optimize.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out")
+    optimize.add_argument("--method", choices=["paper", "trust-region"], help="override the scene's method")
+    optimize.add_argument("--weight", type=float, default=0.5,
+                          help="w_1 of L = w_1(-d) + (1-w_1) α A² for co-optimisation scenes (default 0.5)")
+    optimize.add_argument("--max-time", type=float, metavar="SECONDS",
+                          help="stop the optimiser after this wall time (default 86400 s, one day)")
+    pareto = command("pareto", "co-optimisation weight sweep: Pareto front of distance against actuation energy")
+    pareto.add_argument("--out", type=Path, help="output directory (default results/pareto/SCENE)")
+    pareto.add_argument("--force", action="store_true", help="replace existing outputs")
+    from aquarom_fenics.viz.animate import DEFAULT_FPS
+
+    animate_help = "animate a simulation run (MP4 and GIF preview): the fish from above and from the side"
+    animate = commands.add_parser("animate", help=animate_help, description=animate_help,
+                                  epilog=f"example:\n  {EXAMPLES['animate']}",
+                                  formatter_class=argparse.RawDescriptionHelpFormatter)
+    animate.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="output directory of `aquarom simulate`")
+    animate.add_argument("--out", type=Path, help="MP4 file (default RUN_DIR/animation.mp4; the GIF goes next to it)")
+    animate.add_argument("--fps", type=int, default=DEFAULT_FPS, help=f"frames per second (default {DEFAULT_FPS})")
+    animate.add_argument("--stride", type=int, default=1, help="one frame every K stored samples (default 1)")
+    basis = command("basis", "build the scene's PROM and draw every basis vector on the fish (basis.png)")
+    basis.add_argument("--out", type=Path, help="output directory (default results/basis/SCENE)")
+    basis.add_argument("--force", action="store_true", help="replace existing outputs")
+    check = command("check", "Taylor tests of the scene's PROM against its FOM forms and finite differences "
+                             "(exit 1 on a FAIL)")
+    check.add_argument("--prom", type=Path, help="PROM file from `aquarom build` to check (default: build one)")
+    cache_help = "list or clear the caches of meshes, PROMs and FOM checks (content-addressed, checksummed)"
+    cache = commands.add_parser("cache", help=cache_help, description=cache_help,
+                                epilog=f"example:\n  {EXAMPLES['cache']}", formatter_class=argparse.RawDescriptionHelpFormatter)
+    cache.add_argument("action", choices=["list", "clear"])
+    cache.add_argument("--kind", action="append", choices=["prom", "fom", "mesh"],
+                       help="cache to clear (repeatable; default prom and fom)")
+    return parser

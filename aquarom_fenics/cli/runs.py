@@ -1,0 +1,114 @@
+"""Commands that run models at one design: simulate, build, compare."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from aquarom_fenics.cli.inputs import check_inputs, load_scene, say
+from aquarom_fenics.cli.outputs import claim_output, claim_output_file, shown
+from aquarom_fenics.errors import SolverError
+
+
+def run_simulate(args) -> int:
+    from aquarom_fenics.dynamics.simulate import simulate_fom
+
+    scene, xi = check_inputs(args, load_scene(args))
+    out = claim_output(args, args.out or Path("results") / "simulate" / f"{scene.name}-{args.model}")
+    if args.model == "fom":
+        result = simulate_fom(scene, xi=xi, out_dir=out, progress=not args.no_progress)
+    else:
+        result = run_reduced_model(scene, xi, args.model, args.prom, out)
+    if not result.completed:
+        raise SolverError(f"{result.error}; partial trajectory in {out / 'trajectory.csv'}")
+    say(f"{scene.name} ({args.model}): distance {100 * result.distance:.3f} cm, tail amplitude "
+        f"{100 * result.tail_amplitude:.3f} cm, {result.wall_time:.2f} s on {MPI.COMM_WORLD.size} rank(s)")
+    say(f"outputs in {shown(args, out)}/ (trajectory.csv, summary.json, trajectory.png)")
+    return 0
+
+
+def reduced_model(scene, xi: dict, model: str, prom_file: Path | None):
+    """A ROM built at the design, or the scene's PROM (loaded from ``prom_file`` or built at the start values)."""
+    from aquarom_fenics.reduction.cache import cached_prom
+    from aquarom_fenics.geometry.fish import load_fish
+    from aquarom_fenics.reduction.prom import ReducedModel
+    from aquarom_fenics.reduction.reductor import build_prom
+
+    if prom_file is not None and model == "prom":
+        return ReducedModel.load(prom_file, scene_hash=scene.hash)
+    fish = load_fish(scene)
+    center = {s.name: s.start for s in scene.shapes} | (xi if model == "rom" else {})
+    vector = fish.parameter_vector(center)
+    if model == "prom":
+        # Refuse a design beyond the validity radius before spending time on the build.
+        ReducedModel.refuse_outside_radius(scene.shape_names, fish.parameter_vector(center | xi), vector,
+                                           np.array(scene.validity_radii()))
+    return cached_prom(scene, vector, lambda: build_prom(scene, xi_center=vector, fish=fish,
+                                                          parametric=model == "prom"), parametric=model == "prom")
+
+
+def run_reduced_model(scene, xi: dict, model: str, prom_file: Path | None, out: Path):
+    """Simulate the ROM or PROM at the design and write its run outputs to ``out``."""
+    from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
+    from aquarom_fenics.geometry.fish import load_fish
+    from aquarom_fenics.io.run_outputs import write_run_outputs
+
+    reduced = reduced_model(scene, xi, model, prom_file)
+    xi_vector = np.array([xi.get(name, reduced.design_point.get(name, 0.0)) for name in reduced.shape_names])
+    result = simulate_reduced(reduced, scene, xi_vector)
+    fish = load_fish(scene)
+    if MPI.COMM_WORLD.rank == 0:
+        design = reduced.design_point | xi
+        vertices = fish.nodes.n_vertices
+        write_run_outputs(out, scene, result, model, design, fish.design(design)[:vertices], fish.mesh.cells,
+                          np.einsum("ndm,sm->snd", reduced.basis[:vertices], result.states), MPI.COMM_WORLD,
+                          extra={"cells": reduced.cells, "dofs": reduced.dofs, "reduced_size": reduced.size,
+                                 "basis": reduced.labels, "basis_dropped": reduced.dropped,
+                                 "build_timings": reduced.timings})
+    return result
+
+
+def run_build(args) -> int:
+    from aquarom_fenics.reduction.cache import cached_prom
+    from aquarom_fenics.geometry.fish import load_fish
+    from aquarom_fenics.reduction.reductor import build_prom
+
+    scene, xi = check_inputs(args, load_scene(args))
+    xi = {s.name: s.start for s in scene.shapes} | xi
+    out = claim_output_file(args, args.out or Path("results") / "build" / f"{scene.name}-prom.npz")
+    fish = load_fish(scene)
+    center = fish.parameter_vector(xi)
+    prom = cached_prom(scene, center, lambda: build_prom(scene, xi_center=center, fish=fish))
+    if MPI.COMM_WORLD.rank == 0:
+        prom.save(out)
+    say(f"PROM of {scene.name}: m = {prom.size} ({', '.join(prom.labels)}), p = {prom.n_parameters}, "
+        f"built in {prom.timings['total']:.2f} s; wrote {out}")
+    return 0
+
+
+def run_compare(args) -> int:
+    from aquarom_fenics.verification.compare import model_errors
+    from aquarom_fenics.io.outputs import plot_comparison
+    from aquarom_fenics.io.persistence import write_json_atomic
+    from aquarom_fenics.dynamics.simulate import simulate_fom
+
+    scene, xi = check_inputs(args, load_scene(args))
+    out = claim_output(args, args.out or Path("results") / "compare" / scene.name)
+    reduced = run_reduced_model(scene, xi, args.model, args.prom, out / args.model)
+    full = simulate_fom(scene, xi=xi, out_dir=out / "fom", progress=not args.no_progress)
+    for name, result in (("fom", full), (args.model, reduced)):
+        if not result.completed:
+            raise SolverError(f"{name}: {result.error}")
+    errors = model_errors(full, reduced)
+    if MPI.COMM_WORLD.rank == 0:
+        write_json_atomic(out / "compare.json", {"xi": xi, "model": args.model, "errors": errors,
+                                                 "fom": full.summary(), args.model: reduced.summary(),
+                                                 "speedup": full.wall_time / reduced.wall_time})
+        plot_comparison(out / "compare.png", {"FOM": full.trajectory.arrays(),
+                                              args.model.upper(): reduced.trajectory.arrays()},
+                        f"{scene.name}: FOM against {args.model.upper()}")
+    say(f"{scene.name} at {xi or 'the start values'}: distance FOM {100 * full.distance:.3f} cm, "
+        f"{args.model.upper()} {100 * reduced.distance:.3f} cm ({100 * errors['distance_relative']:+.2f} %); "
+        f"tail amplitude {100 * errors['tail_amplitude_relative']:+.2f} %; outputs in {shown(args, out)}/")
+    return 0

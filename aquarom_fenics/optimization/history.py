@@ -1,0 +1,98 @@
+"""What an optimiser leaves after every iteration: the history row, the checkpoint, its safeguards."""
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from aquarom_fenics.errors import InputError, SolverError
+from aquarom_fenics.io.persistence import write_json_atomic
+from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.optimization.cost import DesignSpace
+from aquarom_fenics.optimization.prom_builder import PromBuilder
+
+
+def history_columns(space: DesignSpace) -> list[str]:
+    """The columns of a history row, in the order :func:`history_row` makes them."""
+    return (["iteration", *(f"xi_{name}" for name in space.names), "cost", *(f"grad_{name}" for name in space.names)]
+            + ["distance", "prom", "wall_time", "radius", "ratio", "optimality"])
+
+
+def history_row(space: DesignSpace, iteration: int, z, cost, gradient, distance, kind: str, started: float,
+                radius: float | None = None, ratio: float | None = None, optimality: float | None = None) -> dict:
+    """One iteration: ξ, cost, gradient, distance [m], how the PROM was used, the first-order
+    measure, and for the trust region its radius (fraction of the validity box) and
+    actual/predicted reduction."""
+    row = {"iteration": iteration}
+    row.update({f"xi_{name}": float(value) for name, value in zip(space.names, z)})
+    row["cost"] = float(cost)
+    row.update({f"grad_{name}": float(value) for name, value in zip(space.names, gradient)})
+    row.update({"distance": float(distance), "prom": kind, "wall_time": time.perf_counter() - started,
+                "radius": radius, "ratio": ratio, "optimality": optimality})
+    return row
+
+
+def record(history: list[dict], row: dict, on_iteration) -> None:
+    """Append a history row and show it to ``on_iteration``."""
+    history.append(row)
+    on_iteration(row)
+
+
+class Checkpoint:
+    """Optimiser state as JSON, written atomically after every iteration."""
+
+    KEYS = ("scene_hash", "method", "state", "history", "builds", "build_time", "solve_time")
+
+    def __init__(self, path: Path | None, scene: Scene, method: str, write: bool = True):
+        self.path, self.scene_hash, self.method, self.write = path, scene.hash, method, write
+
+    def save(self, state: dict, history: list[dict], builder: PromBuilder) -> None:
+        if self.path is None or not self.write:
+            return
+        write_json_atomic(self.path, {"scene_hash": self.scene_hash, "method": self.method, "state": state,
+                                      "history": history, "builds": builder.builds, "reused": builder.reused,
+                                      "build_time": builder.build_time, "solve_time": builder.solve_time})
+
+    def load(self) -> dict | None:
+        if self.path is None or not self.path.exists():
+            return None
+        try:
+            data = json.loads(self.path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as error:
+            raise InputError(f"checkpoint {self.path}: unreadable ({error}); start without --resume") from None
+        if not isinstance(data, dict) or any(key not in data for key in self.KEYS):
+            raise InputError(f"checkpoint {self.path}: incomplete (needs {', '.join(self.KEYS)}); "
+                             "start without --resume")
+        if data.get("scene_hash") != self.scene_hash or data.get("method") != self.method:
+            raise InputError(f"checkpoint {self.path}: written for scene hash {data.get('scene_hash')} with "
+                             f"method {data.get('method')}, not this scene ({self.scene_hash}, {self.method}); "
+                             "start without --resume")
+        return data
+
+
+@dataclass
+class Safeguard:
+    """Stops a loop past its wall-time budget and refuses a non-finite design."""
+
+    started: float
+    max_time: float
+
+    def out_of_time(self) -> bool:
+        return time.perf_counter() - self.started > self.max_time
+
+    @property
+    def reason(self) -> str:
+        return f"wall-time limit of {self.max_time:g} s reached"
+
+    @staticmethod
+    def finite(z: np.ndarray, iteration: int) -> np.ndarray:
+        if not np.all(np.isfinite(z)):
+            raise SolverError(f"the optimiser produced a non-finite design {z.tolist()} at iteration {iteration}")
+        return z
+
+
+def optimality_reason(measure: float, tolerance: float) -> str:
+    return f"first-order optimality: measure {measure:.2e} ≤ tolerance {tolerance:g}"

@@ -1,0 +1,229 @@
+"""The source's optimiser (SPEC §10): gradient descent with a log-barrier and a PROM-linearised trajectory.
+
+z ← z - γ W ∇L_b with L_b = L + μ B, B(z) = -Σ log s_i(z); the diagonal W starts at
+1/‖∇L_b(z_0)‖_∞ and is halved along a direction whose gradient component changes sign or whose
+bound becomes active; between PROM builds d ≈ d_c + ∇d_c·(z - z_c); a new PROM when any
+|z - z_c|_i exceeds ``rebuild_threshold`` or every ``n_rebuild`` iterations.
+"""
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from aquarom_fenics.errors import InputError
+from aquarom_fenics.optimization.cost import (DesignSpace, Evaluation, barrier_scale_at, first_order, first_order_at,
+                                              require_interior)
+from aquarom_fenics.optimization.history import history_row, optimality_reason, record
+from aquarom_fenics.optimization.prom_builder import PromBuilder
+
+log = logging.getLogger("aquarom")
+
+
+def barrier(space: DesignSpace, z: np.ndarray) -> tuple[float, np.ndarray]:
+    """B(z) = -Σ log s_i(z) and ∇B, over the box bounds of the free parameters and the linear
+    inequalities s(z) ≥ 0 (a fixed parameter, lower = upper, has no interior to keep to)."""
+    rows = space.barrier_rows
+    slacks = space.slacks(z)[rows]
+    if np.any(slacks <= 0):
+        return np.inf, np.full(z.size, np.nan)
+    jacobian = space.slack_jacobian[rows]   # ∂s/∂z
+    return float(-np.log(slacks).sum()), -(jacobian / slacks[:, None]).sum(axis=0)
+
+
+def paper_method(scene, space, builder, weights, history, checkpoint, state, safeguard, on_iteration):
+    settings = scene.optimizer
+    started = safeguard.started
+    require_interior(space, scene)
+    interior = _strictly_inside(space, space.start)
+    if state is None:
+        state = {"z": interior.tolist(), "iteration": 0, "scaling": np.ones(space.names.__len__()).tolist(),
+                 "previous_gradient": None, "since_build": 0, "center": None}
+    z = np.array(state["z"])
+    scaling = np.array(state["scaling"])
+    prom = None
+    center = state["center"]
+    reason = "maximum number of iterations (safeguard)"
+    while state["iteration"] < settings.max_iterations:
+        iteration = state["iteration"]
+        drift = np.inf if center is None else np.abs(z - np.array(center["z"])).max()
+        rebuild = center is None or drift > settings.rebuild_threshold or state["since_build"] >= settings.n_rebuild
+        if rebuild:
+            try:
+                prom = builder.build(z)
+            except InputError as refused:      # the mesh check refuses the design: step back halfway
+                if center is None or np.abs(z - np.array(center["z"])).max() < settings.step_tolerance:
+                    raise
+                log.warning("paper method: %s; stepping back towards the last built design", refused)
+                z = np.array(center["z"]) + 0.5 * (z - np.array(center["z"]))
+                scaling *= 0.5
+                state.update(z=z.tolist(), scaling=scaling.tolist())
+                continue
+            exact = builder.evaluate(prom, z, weights)
+            center = {"z": z.tolist(), "distance": exact.distance, "distance_gradient": exact.distance_gradient.tolist()}
+            state["since_build"] = 0
+        distance, distance_gradient = _linearised_distance(center, z)
+        cost, gradient = _weighted_cost(space, weights, z, distance, distance_gradient)
+        barrier_value, barrier_gradient = barrier(space, z)
+        barrier_scale = barrier_scale_at(settings, cost)
+        total_gradient = np.where(space.free, gradient + barrier_scale * barrier_gradient, 0.0)
+        measure = first_order(space, z, cost, gradient, settings.active_tolerance, barrier_scale).measure
+        if measure <= settings.optimality_tolerance and not rebuild:
+            # optimal by the linearised gradient: confirm with a PROM built here before stopping
+            state["since_build"] = settings.n_rebuild
+            continue
+        record(history, history_row(space, iteration, z, cost, gradient, distance,
+                                     "built" if rebuild else "approximated", started, optimality=measure), on_iteration)
+        if measure <= settings.optimality_tolerance:
+            reason = optimality_reason(measure, settings.optimality_tolerance)
+            state.update(iteration=iteration + 1)
+            checkpoint.save(state, history, builder)
+            break
+        previous = state["previous_gradient"]
+        if previous is None:     # W starts at 1/‖∇L_0‖_∞: the first step changes the leading parameter by γ
+            scaling /= max(np.abs(total_gradient).max(), 1e-300)
+        else:
+            scaling = _rescaled(scaling, total_gradient, np.array(previous), barrier_scale * barrier_gradient,
+                                rebuild, settings)
+        step = -settings.step_size * scaling * total_gradient
+        fraction, blocking = _fraction_to_boundary(space, z, step)
+        if fraction < 1.0:
+            scaling[blocking] *= 0.5
+            step = fraction * step
+        z = safeguard.finite(z + step, iteration)
+        state.update(z=z.tolist(), iteration=iteration + 1, scaling=scaling.tolist(),
+                     previous_gradient=total_gradient.tolist(), since_build=state["since_build"] + 1, center=center)
+        checkpoint.save(state, history, builder)
+        if safeguard.out_of_time():
+            reason = safeguard.reason
+            break
+        if np.linalg.norm(step) < settings.step_tolerance:
+            if rebuild and state.get("restarted"):
+                reason = f"step {np.linalg.norm(step):.2e} below the step tolerance (stalled before optimality)"
+                break
+            if rebuild:     # W restarts once, as at the first iteration (1/‖∇L_b‖_∞)
+                state.update(scaling=np.ones(z.size).tolist(), previous_gradient=None, restarted=True)
+                scaling = np.ones(z.size)
+            else:           # a linearised gradient may be stale: rebuild first
+                state["since_build"] = settings.n_rebuild
+            checkpoint.save(state, history, builder)
+    if center is not None and np.allclose(z, center["z"]) and prom is not None:
+        final = builder.evaluate(prom, z, weights)
+    else:
+        final = _final_evaluation(builder, weights, z, np.array(center["z"]))
+    if not reason.startswith("first-order"):        # a converged iterate's row is the last one recorded
+        _record_final(scene, space, history, history[-1]["iteration"] + 1, final, started, on_iteration)
+    closed = _barrier_gap_closed(space, builder, weights, final, settings.barrier_weight)
+    if closed is not None:
+        names, final = closed
+        measure = first_order_at(scene, space, final).measure
+        reason += (f"; then {', '.join(names)} moved from the barrier iterate onto the bound "
+                   f"(first-order measure {measure:.2e} there)")
+        _record_final(scene, space, history, history[-1]["iteration"] + 1, final, started, on_iteration)
+    return final.z, final, reason
+
+
+def _record_final(scene, space, history, iteration, final: Evaluation, started, on_iteration) -> None:
+    measure = first_order_at(scene, space, final).measure
+    record(history, history_row(space, iteration, final.z, final.cost, final.gradient, final.distance, "built",
+                                 started, optimality=measure), on_iteration)
+
+
+def _barrier_gap_closed(space: DesignSpace, builder: PromBuilder, weights, final: Evaluation, barrier_weight: float):
+    """The barrier holds a bound off by s_i ≈ μ / |∂L/∂z_i| (complementarity λ_i s_i = μ). A bound
+    within √barrier_weight of its range whose gradient pushes towards it (λ_i = μ / s_i would exceed
+    s_i, both relative) is taken as active: the design with those parameters on their bounds
+    (the weakest-held, by |∂L/∂z_i| · range, let go until it is feasible and meshes) replaces the
+    iterate when a PROM built there gives a lower cost.
+    Returns (the bounds moved onto, its evaluation) or None."""
+    z, gradient = final.z, final.gradient
+    width = space.upper - space.lower
+    near_lower = space.free & (z - space.lower < np.sqrt(barrier_weight) * width) & (gradient > 0)
+    near_upper = space.free & (space.upper - z < np.sqrt(barrier_weight) * width) & (gradient < 0)
+    if not (near_lower.any() or near_upper.any()):
+        return None
+    # the weakest-held bounds are let go, one at a time, until the design is feasible and meshes
+    for weakest in [i for i in np.argsort(np.abs(gradient) * width) if near_lower[i] or near_upper[i]]:
+        snapped = np.where(near_lower, space.lower, np.where(near_upper, space.upper, z))
+        if not (near_lower.any() or near_upper.any()) or (space.is_feasible(snapped) and builder.meshes(snapped)):
+            break
+        near_lower[weakest] = near_upper[weakest] = False
+    if not (near_lower.any() or near_upper.any()):
+        return None
+    try:
+        evaluation = builder.evaluate(builder.build(snapped), snapped, weights)
+    except InputError:
+        return None
+    if evaluation.cost >= final.cost:
+        return None
+    names = [f"{n} = lower" for n in np.array(space.names)[near_lower]]
+    names += [f"{n} = upper" for n in np.array(space.names)[near_upper]]
+    return names, evaluation
+
+
+def _rescaled(scaling, gradient, previous, barrier_part, built: bool, settings) -> np.ndarray:
+    """W_i halves where ∂L_b/∂z_i changed sign (the source's rule). Beyond the source, at a design
+    where a PROM was just built (a linearised gradient holds no new information), W_i doubles
+    where the sign held, the barrier's part μ ∂B/∂z_i is under half of ∂L_b/∂z_i (away from the
+    bounds' barrier layer) and the doubled step γ W_i |∂L_b/∂z_i| stays within the rebuild
+    threshold: a parameter with a small gradient still reaches its bound."""
+    sign_change = np.sign(gradient) * np.sign(previous)
+    scaling = np.where(sign_change < 0, 0.5 * scaling, scaling)
+    outside_barrier_layer = np.abs(barrier_part) < 0.5 * np.abs(gradient)
+    room = 2 * settings.step_size * scaling * np.abs(gradient) <= settings.rebuild_threshold
+    return np.where(built & (sign_change > 0) & outside_barrier_layer & room, 2.0 * scaling, scaling)
+
+
+def _final_evaluation(builder: PromBuilder, weights, z, last_built) -> Evaluation:
+    """A PROM built at the last iterate (stepping back towards the last built design if refused)."""
+    for _ in range(20):
+        try:
+            return builder.evaluate(builder.build(z), z, weights)
+        except InputError:
+            z = last_built + 0.5 * (z - last_built)
+    return builder.evaluate(builder.build(last_built), last_built, weights)
+
+
+def _strictly_inside(space: DesignSpace, z: np.ndarray) -> np.ndarray:
+    """Move a start on a bound slightly inside (the barrier needs interior points); a start on a
+    linear constraint moves halfway towards the most interior point of the feasible set."""
+    margin = 1e-3 * (space.upper - space.lower)
+    z = np.clip(z, space.lower + margin, space.upper - margin)
+    if np.all(space.slacks(z)[space.barrier_rows] > 0):
+        return z
+    return 0.5 * (z + space.most_interior_point())
+
+
+def _linearised_distance(center: dict, z: np.ndarray) -> tuple[float, np.ndarray]:
+    """d(z) ≈ d_c + ∇d_c · (z - z_c), the first-order trajectory approximation between builds."""
+    gradient = np.array(center["distance_gradient"])
+    return center["distance"] + gradient @ (z - np.array(center["z"])), gradient
+
+
+def _weighted_cost(space, weights, z, distance, distance_gradient):
+    cost = -weights.distance * distance
+    gradient = -weights.distance * np.asarray(distance_gradient, dtype=float)
+    if space.with_amplitude:
+        cost += weights.energy * weights.energy_term(z[-1])
+        gradient = gradient.copy()
+        gradient[-1] += weights.energy * 2 * weights.alpha * z[-1]
+    return cost, gradient
+
+
+def _fraction_to_boundary(space: DesignSpace, z, step, keep: float = 0.1) -> tuple[float, np.ndarray]:
+    """Largest t ≤ 1 that keeps ``keep`` of every slack s(z) > 0, and the directions it blocks."""
+    rows = space.barrier_rows
+    slacks = space.slacks(z)[rows]
+    jacobian = space.slack_jacobian[rows]
+    change = jacobian @ step
+    shrinking = change < 0
+    if not np.any(shrinking):
+        return 1.0, np.array([], dtype=int)
+    limits = np.full(slacks.size, np.inf)
+    limits[shrinking] = -slacks[shrinking] / change[shrinking]
+    limits *= 1.0 - keep
+    if limits.min() >= 1.0:
+        return 1.0, np.array([], dtype=int)
+    fraction = limits.min()
+    limiting = np.flatnonzero(limits < 1.0)
+    return fraction, np.flatnonzero(np.abs(jacobian[limiting]).sum(axis=0) * (step != 0) > 0)

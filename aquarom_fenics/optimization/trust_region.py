@@ -1,0 +1,166 @@
+"""The trust-region optimiser (SPEC §10): the PROM at the centre as a nonlinear surrogate.
+
+SciPy's SLSQP solves the surrogate problem with bounds and linear constraints inside the radius (a
+fraction of the PROM validity box); a PROM built at the candidate gives the actual reduction, and
+ρ = actual / predicted accepts or rejects the step and resizes the radius. A candidate the design
+check refuses is pulled back along its step (bisection); a direction refused right at the centre
+becomes a cut of the surrogate problem.
+"""
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+from scipy.optimize import LinearConstraint, minimize
+
+from aquarom_fenics.errors import InputError, SolverError
+from aquarom_fenics.optimization.cost import first_order_at
+from aquarom_fenics.optimization.history import history_row, optimality_reason, record
+from aquarom_fenics.optimization.prom_builder import PromBuilder
+from aquarom_fenics.reduction.prom import ReducedModel
+
+log = logging.getLogger("aquarom")
+
+
+def trust_region(scene, space, builder, weights, history, checkpoint, state, safeguard, on_iteration):
+    settings = scene.optimizer
+    started = safeguard.started
+    # The trust radius is a fraction of the PROM validity box; the amplitude enters the reduced
+    # actuation exactly (linearly), so its box is its whole range.
+    half_widths = np.array(scene.validity_radii() + ([space.upper[-1] - space.lower[-1]] if space.with_amplitude else []))
+    if state is None:
+        state = {"center": space.start.tolist(), "radius": settings.initial_radius, "iteration": 0, "cuts": []}
+    center = np.array(state["center"])
+    cuts = [np.array(cut) for cut in state.get("cuts", [])]
+    prom = _build_or_stop(builder, center)
+    current = builder.evaluate(prom, center, weights)
+    measure = first_order_at(scene, space, current).measure
+    if not history:
+        record(history, history_row(space, 0, center, current.cost, current.gradient, current.distance,
+                                     "built", started, radius=state["radius"], optimality=measure), on_iteration)
+    reason = "maximum number of iterations (safeguard)"
+    while state["iteration"] < settings.max_iterations:
+        if measure <= settings.optimality_tolerance:
+            reason = optimality_reason(measure, settings.optimality_tolerance)
+            break
+        if safeguard.out_of_time():
+            reason = safeguard.reason
+            break
+        radius = state["radius"]
+        candidate, predicted_cost = _surrogate_step(builder, prom, space, weights, center, radius * half_widths, cuts)
+        candidate = safeguard.finite(candidate, state["iteration"] + 1)
+        step = candidate - center
+        iteration = state["iteration"] + 1
+        if (np.abs(step).max() < settings.step_tolerance
+                or current.cost - predicted_cost <= settings.cost_tolerance * abs(current.cost)):
+            reason = "no predicted improvement inside the trust radius (stalled before optimality)"
+            break
+        candidate, candidate_prom = _meshable_candidate(builder, center, candidate, settings.step_tolerance)
+        if candidate_prom is None:
+            # refused right at the centre: the half-space step·(z - z_c) ≤ 0 is cut from the surrogate problem
+            if len(cuts) >= 2 * len(space.names):
+                reason = "the design check refuses every descent direction from the centre"
+                break
+            cuts.append(step)
+            state.update(iteration=iteration, cuts=[cut.tolist() for cut in cuts])
+            checkpoint.save(state, history, builder)
+            continue
+        step = candidate - center
+        predicted = current.cost - _surrogate_cost(builder, prom, weights, candidate)
+        trial = builder.evaluate(candidate_prom, candidate, weights)
+        ratio = (current.cost - trial.cost) / predicted if predicted > 0 else -np.inf
+        accepted = ratio > settings.accept_ratio
+        trial_measure = first_order_at(scene, space, trial).measure
+        record(history, history_row(space, iteration, candidate, trial.cost, trial.gradient, trial.distance,
+                                     "built" if accepted else "rejected", started, radius=radius,
+                                     ratio=float(ratio), optimality=trial_measure), on_iteration)
+        radius = _resized_radius(radius, ratio)
+        if accepted:
+            center, prom, current, measure, cuts = candidate, candidate_prom, trial, trial_measure, []
+        state.update(center=center.tolist(), radius=radius, iteration=iteration, cuts=[cut.tolist() for cut in cuts])
+        checkpoint.save(state, history, builder)
+        if np.all(radius * half_widths < settings.step_tolerance):
+            reason = f"trust radius {radius:.2e} of the validity box below the step tolerance"
+            break
+    return center, current, reason
+
+
+def _resized_radius(radius: float, ratio: float) -> float:
+    """ρ < 1/4: halve; ρ > 3/4: double (at most the validity box); otherwise keep."""
+    if ratio < 0.25:
+        return 0.5 * radius
+    if ratio > 0.75:
+        return min(2.0 * radius, 1.0)
+    return radius
+
+
+def _meshable_candidate(builder: PromBuilder, center, candidate, step_tolerance: float, bisections: int = 12):
+    """The candidate and its PROM, or the last design along z_c + t (z - z_c) that the design check
+    accepts (bisection on t ∈ [0, 1]); (candidate, None) when that step is below the tolerance."""
+    step = candidate - center
+    if not builder.meshes(candidate):
+        meshing, refused = 0.0, 1.0
+        for _ in range(bisections):
+            middle = 0.5 * (meshing + refused)
+            meshing, refused = (middle, refused) if builder.meshes(center + middle * step) else (meshing, middle)
+        log.warning("trust region: candidate %s refused by the design check; step shortened to %.3g of it",
+                    builder.space.as_dict(candidate), meshing)
+        candidate = center + meshing * step
+        if np.abs(candidate - center).max() < step_tolerance:
+            return candidate, None
+    try:
+        return candidate, builder.build(candidate)
+    except InputError as refused:
+        log.warning("trust region: candidate refused (%s)", refused)
+        return candidate, None
+
+
+def _surrogate_cost(builder: PromBuilder, prom, weights, z) -> float:
+    return builder.evaluate(prom, z, weights).cost
+
+
+def _build_or_stop(builder: PromBuilder, z: np.ndarray) -> ReducedModel:
+    try:
+        return builder.build(z)
+    except InputError as refused:
+        raise InputError(f"the PROM cannot be built at {builder.space.as_dict(z)}: {refused}") from None
+
+
+def _within_cuts(z, center, cuts) -> bool:
+    return all(cut @ (z - center) <= 1e-12 for cut in cuts)
+
+
+def _surrogate_step(builder, prom, space, weights, center, radius, cuts=()) -> tuple[np.ndarray, float]:
+    """Minimise the surrogate cost (PROM at its centre, simulated at z) inside bounds, constraints,
+    radius and the cuts c·(z - z_c) ≤ 0 of directions the design check refused."""
+    cache = {}
+
+    lower = np.maximum(space.lower, center - radius)
+    upper = np.minimum(space.upper, center + radius)
+
+    def surrogate(z):
+        z = np.clip(np.asarray(z, dtype=float), lower, upper)
+        key = tuple(z)
+        if key not in cache:
+            cache[key] = builder.evaluate(prom, z, weights)
+        return cache[key]
+
+    constraints = []
+    if space.constraint_matrix.size:
+        constraints.append(LinearConstraint(space.constraint_matrix, -np.inf, space.constraint_bound))
+    for cut in cuts:
+        constraints.append(LinearConstraint(cut[None, :], -np.inf, cut @ center))
+    try:
+        solution = minimize(lambda z: surrogate(z).cost, center, jac=lambda z: surrogate(z).gradient, method="SLSQP",
+                            bounds=list(zip(lower, upper)), constraints=constraints,
+                            options={"maxiter": 30, "ftol": 1e-10})
+        candidate = np.clip(solution.x, lower, upper)
+    except SolverError as failed:      # the surrogate cannot be simulated everywhere: its best point so far
+        log.warning("trust region: surrogate solve stopped (%s); taking its best feasible point so far", failed)
+        candidate = np.array(min((key for key in cache if _within_cuts(np.array(key), center, cuts)
+                                  and space.is_feasible(np.array(key), tolerance=1e-9)),
+                                 key=lambda key: cache[key].cost))
+    if not space.is_feasible(candidate, tolerance=1e-9):
+        raise SolverError(f"the surrogate step left the feasible set at {space.as_dict(candidate)}")
+    value = surrogate(candidate).cost
+    return candidate, value

@@ -1,0 +1,135 @@
+"""Convergence studies of the validation: time step (study d) and mesh (SPEC §11)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from aquarom_fenics.io.scene import SolverSection
+from aquarom_fenics.verification.convergence import MeshCase, mesh_convergence
+from aquarom_fenics.verification.validation.cases import fom_case, mesh_case, reduced_case
+from aquarom_fenics.verification.validation.runner import Runner
+from aquarom_fenics.verification.validation.settings import Settings, base_scene
+
+
+@dataclass(frozen=True)
+class ConvergenceScheme:
+    """A time scheme of study d: its label, [solver] values and whether it is second order."""
+
+    tag: str
+    solver: tuple          # ([solver] key, value) pairs
+    second_order: bool
+
+    def facts(self) -> dict:
+        """integrator and ρ∞ or α_N, as written with each quantity."""
+        values = {**vars(SolverSection()), **dict(self.solver)}
+        key = "rho_infinity" if values["integrator"] == "generalized-alpha" else "newmark_alpha"
+        return {"integrator": values["integrator"], key: values[key], "second_order": self.second_order}
+
+
+def convergence_schemes() -> tuple[ConvergenceScheme, ...]:
+    """The default scheme (generalized-α, second order for any ρ∞) and Newmark at its default α_N.
+
+    With γ = ½ + α_N Newmark's error has an O(α_N h) term, so for α_N > 0 the ratios tend to 2
+    as h → 0; how soon depends on α_N against h."""
+    defaults = SolverSection()
+    return (ConvergenceScheme(f"generalized-α ρ∞ = {defaults.rho_infinity:g}", (), True),
+            ConvergenceScheme(f"Newmark α_N = {defaults.newmark_alpha:g}", (("integrator", "newmark"),),
+                              defaults.newmark_alpha == 0.0))
+
+
+def study_d(runner: Runner, settings: Settings) -> dict:
+    steps = settings.convergence_steps
+    families = {}
+    for scheme in convergence_schemes():
+        def scene(name="nominal", h=0.02, scheme=scheme):
+            return base_scene(settings, name, time_step=h, solver=dict(scheme.solver))
+        tag = scheme.tag
+        families[(scheme, "FOM", f"FOM, {tag}")] = [fom_case(f"FOM h={h} {tag}", scene(h=h)) for h in steps]
+        families[(scheme, "ROM", f"ROM, {tag}")] = [reduced_case(f"ROM h={h} {tag}", scene(h=h), parametric=False)
+                                                   for h in steps]
+        families[(scheme, "PROM", f"PROM p=3 sensitivities, {tag}")] = [
+            reduced_case(f"PROM SO1 h={h} {tag} with sensitivities", scene("so1", h), parametric=True,
+                         sensitivities=True) for h in steps]
+    cases = [case for family in families.values() for case in family]
+    records = dict(zip((case.key for case in cases), runner.run("d", cases)))
+    coarse = steps[0]
+    result = {"study": "d", "level": settings.reference_level, "duration": settings.duration,
+              "time_steps": list(steps), "grid_step": coarse,
+              "schemes": [{"tag": scheme.tag} | scheme.facts() for scheme in convergence_schemes()], "quantities": []}
+    for (scheme, model, name), family in families.items():
+        runs = [records[case.key] for case in family]
+        facts = {"model": model} | scheme.facts()
+        if any(run.get("status") != "completed" for run in runs):
+            result["quantities"].append({"name": name, **facts, "status": "incomplete",
+                                         "message": "; ".join(f"h={h}: {run.get('status')} {run.get('message') or ''}"
+                                                              for h, run in zip(steps, runs))})
+            continue
+        if model == "PROM":
+            parameter_names = runs[0].get("parameter_names") or []
+            series = [on_grid(run["trajectory"]["time"], np.asarray(run["head_x_sensitivity"]), coarse) for run in runs]
+            for index, parameter in enumerate(parameter_names):
+                result["quantities"].append(convergence(f"d head x / d ξ[{parameter}] (PROM p=3), {scheme.tag}",
+                                                        [s[1][:, index] for s in series], series[0][0], steps,
+                                                        facts | {"quantity": f"d head_x / d {parameter}"}))
+            gradients = [np.asarray(run["distance_gradient"]) for run in runs]
+            result["quantities"].append(convergence(f"d distance / d ξ (PROM p=3, norm over parameters), {scheme.tag}",
+                                                    gradients, None, steps, facts | {"quantity": "d distance / d xi"}))
+        else:
+            for quantity, label in (("head_x", "head x"), ("tail_y", "tail y")):
+                series = [on_grid(run["trajectory"]["time"], np.asarray(run["trajectory"][quantity]), coarse)
+                          for run in runs]
+                result["quantities"].append(convergence(f"{model} {label}, {scheme.tag}", [s[1] for s in series],
+                                                        series[0][0], steps, facts | {"quantity": quantity}))
+    return result
+
+
+def time_convergence_summary(study: dict) -> dict:
+    """The ratios of study d per scheme, model and quantity (results/validation/time_convergence.json)."""
+    summary = {"level": study["level"], "duration": study["duration"], "time_steps": study["time_steps"],
+               "ratio_range_second_order": [3.5, 4.5], "schemes": []}
+    for scheme in study["schemes"]:
+        entries = [q for q in study["quantities"] if q["integrator"] == scheme["integrator"]
+                   and q.get("rho_infinity") == scheme.get("rho_infinity")
+                   and q.get("newmark_alpha") == scheme.get("newmark_alpha")]
+        models = {}
+        for entry in entries:
+            models.setdefault(entry["model"], {})[entry.get("quantity", entry["name"])] = (
+                {"ratios": entry["ratios"], "differences": entry["differences"]} if entry["status"] == "completed"
+                else {"status": entry["status"], "message": entry.get("message")})
+        summary["schemes"].append(scheme | {"models": models})
+    return summary
+
+
+def on_grid(time, values, step):
+    """Samples of ``values`` at the multiples of ``step`` (the coarsest run's samples)."""
+    time = np.asarray(time)
+    stride = int(round(step / (time[1] - time[0])))
+    return time[::stride], np.asarray(values)[::stride]
+
+
+def convergence(name, values, time, steps, facts: dict) -> dict:
+    """Successive differences ‖q_h - q_h/2‖_∞ and their ratio (≈ 4 for a second-order scheme)."""
+    differences = [float(np.max(np.abs(np.asarray(a) - np.asarray(b)))) for a, b in zip(values, values[1:])]
+    ratios = [first / second if second > 0 else None for first, second in zip(differences, differences[1:])]
+    entry = {"name": name, **facts, "status": "completed", "differences": differences,
+             "ratios": ratios,
+             "ratio": ratios[0] if ratios else None, "pairs": [f"{a:g}–{b:g}" for a, b in zip(steps, steps[1:])]}
+    if time is not None:
+        entry["time"] = np.asarray(time).tolist()
+        entry["difference_series"] = [np.abs(np.asarray(a) - np.asarray(b)).tolist() for a, b in zip(values, values[1:])]
+    return entry
+
+
+def study_mesh_convergence(runner: Runner, settings: Settings) -> dict:
+    """Mesh convergence of the nominal FOM per element degree and level; Richardson reference."""
+    cases = [mesh_case(f"degree {degree}, level {level}",
+                       base_scene(settings, level=level).replace("mesh", degree=degree))
+             for degree, levels in settings.mesh_series for level in levels]
+    records = runner.run("mesh_convergence", cases)
+    fields = MeshCase.__dataclass_fields__
+    measured = [MeshCase(**{name: record[name] for name in fields}) for record in records
+                if record["status"] == "completed"]
+    failed = [{"label": record["label"], "status": record["status"], "message": record.get("message")}
+              for record in records if record["status"] != "completed"]
+    return mesh_convergence(measured) | {"failed": failed}

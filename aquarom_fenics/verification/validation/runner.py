@@ -1,0 +1,266 @@
+"""Running validation cases once: cache, progress lines, a time limit per case, parallel workers."""
+from __future__ import annotations
+
+import json
+import logging
+import os
+import resource
+import signal
+import sys
+import time
+import traceback
+from pathlib import Path
+
+from aquarom_fenics import __version__
+from aquarom_fenics.io.persistence import get_or_compute, read_intact, write_json_atomic
+from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.verification.validation.cases import CACHED_STATUSES, Case, describe, read_record
+from aquarom_fenics.verification.validation.compute import compute_fom, compute_mesh, compute_mpi, compute_reduced
+
+
+class CaseTimeLimit(Exception):
+    """Raised by the alarm when a case runs past its time limit."""
+
+
+class CasesCollected(Exception):
+    """Raised by a collecting Runner: the study's case list is known, nothing was run."""
+
+
+class Runner:
+    """Runs cases once: cached records are read, missing ones computed and written.
+
+    ``collect`` True: ``run`` only records the cases it is given and raises CasesCollected (the
+    study functions call ``run`` once each), so that a driver can list every case of a set of
+    studies and compute them in parallel first (see ``compute_in_parallel``).
+    """
+
+    def __init__(self, out: Path, time_limit: float = 1800.0, recompute_failed: bool = False, stream=None,
+                 collect: bool = False, concurrent_jobs: int = 1):
+        self.out = Path(out)
+        self.cases_dir = self.out / "cases"
+        self.time_limit = float(time_limit)
+        self.recompute_failed = recompute_failed
+        self.stream = stream or sys.stdout
+        self.collect = collect
+        self.collected: list[Case] = []
+        self.concurrent_jobs = concurrent_jobs
+        self.outcomes: dict[str, str] = {}      # key → "cached" | "computed" | "not cached (…)", once per case
+        self.this_run: dict[str, dict] = {}      # records computed in this run (also the uncached ones)
+        self.computed_elsewhere: set[str] = set()
+        self.compute_time = 0.0
+        self._fish = {}
+        self._warm = set()
+        logging.getLogger("aquarom").setLevel(logging.ERROR)   # dropped vectors etc. are in the records
+
+    @property
+    def counts(self) -> dict:
+        counts = {"cached": 0, "computed": 0, "not cached (time limit or crash)": 0}
+        for outcome in self.outcomes.values():
+            counts[outcome] += 1
+        return counts
+
+    # ----------------------------------------------------------------- public
+    def run(self, study: str, cases: list[Case]) -> list[dict]:
+        """Records of ``cases`` in order, computing those missing; one progress line per case."""
+        if self.collect:
+            self.collected += cases
+            raise CasesCollected(study)
+        records = []
+        width = len(str(len(cases)))
+        for number, case in enumerate(cases, start=1):
+            prefix = f"[{study} {number:>{width}}/{len(cases)}] {case.label}"
+            record = self.this_run.get(case.key) or self.cached(case)
+            if record is not None:
+                if case.key not in self.outcomes:
+                    self.outcomes[case.key] = "computed" if case.key in self.computed_elsewhere else "cached"
+                done = "computed in parallel" if case.key in self.computed_elsewhere else (
+                    "done" if case.key in self.this_run else "cached")
+                self._say(f"{prefix}: {done} — {describe(record)}")
+                records.append(record)
+                continue
+            self._say(f"{prefix}: computing …", end="")
+            record, elapsed = self.compute_and_store(case)
+            self._say(f" {elapsed:.1f} s — {describe(record)}")
+            records.append(record)
+        return records
+
+    def cached(self, case: Case) -> dict | None:
+        """The case's record from the cache when it is intact and usable, else None."""
+        path = self.cases_dir / case.file_name
+        if not path.exists():
+            return None
+        try:
+            return read_intact(path, lambda entry: self._usable_record(case, entry))
+        except ValueError:
+            return None
+
+    def _usable_record(self, case: Case, path: Path) -> dict:
+        """A cached record, or ValueError: unreadable, no answer of the model, or a failure to recompute."""
+        record = read_record(path)
+        if record is None:
+            raise ValueError("no record of a model answer")
+        if self.recompute_failed and record["status"] != "completed" and case.key not in self.computed_elsewhere:
+            raise ValueError(f"status {record['status']}, recomputed on request")
+        return record
+
+    def compute_and_store(self, case: Case) -> tuple[dict, float]:
+        """Compute a case through the cache (stored when it is an answer of the model); (record, seconds)."""
+        started = time.perf_counter()
+
+        def compute() -> dict:
+            record = self.compute(case)
+            record["compute_time"] = time.perf_counter() - started
+            record["concurrent_jobs"] = self.concurrent_jobs
+            return record
+
+        record = get_or_compute(self.cases_dir / case.file_name, compute,
+                                save=lambda value, target: write_json_atomic(target, value),
+                                load=lambda entry: self._usable_record(case, entry), label="validation cache",
+                                store_if=lambda value: value["status"] in CACHED_STATUSES)
+        elapsed = time.perf_counter() - started
+        self.compute_time += elapsed
+        self.outcomes[case.key] = ("computed" if record["status"] in CACHED_STATUSES
+                                   else "not cached (time limit or crash)")
+        self.this_run[case.key] = record
+        return record, elapsed
+
+    def compute(self, case: Case) -> dict:
+        """The record of one case (never raises for the model's own failures)."""
+        record = {"kind": case.kind, "key": case.key, "label": case.label, "scene_hash": case.scene.hash,
+                  "scene": case.scene.to_dict(), "options": case.options, "version": __version__,
+                  "computed_at": time.strftime("%Y-%m-%d %H:%M:%S")}
+        try:
+            if case.kind == "mpi":
+                record.update(compute_mpi(self, case))
+            else:
+                compute = {"fom": compute_fom, "reduced": compute_reduced, "mesh": compute_mesh}[case.kind]
+                record.update(with_time_limit(self.time_limit, lambda: compute(self, case)))
+        except CaseTimeLimit:
+            record.update(status="time-limit", message=f"stopped by the validation's time limit of "
+                                                          f"{self.time_limit:g} s per case (not cached; rerun to retry)")
+        except Exception as error:  # noqa: BLE001 — a crash of one case must not end the study
+            record.update(status="crashed", message=f"{type(error).__name__}: {error}",
+                          traceback=traceback.format_exc(limit=6))
+        record["peak_rss_mb_process"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+        return record
+
+    def fish(self, scene: Scene):
+        """load_fish, shared by cases with the same mesh, regions and shape set."""
+        from aquarom_fenics.geometry.fish import load_fish
+
+        key = json.dumps([scene.to_dict()["mesh"], scene.to_dict()["regions"], scene.shape_names], sort_keys=True)
+        if key not in self._fish:
+            self._fish[key] = load_fish(scene)
+        return self._fish[key]
+
+    def warm_up(self, scene: Scene, parametric: bool | None) -> None:
+        """Compile (or load from the JIT cache) the forms of a model kind and run it briefly on level 1.
+
+        Keeps form compilation and first-call costs out of the first timed case, which would bend
+        the cost fits.
+        ``parametric`` None: the FOM's forms.
+        """
+        order = scene.reduction.taylor_order if parametric and scene.shapes else 0
+        key = ("fom",) if parametric is None else ("reduced", order)
+        if key in self._warm:
+            return
+        self._warm.add(key)
+        coarse = scene.replace("mesh", level=1) if not scene.mesh.file else scene
+        coarse = coarse.replace("solver", duration=0.1, time_step=0.02)
+        if parametric is None:
+            from aquarom_fenics.dynamics.simulate import simulate_fom
+
+            simulate_fom(coarse, fish=self.fish(coarse), progress=False)
+        else:
+            from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
+            from aquarom_fenics.reduction.reductor import build_prom
+
+            simulate_reduced(build_prom(coarse, fish=self.fish(coarse), parametric=parametric), coarse,
+                             sensitivities=True)
+
+    def _say(self, text: str, end: str = "\n") -> None:
+        print(text, end=end, file=self.stream, flush=True)
+
+
+LEVEL_CELLS = {1: 1232, 2: 4176, 3: 7944, 4: 15392, 5: 25312}
+
+_WORKER: Runner | None = None
+
+
+def estimated_cost(case: Case) -> float:
+    """A rough run time [s], to start the longest cases first."""
+    cells = LEVEL_CELLS.get(case.scene.mesh.level, 8000)
+    steps = case.scene.n_steps
+    if case.kind in ("fom", "mpi", "mesh"):
+        quadratic = 8.0 if case.scene.mesh.degree == 2 else 1.0   # measured: level 1, 16 s against 1.9 s
+        return quadratic * 7e-4 * cells ** 1.1 * steps / 100.0
+    p = len(case.scene.shapes) if case.options.get("parametric") else 0
+    order = case.scene.reduction.taylor_order if p else 0
+    return 1e-4 * cells * (1 + p) * (4 if order == 2 else 1) + 0.05 * steps / 100.0
+
+
+def _start_worker(out, time_limit, recompute_failed, jobs):
+    global _WORKER
+    _WORKER = Runner(out, time_limit, recompute_failed, stream=open(os.devnull, "w"), concurrent_jobs=jobs)
+
+
+def _work(case: Case):
+    return _WORKER.compute_and_store(case)
+
+
+def compute_in_parallel(runner: Runner, cases: list[Case], jobs: int) -> int:
+    """Compute the missing (non-MPI) cases in ``jobs`` worker processes, longest first.
+
+    Workers are fresh interpreters (spawn), each with one BLAS thread; their records are written
+    to the cache as usual, and the uncached outcomes (time limit, crash) are handed to ``runner``
+    so that the studies do not retry them in the same run. Returns the number of cases computed.
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    pending = {}
+    for case in cases:
+        if case.kind != "mpi" and case.key not in pending and runner.cached(case) is None:
+            pending[case.key] = case
+    if not pending:
+        return 0
+    order = sorted(pending.values(), key=estimated_cost, reverse=True)
+    print(f"== computing {len(order)} missing cases with {jobs} parallel workers (longest first) ==",
+          file=runner.stream, flush=True)
+    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[name] = "1"
+    width = len(str(len(order)))
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=_start_worker,
+                             initargs=(runner.out, runner.time_limit, runner.recompute_failed, jobs)) as pool:
+        futures = {pool.submit(_work, case): case for case in order}
+        for number, future in enumerate(as_completed(futures), start=1):
+            case = futures[future]
+            prefix = f"[parallel {number:>{width}}/{len(order)}] {case.label}"
+            try:
+                record, elapsed = future.result()
+            except Exception as error:  # noqa: BLE001 — a dead worker: the studies compute the case again
+                print(f"{prefix}: worker failed ({type(error).__name__}: {error}); computed again below",
+                      file=runner.stream, flush=True)
+                continue
+            if record["status"] in CACHED_STATUSES:
+                runner.computed_elsewhere.add(case.key)
+            else:
+                runner.this_run[case.key] = record
+                runner.outcomes[case.key] = "not cached (time limit or crash)"
+            print(f"{prefix}: {elapsed:.1f} s — {describe(record)}", file=runner.stream, flush=True)
+    return len(order)
+
+
+def with_time_limit(seconds: float, function):
+    """``function()`` under a SIGALRM time limit (raises CaseTimeLimit); main thread only."""
+    def on_alarm(signum, frame):
+        raise CaseTimeLimit(f"time limit of {seconds:g} s")
+
+    previous = signal.signal(signal.SIGALRM, on_alarm)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        return function()
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)

@@ -1,0 +1,53 @@
+"""Settings of the validation (full and quick) and the scenes its studies start from."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from aquarom_fenics.io.scene import Scene
+
+REFERENCE_STIFFNESS = 6e4
+"""k [Pa] of the reference fish (SPEC §5)."""
+
+PROM_SCENES = {3: "so1", 5: "so2", 8: "so3"}
+"""Number of shape parameters → shipped scene whose shape set the PROM carries."""
+
+
+@dataclass(frozen=True)
+class Settings:
+    quick: bool
+    levels: tuple[int, ...]
+    stiffnesses: tuple[float, ...]          # Pa; calibrated on level 1 (amplitude ∝ k): 0.5–3.3 cm on level 3
+    duration: float                          # s
+    reference_level: int
+    time_steps: tuple[float, ...]            # study c
+    convergence_steps: tuple[float, ...]     # study d
+    mpi_levels: tuple[int, ...]
+    stress_level: int
+    fine_prom_level: int
+    time_limit: float                        # s per case
+    mesh_series: tuple[tuple[int, tuple[int, ...]], ...]   # (degree, levels) of the mesh-convergence study
+
+
+FULL = Settings(quick=False, levels=(1, 2, 3, 4, 5), stiffnesses=(1.2e4, 2.5e4, 4e4, 6e4, 7.5e4), duration=2.0,
+                reference_level=3, time_steps=(0.04, 0.02, 0.01, 0.005), convergence_steps=(0.02, 0.01, 0.005, 0.0025),
+                mpi_levels=(4, 5), stress_level=3, fine_prom_level=5, time_limit=1800.0,
+                mesh_series=((1, (1, 2, 3, 4, 5)), (2, (1, 2, 3))))
+QUICK = Settings(quick=True, levels=(1, 2), stiffnesses=(1.2e4, 6e4, 7.5e4), duration=0.4, reference_level=1,
+                 time_steps=(0.04, 0.02, 0.01, 0.005), convergence_steps=(0.02, 0.01, 0.005, 0.0025),
+                 mpi_levels=(1, 2), stress_level=1, fine_prom_level=2, time_limit=300.0,
+                 mesh_series=((1, (1, 2, 3)), (2, (1,))))
+
+
+def base_scene(settings: Settings, name: str = "nominal", level: int | None = None,
+               stiffness: float = REFERENCE_STIFFNESS, time_step: float = 0.02, solver: dict | None = None):
+    """A shipped scene at the study's level (linear tetrahedra: the studies sweep the five levels of
+    SPEC §11), stiffness, horizon and step; ``solver`` overrides [solver] values."""
+    scene = Scene.load(name)
+    scene = scene.replace("mesh", level=level or settings.reference_level, degree=1)
+    scene = scene.replace("actuation", stiffness=float(stiffness))
+    scene = scene.replace("solver", duration=settings.duration, time_step=float(time_step), **(solver or {}))
+    return scene.replace("output", plots=False, render=False, xdmf=False)
+
+
+def kpa(stiffness: float) -> str:
+    return f"{stiffness / 1e3:g} kPa"
