@@ -36,7 +36,7 @@ def test_dry_run_prints_a_plan_and_writes_nothing(tmp_path, capsys):
         assert not (tmp_path / "out").exists()
     main(["optimize", scene, "--dry-run"])
     text = capsys.readouterr().out
-    assert "skipped: drag" in text and "xi_1_z_tail" in text and "FOM checks" in text
+    assert "skipped: drag" in text and "xi_1_1" in text and "FOM checks" in text
 
 
 def test_existing_outputs_are_kept_unless_forced_and_a_manifest_is_written(tmp_path, capsys):

@@ -16,97 +16,57 @@ import scipy.linalg
 from aquarom_fenics.dynamics.integrator import IntegrationStopped, NewtonSettings, StepReport, TimeScheme, between, integrate
 from aquarom_fenics.reduction.prom import ReducedModel
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.physics.thrust import SpineGeometry, thrust_force, thrust_force_per_virtual_mass, thrust_jacobians, virtual_mass
 from aquarom_fenics.dynamics.trajectory import Trajectory, swimming_distance, tail_amplitude, window_mask, DISTANCE_WINDOW
 
 
 class ReducedSystem:
-    """The PROM's tensors evaluated at one design ξ (implements ``NewtonSystem``)."""
+    """The PROM's terms evaluated at one design ξ (implements ``NewtonSystem``).
+
+    r_r = M_r η̈ + C_r η̇ + f_int,r(η) - f_act,r(η, t) - f_thrust,r(η, η̇, η̈) - f_drag,r(η̇); its tangents and
+    ξ-derivative are the sums of the terms' parts.
+    """
 
     def __init__(self, prom: ReducedModel, scene: Scene, xi, scheme: TimeScheme, amplitude: float | None = None):
         self.prom, self.scheme = prom, scheme
-        self.delta = prom.delta(xi)
-        d = self.delta
-        self.mass = prom.mass.at(d)
-        self.k1, self.k2, self.k3 = (t.at(d) for t in (prom.stiffness_linear, prom.stiffness_quadratic, prom.stiffness_cubic))
-        alpha, beta = prom.rayleigh
-        self.damping = alpha * self.mass + beta * self.k1
-        self.actuation_constant = prom.actuation_constant.at(d)
-        self.actuation_linear = prom.actuation_linear.at(d)
-        self.drag = prom.drag.at(d)
-        self.amplitude = scene.actuation.amplitude if amplitude is None else amplitude
-        self.frequency = scene.actuation.frequency
-        self.dorsal_z = prom.dorsal_z + prom.dorsal_z_gradient @ d if d.size else prom.dorsal_z
-        self.spine = SpineGeometry(prom.spine_rest_xy, virtual_mass(self.dorsal_z, prom.fluid_density),
-                                   scene.fluid.spine_force)
-        self.spine_rows = prom.spine_rows.reshape(-1, prom.size)            # (2 n_spine, m)
-        self.com_weights = prom.mass_moment_x.at(d) / float(prom.total_mass.at(d))
+        self.delta = d = prom.delta(xi)
+        self.elastic = prom.elastic.at(d)
+        self.inertia = prom.inertia.at(d, prom.elastic.linear, self.elastic.k1)
+        self.muscle = prom.muscle.at(d, scene.actuation.amplitude if amplitude is None else amplitude,
+                                     scene.actuation.frequency)
+        self.thrust = prom.thrust.at(d, scene.fluid.spine_force) if prom.thrust is not None else None
+        self.drag = prom.drag.at(d, prom.observation.head_x_row) if prom.drag is not None else None
+        self.terms = [term for term in (self.elastic, self.muscle, self.inertia, self.thrust, self.drag)
+                      if term is not None]
+        self.com_weights = self.inertia.com_weights
         self._factors = None
 
     # ------------------------------------------------------------------ forces
-    def activations(self, time: float) -> np.ndarray:
-        """(a_left, a_right) = A sin(2π f t) (1, -1)."""
-        return self.amplitude * self.unit_activations(time)
-
-    def unit_activations(self, time: float) -> np.ndarray:
-        """∂(a_left, a_right)/∂A = sin(2π f t) (1, -1)."""
-        value = np.sin(2 * np.pi * self.frequency * time)
-        return np.array([value, -value])
-
     def amplitude_derivative(self, time, eta) -> np.ndarray:
-        """∂r/∂A = Σ_j (∂a_j/∂A) (b_j + B_j η)."""
-        a = self.unit_activations(time)
-        return a @ self.actuation_constant + np.einsum("j,jab,b->a", a, self.actuation_linear, eta)
+        """∂r/∂A of the actuation amplitude."""
+        return self.muscle.amplitude_derivative(time, eta)
 
     def internal_force(self, eta):
-        """K1 η + K2 η η + K3 η η η."""
-        quadratic = self.k2 @ eta
-        cubic = (self.k3 @ eta) @ eta
-        return self.k1 @ eta + quadratic @ eta + cubic @ eta
-
-    def internal_tangent(self, eta):
-        """K1 + 2 K2 η + 3 K3 η η (symmetric tensors)."""
-        return self.k1 + 2.0 * (self.k2 @ eta) + 3.0 * ((self.k3 @ eta) @ eta)
-
-    def actuation_force(self, time, eta):
-        """f_act,r = -Σ_j a_j (b_j + B_j η)."""
-        a = self.activations(time)
-        return -(a @ self.actuation_constant + np.einsum("j,jab,b->a", a, self.actuation_linear, eta))
-
-    def _spine_states(self, eta, eta_dot, eta_ddot):
-        return [(self.spine_rows @ x).reshape(-1, 2) for x in (eta, eta_dot, eta_ddot)]
-
-    def thrust_force(self, eta, eta_dot, eta_ddot):
-        if not self.prom.thrust:
-            return np.zeros_like(eta)
-        return self.spine_rows.T @ thrust_force(self.spine, *self._spine_states(eta, eta_dot, eta_ddot)).ravel()
-
-    def drag_force(self, eta_dot):
-        """g_r v_x², v_x the head's x-velocity."""
-        return self.drag * (self.prom.head_x_row @ eta_dot) ** 2
+        return self.elastic.force(eta)
 
     def residual(self, time, eta, eta_dot, eta_ddot):
-        inertia = self.mass @ eta_ddot
-        internal = self.internal_force(eta)
-        external = self.actuation_force(time, eta) + self.thrust_force(eta, eta_dot, eta_ddot) + self.drag_force(eta_dot)
-        residual = inertia + self.damping @ eta_dot + internal - external
+        inertia = self.inertia.mass @ eta_ddot
+        internal = self.elastic.force(eta)
+        external = self.muscle.force(time, eta)
+        if self.thrust is not None:
+            external = external + self.thrust.force(eta, eta_dot, eta_ddot)
+        if self.drag is not None:
+            external = external + self.drag.force(eta_dot)
+        residual = inertia + self.inertia.damping @ eta_dot + internal - external
         return residual, max(self.norm(internal), self.norm(external), self.norm(inertia))
 
     def tangents(self, time, eta, eta_dot, eta_ddot):
-        """(K_t, C_t, M_t) = ∂r/∂(η, η̇, η̈)."""
-        a = self.activations(time)
-        stiffness = self.internal_tangent(eta) + np.einsum("j,jab->ab", a, self.actuation_linear)
-        damping = self.damping.copy()
-        mass = self.mass.copy()
-        if self.prom.thrust:
-            jacobians = thrust_jacobians(self.spine, *self._spine_states(eta, eta_dot, eta_ddot))
-            rows = self.spine_rows
-            stiffness -= rows.T @ jacobians[0] @ rows
-            damping -= rows.T @ jacobians[1] @ rows
-            mass -= rows.T @ jacobians[2] @ rows
-        head = self.prom.head_x_row
-        damping -= 2.0 * (head @ eta_dot) * np.outer(self.drag, head)
-        return stiffness, damping, mass
+        """(K_t, C_t, M_t) = ∂r/∂(η, η̇, η̈), the sums of the terms' parts."""
+        totals = [np.zeros((eta.size, eta.size)) for _ in range(3)]
+        for term in self.terms:
+            for total, part in zip(totals, term.tangents(time, eta, eta_dot, eta_ddot)):
+                if part is not None:
+                    total += part
+        return tuple(totals)
 
     def set_time_step(self, scheme: TimeScheme) -> None:
         self.scheme = scheme
@@ -126,47 +86,24 @@ class ReducedSystem:
 
     # ------------------------------------------------------------------ ξ-derivatives
     def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
-        """∂r/∂ξ_k at fixed (η, η̇, η̈), shape (m, p)."""
-        prom, d = self.prom, self.delta
-        p = prom.n_parameters
-        if p == 0 or prom.mass.first is None:
+        """∂r/∂ξ_k at fixed (η, η̇, η̈), shape (m, p): the sum of the terms' parts."""
+        p = self.prom.n_parameters
+        if p == 0 or self.prom.inertia.mass.first is None:
             return np.zeros((eta.size, p))
-        alpha, beta = prom.rayleigh
-        mass_k = prom.mass.gradient(d)
-        a = self.activations(time)
-        columns = (mass_k @ eta_ddot + (alpha * mass_k + beta * prom.stiffness_linear.gradient(d)) @ eta_dot
-                   + self.internal_force_gradient(eta)
-                   + np.einsum("j,kja->ka", a, prom.actuation_constant.gradient(d))
-                   + np.einsum("j,kjab,b->ka", a, prom.actuation_linear.gradient(d), eta)
-                   - prom.drag.gradient(d) * (prom.head_x_row @ eta_dot) ** 2)
-        if prom.thrust:
-            per_mass = thrust_force_per_virtual_mass(self.spine, *self._spine_states(eta, eta_dot, eta_ddot))
-            # m̃ = (π/4) ρ_w (2 z_d)² ⇒ ∂m̃/∂ξ_k = 2π ρ_w z_d ∂z_d/∂ξ_k
-            mass_gradient = 2 * np.pi * prom.fluid_density * self.dorsal_z[:, None] * prom.dorsal_z_gradient
-            thrust_k = np.einsum("snc,sk->knc", per_mass, mass_gradient).reshape(p, -1)
-            columns -= thrust_k @ self.spine_rows
-        return columns.T
+        return sum(term.parameter_derivative(time, eta, eta_dot, eta_ddot) for term in self.terms).T
 
     def internal_force_gradient(self, eta) -> np.ndarray:
-        """∂f_int,r/∂ξ_k = K1_k η + K2_k η η + K3_k η η η, shape (p, m)."""
-        d = self.delta
-        k1_k, k2_k, k3_k = (t.gradient(d) for t in (self.prom.stiffness_linear, self.prom.stiffness_quadratic,
-                                                     self.prom.stiffness_cubic))
-        return (k1_k @ eta + np.einsum("kabc,b,c->ka", k2_k, eta, eta)
-                + np.einsum("kabcd,b,c,d->ka", k3_k, eta, eta, eta))
+        """∂f_int,r/∂ξ_k, shape (p, m)."""
+        return self.elastic.force_gradient(eta)
 
     def observables(self, eta) -> tuple[float, float, float]:
         """(head x, tail y, centre-of-mass x) [m]."""
-        return float(self.prom.head_x_row @ eta), float(self.prom.tail_y_row @ eta), float(self.com_weights @ eta)
+        observation = self.prom.observation
+        return float(observation.head_x_row @ eta), float(observation.tail_y_row @ eta), float(self.com_weights @ eta)
 
     def com_weights_gradient(self) -> np.ndarray:
-        """∂(c(ξ))/∂ξ_k for com_x = c(ξ)·η, c = n(ξ)/mass(ξ); shape (p, m)."""
-        prom, d = self.prom, self.delta
-        if prom.n_parameters == 0 or prom.mass_moment_x.first is None:
-            return np.zeros((prom.n_parameters, prom.size))
-        # c = n / m_total ⇒ ∂c/∂ξ_k = (∂n/∂ξ_k - c ∂m_total/∂ξ_k) / m_total
-        total = float(prom.total_mass.at(d))
-        return (prom.mass_moment_x.gradient(d) - np.outer(prom.total_mass.gradient(d), self.com_weights)) / total
+        """∂c/∂ξ_k of com_x = c(ξ)·η, shape (p, m)."""
+        return self.inertia.com_weights_gradient()
 
 
 @dataclass

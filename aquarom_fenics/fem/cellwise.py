@@ -72,7 +72,7 @@ class CellSampler:
             self.weight.append(self._compile(fom.shape_derivative(first_weight, self.shape_directions[1])))
         self.unit_strain = fx.tensor_constant(fom.mesh, (3, 3))
         self.energy_density = self._compile(svk_energy_density(
-            self.unit_strain, fom.young_modulus, fx.constant(fom.mesh, fom.scene.material.poisson_ratio)))
+            self.unit_strain, fom.elastic.young_modulus, fom.elastic.poisson_ratio))
 
     def _compile(self, expression):
         return fx.compile_quadrature_expression(expression, self.degree)

@@ -3,8 +3,8 @@
     M ü + C u̇ + f_int(u) = f_thrust(u, u̇, ü) + f_drag(u̇) + f_act(u, t)
 
 on a distributed linear tetrahedral mesh with a degree-1 or degree-2 Lagrange displacement and
-PETSc. The elastic, muscle, mass and drag terms are the UFL forms of ``forms/``; the Lighthill
-thrust acts on the spine nodes (``thrust.py``). A design ξ is either pulled back (forms on the
+PETSc. Each force is a term of ``physics/`` (elastic, muscle, inertia with Rayleigh damping, drag,
+thrust): the model sums their residuals and Newton-matrix parts. A design ξ is either pulled back (forms on the
 nominal mesh with F_1 = I + ∇u_ξ, ∇u_ξ = Σ ξ_k ∇U_k of the exact shape fields at the quadrature
 points, SPEC §4) or meshed directly (``moved_mesh``, u_ξ = 0).
 """
@@ -18,16 +18,14 @@ from ufl.algorithms import extract_coefficients
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.geometry.fish import Fish, quadrature_degrees
-from aquarom_fenics.forms.drag import drag_direction_form
-from aquarom_fenics.forms.elasticity import strain_energy
-from aquarom_fenics.forms.inertia import mass_form, mass_moment_x, total_mass
-from aquarom_fenics.forms.muscle import muscle_energy
 from aquarom_fenics.dynamics.integrator import TimeScheme
 from aquarom_fenics.errors import SolverError
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.physics.thrust import SpineGeometry, thrust_force, thrust_jacobians, virtual_mass
-
-LEFT, RIGHT = 0, 1
+from aquarom_fenics.physics.drag import DragTerm
+from aquarom_fenics.physics.elastic import ElasticTerm
+from aquarom_fenics.physics.inertia import InertiaTerm
+from aquarom_fenics.physics.muscle import MuscleTerm
+from aquarom_fenics.physics.thrust_term import ThrustTerm
 
 
 def direct_solver(comm: MPI.Comm) -> PETSc.KSP:
@@ -79,21 +77,22 @@ class FullOrderModel:
         self.n_global_dofs = 3 * self.space.dofmap.index_map.size_global
         self.n_cells = fish.mesh.cells.shape[0]
 
+        # One pair of arguments for every term: the Newton matrix's form sums the terms' tangent forms.
+        self.test_function, self.trial_function = ufl.TestFunction(self.space), ufl.TrialFunction(self.space)
         self.displacement = fx.new_function(self.space, "displacement")
         self.shape_displacement = fx.new_function(self.space, "shape_displacement")
         fx.set_nodal_values(self.shape_displacement, self.layout, shape_displacement)
         self._build_shape_gradients(np.zeros_like(self.xi) if moved_mesh else self.xi)
-        self._build_forms()
-        self._build_spine(rest_points)
+        self._build_spine()
         self._build_boundary_conditions()
-        self._build_constant_matrices()
+        self._build_terms(rest_points)
         self._work_in = PETSc.Vec().createMPI((self.n_owned_dofs, self.n_global_dofs), comm=comm)
         self._work_out = self._work_in.duplicate()
         self._solver = None
         self.set_time_step(TimeScheme.from_solver(scene.solver))
 
     # ------------------------------------------------------------------ set-up
-    def _cell_field(self, values_by_cell: np.ndarray, name: str):
+    def cell_field(self, values_by_cell: np.ndarray, name: str):
         field = fx.new_function(fx.cellwise_constant_space(self.mesh), name)
         fx.set_cell_values(field, values_by_cell)
         return field
@@ -127,60 +126,36 @@ class FullOrderModel:
                  if coefficient in present]
         return sum(terms[1:], terms[0])
 
-    def _build_forms(self):
-        scene, tags = self.scene, self.fish.tags
-        material = scene.material
-        stiffness_by_cell = np.full(self.n_cells, material.young_modulus)
-        stiffness_by_cell[tags.head_cells] *= material.head_stiffness_factor
-        young_modulus = self._cell_field(stiffness_by_cell, "young_modulus")
-        muscles = []
-        for cells, name in ((tags.left_muscle_cells, "left_muscle"), (tags.right_muscle_cells, "right_muscle")):
-            indicator = np.zeros(self.n_cells)
-            indicator[cells] = 1.0
-            muscles.append(self._cell_field(indicator, name))
-        self.activations = [fx.constant(self.mesh, 0.0), fx.constant(self.mesh, 0.0)]
-
-        # Values enter as constants so that one compiled form serves every scene and design.
-        poisson_ratio = fx.constant(self.mesh, material.poisson_ratio)
-        density = fx.constant(self.mesh, material.density)
-        muscle_stiffness = fx.constant(self.mesh, scene.actuation.stiffness)
-        fluid_density = fx.constant(self.mesh, scene.fluid.density)
-        u = self.displacement
-        grad_stiffness, grad_mass = self.shape_gradients["stiffness"], self.shape_gradients["mass"]
-        test, trial = ufl.TestFunction(self.space), ufl.TrialFunction(self.space)
-        elastic_energy = self._stiffness_rule(strain_energy(u, grad_stiffness, young_modulus, poisson_ratio))
-        internal_force = ufl.derivative(elastic_energy, u, test)
-        self.actuation_on = scene.actuation.stiffness > 0 and scene.actuation.amplitude > 0
-        tangent = ufl.derivative(internal_force, u, trial)
-        forms = {"internal_force": internal_force, "elastic_energy": elastic_energy,
-                 "elastic_tangent": tangent}
-        if self.actuation_on:
-            energy = self._stiffness_rule(muscle_energy(
-                u, grad_stiffness, muscle_stiffness, self.activations, muscles,
-                nominal_volume=scene.actuation.muscle_volume == "nominal"))
-            negative_actuation = ufl.derivative(energy, u, test)
-            forms["negative_actuation_force"] = negative_actuation
-            tangent = tangent + ufl.derivative(negative_actuation, u, trial)
-        forms["tangent"] = tangent
-        forms["mass"] = self._mass_rule(mass_form(trial, test, grad_mass, density))
-        forms["mass_moment_x"] = self._mass_rule(mass_moment_x(test, grad_mass, density))
-        forms["total_mass"] = self._mass_rule(total_mass(grad_mass, density, self.mesh))
-        if scene.fluid.drag:
-            # The skin of the rest shape: u_ξ interpolated at the displacement nodes (SPEC §5).
-            forms["drag_direction"] = self._mass_rule(drag_direction_form(
-                test, ufl.grad(self.shape_displacement), fluid_density, self.mesh))
-        self.ufl_forms = forms
-        self.young_modulus, self.muscle_indicators = young_modulus, muscles
-        self.forms = {name: fx.compile_form(form) for name, form in forms.items()}
-        self._vectors = {name: fx.create_vector(self.forms[name])
-                         for name in ("internal_force", "negative_actuation_force") if name in self.forms}
-        self.tangent_matrix = fx.create_matrix(self.forms["tangent"])
+    def _build_terms(self, rest_points: np.ndarray) -> None:
+        """The force terms; the Newton matrix's tangent form sums the elastic and muscle tangents."""
+        fluid = self.scene.fluid
+        self.elastic = ElasticTerm(self)
+        self.muscle = MuscleTerm(self)
+        self.rest_stiffness = self.elastic.rest_stiffness()
+        self.inertia = InertiaTerm(self, self.rest_stiffness)
+        self.drag = DragTerm(self) if fluid.drag else None
+        self.thrust = ThrustTerm(self, rest_points) if fluid.thrust else None
+        tangent = self.elastic.tangent_form
+        if self.muscle.on:
+            tangent = tangent + self.muscle.tangent_form
+        self._tangent = fx.compile_form(tangent)
+        self.tangent_matrix = fx.create_matrix(self._tangent)
         self.tangent_matrix.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
 
-    def _stiffness_rule(self, form):
+    @property
+    def mass_matrix(self) -> PETSc.Mat:
+        return self.inertia.mass_matrix
+
+    @property
+    def damping_matrix(self) -> PETSc.Mat:
+        return self.inertia.damping_matrix
+
+    def stiffness_rule(self, form):
+        """The form with the quadrature rule of the stiffness terms (elastic, muscle)."""
         return fx.with_quadrature_degree(form, self.quadrature_degrees["stiffness"])
 
-    def _mass_rule(self, form):
+    def mass_rule(self, form):
+        """The form with the quadrature rule of the mass terms (mass, mass moment, skin)."""
         return fx.with_quadrature_degree(form, self.quadrature_degrees["mass"])
 
     def owned_positions(self, nodes: np.ndarray):
@@ -191,17 +166,17 @@ class FullOrderModel:
         blocks = np.flatnonzero(position >= 0)
         return blocks, position[blocks]
 
-    def _build_spine(self, rest_points):
+    def _build_spine(self):
+        """Owned blocks of the spine nodes (tail -> head) and their global blocks on every rank."""
         tags = self.fish.tags
         self.spine_nodes = tags.spine_nodes
-        self._spine_blocks, self._spine_index = self.owned_positions(self.spine_nodes)
+        self.spine_blocks, self.spine_index = self.owned_positions(self.spine_nodes)
         global_blocks = np.zeros(self.spine_nodes.size, dtype=np.int64)
-        global_blocks[self._spine_index] = self.layout.global_block[self._spine_blocks]
-        self._spine_global_blocks = self.comm.allreduce(global_blocks, op=MPI.SUM)
-        dorsal_z = rest_points[tags.dorsal_nodes, 2] - tags.box.z_axis
-        self.spine = SpineGeometry(rest_points[self.spine_nodes, :2],
-                                   virtual_mass(dorsal_z, self.scene.fluid.density), self.scene.fluid.spine_force)
-        self.thrust_on = self.scene.fluid.thrust
+        global_blocks[self.spine_index] = self.layout.global_block[self.spine_blocks]
+        self.spine_global_blocks = self.comm.allreduce(global_blocks, op=MPI.SUM)
+        self.head_x_global_dof = int(3 * self.spine_global_blocks[-1])
+        head = self.owned_positions(np.array([tags.head_spine_node]))[0]
+        self._head_x_owned = 3 * head  # empty on ranks that do not own the head node
 
     def _build_boundary_conditions(self):
         """Swimming: head nodes fixed in y and z, free in x (SPEC §5). Clamped: all head dofs."""
@@ -217,45 +192,20 @@ class FullOrderModel:
         """PETSc global indices of owned local dof indices."""
         return (3 * self.layout.global_block[owned_dofs // 3] + owned_dofs % 3).astype(np.int32)
 
-    def _build_constant_matrices(self):
-        material = self.scene.material
-        self.mass_matrix = fx.assemble_matrix_into(fx.create_matrix(self.forms["mass"]), self.forms["mass"])
-        if material.mass == "lumped":
-            row_sums = self.mass_matrix.getRowSum()
-            self.mass_matrix.zeroEntries()
-            self.mass_matrix.setDiagonal(row_sums)
-            self.mass_matrix.assemble()
-        self.displacement.x.array[:] = 0.0
-        self.rest_stiffness = fx.assemble_matrix_into(fx.create_matrix(self.forms["elastic_tangent"]),
-                                                      self.forms["elastic_tangent"])
-        self.damping_matrix = self.mass_matrix.copy()
-        self.damping_matrix.scale(material.rayleigh_alpha)
-        self.damping_matrix.axpy(material.rayleigh_beta, self.rest_stiffness)
-        moment = fx.create_vector(self.forms["mass_moment_x"])
-        self._com_weights = fx.assemble_vector_into(moment, self.forms["mass_moment_x"]).copy()
-        self.total_mass = fx.assemble_scalar(self.forms["total_mass"], self.comm)
-        if self.scene.fluid.drag:
-            drag = fx.create_vector(self.forms["drag_direction"])
-            self._drag_direction = fx.assemble_vector_into(drag, self.forms["drag_direction"]).copy()
-            self._drag_rows = np.flatnonzero(self._drag_direction)
-        head = self.owned_positions(np.array([self.fish.tags.head_spine_node]))[0]
-        self._head_x_owned = 3 * head  # empty on ranks that do not own the head node
-
     def set_time_step(self, scheme: TimeScheme) -> None:
         """The scheme's factors enter S = (1 - α_f) K_t + (1 - α_f)(γ/(βh)) C_t + ((1 - α_m)/(βh²)) M_t."""
         self.scheme = scheme
-        self._inertia_damping = self.mass_matrix.copy()
-        self._inertia_damping.scale(scheme.acceleration_factor)
-        self._inertia_damping.axpy(scheme.velocity_factor, self.damping_matrix)
+        self._inertia_damping = self.inertia.newton_block(scheme.acceleration_factor, scheme.velocity_factor)
         self._inertia_damping_on_newton_pattern = None
 
     # ------------------------------------------------------------------ evaluations
-    def _set_state(self, time: float, u: np.ndarray) -> None:
+    def set_displacement(self, u: np.ndarray) -> None:
+        """u of the forms (owned dofs)."""
         fx.set_owned_values(self.displacement, u)
-        actuation = self.scene.actuation
-        activation = actuation.amplitude * np.sin(2.0 * np.pi * actuation.frequency * time)
-        self.activations[LEFT].value = activation
-        self.activations[RIGHT].value = -activation
+
+    def _set_state(self, time: float, u: np.ndarray) -> None:
+        self.set_displacement(u)
+        self.muscle.set_time(time)
 
     def matvec(self, matrix: PETSc.Mat, x: np.ndarray) -> np.ndarray:
         self._work_in.array[:] = x
@@ -265,7 +215,7 @@ class FullOrderModel:
     def spine_values(self, owned: np.ndarray) -> np.ndarray:
         """(n_spine, 3) nodal values of an owned dof array at the spine nodes, on every rank."""
         local = np.zeros((self.spine_nodes.size, 3))
-        local[self._spine_index] = owned.reshape(-1, 3)[self._spine_blocks]
+        local[self.spine_index] = owned.reshape(-1, 3)[self.spine_blocks]
         return self.comm.allreduce(local, op=MPI.SUM)
 
     def head_velocity_x(self, v: np.ndarray) -> float:
@@ -273,41 +223,28 @@ class FullOrderModel:
 
     def internal_force(self, u: np.ndarray) -> np.ndarray:
         """f_int(u) = ∂Π/∂u, owned entries [N]."""
-        fx.set_owned_values(self.displacement, u)
-        return fx.assemble_vector_into(self._vectors["internal_force"], self.forms["internal_force"]).copy()
+        self.set_displacement(u)
+        return self.elastic.force()
 
     def actuation_force(self, time: float, u: np.ndarray) -> np.ndarray:
         """f_act(u, t) = -∂Π_act/∂u [N]."""
         self._set_state(time, u)
-        return self._actuation_force_at_current_state()
-
-    def _actuation_force_at_current_state(self) -> np.ndarray:
-        if not self.actuation_on:
-            return np.zeros(self.n_owned_dofs)
-        return -fx.assemble_vector_into(self._vectors["negative_actuation_force"],
-                                        self.forms["negative_actuation_force"])
+        return self.muscle.force()
 
     def thrust_force(self, u, v, a) -> np.ndarray:
         """Lighthill thrust scattered to the owned spine dofs (x, y) [N]."""
-        force = np.zeros(self.n_owned_dofs)
-        if self.thrust_on:
-            nodal = thrust_force(self.spine, *(self.spine_values(x)[:, :2] for x in (u, v, a)))
-            for component in (0, 1):
-                force[3 * self._spine_blocks + component] = nodal[self._spine_index, component]
-        return force
+        return self.thrust.force(u, v, a) if self.thrust is not None else np.zeros(self.n_owned_dofs)
 
     def drag_force(self, v) -> np.ndarray:
         """f_drag = g(ξ) v_x² with v_x the head's x-velocity [N]."""
-        if not self.scene.fluid.drag:
-            return np.zeros(self.n_owned_dofs)
-        return self._drag_direction * self.head_velocity_x(v) ** 2
+        return self.drag.force(v) if self.drag is not None else np.zeros(self.n_owned_dofs)
 
     def residual(self, time, u, v, a):
         """r = M ü + C u̇ + f_int - f_act - f_thrust - f_drag (zero on fixed dofs), and the force scale."""
         self._set_state(time, u)
         inertia = self.matvec(self.mass_matrix, a)
-        internal = fx.assemble_vector_into(self._vectors["internal_force"], self.forms["internal_force"]).copy()
-        external = self._actuation_force_at_current_state() + self.thrust_force(u, v, a) + self.drag_force(v)
+        internal = self.elastic.force()
+        external = self.muscle.force() + self.thrust_force(u, v, a) + self.drag_force(v)
         residual = inertia + self.matvec(self.damping_matrix, v) + internal - external
         residual[self.fixed_dofs] = 0.0
         scale = max(self.norm(internal), self.norm(external), self.norm(inertia))
@@ -317,13 +254,13 @@ class FullOrderModel:
         """S = ∂r_{n+1-α}/∂u_{n+1} = (1 - α_f) K_t + (1 - α_f)(γ/(βh)) C_t + ((1 - α_m)/(βh²)) M_t at the
         evaluation point (t, u, u̇, ü), with the exact thrust and drag Jacobians."""
         self._set_state(time, u)
-        matrix = fx.assemble_matrix_into(self.tangent_matrix, self.forms["tangent"])
+        matrix = fx.assemble_matrix_into(self.tangent_matrix, self._tangent)
         if self.scheme.stiffness_factor != 1.0:
             matrix.scale(self.scheme.stiffness_factor)
-        if self.thrust_on:
-            self._add_thrust_jacobian(matrix, u, v, a)
-        if self.scene.fluid.drag:
-            self._add_drag_jacobian(matrix, v)
+        if self.thrust is not None:
+            self.thrust.add_newton_matrix(matrix, self.scheme, u, v, a)
+        if self.drag is not None:
+            self.drag.add_newton_matrix(matrix, self.scheme.velocity_factor, v)
         matrix.assemble()
         matrix.axpy(1.0, self._inertia_damping_on(matrix), structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
         matrix.zeroRowsColumns(self.global_dofs(self.fixed_dofs), diag=1.0)
@@ -337,29 +274,6 @@ class FullOrderModel:
             padded.axpy(1.0, self._inertia_damping, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
             self._inertia_damping_on_newton_pattern = padded
         return self._inertia_damping_on_newton_pattern
-
-    def _add_thrust_jacobian(self, matrix, u, v, a):
-        jacobians = thrust_jacobians(self.spine, *(self.spine_values(x)[:, :2] for x in (u, v, a)))
-        scheme = self.scheme
-        # S gets -((1 - α_f) ∂f/∂u + (1 - α_f) γ/(βh) ∂f/∂u̇ + (1 - α_m)/(βh²) ∂f/∂ü): f_thrust is on the right.
-        block = -(scheme.stiffness_factor * jacobians[0] + scheme.velocity_factor * jacobians[1]
-                  + scheme.acceleration_factor * jacobians[2])
-        n_spine = self.spine_nodes.size
-        spine_dofs = (3 * self._spine_global_blocks[:, None] + np.arange(2)).astype(np.int32)
-        for index in self._spine_index:
-            neighbours = np.arange(max(index - 1, 0), min(index + 2, n_spine))
-            rows = spine_dofs[index]
-            columns = spine_dofs[neighbours].ravel()
-            values = block[np.ix_(2 * index + np.arange(2), (2 * neighbours[:, None] + np.arange(2)).ravel())]
-            matrix.setValues(rows, columns, values, addv=PETSc.InsertMode.ADD_VALUES)
-
-    def _add_drag_jacobian(self, matrix, v):
-        """∂(-g v_x²)/∂u_{n+1} = -2 g v_x (1 - α_f)(γ/(βh)) e_head_xᵀ: a column at the head's x dof."""
-        head_global = int(3 * self._spine_global_blocks[-1])
-        factor = -2.0 * self.head_velocity_x(v) * self.scheme.velocity_factor
-        rows = self.global_dofs(self._drag_rows)
-        values = (factor * self._drag_direction[self._drag_rows]).reshape(-1, 1)
-        matrix.setValues(rows, np.array([head_global], dtype=np.int32), values, addv=PETSc.InsertMode.ADD_VALUES)
 
     def factorize(self, time, u, v, a) -> None:
         if self._solver is None:
@@ -387,17 +301,17 @@ class FullOrderModel:
     def static_response(self, left: float, right: float, tolerance: float = 1e-10,
                         max_iterations: int = 30) -> np.ndarray:
         """u solving f_int(u) = f_act(u) for fixed activations, head clamped (full Newton)."""
-        self.activations[LEFT].value, self.activations[RIGHT].value = left, right
+        self.muscle.set_activations((left, right))
         solver = direct_solver(self.comm)
         u = np.zeros(self.n_owned_dofs)
         for _ in range(max_iterations):
             internal = self.internal_force(u)
-            actuation = self._actuation_force_at_current_state()
+            actuation = self.muscle.force()
             residual = internal - actuation
             residual[self.clamped_dofs] = 0.0
             if self.norm(residual) <= tolerance * max(self.norm(internal), self.norm(actuation), 1e-30):
                 return u
-            tangent = fx.assemble_matrix_into(self.tangent_matrix, self.forms["tangent"])
+            tangent = fx.assemble_matrix_into(self.tangent_matrix, self._tangent)
             tangent.zeroRowsColumns(self.global_dofs(self.clamped_dofs), diag=1.0)
             solver.setOperators(tangent)
             u = u - self.solve_with(solver, residual)
@@ -421,7 +335,7 @@ class FullOrderModel:
     def observables(self, u: np.ndarray) -> dict[str, float]:
         """Head x, tail y and centre-of-mass x displacements [m]."""
         spine = self.spine_values(u)
-        com_x = self.comm.allreduce(float(self._com_weights @ u), op=MPI.SUM) / self.total_mass
+        com_x = self.comm.allreduce(float(self.inertia.mass_moment_x @ u), op=MPI.SUM) / self.inertia.total_mass
         return {"head_x": float(spine[-1, 0]), "tail_y": float(spine[0, 1]), "com_x": com_x}
 
     def kinetic_energy(self, v: np.ndarray) -> float:
@@ -430,8 +344,16 @@ class FullOrderModel:
 
     def elastic_energy(self, u: np.ndarray) -> float:
         """Π(u) [J]."""
-        fx.set_owned_values(self.displacement, u)
-        return fx.assemble_scalar(self.forms["elastic_energy"], self.comm)
+        self.set_displacement(u)
+        return self.elastic.energy()
+
+    def rows_at(self, vectors: np.ndarray, node: int) -> np.ndarray:
+        """(3, m): the rows of the owned dof columns ``vectors`` at one input node, on every rank."""
+        blocks, _ = self.owned_positions(np.array([node]))
+        rows = np.zeros((3, vectors.shape[1]))
+        if blocks.size:
+            rows = vectors[3 * blocks[0]: 3 * blocks[0] + 3]
+        return self.comm.allreduce(rows, op=MPI.SUM)
 
     def nodal_displacement(self, u: np.ndarray) -> np.ndarray:
         """(n_nodes, 3) on every rank (for renders and checks; the vertices come first)."""

@@ -12,6 +12,7 @@ import numpy as np
 from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS, block_cache_path
 from aquarom_fenics.io.paths import bench_results
 from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.reduction.basis import candidate_labels
 
 # Reference costs at 7944 cells (level 3, 2 cores): FOM 2 s simulation, PROM build with p
 # parameters ≈ 0.5 + 0.33 p s, reduced solve ≈ 0.1 s (0.2 s with sensitivities).
@@ -66,15 +67,9 @@ def _bench_runs(name: str, keep) -> list[dict]:
 def expected_basis(scene: Scene, parametric: bool) -> list[str]:
     """Candidate basis vectors (SPEC §7); dependent ones are dropped at build time."""
     reduction = scene.reduction
-    modes = reduction.vibration_modes
-    labels = ["rigid_x"] + [f"mode_{i + 1}" for i in range(modes)]
-    if reduction.modal_derivatives:
-        labels += [f"theta_{i + 1}_{j + 1}" for j in range(modes) for i in range(j + 1)]
-    if parametric:
-        labels += [f"xi_{i + 1}_{shape.name}" for shape in scene.shapes for i in range(modes)]
-    if reduction.basis == "default" and scene.actuation.stiffness > 0 and scene.actuation.amplitude > 0:
-        labels += ["psi", "theta_psi"]
-    return labels
+    actuation_modes = reduction.basis == "default" and scene.actuation.stiffness > 0 and scene.actuation.amplitude > 0
+    return candidate_labels(reduction.vibration_modes, reduction.modal_derivatives,
+                            len(scene.shapes) if parametric else 0, actuation_modes)
 
 
 def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:

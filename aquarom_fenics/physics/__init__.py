@@ -1,1 +1,2 @@
-"""Physics that is not a UFL form: the Lighthill thrust on the spine."""
+"""The force terms, one module each (see ``term.py``): elastic, muscle, inertia with Rayleigh damping, drag
+and the Lighthill thrust (``thrust.py``, its full and reduced term in ``thrust_term.py``)."""

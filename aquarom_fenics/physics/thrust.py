@@ -91,6 +91,14 @@ def virtual_mass(dorsal_z, fluid_density: float) -> np.ndarray:
     return 0.25 * np.pi * fluid_density * depth**2
 
 
+def virtual_mass_gradient(dorsal_z, dorsal_z_gradient, fluid_density: float) -> np.ndarray:
+    """∂m̃/∂ξ_k = 2π ρ_w z_dorsal ∂z_dorsal/∂ξ_k of m̃ = (π/4) ρ_w (2 z_dorsal)², (n_segments, p) [kg/m].
+
+    dorsal_z_gradient: (n_segments, p) ∂z_dorsal/∂ξ_k [m].
+    """
+    return 2 * np.pi * fluid_density * np.asarray(dorsal_z, dtype=float)[:, None] * dorsal_z_gradient
+
+
 def segment_frame(geometry: SpineGeometry, displacement: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Tangent t and normal n of every segment, each (n_segments, 2) [dimensionless].
 

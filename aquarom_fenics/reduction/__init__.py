@@ -1,1 +1,1 @@
-"""Model reduction: the basis, the reductor, the reduced model and its cache."""
+"""Model reduction: the basis, the projection on it, the reductor, the reduced model and its cache."""

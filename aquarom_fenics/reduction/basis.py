@@ -22,7 +22,8 @@ from petsc4py import PETSc
 from slepc4py import SLEPc
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
-from aquarom_fenics.fem.fom import LEFT, RIGHT, FullOrderModel, direct_solver
+from aquarom_fenics.fem.fom import FullOrderModel, direct_solver
+from aquarom_fenics.physics.muscle import ANTAGONIST_PATTERN
 
 log = logging.getLogger("aquarom")
 
@@ -44,14 +45,14 @@ class _SecondVariations:
         self.direction_a = fx.new_function(fom.space, "direction_a")
         self.direction_b = fx.new_function(fom.space, "direction_b")
         self.shape_direction = fom.shape_direction("shape_direction")
-        internal = fom.ufl_forms["internal_force"]
+        internal = fom.elastic.force_form
         first = ufl.derivative(internal, fom.displacement, self.direction_a)
         self.modal = fx.compile_form(ufl.derivative(first, fom.displacement, self.direction_b))
         self.shape = fx.compile_form(fom.shape_derivative(first, self.shape_direction))
         self.vector = fx.create_vector(self.modal)
 
     def evaluate(self, compiled, a: np.ndarray, b: np.ndarray | None = None) -> np.ndarray:
-        fx.set_owned_values(self.fom.displacement, np.zeros(self.fom.n_owned_dofs))
+        self.fom.set_displacement(np.zeros(self.fom.n_owned_dofs))
         fx.set_owned_values(self.direction_a, a)
         if b is not None:
             fx.set_owned_values(self.direction_b, b)
@@ -100,6 +101,18 @@ def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int) -> tu
     return np.column_stack(modes), np.array(frequencies)
 
 
+def candidate_labels(n_modes: int, modal_derivatives: bool, n_parameters: int, actuation_modes: bool) -> list[str]:
+    """Names of the candidate vectors in the order of SPEC §7: rigid_x, mode_i, theta_i_j (i ≤ j),
+    xi_i_k (mode i, parameter k, both from 1), psi and theta_psi."""
+    labels = ["rigid_x"] + [f"mode_{i + 1}" for i in range(n_modes)]
+    if modal_derivatives:
+        labels += [f"theta_{i + 1}_{j + 1}" for j in range(n_modes) for i in range(j + 1)]
+    labels += [f"xi_{i + 1}_{k + 1}" for k in range(n_parameters) for i in range(n_modes)]
+    if actuation_modes:
+        labels += ["psi", "theta_psi"]
+    return labels
+
+
 def build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
     """Basis of SPEC §7 for the FOM's design, with sensitivities to the first ``n_parameters`` ξ_k."""
     settings = fom.scene.reduction
@@ -115,30 +128,27 @@ def build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
         rhs[clamped] = 0.0
         return fom.solve_with(solver, rhs)
 
-    candidates: list[tuple[str, np.ndarray]] = []
     rigid = np.zeros(fom.n_owned_dofs)
     rigid[0::3] = 1.0
-    candidates.append(("rigid_x", rigid))
+    candidates = [rigid]
     modes, frequencies = vibration_modes(fom, stiffness, settings.vibration_modes)
     timings["vibration_modes"] = time.perf_counter() - started
     modes = [modes[:, i] / fom.norm(modes[:, i]) for i in range(modes.shape[1])]
-    candidates += [(f"mode_{i + 1}", mode) for i, mode in enumerate(modes)]
+    candidates += modes
 
     variations = _SecondVariations(fom)
     if settings.modal_derivatives:
         for i, j in ((i, j) for j in range(len(modes)) for i in range(j + 1)):
-            theta = -static_solve(variations.evaluate(variations.modal, modes[i], modes[j]))
-            candidates.append((f"theta_{i + 1}_{j + 1}", theta))
+            candidates.append(-static_solve(variations.evaluate(variations.modal, modes[i], modes[j])))
     for k in range(n_parameters):
-        for i, mode in enumerate(modes):
-            sensitivity = -static_solve(variations.shape_variation(mode, k))
-            candidates.append((f"xi_{i + 1}_{k + 1}", sensitivity))
-    if settings.basis == "default" and fom.actuation_on:
+        candidates += [-static_solve(variations.shape_variation(mode, k)) for mode in modes]
+    actuation_modes = settings.basis == "default" and fom.muscle.on
+    if actuation_modes:
         psi = static_solve(unit_actuation_force(fom))
-        candidates.append(("psi", psi))
-        candidates.append(("theta_psi", -static_solve(variations.evaluate(variations.modal, psi, psi))))
+        candidates += [psi, -static_solve(variations.evaluate(variations.modal, psi, psi))]
     timings["static_solves"] = time.perf_counter() - started - timings["vibration_modes"]
-    vectors, labels, dropped = mass_orthonormalise(fom, candidates, settings.drop_tolerance)
+    labels = candidate_labels(len(modes), settings.modal_derivatives, n_parameters, actuation_modes)
+    vectors, labels, dropped = mass_orthonormalise(fom, list(zip(labels, candidates)), settings.drop_tolerance)
     timings["basis_total"] = time.perf_counter() - started
     if dropped:
         log.warning("basis: dropped numerically dependent vectors %s", ", ".join(dropped))
@@ -148,10 +158,10 @@ def build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
 
 
 def unit_actuation_force(fom: FullOrderModel) -> np.ndarray:
-    """f_act at rest with a_left = 1, a_right = -1 (left contracting, right extending)."""
-    fom.activations[LEFT].value, fom.activations[RIGHT].value = 1.0, -1.0
-    fx.set_owned_values(fom.displacement, np.zeros(fom.n_owned_dofs))
-    return fom._actuation_force_at_current_state()
+    """f_act at rest with the activation pattern at unit amplitude (left contracting, right extending)."""
+    fom.muscle.set_activations(ANTAGONIST_PATTERN)
+    fom.set_displacement(np.zeros(fom.n_owned_dofs))
+    return fom.muscle.force()
 
 
 def mass_orthonormalise(fom: FullOrderModel, candidates, tolerance: float):

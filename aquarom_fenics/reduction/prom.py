@@ -9,46 +9,31 @@ quadratic in ξ, its geometry does not move with the catalog's shape variations)
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, is_dataclass
 from pathlib import Path
+from typing import get_args, get_type_hints
 
 import numpy as np
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.io.persistence import write_npz_atomic
+from aquarom_fenics.physics.drag import DragTensors
+from aquarom_fenics.physics.elastic import ElasticTensors
+from aquarom_fenics.physics.inertia import InertiaTensors
+from aquarom_fenics.physics.muscle import MuscleTensors
+from aquarom_fenics.physics.thrust_term import ThrustData
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+"""2: the tensors grouped per force term (elastic, muscle, inertia, drag, thrust, observation)."""
 ZIP_MAGIC = b"PK\x03\x04"       # first bytes of a .npz (zip) archive
 
 
 @dataclass
-class Taylor:
-    """T(Δξ) = T0 + Σ_k Δξ_k T1[k] + ½ Σ_kl Δξ_k Δξ_l T2[k, l] (T1, T2 absent below the order)."""
+class Observation:
+    """Rows of V giving the observed displacements [m] from η."""
 
-    constant: np.ndarray
-    first: np.ndarray | None = None
-    second: np.ndarray | None = None
-
-    def at(self, delta: np.ndarray) -> np.ndarray:
-        value = np.array(self.constant, dtype=float)
-        if self.first is not None and delta.size:
-            value = value + np.tensordot(delta, self.first, axes=1)
-        if self.second is not None and delta.size:
-            value = value + 0.5 * np.tensordot(delta, np.tensordot(delta, self.second, axes=1), axes=1)
-        return value
-
-    def gradient(self, delta: np.ndarray) -> np.ndarray:
-        """∂T/∂ξ_k at Δξ, shape (p, ...)."""
-        if self.first is None:
-            return np.zeros((delta.size,) + np.shape(self.constant))
-        value = np.array(self.first, dtype=float)
-        if self.second is not None:
-            value = value + np.tensordot(delta, self.second, axes=1)
-        return value
-
-
-TAYLOR_FIELDS = ("mass", "stiffness_linear", "stiffness_quadratic", "stiffness_cubic",
-                 "actuation_constant", "actuation_linear", "drag", "mass_moment_x", "total_mass")
+    head_x_row: np.ndarray               # (m,) row of V at the head spine node's x dof
+    tail_y_row: np.ndarray               # (m,) row of V at the tail node's y dof
 
 
 @dataclass
@@ -65,32 +50,19 @@ class ReducedModel:
     basis: np.ndarray                    # V at the input-mesh nodes, (n_nodes, 3, m), Vᵀ M V = I
     dropped: list[str]                   # candidate vectors dropped as dependent
     frequencies: np.ndarray              # Hz, vibration modes of the basis
-    mass: Taylor                         # M_r (m, m)
-    stiffness_linear: Taylor             # K1 (m, m); also K_0,r of the Rayleigh damping
-    stiffness_quadratic: Taylor          # K2 (m, m, m)
-    stiffness_cubic: Taylor              # K3 (m, m, m, m)
-    actuation_constant: Taylor           # b_j (2, m): ∂Π_act,j/∂u at rest for a_j = 1 (left, right)
-    actuation_linear: Taylor             # B_j (2, m, m): ∂²Π_act,j/∂u² for a_j = 1
-    drag: Taylor                         # g_r (m,), zero when drag is off
-    mass_moment_x: Taylor                # Vᵀ ∫ρ φ·e_x dV_ξ (m,)
-    total_mass: Taylor                   # ∫ρ dV_ξ ()
-    spine_rows: np.ndarray               # (n_spine, 2, m): x-y rows of V at the spine nodes
-    spine_rest_xy: np.ndarray            # (n_spine, 2) at ξ_c
-    dorsal_z: np.ndarray                 # (n_segments,) z_dorsal - z_axis at ξ_c
-    dorsal_z_gradient: np.ndarray        # (n_segments, p) ∂z_dorsal/∂ξ (U rows: exact)
-    head_x_row: np.ndarray               # (m,) row of V at the head spine node's x dof
-    tail_y_row: np.ndarray               # (m,) row of V at the tail node's y dof
-    rayleigh: tuple[float, float]        # (α_R, β_R)
-    fluid_density: float
-    thrust: bool
-    drag_on: bool
+    elastic: ElasticTensors              # f_int,r
+    muscle: MuscleTensors                # f_act,r (zero tensors when the muscles are off)
+    inertia: InertiaTensors              # M_r, C_r and the centre of mass
+    drag: DragTensors | None             # f_drag,r, None when drag is off
+    thrust: ThrustData | None            # f_thrust,r, None when thrust is off
+    observation: Observation
     cells: int
     dofs: int
     timings: dict = field(default_factory=dict)
 
     @property
     def size(self) -> int:
-        return self.mass.constant.shape[0]
+        return self.inertia.mass.constant.shape[0]
 
     @property
     def n_parameters(self) -> int:
@@ -113,20 +85,20 @@ class ReducedModel:
                 f"{', '.join(f'{r:g}' for r, o in zip(radius, outside) if o)} around its building "
                 f"point {dict(zip(names, np.round(center, 6).tolist()))}; build a PROM nearer")
 
+    def term_arrays(self) -> dict[str, np.ndarray]:
+        """Every array of the per-term tensors by dotted name, e.g. "elastic.linear.constant"."""
+        arrays = {}
+        for name in ("elastic", "muscle", "inertia", "drag", "thrust"):
+            if getattr(self, name) is not None:
+                _flatten(getattr(self, name), name + ".", arrays, {})
+        return arrays
+
     # ------------------------------------------------------------------ file format
     def save(self, path: Path) -> None:
-        """One .npz file: arrays plus a JSON header with scene hash, version, labels and timings."""
+        """One .npz file: arrays under dotted names ("elastic.linear.constant") plus a JSON header with
+        the format version, scene hash, software version, labels, scalars and timings."""
         arrays, header = {}, {"format_version": FORMAT_VERSION}
-        for item in fields(self):
-            value = getattr(self, item.name)
-            if isinstance(value, Taylor):
-                for part in ("constant", "first", "second"):
-                    if getattr(value, part) is not None:
-                        arrays[f"{item.name}.{part}"] = getattr(value, part)
-            elif isinstance(value, np.ndarray):
-                arrays[item.name] = value
-            else:
-                header[item.name] = value
+        _flatten(self, "", arrays, header)
         arrays["header"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -134,7 +106,7 @@ class ReducedModel:
 
     @classmethod
     def load(cls, path: Path, scene_hash: str | None = None) -> "ReducedModel":
-        """Read a PROM file; refuses another scene's or another version's file, naming the difference."""
+        """Read a PROM file; refuses another scene's, another format's or another version's file, naming the difference."""
         from aquarom_fenics import __version__
 
         path = Path(path)
@@ -149,23 +121,53 @@ class ReducedModel:
             raise InputError(f"PROM file {path}: not found (build one with `aquarom build SCENE`)") from None
         except Exception as error:  # zip, JSON and key errors of a damaged file
             raise InputError(f"PROM file {path}: unreadable ({type(error).__name__}: {error})") from None
-        if header.get("format_version") != FORMAT_VERSION or header.get("software_version") != __version__:
-            raise InputError(f"PROM file {path}: written by aquarom_fenics {header.get('software_version')} "
-                             f"(format {header.get('format_version')}), this is {__version__} (format "
-                             f"{FORMAT_VERSION}); rebuild it")
+        if header.get("format_version") != FORMAT_VERSION:
+            raise InputError(f"PROM file {path}: format version {header.get('format_version')} (aquarom_fenics "
+                             f"{header.get('software_version')}), this version reads format {FORMAT_VERSION}; "
+                             "rebuild it with `aquarom build SCENE`")
+        if header.get("software_version") != __version__:
+            raise InputError(f"PROM file {path}: written by aquarom_fenics {header.get('software_version')}, "
+                             f"this is {__version__}; rebuild it with `aquarom build SCENE`")
         if scene_hash is not None and header["scene_hash"] != scene_hash:
             raise InputError(f"PROM file {path}: built for scene hash {header['scene_hash']}, the scene's hash is "
                              f"{scene_hash} (a different scene or changed values); rebuild it")
-        values = {}
-        for item in fields(cls):
-            if item.name in TAYLOR_FIELDS:
-                values[item.name] = Taylor(*(arrays.get(f"{item.name}.{part}") for part in ("constant", "first", "second")))
-            elif item.name in arrays:
-                values[item.name] = arrays[item.name]
-            else:
-                values[item.name] = header[item.name]
-        values["rayleigh"] = tuple(values["rayleigh"])
-        return cls(**values)
+        try:
+            return _unflatten(cls, "", arrays, header)
+        except KeyError as missing:
+            raise InputError(f"PROM file {path}: unreadable (missing {missing})") from None
+
+
+def _flatten(record, prefix: str, arrays: dict, header: dict) -> None:
+    """Arrays of a (nested) dataclass under dotted names; every other value, and None, in the header."""
+    for item in fields(record):
+        name, value = prefix + item.name, getattr(record, item.name)
+        if is_dataclass(value):
+            _flatten(value, name + ".", arrays, header)
+        elif isinstance(value, np.ndarray):
+            arrays[name] = value
+        else:
+            header[name] = value
+
+
+def _unflatten(cls, prefix: str, arrays: dict, header: dict):
+    """The inverse of :func:`_flatten` for the dataclass ``cls``."""
+    hints = get_type_hints(cls)
+    values = {}
+    for item in fields(cls):
+        name = prefix + item.name
+        if name in arrays:
+            values[item.name] = arrays[name]
+        elif name in header:
+            values[item.name] = header[name]
+        else:
+            values[item.name] = _unflatten(_record_type(hints[item.name]), name + ".", arrays, header)
+    return cls(**values)
+
+
+def _record_type(hint):
+    """The dataclass of a field annotated ``Record`` or ``Record | None``."""
+    arguments = get_args(hint)
+    return next(arg for arg in arguments if is_dataclass(arg)) if arguments else hint
 
 
 def _first_bytes(path: Path, count: int) -> bytes:

@@ -16,13 +16,13 @@ from dataclasses import dataclass
 from typing import Iterator
 
 import numpy as np
-from mpi4py import MPI
 
 from aquarom_fenics.optimization.cost import CostWeights, design_space, evaluate
 from aquarom_fenics.errors import SolverError
 from aquarom_fenics.geometry.fish import Fish, load_fish
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.dynamics.integrator import TimeScheme
+from aquarom_fenics.reduction.projection import project_vector
 from aquarom_fenics.reduction.prom import ReducedModel
 from aquarom_fenics.dynamics.reduced_dynamics import ReducedSystem, simulate_reduced
 from aquarom_fenics.io.scene import Scene
@@ -89,7 +89,7 @@ def relative(difference: float, reference: float, scale: float) -> float:
 
 def taylor_order(prom: ReducedModel) -> int:
     """Order of the PROM's Taylor polynomials in ξ (0 for a plain ROM)."""
-    stiffness = prom.stiffness_linear
+    stiffness = prom.elastic.linear
     return 2 if stiffness.second is not None else 1 if stiffness.first is not None else 0
 
 
@@ -117,7 +117,7 @@ class ProjectedFOM:
         self.vectors = np.column_stack([self.model.owned_values(prom.basis[:, :, j]) for j in range(prom.size)])
 
     def project(self, owned: np.ndarray) -> np.ndarray:
-        return self.model.comm.allreduce(self.vectors.T @ owned, op=MPI.SUM)
+        return project_vector(self.model.comm, self.vectors, owned)
 
     def residual(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
         V = self.vectors

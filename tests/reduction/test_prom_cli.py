@@ -79,6 +79,22 @@ def test_prom_file_of_another_version_is_refused(built, tmp_path, capsys):
     assert "0.0.1" in capsys.readouterr().err
 
 
+def test_prom_file_of_the_flat_format_1_layout_is_refused_naming_file_version_and_remedy(built, tmp_path, capsys):
+    """Format 1 held one flat record ("mass.constant", "stiffness_linear.constant", ...)."""
+    scene, prom_file = built
+    with np.load(prom_file) as data:
+        arrays = {key.replace("inertia.", "").replace("elastic.linear", "stiffness_linear"): data[key]
+                  for key in data.files}
+    header = json.loads(arrays["header"].tobytes().decode())
+    header["format_version"] = 1
+    arrays["header"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
+    np.savez(tmp_path / "flat.npz", **arrays)
+    assert main(["simulate", str(scene), "--model", "prom", "--prom", str(tmp_path / "flat.npz")]) == 2
+    message = capsys.readouterr().err.strip()
+    assert len(message.splitlines()) == 1
+    assert str(tmp_path / "flat.npz") in message and "format version 1" in message and "aquarom build" in message
+
+
 def test_damaged_prom_file_is_refused(built, tmp_path, capsys):
     scene, prom_file = built
     (tmp_path / "cut.npz").write_bytes(prom_file.read_bytes()[:500])

@@ -56,23 +56,23 @@ def one_shape_prom():
 
 def test_perturbed_tensor_fails_check_1(one_shape_prom):
     scene, prom = one_shape_prom
-    original = prom.stiffness_linear.constant
-    prom.stiffness_linear.constant = original * (1 + 1e-6)
+    original = prom.elastic.linear.constant
+    prom.elastic.linear.constant = original * (1 + 1e-6)
     try:
         tensors = next(run_checks(scene, prom))
     finally:
-        prom.stiffness_linear.constant = original
+        prom.elastic.linear.constant = original
     assert tensors.check.startswith("1 ") and tensors.passed is False
 
 
 def test_wrong_xi_derivative_fails_checks_2_and_3(one_shape_prom):
     scene, prom = one_shape_prom
-    original = prom.stiffness_linear.first
-    prom.stiffness_linear.first = original * 1.5
+    original = prom.elastic.linear.first
+    prom.elastic.linear.first = original * 1.5
     try:
         tensors, derivative, taylor = islice(run_checks(scene, prom), 3)
     finally:
-        prom.stiffness_linear.first = original
+        prom.elastic.linear.first = original
     assert tensors.passed and derivative.check == "2 ∂f_int/∂ξ z_tail" and not derivative.passed
     assert taylor.check.startswith("3 ") and not taylor.passed
 

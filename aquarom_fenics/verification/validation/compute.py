@@ -112,7 +112,6 @@ def compute_mesh(runner: Runner, case: Case) -> dict:
 
 
 def compute_reduced(runner: Runner, case: Case) -> dict:
-    from aquarom_fenics.reduction.prom import TAYLOR_FIELDS
     from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
     from aquarom_fenics.reduction.reductor import build_prom
 
@@ -125,8 +124,7 @@ def compute_reduced(runner: Runner, case: Case) -> dict:
     build_time = time.perf_counter() - started
     timings = prom.timings
     tensors = timings.get("internal_force_tensors", 0.0) + timings.get("other_tensors", 0.0)
-    finite_tensors = all(np.all(np.isfinite(part)) for name in TAYLOR_FIELDS
-                         for part in vars(getattr(prom, name)).values() if part is not None)
+    finite_tensors = all(np.all(np.isfinite(array)) for array in prom.term_arrays().values())
     xi = options.get("xi")
     result = simulate_reduced(prom, scene, xi)
     solve_times = [result.wall_time] + [simulate_reduced(prom, scene, xi).wall_time for _ in range(SOLVE_REPEATS - 1)]
@@ -153,7 +151,7 @@ def compute_reduced(runner: Runner, case: Case) -> dict:
                                          for _ in range(SOLVE_REPEATS - 1)]
         record["solve_time_sensitivities"] = min(times)
         if sensitive.completed and sensitive.sensitivities is not None:
-            head = np.einsum("m,smk->sk", prom.head_x_row, sensitive.sensitivities)
+            head = np.einsum("m,smk->sk", prom.observation.head_x_row, sensitive.sensitivities)
             record["head_x_sensitivity"] = head.tolist()
             record["distance_gradient"] = np.asarray(sensitive.distance_gradient).tolist()
             if not np.all(np.isfinite(head)):

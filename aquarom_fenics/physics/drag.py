@@ -1,0 +1,84 @@
+"""Form drag (SPEC §5): f_drag = g(ξ) v_x², v_x the x-velocity of the head node.
+
+g is the skin form of ``forms/drag.py`` on the rest shape. The law, its Jacobian
+∂f/∂u̇ = 2 g v_x e_head_xᵀ (a single column, at the head's x dof) and its ξ-derivative
+∂f/∂ξ_k = (∂g/∂ξ_k) v_x² are written here once, for the full and the reduced model.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import ufl
+from petsc4py import PETSc
+
+from aquarom_fenics.fem import dolfinx_adapter as fx
+from aquarom_fenics.forms.drag import drag_direction_form
+from aquarom_fenics.reduction.projection import Taylor
+
+
+def drag_force(direction: np.ndarray, head_velocity_x: float) -> np.ndarray:
+    """f = g v_x² [N]; with ∂g/∂ξ_k (shape (p, n)) in place of g, ∂f/∂ξ_k."""
+    return direction * head_velocity_x ** 2
+
+
+def drag_velocity_jacobian(direction: np.ndarray, head_velocity_x: float) -> np.ndarray:
+    """∂f/∂v_x = 2 g v_x [N s/m]: the column of ∂f/∂u̇ at the head's x dof."""
+    return 2.0 * head_velocity_x * direction
+
+
+class DragTerm:
+    """g assembled on the FOM's rest shape; the force and its column of the Newton matrix."""
+
+    def __init__(self, fom):
+        self.fom = fom
+        fluid_density = fx.constant(fom.mesh, fom.scene.fluid.density)
+        # The skin of the rest shape: u_ξ interpolated at the displacement nodes (SPEC §5).
+        self.direction_form = fom.mass_rule(drag_direction_form(
+            fom.test_function, ufl.grad(fom.shape_displacement), fluid_density, fom.mesh))
+        compiled = fx.compile_form(self.direction_form)
+        self.direction = fx.assemble_vector_into(fx.create_vector(compiled), compiled).copy()
+        self.rows = np.flatnonzero(self.direction)
+
+    def force(self, v: np.ndarray) -> np.ndarray:
+        """f_drag on the owned dofs [N]."""
+        return drag_force(self.direction, self.fom.head_velocity_x(v))
+
+    def add_newton_matrix(self, matrix: PETSc.Mat, velocity_factor: float, v: np.ndarray) -> None:
+        """S += -k_v ∂f/∂u̇ (f_drag is on the right of the equations of motion)."""
+        column = drag_velocity_jacobian(self.direction[self.rows], self.fom.head_velocity_x(v))
+        rows = self.fom.global_dofs(self.rows)
+        head = np.array([self.fom.head_x_global_dof], dtype=np.int32)
+        matrix.setValues(rows, head, (-velocity_factor * column).reshape(-1, 1), addv=PETSc.InsertMode.ADD_VALUES)
+
+    def reduce(self, projector) -> "DragTensors":
+        return DragTensors(projector.taylor(self.direction_form))
+
+
+@dataclass
+class DragTensors:
+    """The reduced drag: f_drag,r = g_r v_x², v_x = (head x row of V)·η̇."""
+
+    direction: Taylor                    # g_r = Vᵀ g, (m,)
+
+    def at(self, delta: np.ndarray, head_x_row: np.ndarray) -> "ReducedDrag":
+        return ReducedDrag(self, delta, head_x_row)
+
+
+class ReducedDrag:
+    """The reduced drag at one design ξ (a :class:`ReducedTerm`)."""
+
+    def __init__(self, tensors: DragTensors, delta: np.ndarray, head_x_row: np.ndarray):
+        self.tensors, self.delta, self.head_x_row = tensors, delta, head_x_row
+        self.direction = tensors.direction.at(delta)
+
+    def force(self, eta_dot: np.ndarray) -> np.ndarray:
+        return drag_force(self.direction, self.head_x_row @ eta_dot)
+
+    def tangents(self, time, eta, eta_dot, eta_ddot):
+        """C_t part -∂f/∂η̇ = -2 g_r v_x (head x row)ᵀ."""
+        column = drag_velocity_jacobian(self.direction, self.head_x_row @ eta_dot)
+        return None, -np.outer(column, self.head_x_row), None
+
+    def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
+        return -drag_force(self.tensors.direction.gradient(self.delta), self.head_x_row @ eta_dot)

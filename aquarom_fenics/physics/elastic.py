@@ -1,0 +1,105 @@
+"""Elastic force (SPEC §5): f_int = ∂Π/∂u of the Saint Venant-Kirchhoff energy of ``forms/elasticity.py``.
+
+On the FOM the energy is assembled as a UFL form; its reduction samples the same forms at the
+quadrature points (``fem/cellwise.py``, SPEC §8) into the force tensors of
+
+    f_int,r(η) = K1 η + K2 η η + K3 η η η,   K_t,r = K1 + 2 K2 η + 3 K3 η η.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import ufl
+from petsc4py import PETSc
+
+from aquarom_fenics.fem import dolfinx_adapter as fx
+from aquarom_fenics.fem.cellwise import CellSampler, internal_force_taylor
+from aquarom_fenics.forms.elasticity import strain_energy
+from aquarom_fenics.reduction.projection import Taylor
+
+
+class ElasticTerm:
+    """The SVK energy of one FOM (stiffer head cells), its force and tangent forms."""
+
+    def __init__(self, fom):
+        self.fom = fom
+        material = fom.scene.material
+        stiffness_by_cell = np.full(fom.n_cells, material.young_modulus)
+        stiffness_by_cell[fom.fish.tags.head_cells] *= material.head_stiffness_factor
+        self.young_modulus = fom.cell_field(stiffness_by_cell, "young_modulus")
+        self.poisson_ratio = fx.constant(fom.mesh, material.poisson_ratio)
+        u = fom.displacement
+        self.energy_form = fom.stiffness_rule(strain_energy(u, fom.shape_gradients["stiffness"],
+                                                            self.young_modulus, self.poisson_ratio))
+        self.force_form = ufl.derivative(self.energy_form, u, fom.test_function)
+        self.tangent_form = ufl.derivative(self.force_form, u, fom.trial_function)
+        self._energy = fx.compile_form(self.energy_form)
+        self._force = fx.compile_form(self.force_form)
+        self._vector = fx.create_vector(self._force)
+
+    def force(self) -> np.ndarray:
+        """f_int at the FOM's displacement, owned entries [N]."""
+        return fx.assemble_vector_into(self._vector, self._force).copy()
+
+    def energy(self) -> float:
+        """Π at the FOM's displacement [J]."""
+        return fx.assemble_scalar(self._energy, self.fom.comm)
+
+    def rest_stiffness(self) -> PETSc.Mat:
+        """K_0 = ∂f_int/∂u at u = 0 (no boundary conditions)."""
+        self.fom.set_displacement(np.zeros(self.fom.n_owned_dofs))
+        tangent = fx.compile_form(self.tangent_form)
+        return fx.assemble_matrix_into(fx.create_matrix(tangent), tangent)
+
+    def reduce(self, projector) -> "ElasticTensors":
+        """(K1, K2, K3) on the projector's basis with their Taylor terms in ξ, sampled at the quadrature points."""
+        sampler = CellSampler(self.fom, projector.order)
+        taylor = internal_force_taylor(sampler, projector.vectors, projector.n_parameters, projector.order,
+                                       self.fom.comm)
+        terms = list(taylor) + [None] * (3 - len(taylor))     # (constant, first, second), each (K1, K2, K3)
+        return ElasticTensors(*(Taylor(*(term[i] if term is not None else None for term in terms))
+                                for i in range(3)))
+
+
+@dataclass
+class ElasticTensors:
+    """The reduced internal force f_int,r(η) = K1 η + K2 η η + K3 η η η (symmetric tensors)."""
+
+    linear: Taylor                       # K1 (m, m); also K_0,r of the Rayleigh damping
+    quadratic: Taylor                    # K2 (m, m, m)
+    cubic: Taylor                        # K3 (m, m, m, m)
+
+    def at(self, delta: np.ndarray) -> "ReducedElastic":
+        return ReducedElastic(self, delta)
+
+
+class ReducedElastic:
+    """The reduced internal force at one design ξ (a :class:`ReducedTerm`)."""
+
+    def __init__(self, tensors: ElasticTensors, delta: np.ndarray):
+        self.tensors, self.delta = tensors, delta
+        self.k1, self.k2, self.k3 = (t.at(delta) for t in (tensors.linear, tensors.quadratic, tensors.cubic))
+
+    def force(self, eta: np.ndarray) -> np.ndarray:
+        """K1 η + K2 η η + K3 η η η."""
+        quadratic = self.k2 @ eta
+        cubic = (self.k3 @ eta) @ eta
+        return self.k1 @ eta + quadratic @ eta + cubic @ eta
+
+    def tangent(self, eta: np.ndarray) -> np.ndarray:
+        """K1 + 2 K2 η + 3 K3 η η."""
+        return self.k1 + 2.0 * (self.k2 @ eta) + 3.0 * ((self.k3 @ eta) @ eta)
+
+    def tangents(self, time, eta, eta_dot, eta_ddot):
+        return self.tangent(eta), None, None
+
+    def force_gradient(self, eta: np.ndarray) -> np.ndarray:
+        """∂f_int,r/∂ξ_k = K1_k η + K2_k η η + K3_k η η η, shape (p, m)."""
+        k1_k, k2_k, k3_k = (t.gradient(self.delta) for t in (self.tensors.linear, self.tensors.quadratic,
+                                                              self.tensors.cubic))
+        return (k1_k @ eta + np.einsum("kabc,b,c->ka", k2_k, eta, eta)
+                + np.einsum("kabcd,b,c,d->ka", k3_k, eta, eta, eta))
+
+    def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
+        return self.force_gradient(eta)

@@ -1,0 +1,125 @@
+"""Inertia and Rayleigh damping (SPEC §5): M ü + C u̇ with the mass of ``forms/inertia.py`` and
+
+    C = α_R M + β_R K_0,
+
+K_0 the elastic tangent at rest. C is linear in (M, K_0), so ∂C/∂ξ_k = α_R ∂M/∂ξ_k + β_R ∂K_0/∂ξ_k:
+:func:`rayleigh_damping` serves both, on PETSc matrices and on numpy arrays. The mass moment
+m·u / ∫ρ dV_ξ gives the centre-of-mass x-displacement.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from petsc4py import PETSc
+
+from aquarom_fenics.fem import dolfinx_adapter as fx
+from aquarom_fenics.forms.inertia import mass_form, mass_moment_x, total_mass
+from aquarom_fenics.reduction.projection import Taylor
+
+
+def linear_combination(a: float, x, b: float, y):
+    """a x + b y of numpy arrays."""
+    return a * x + b * y
+
+
+def petsc_linear_combination(a: float, x: PETSc.Mat, b: float, y: PETSc.Mat) -> PETSc.Mat:
+    """a x + b y of PETSc matrices, a new matrix on the pattern of x (y's pattern a subset of it)."""
+    result = x.copy()
+    result.scale(a)
+    result.axpy(b, y)
+    return result
+
+
+def rayleigh_damping(alpha: float, mass, beta: float, stiffness, combine=linear_combination):
+    """C = α_R M + β_R K_0 (or ∂C/∂ξ_k from ∂M/∂ξ_k, ∂K_0/∂ξ_k); ``combine`` is (a, x, b, y) ↦ a x + b y."""
+    return combine(alpha, mass, beta, stiffness)
+
+
+def lump(matrix: PETSc.Mat) -> PETSc.Mat:
+    """Row sums on the diagonal, in place (the lumped mass of ``material.mass = "lumped"``)."""
+    row_sums = matrix.getRowSum()
+    matrix.zeroEntries()
+    matrix.setDiagonal(row_sums)
+    matrix.assemble()
+    return matrix
+
+
+class InertiaTerm:
+    """Mass and Rayleigh damping matrices of one FOM, its mass moment and total mass."""
+
+    def __init__(self, fom, rest_stiffness: PETSc.Mat):
+        self.fom = fom
+        material = fom.scene.material
+        self.alpha, self.beta = material.rayleigh_alpha, material.rayleigh_beta
+        self.lumped = material.mass == "lumped"
+        density = fx.constant(fom.mesh, material.density)
+        shape_gradient = fom.shape_gradients["mass"]
+        test, trial = fom.test_function, fom.trial_function
+        self.mass_form = fom.mass_rule(mass_form(trial, test, shape_gradient, density))
+        self.mass_moment_form = fom.mass_rule(mass_moment_x(test, shape_gradient, density))
+        self.total_mass_form = fom.mass_rule(total_mass(shape_gradient, density, fom.mesh))
+        mass = fx.compile_form(self.mass_form)
+        self.mass_matrix = fx.assemble_matrix_into(fx.create_matrix(mass), mass)
+        if self.lumped:
+            lump(self.mass_matrix)
+        self.damping_matrix = rayleigh_damping(self.alpha, self.mass_matrix, self.beta, rest_stiffness,
+                                               petsc_linear_combination)
+        moment = fx.compile_form(self.mass_moment_form)
+        self.mass_moment_x = fx.assemble_vector_into(fx.create_vector(moment), moment).copy()
+        self.total_mass = fx.assemble_scalar(fx.compile_form(self.total_mass_form), fom.comm)
+
+    def newton_block(self, acceleration_factor: float, velocity_factor: float) -> PETSc.Mat:
+        """k_a M + k_v C, the inertia and damping part of the Newton matrix."""
+        return petsc_linear_combination(acceleration_factor, self.mass_matrix, velocity_factor, self.damping_matrix)
+
+    def reduce(self, projector) -> "InertiaTensors":
+        return InertiaTensors(projector.taylor(self.mass_form, transform=lump if self.lumped else None),
+                              self.alpha, self.beta, projector.taylor(self.mass_moment_form),
+                              projector.taylor(self.total_mass_form))
+
+
+@dataclass
+class InertiaTensors:
+    """The reduced inertia M_r η̈ + C_r η̇, C_r = α_R M_r + β_R K1 (K1 of the elastic tensors)."""
+
+    mass: Taylor                         # M_r (m, m)
+    rayleigh_alpha: float                # α_R [1/s]
+    rayleigh_beta: float                 # β_R [s]
+    mass_moment_x: Taylor                # Vᵀ ∫ρ φ·e_x dV_ξ (m,)
+    total_mass: Taylor                   # ∫ρ dV_ξ ()
+
+    def at(self, delta: np.ndarray, rest_stiffness: Taylor, rest_stiffness_value: np.ndarray) -> "ReducedInertia":
+        """At Δξ, with the Taylor of K_0,r and its value at Δξ."""
+        return ReducedInertia(self, delta, rest_stiffness, rest_stiffness_value)
+
+
+class ReducedInertia:
+    """The reduced inertia and damping at one design ξ (a :class:`ReducedTerm`)."""
+
+    def __init__(self, tensors: InertiaTensors, delta: np.ndarray, rest_stiffness: Taylor,
+                 rest_stiffness_value: np.ndarray):
+        self.tensors, self.delta, self.rest_stiffness = tensors, delta, rest_stiffness
+        self.mass = tensors.mass.at(delta)
+        self.damping = rayleigh_damping(tensors.rayleigh_alpha, self.mass, tensors.rayleigh_beta, rest_stiffness_value)
+        self.total_mass = float(tensors.total_mass.at(delta))
+        self.com_weights = tensors.mass_moment_x.at(delta) / self.total_mass
+
+    def tangents(self, time, eta, eta_dot, eta_ddot):
+        return None, self.damping, self.mass
+
+    def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
+        """∂M_r/∂ξ_k η̈ + ∂C_r/∂ξ_k η̇, shape (p, m)."""
+        tensors = self.tensors
+        mass_k = tensors.mass.gradient(self.delta)
+        damping_k = rayleigh_damping(tensors.rayleigh_alpha, mass_k, tensors.rayleigh_beta,
+                                     self.rest_stiffness.gradient(self.delta))
+        return mass_k @ eta_ddot + damping_k @ eta_dot
+
+    def com_weights_gradient(self) -> np.ndarray:
+        """∂c/∂ξ_k of com_x = c(ξ)·η, c = n(ξ)/mass(ξ): (∂n/∂ξ_k - c ∂mass/∂ξ_k) / mass, shape (p, m)."""
+        tensors = self.tensors
+        if tensors.mass_moment_x.first is None:
+            return np.zeros((self.delta.size, self.com_weights.size))
+        return (tensors.mass_moment_x.gradient(self.delta)
+                - np.outer(tensors.total_mass.gradient(self.delta), self.com_weights)) / self.total_mass

@@ -1,0 +1,132 @@
+"""Muscle actuation (SPEC §5): f_act = -∂Π_act/∂u with the muscle energy of ``forms/muscle.py``,
+
+    Π_act = Σ_j ½ k a_j(t) ∫_muscle_j |F_2 m|² dV_ξ,   (a_left, a_right) = A sin(2π f t) (1, -1).
+
+The activation law and its derivative in A are written here once, for the full and the reduced
+model. Π_act is linear in each a_j: the reduced force is -Σ_j a_j (b_j + B_j η) with b_j, B_j the
+projected force and tangent of muscle j alone at unit activation.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import ufl
+
+from aquarom_fenics.fem import dolfinx_adapter as fx
+from aquarom_fenics.forms.muscle import muscle_energy
+from aquarom_fenics.reduction.projection import Taylor, stack_taylor
+
+ANTAGONIST_PATTERN = np.array([1.0, -1.0])
+"""(a_left, a_right) per unit of A sin(2π f t): the left muscle contracts while the right extends."""
+
+
+def unit_activations(frequency: float, time: float) -> np.ndarray:
+    """∂(a_left, a_right)/∂A = sin(2π f t) (1, -1)."""
+    return np.sin(2.0 * np.pi * frequency * time) * ANTAGONIST_PATTERN
+
+
+def activations(amplitude: float, frequency: float, time: float) -> np.ndarray:
+    """(a_left, a_right) = A sin(2π f t) (1, -1)."""
+    return amplitude * unit_activations(frequency, time)
+
+
+class MuscleTerm:
+    """The two muscles of one FOM: their activations (constants of the form), force and tangent form.
+
+    Off (``on`` False, zero force) when the scene's muscle stiffness k or amplitude A is zero.
+    """
+
+    def __init__(self, fom):
+        scene, tags = fom.scene, fom.fish.tags
+        self.fom = fom
+        self.amplitude, self.frequency = scene.actuation.amplitude, scene.actuation.frequency
+        self.on = scene.actuation.stiffness > 0 and scene.actuation.amplitude > 0
+        self._activations = [fx.constant(fom.mesh, 0.0), fx.constant(fom.mesh, 0.0)]
+        self.indicators = []
+        for cells, name in ((tags.left_muscle_cells, "left_muscle"), (tags.right_muscle_cells, "right_muscle")):
+            indicator = np.zeros(fom.n_cells)
+            indicator[cells] = 1.0
+            self.indicators.append(fom.cell_field(indicator, name))
+        self.negative_force_form = self.tangent_form = None
+        if self.on:
+            u = fom.displacement
+            energy = fom.stiffness_rule(muscle_energy(
+                u, fom.shape_gradients["stiffness"], fx.constant(fom.mesh, scene.actuation.stiffness),
+                self._activations, self.indicators, nominal_volume=scene.actuation.muscle_volume == "nominal"))
+            self.negative_force_form = ufl.derivative(energy, u, fom.test_function)
+            self.tangent_form = ufl.derivative(self.negative_force_form, u, fom.trial_function)
+            self._negative_force = fx.compile_form(self.negative_force_form)
+            self._vector = fx.create_vector(self._negative_force)
+
+    def set_activations(self, values) -> None:
+        """(a_left, a_right) of the forms."""
+        for constant, value in zip(self._activations, values):
+            constant.value = value
+
+    def set_time(self, time: float) -> None:
+        """The activations of the scene's law at time t."""
+        self.set_activations(activations(self.amplitude, self.frequency, time))
+
+    def force(self) -> np.ndarray:
+        """f_act = -∂Π_act/∂u at the FOM's displacement and the current activations [N]."""
+        if not self.on:
+            return np.zeros(self.fom.n_owned_dofs)
+        return -fx.assemble_vector_into(self._vector, self._negative_force)
+
+    def reduce(self, projector) -> "MuscleTensors":
+        """b_j = Vᵀ ∂Π_act,j/∂u and B_j = Vᵀ ∂²Π_act,j/∂u² V at rest, a_j = 1 (zero when off)."""
+        m = projector.vectors.shape[1]
+        if not self.on:
+            return MuscleTensors(Taylor(np.zeros((2, m))), Taylor(np.zeros((2, m, m))))
+        self.fom.set_displacement(np.zeros(self.fom.n_owned_dofs))
+        constant_parts, linear_parts = [], []
+        for unit in np.eye(2):
+            self.set_activations(unit)
+            constant_parts.append(projector.taylor(self.negative_force_form))
+            linear_parts.append(projector.taylor(self.tangent_form))
+        return MuscleTensors(stack_taylor(constant_parts), stack_taylor(linear_parts))
+
+
+@dataclass
+class MuscleTensors:
+    """The reduced muscles: f_act,r = -Σ_j a_j (b_j + B_j η)."""
+
+    constant: Taylor                     # b_j (2, m): ∂Π_act,j/∂u at rest for a_j = 1 (left, right)
+    linear: Taylor                       # B_j (2, m, m): ∂²Π_act,j/∂u² for a_j = 1
+
+    def at(self, delta: np.ndarray, amplitude: float, frequency: float) -> "ReducedMuscle":
+        return ReducedMuscle(self, delta, amplitude, frequency)
+
+
+class ReducedMuscle:
+    """The reduced muscles at one design ξ and amplitude A (a :class:`ReducedTerm`)."""
+
+    def __init__(self, tensors: MuscleTensors, delta: np.ndarray, amplitude: float, frequency: float):
+        self.tensors, self.delta = tensors, delta
+        self.amplitude, self.frequency = amplitude, frequency
+        self.constant = tensors.constant.at(delta)
+        self.linear = tensors.linear.at(delta)
+
+    def activations(self, time: float) -> np.ndarray:
+        return activations(self.amplitude, self.frequency, time)
+
+    def _per_activation(self, a: np.ndarray, eta: np.ndarray) -> np.ndarray:
+        """Σ_j a_j (b_j + B_j η)."""
+        return a @ self.constant + np.einsum("j,jab,b->a", a, self.linear, eta)
+
+    def force(self, time: float, eta: np.ndarray) -> np.ndarray:
+        return -self._per_activation(self.activations(time), eta)
+
+    def amplitude_derivative(self, time: float, eta: np.ndarray) -> np.ndarray:
+        """∂r/∂A = Σ_j (∂a_j/∂A) (b_j + B_j η)."""
+        return self._per_activation(unit_activations(self.frequency, time), eta)
+
+    def tangents(self, time, eta, eta_dot, eta_ddot):
+        """K_t part Σ_j a_j B_j."""
+        return np.einsum("j,jab->ab", self.activations(time), self.linear), None, None
+
+    def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
+        a = self.activations(time)
+        return (np.einsum("j,kja->ka", a, self.tensors.constant.gradient(self.delta))
+                + np.einsum("j,kjab,b->ka", a, self.tensors.linear.gradient(self.delta), eta))

@@ -1,0 +1,116 @@
+"""Galerkin projection on a basis V (SPEC §8) and the Taylor polynomials in ξ of projected forms.
+
+Every reduced vector is Vᵀ b and every reduced matrix Vᵀ A V, summed over the ranks; the ξ-terms
+of a form are the projections of its UFL derivatives along the shape directions δξ = e_k
+(``FullOrderModel.shape_derivative``) at the design the basis was built on.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from mpi4py import MPI
+
+from aquarom_fenics.fem import dolfinx_adapter as fx
+
+
+@dataclass
+class Taylor:
+    """T(Δξ) = T0 + Σ_k Δξ_k T1[k] + ½ Σ_kl Δξ_k Δξ_l T2[k, l] (T1, T2 absent below the order)."""
+
+    constant: np.ndarray
+    first: np.ndarray | None = None
+    second: np.ndarray | None = None
+
+    def at(self, delta: np.ndarray) -> np.ndarray:
+        value = np.array(self.constant, dtype=float)
+        if self.first is not None and delta.size:
+            value = value + np.tensordot(delta, self.first, axes=1)
+        if self.second is not None and delta.size:
+            value = value + 0.5 * np.tensordot(delta, np.tensordot(delta, self.second, axes=1), axes=1)
+        return value
+
+    def gradient(self, delta: np.ndarray) -> np.ndarray:
+        """∂T/∂ξ_k at Δξ, shape (p, ...)."""
+        if self.first is None:
+            return np.zeros((delta.size,) + np.shape(self.constant))
+        value = np.array(self.first, dtype=float)
+        if self.second is not None:
+            value = value + np.tensordot(delta, self.second, axes=1)
+        return value
+
+
+def stack_taylor(parts: list[Taylor]) -> Taylor:
+    """One Taylor of the stacked values: constant (n, ...), first (p, n, ...), second (p, p, n, ...)."""
+    def stacked(name):
+        values = [getattr(part, name) for part in parts]
+        return None if values[0] is None else np.stack(values, axis=-np.ndim(parts[0].constant) - 1)
+    return Taylor(np.stack([part.constant for part in parts]), stacked("first"), stacked("second"))
+
+
+def project_vector(comm: MPI.Comm, vectors: np.ndarray, owned: np.ndarray) -> np.ndarray:
+    """Vᵀ b over all ranks; ``owned`` is one owned dof array or its columns."""
+    return comm.allreduce(vectors.T @ owned, op=MPI.SUM)
+
+
+def project_matrix(comm: MPI.Comm, vectors: np.ndarray, apply: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """Vᵀ A V over all ranks; ``apply`` is x ↦ A x on owned dofs."""
+    product = np.column_stack([apply(vectors[:, j]) for j in range(vectors.shape[1])])
+    return project_vector(comm, vectors, product)
+
+
+class Projector:
+    """Projects the forms of one FOM on the basis V, with their Taylor coefficients in ξ at its design.
+
+    ``order`` is the Taylor order (0 without ξ-terms), ``n_parameters`` the number p of ξ_k.
+    """
+
+    def __init__(self, fom, vectors: np.ndarray, n_parameters: int, order: int):
+        self.fom, self.vectors = fom, vectors
+        self.n_parameters, self.order = n_parameters, order
+        self.directions = [fom.shape_direction(f"projection_direction_{i}") for i in range(min(order, 2))]
+
+    def vector(self, owned: np.ndarray) -> np.ndarray:
+        return project_vector(self.fom.comm, self.vectors, owned)
+
+    def matrix(self, matrix) -> np.ndarray:
+        return project_matrix(self.fom.comm, self.vectors, lambda x: self.fom.matvec(matrix, x))
+
+    def taylor(self, form, transform: Callable | None = None) -> Taylor:
+        """Taylor in Δξ of the projected form (scalar, Vᵀ b or Vᵀ A V); ``transform`` acts on the
+        assembled matrix before the projection (e.g. lumping)."""
+        compiled = [fx.compile_form(form)]
+        if self.order >= 1:
+            first = self.fom.shape_derivative(form, self.directions[0])
+            compiled.append(fx.compile_form(first))
+        if self.order >= 2:
+            compiled.append(fx.compile_form(self.fom.shape_derivative(first, self.directions[1])))
+        rank = len(form.arguments())
+        storage = fx.create_matrix(compiled[0]) if rank == 2 else fx.create_vector(compiled[0]) if rank == 1 else None
+
+        def project(derivative: int) -> np.ndarray:
+            if rank == 0:
+                return np.array(fx.assemble_scalar(compiled[derivative], self.fom.comm))
+            if rank == 1:
+                return self.vector(fx.assemble_vector_into(storage, compiled[derivative]))
+            matrix = fx.assemble_matrix_into(storage, compiled[derivative])
+            return self.matrix(transform(matrix) if transform else matrix)
+
+        p = self.n_parameters
+        constant = project(0)
+        first = second = None
+        if self.order >= 1 and p:
+            first = []
+            for k in range(p):
+                self.directions[0].set_parameter(k)
+                first.append(project(1))
+            first = np.stack(first)
+        if self.order >= 2 and p:
+            second = np.empty((p, p) + np.shape(constant))
+            for k in range(p):
+                for l in range(k, p):
+                    self.directions[0].set_parameter(k)
+                    self.directions[1].set_parameter(l)
+                    second[k, l] = second[l, k] = project(2)
+        return Taylor(constant, first, second)
