@@ -19,6 +19,8 @@ import sys
 import time
 from pathlib import Path
 
+from aquarom_fenics.io.persistence import write_json_atomic
+
 REPOSITORY = Path(__file__).resolve().parents[1]
 IMAGE = "aquarom-fenicsx"
 BASE_IMAGE = "debian:bookworm"
@@ -190,7 +192,7 @@ def main() -> int:
         print(f"docker-test: {error}", file=sys.stderr)
         return 1
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(report, indent=2) + "\n")
+    write_json_atomic(args.out, report)
     failed = [name for name, passed in report["checks"].items() if not passed]
     print(f"docker-test: {'FAILED ' + ', '.join(failed) if failed else 'all checks pass'}; {args.out}")
     return 1 if failed else 0

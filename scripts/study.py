@@ -11,6 +11,7 @@ from pathlib import Path
 
 from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.io.outputs import software_versions
+from aquarom_fenics.io.persistence import write_text_atomic
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.optimization.study import pareto_sweep, run_optimization
 
@@ -49,7 +50,7 @@ def main():
         lines += ["", "FOM runs marked 'stopped' did not converge: see each case's summary.json (fom_check.error)."]
     versions = software_versions()
     lines += ["", f"aquarom_fenics {versions['aquarom_fenics']}, dolfinx {versions['dolfinx']}."]
-    (args.out / "summary.md").write_text("\n".join(lines) + "\n")
+    write_text_atomic(args.out / "summary.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

@@ -18,22 +18,35 @@ from aquarom_fenics.dynamics.trajectory import COLUMNS
 from aquarom_fenics.io.persistence import require_writable, write_json_atomic
 
 
-class TrajectoryCSV:
-    """trajectory.csv, one row per converged step, flushed at once (kept if a later step fails)."""
+class IncrementalCSV:
+    """A CSV file written one row at a time and flushed at once, so that the rows already written
+    survive a run that stops later."""
 
-    def __init__(self, path: Path):
+    def __init__(self, path: Path, header: list[str]):
         path.parent.mkdir(parents=True, exist_ok=True)
         self._stream = open(path, "w", newline="")
         self._writer = csv.writer(self._stream)
-        self._writer.writerow(COLUMNS)
+        self.rows = 0
+        self._writer.writerow(header)
         self._stream.flush()
 
-    def write(self, time, head_x, tail_y, com_x, iterations) -> None:
-        self._writer.writerow([f"{time:.10g}", f"{head_x:.17g}", f"{tail_y:.17g}", f"{com_x:.17g}", iterations])
+    def write_row(self, values: list) -> None:
+        self._writer.writerow(values)
         self._stream.flush()
+        self.rows += 1
 
     def close(self) -> None:
         self._stream.close()
+
+
+class TrajectoryCSV(IncrementalCSV):
+    """trajectory.csv, one row per converged step (kept if a later step fails)."""
+
+    def __init__(self, path: Path):
+        super().__init__(path, list(COLUMNS))
+
+    def write(self, time, head_x, tail_y, com_x, iterations) -> None:
+        self.write_row([f"{time:.10g}", f"{head_x:.17g}", f"{tail_y:.17g}", f"{com_x:.17g}", iterations])
 
 
 def write_trajectory_csv(path: Path, arrays: dict[str, np.ndarray]) -> None:

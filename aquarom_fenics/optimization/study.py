@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import csv
+import io
 import json
 import logging
 import time
@@ -18,9 +19,10 @@ from aquarom_fenics.optimization.history import Checkpoint, history_columns
 from aquarom_fenics.optimization.optimize import (DEFAULT_MAX_TIME, OptimizationResult, optimization_space, optimize,
                                                   start_points)
 from aquarom_fenics.optimization.prom_builder import PromBuilder
-from aquarom_fenics.io.outputs import software_versions
+from aquarom_fenics.io.outputs import IncrementalCSV, software_versions
 from aquarom_fenics.io.paths import cache_root
-from aquarom_fenics.io.persistence import entry_key, get_or_compute, require_cache_writable, write_json_atomic
+from aquarom_fenics.io.persistence import (entry_key, get_or_compute, require_cache_writable, write_json_atomic,
+                                           write_text_atomic)
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.dynamics.simulate import simulate_fom
 
@@ -194,26 +196,19 @@ def _distinct_optima(space, optima: list[np.ndarray], tolerance: float) -> list[
     return groups
 
 
-class HistoryWriter:
-    """history.csv, one row per iteration in the columns of :func:`history_columns`, flushed at
-    once; a resumed run starts from the checkpoint's rows (a row written after the last
-    checkpoint is made again, not duplicated)."""
+class HistoryWriter(IncrementalCSV):
+    """history.csv, one row per iteration in the columns of :func:`history_columns`; a resumed run
+    starts from the checkpoint's rows (a row written after the last checkpoint is made again, not
+    duplicated)."""
 
     def __init__(self, path: Path, columns: list[str], checkpoint_rows: list[dict]):
-        self.stream = open(path, "w", newline="")
+        super().__init__(path, columns)
         self.header = columns
-        self.rows = 0
-        csv.writer(self.stream).writerow(self.header)
         for row in checkpoint_rows:
             self.write(row)
 
     def write(self, row: dict) -> None:
-        csv.writer(self.stream).writerow([_csv_value(row.get(key)) for key in self.header])
-        self.stream.flush()
-        self.rows += 1
-
-    def close(self) -> None:
-        self.stream.close()
+        self.write_row([_csv_value(row.get(key)) for key in self.header])
 
 
 def _csv_value(value):
@@ -285,10 +280,11 @@ def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None) -> list[
                        "prom_distance": result.evaluation.distance,
                        **{f"xi_{n}": float(v) for n, v in zip(result.space.names[:-1], result.optimum[:-1])}})
     if MPI.COMM_WORLD.rank == 0:
-        with open(Path(out_dir) / "pareto.csv", "w", newline="") as stream:
-            writer = csv.DictWriter(stream, fieldnames=list(points[0]))
-            writer.writeheader()
-            writer.writerows(points)
+        table = io.StringIO()
+        writer = csv.DictWriter(table, fieldnames=list(points[0]), lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(points)
+        write_text_atomic(Path(out_dir) / "pareto.csv", table.getvalue())
         from aquarom_fenics.viz.report import plot_pareto
 
         plot_pareto(points, Path(out_dir) / "pareto.png")
