@@ -12,7 +12,7 @@ import numpy as np
 from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS, block_cache_path
 from aquarom_fenics.io.paths import bench_results
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.reduction.basis import candidate_labels
+from aquarom_fenics.reduction.basis import candidate_labels, response_labels
 
 # Reference costs at 7944 cells (level 3, 2 cores): FOM 2 s simulation, PROM build with p
 # parameters ≈ 0.5 + 0.33 p s, reduced solve ≈ 0.1 s (0.2 s with sensitivities).
@@ -68,8 +68,10 @@ def expected_basis(scene: Scene, parametric: bool) -> list[str]:
     """Candidate basis vectors (SPEC §7); dependent ones are dropped at build time."""
     reduction = scene.reduction
     actuation_modes = reduction.basis == "default" and scene.actuation.stiffness > 0 and scene.actuation.amplitude > 0
+    responses = response_labels(reduction.basis == "default" and reduction.response_vectors, actuation_modes,
+                                scene.fluid.thrust)
     return candidate_labels(reduction.vibration_modes, reduction.modal_derivatives,
-                            len(scene.shapes) if parametric else 0, actuation_modes)
+                            len(scene.shapes) if parametric else 0, actuation_modes, responses)
 
 
 def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:

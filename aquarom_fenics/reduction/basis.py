@@ -5,7 +5,12 @@ With the head clamped in all directions:
   2. vibration modes (K_0 - ω² M) φ = 0 (SLEPc, shift-invert at 0);
   3. static modal derivatives θ_ij = -K_0⁻¹ (∂K/∂u[φ_j]) φ_i, i ≤ j;
   4. static parameter sensitivities Ξ_ik = -K_0⁻¹ (∂K/∂ξ_k) φ_i;
-  5. actuation modes ψ = K_0⁻¹ f_act,1 and θ_ψ = -K_0⁻¹ (∂K/∂u[ψ]) ψ (not in ``basis = "paper"``).
+  5. actuation modes ψ = K_0⁻¹ f_act,1 and θ_ψ = -K_0⁻¹ (∂K/∂u[ψ]) ψ (not in ``basis = "paper"``);
+  6. response vectors (``response_vectors``, not in ``basis = "paper"``):
+     ψ_m = -K_0⁻¹ B_1 ψ, B_1 = ∂²Π_act,1/∂u² the muscles' stiffness at unit activation: with
+     f_act = -a (b_1 + B_1 u) the static response to a is u = a ψ + a² (½ θ_ψ + ψ_m) + O(a³);
+     τ = K_0⁻¹ e_tail,x, the static response to the thrust's tail force at rest (f_tail ∥ t = e_x),
+     a point force that indents the tail node and so shortens the tail segment's t.
 Each vector is normalised, then mass-orthonormalised; vectors whose remaining mass-norm falls
 below the drop tolerance are dropped and reported.
 """
@@ -50,6 +55,10 @@ class _SecondVariations:
         self.modal = fx.compile_form(ufl.derivative(first, fom.displacement, self.direction_b))
         self.shape = fx.compile_form(fom.shape_derivative(first, self.shape_direction))
         self.vector = fx.create_vector(self.modal)
+        self.muscle = None
+        if fom.muscle.on:
+            muscle_stiffness = ufl.derivative(fom.muscle.negative_force_form, fom.displacement, self.direction_a)
+            self.muscle = fx.compile_form(muscle_stiffness)
 
     def evaluate(self, compiled, a: np.ndarray, b: np.ndarray | None = None) -> np.ndarray:
         self.fom.set_displacement(np.zeros(self.fom.n_owned_dofs))
@@ -62,6 +71,11 @@ class _SecondVariations:
         """∂/∂ξ_k (d f_int(0)[a])."""
         self.shape_direction.set_parameter(k)
         return self.evaluate(self.shape, a)
+
+    def muscle_stiffness(self, a: np.ndarray) -> np.ndarray:
+        """B_1 a = ∂²Π_act/∂u² (0)[a] with the activations at the antagonist pattern at unit amplitude."""
+        self.fom.muscle.set_activations(ANTAGONIST_PATTERN)
+        return self.evaluate(self.muscle, a)
 
 
 def clamped_stiffness(fom: FullOrderModel) -> PETSc.Mat:
@@ -101,16 +115,25 @@ def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int) -> tu
     return np.column_stack(modes), np.array(frequencies)
 
 
-def candidate_labels(n_modes: int, modal_derivatives: bool, n_parameters: int, actuation_modes: bool) -> list[str]:
+def candidate_labels(n_modes: int, modal_derivatives: bool, n_parameters: int, actuation_modes: bool,
+                     responses: tuple[str, ...] = ()) -> list[str]:
     """Names of the candidate vectors in the order of SPEC §7: rigid_x, mode_i, theta_i_j (i ≤ j),
-    xi_i_k (mode i, parameter k, both from 1), psi and theta_psi."""
+    xi_i_k (mode i, parameter k, both from 1), psi and theta_psi, then the ``responses``
+    (``psi_muscle``, ``tail_force``; see :func:`response_labels`)."""
     labels = ["rigid_x"] + [f"mode_{i + 1}" for i in range(n_modes)]
     if modal_derivatives:
         labels += [f"theta_{i + 1}_{j + 1}" for j in range(n_modes) for i in range(j + 1)]
     labels += [f"xi_{i + 1}_{k + 1}" for k in range(n_parameters) for i in range(n_modes)]
     if actuation_modes:
         labels += ["psi", "theta_psi"]
-    return labels
+    return labels + list(responses)
+
+
+def response_labels(response_vectors: bool, actuation_modes: bool, thrust: bool) -> tuple[str, ...]:
+    """The response vectors of item 6 that apply: ψ_m needs the actuation modes, τ the thrust."""
+    if not response_vectors:
+        return ()
+    return (("psi_muscle",) if actuation_modes else ()) + (("tail_force",) if thrust else ())
 
 
 def build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
@@ -146,8 +169,14 @@ def build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
     if actuation_modes:
         psi = static_solve(unit_actuation_force(fom))
         candidates += [psi, -static_solve(variations.evaluate(variations.modal, psi, psi))]
+    responses = response_labels(settings.basis == "default" and settings.response_vectors, actuation_modes,
+                                fom.thrust is not None)
+    if "psi_muscle" in responses:
+        candidates.append(-static_solve(variations.muscle_stiffness(psi)))
+    if "tail_force" in responses:
+        candidates.append(static_solve(unit_tail_force(fom)))
     timings["static_solves"] = time.perf_counter() - started - timings["vibration_modes"]
-    labels = candidate_labels(len(modes), settings.modal_derivatives, n_parameters, actuation_modes)
+    labels = candidate_labels(len(modes), settings.modal_derivatives, n_parameters, actuation_modes, responses)
     vectors, labels, dropped = mass_orthonormalise(fom, list(zip(labels, candidates)), settings.drop_tolerance)
     timings["basis_total"] = time.perf_counter() - started
     if dropped:
@@ -162,6 +191,14 @@ def unit_actuation_force(fom: FullOrderModel) -> np.ndarray:
     fom.muscle.set_activations(ANTAGONIST_PATTERN)
     fom.set_displacement(np.zeros(fom.n_owned_dofs))
     return fom.muscle.force()
+
+
+def unit_tail_force(fom: FullOrderModel) -> np.ndarray:
+    """e_tail,x: a unit force [N] in x at the tail node, the direction of f_tail = ½ m̃ (v·n)² t at rest."""
+    force = np.zeros(fom.n_owned_dofs)
+    blocks, _ = fom.owned_positions(np.array([fom.fish.tags.tail_node]))
+    force[3 * blocks] = 1.0
+    return force
 
 
 def mass_orthonormalise(fom: FullOrderModel, candidates, tolerance: float):
