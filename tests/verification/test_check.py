@@ -50,7 +50,10 @@ def test_prom_from_another_mesh_fails_the_tensor_check(tmp_path, capsys):
 
 @pytest.fixture(scope="module")
 def one_shape_prom():
-    scene = coarse_scene(shapes={"z_tail": {"bounds": [-0.5, 0.5]}})
+    """Without the response vectors: with them, the random probe state of check 3 puts more of the
+    error in the ξ² remainder near the tail, and a 1.5× ∂K1/∂ξ gives ratios 3.40, 3.04 (inside 4 ± 25 %;
+    without them 2.74, 2.44); check 2 flags it either way."""
+    scene = coarse_scene(shapes={"z_tail": {"bounds": [-0.5, 0.5]}}, reduction={"response_vectors": False})
     return scene, build_prom(scene)
 
 
