@@ -7,7 +7,9 @@ Two algorithms over the same cost and design space (``cost.py``):
   halved along a direction whose gradient component changes sign or whose bound becomes active,
   the linearised trajectory η ≈ η_c + S (ξ - ξ_c) between PROM builds (so d ≈ d_c + ∇d_c·(z - z_c)),
   and a new PROM when any |z - z_c|_i exceeds ``rebuild_threshold`` or every ``n_rebuild``
-  iterations.
+  iterations (by the count alone, inside the last PROM's validity radius, that PROM simulated at
+  z re-linearises instead). A PROM within half the validity radius of the last PROM whose basis
+  was built reuses that basis (``PromBuilder``).
 * ``trust-region``: the PROM built at the centre is a nonlinear surrogate (simulated at any z in
   the radius, with its own sensitivities); SciPy's SLSQP solves the surrogate problem with bounds
   and linear constraints inside the radius; a PROM built at the candidate gives the actual

@@ -3,7 +3,9 @@
 z ← z - γ W ∇L_b with L_b = L + μ B, B(z) = -Σ log s_i(z); the diagonal W starts at
 1/‖∇L_b(z_0)‖_∞ and is halved along a direction whose gradient component changes sign or whose
 bound becomes active; between PROM builds d ≈ d_c + ∇d_c·(z - z_c); a new PROM when any
-|z - z_c|_i exceeds ``rebuild_threshold`` or every ``n_rebuild`` iterations.
+|z - z_c|_i exceeds ``rebuild_threshold`` or every ``n_rebuild`` iterations, except that a
+rebuild due by the count alone, at a design inside the last PROM's validity radius, simulates
+that PROM there for the new linearisation (history ``surrogate``) instead of building one.
 """
 from __future__ import annotations
 
