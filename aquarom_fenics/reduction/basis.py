@@ -98,6 +98,7 @@ def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int) -> tu
         eigenvalue = solver.getEigenpair(index, vector).real
         modes.append(vector.array.copy())
         frequencies.append(np.sqrt(max(eigenvalue, 0.0)) / (2 * np.pi))
+    solver.destroy()        # frees its factorisation (not freed with the Python object)
     return np.column_stack(modes), np.array(frequencies)
 
 
@@ -147,6 +148,7 @@ def build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
         psi = static_solve(unit_actuation_force(fom))
         candidates += [psi, -static_solve(variations.evaluate(variations.modal, psi, psi))]
     timings["static_solves"] = time.perf_counter() - started - timings["vibration_modes"]
+    solver.destroy()        # frees the factorisation of K_0
     labels = candidate_labels(len(modes), settings.modal_derivatives, n_parameters, actuation_modes)
     vectors, labels, dropped = mass_orthonormalise(fom, list(zip(labels, candidates)), settings.drop_tolerance)
     timings["basis_total"] = time.perf_counter() - started
