@@ -2,7 +2,8 @@
 
 Per run: wall time of the optimisation (PROM builds and solves), the FOM check timed separately
 (the nominal FOM comes from the cache when present), PROM builds (every one built: the runs use a
-fresh PROM cache), how it stopped, iterations, the first-order measure and the active set at the
+fresh PROM cache) with what each reused (the basis of an earlier PROM, its time), iterations
+re-linearised by the last PROM inside its validity radius (paper method), how it stopped, iterations, the first-order measure and the active set at the
 optimum, FOM-verified ratio. Per scene: the trust region's FOM distance over the paper method's.
 For SO1, the bound corners on the face of the paper optimum's active bounds (the other parameters
 at either bound) are FOM-checked against it. The grid search builds a ROM at every point of SO1's
@@ -114,6 +115,8 @@ def main():
             runs.append({"scene": name, "method": method, "cells": fish.mesh.cells.shape[0],
                          "parameters": len(base.shapes), "optimisation_time": result.timings["total"],
                          "prom_build_time": result.timings["prom_builds"], "prom_builds": result.builds,
+                         "prom_builds_on_an_earlier_basis": result.basis_reuses, "builds": result.build_records,
+                         "surrogate_iterations": sum(row["prom"] == "surrogate" for row in result.history),
                          "iterations": result.iterations, "stop_reason": result.stop_reason,
                          "converged": result.converged, "optimality_measure": result.optimality.measure,
                          "optimality_tolerance": scene.optimizer.optimality_tolerance,

@@ -10,8 +10,6 @@ import random
 import time
 import tomllib
 
-import pytest
-
 from aquarom_fenics.cli import main
 from aquarom_fenics.io.scene import SCENES_DIR
 

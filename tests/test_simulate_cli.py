@@ -11,8 +11,6 @@ import pytest
 
 from aquarom_fenics.cli import main
 from aquarom_fenics.io.outputs import read_trajectory_csv
-from aquarom_fenics.dynamics.simulate import simulate_fom
-from conftest import coarse_scene
 
 SHORT_SCENE = """
 [mesh]

@@ -130,7 +130,7 @@ class OptimizerSection:
     step_size: float = _spec(0.05, _positive, "γ in ξ ← ξ - γ W ∇L; W starts at 1/‖∇L_0‖_∞, so γ is the first step (paper)")
     barrier_weight: float = _spec(1e-3, _positive, "log-barrier weight (paper)")
     rebuild_threshold: float = _spec(0.15, _positive, "rebuild the PROM when any |ξ - ξ_c| exceeds this (paper)")
-    n_rebuild: int = _spec(5, _positive, "rebuild the PROM every n iterations (paper)")
+    n_rebuild: int = _spec(5, _positive, "rebuild the PROM every n iterations, unless the design is inside the last PROM's validity radius (then that PROM re-linearises; paper)")
     step_tolerance: float = _spec(1e-3, _positive, "stop (stalled before optimality) when ‖Δξ‖ falls below")
     cost_tolerance: float = _spec(1e-4, _positive, "stop (stalled before optimality) when the predicted relative cost reduction falls below (trust-region)")
     initial_radius: float = _spec(1.0, lambda v: None if 0 < v <= 1 else "must be in (0, 1]", "trust radius as a fraction of the PROM validity radius (trust-region)")

@@ -54,7 +54,10 @@ class Checkpoint:
             return
         write_json_atomic(self.path, {"scene_hash": self.scene_hash, "method": self.method, "state": state,
                                       "history": history, "builds": builder.builds, "reused": builder.reused,
-                                      "build_time": builder.build_time, "solve_time": builder.solve_time})
+                                      "build_time": builder.build_time, "solve_time": builder.solve_time,
+                                      "basis_reuses": builder.basis_reuses, "build_records": builder.records,
+                                      "basis_center": None if builder.basis_center is None
+                                      else builder.basis_center.tolist()})
 
     def load(self) -> dict | None:
         if self.path is None or not self.path.exists():

@@ -7,7 +7,9 @@ Two algorithms over the same cost and design space (``cost.py``):
   halved along a direction whose gradient component changes sign or whose bound becomes active,
   the linearised trajectory η ≈ η_c + S (ξ - ξ_c) between PROM builds (so d ≈ d_c + ∇d_c·(z - z_c)),
   and a new PROM when any |z - z_c|_i exceeds ``rebuild_threshold`` or every ``n_rebuild``
-  iterations.
+  iterations (by the count alone, inside the last PROM's validity radius, that PROM simulated at
+  z re-linearises instead). A PROM within half the validity radius of the last PROM whose basis
+  was built reuses that basis (``PromBuilder``).
 * ``trust-region``: the PROM built at the centre is a nonlinear surrogate (simulated at any z in
   the radius, with its own sensitivities); SciPy's SLSQP solves the surrogate problem with bounds
   and linear constraints inside the radius; a PROM built at the candidate gives the actual
@@ -62,6 +64,8 @@ class OptimizationResult:
     reused: int = 0                           # of the builds, PROMs taken from the cache
     optimality: FirstOrder | None = None      # at the optimum, from the PROM's exact gradient
     converged: bool = False                   # optimality.measure ≤ optimality_tolerance
+    basis_reuses: int = 0                     # of the builds, PROMs on the basis of an earlier one
+    build_records: list[dict] = field(default_factory=list)   # per build: PromBuilder.records
 
     @property
     def iterations(self) -> int:
@@ -100,7 +104,10 @@ def optimize(scene: Scene, fish: Fish | None = None, weights: CostWeights | None
     history = list(saved["history"]) if saved else []
     if saved:
         builder.builds, builder.build_time, builder.solve_time = saved["builds"], saved["build_time"], saved["solve_time"]
-        builder.reused = saved.get("reused", 0)
+        builder.reused, builder.basis_reuses = saved.get("reused", 0), saved.get("basis_reuses", 0)
+        builder.records = list(saved.get("build_records", []))
+        if saved.get("basis_center") is not None:
+            builder.basis_center = np.array(saved["basis_center"])
     started = time.perf_counter() - (history[-1]["wall_time"] if history else 0.0)
     algorithm = {"paper": paper_method, "trust-region": trust_region}[method]
     safeguard = Safeguard(started, max_time)
@@ -110,10 +117,12 @@ def optimize(scene: Scene, fish: Fish | None = None, weights: CostWeights | None
     timings = {"prom_builds": builder.build_time, "prom_solves": builder.solve_time,
                "total": time.perf_counter() - started}
     optimality = first_order_at(scene, space, evaluation)
-    log.info("optimisation (%s) stopped: %s; first-order measure %.2e; %d PROM builds (%d reused from the cache), "
-             "%.1f s", method, reason, optimality.measure, builder.builds, builder.reused, timings["total"])
+    log.info("optimisation (%s) stopped: %s; first-order measure %.2e; %d PROM builds (%d reused from the cache, "
+             "%d on an earlier basis), %.1f s", method, reason, optimality.measure, builder.builds, builder.reused,
+             builder.basis_reuses, timings["total"])
     return OptimizationResult(optimum, evaluation, history, builder.builds, reason, space, builder.last_size, timings,
-                              builder.reused, optimality, optimality.measure <= scene.optimizer.optimality_tolerance)
+                              builder.reused, optimality, optimality.measure <= scene.optimizer.optimality_tolerance,
+                              builder.basis_reuses, builder.records)
 
 
 def start_points(space: DesignSpace, count: int, seed: int, meshes) -> list[np.ndarray]:

@@ -3,7 +3,9 @@
 z ← z - γ W ∇L_b with L_b = L + μ B, B(z) = -Σ log s_i(z); the diagonal W starts at
 1/‖∇L_b(z_0)‖_∞ and is halved along a direction whose gradient component changes sign or whose
 bound becomes active; between PROM builds d ≈ d_c + ∇d_c·(z - z_c); a new PROM when any
-|z - z_c|_i exceeds ``rebuild_threshold`` or every ``n_rebuild`` iterations.
+|z - z_c|_i exceeds ``rebuild_threshold`` or every ``n_rebuild`` iterations, except that a
+rebuild due by the count alone, at a design inside the last PROM's validity radius, simulates
+that PROM there for the new linearisation (history ``surrogate``) instead of building one.
 """
 from __future__ import annotations
 
@@ -41,27 +43,37 @@ def paper_method(scene, space, builder, weights, history, checkpoint, state, saf
                  "previous_gradient": None, "since_build": 0, "center": None}
     z = np.array(state["z"])
     scaling = np.array(state["scaling"])
-    prom = None
     center = state["center"]
+    if center is not None:      # resumed: the PROM of the last build comes back from the cache
+        center.setdefault("prom_z", center["z"])
+    prom = None if center is None else builder.build(np.array(center["prom_z"]))
     reason = "maximum number of iterations (safeguard)"
     while state["iteration"] < settings.max_iterations:
         iteration = state["iteration"]
         drift = np.inf if center is None else np.abs(z - np.array(center["z"])).max()
-        rebuild = center is None or drift > settings.rebuild_threshold or state["since_build"] >= settings.n_rebuild
-        if rebuild:
+        due = center is None or drift > settings.rebuild_threshold or state["since_build"] >= settings.n_rebuild
+        # due by the count only, inside the last PROM's validity radius: that PROM, simulated at z, re-linearises
+        surrogate = (due and drift <= settings.rebuild_threshold and not state.get("confirm")
+                     and builder.trusts(prom, z))
+        rebuild = due and not surrogate
+        if due:
             try:
-                prom = builder.build(z)
+                if rebuild:
+                    prom = builder.build(z)
+                else:
+                    builder.refuse_infeasible(prom, z)
             except InputError as refused:      # the mesh check refuses the design: step back halfway
                 if center is None or np.abs(z - np.array(center["z"])).max() < settings.step_tolerance:
                     raise
-                log.warning("paper method: %s; stepping back towards the last built design", refused)
+                log.warning("paper method: %s; stepping back towards the last linearisation centre", refused)
                 z = np.array(center["z"]) + 0.5 * (z - np.array(center["z"]))
                 scaling *= 0.5
                 state.update(z=z.tolist(), scaling=scaling.tolist())
                 continue
             exact = builder.evaluate(prom, z, weights)
-            center = {"z": z.tolist(), "distance": exact.distance, "distance_gradient": exact.distance_gradient.tolist()}
-            state["since_build"] = 0
+            center = {"z": z.tolist(), "distance": exact.distance, "distance_gradient": exact.distance_gradient.tolist(),
+                      "prom_z": (z if rebuild else np.array(center["prom_z"])).tolist()}
+            state.update(since_build=0, confirm=False)
         distance, distance_gradient = _linearised_distance(center, z)
         cost, gradient = _weighted_cost(space, weights, z, distance, distance_gradient)
         barrier_value, barrier_gradient = barrier(space, z)
@@ -69,11 +81,12 @@ def paper_method(scene, space, builder, weights, history, checkpoint, state, saf
         total_gradient = np.where(space.free, gradient + barrier_scale * barrier_gradient, 0.0)
         measure = first_order(space, z, cost, gradient, settings.active_tolerance, barrier_scale).measure
         if measure <= settings.optimality_tolerance and not rebuild:
-            # optimal by the linearised gradient: confirm with a PROM built here before stopping
-            state["since_build"] = settings.n_rebuild
+            # optimal by a linearised gradient: confirm with a PROM built here before stopping
+            state.update(since_build=settings.n_rebuild, confirm=True)
             continue
-        record(history, history_row(space, iteration, z, cost, gradient, distance,
-                                     "built" if rebuild else "approximated", started, optimality=measure), on_iteration)
+        kind = "built" if rebuild else "surrogate" if surrogate else "approximated"
+        record(history, history_row(space, iteration, z, cost, gradient, distance, kind, started, optimality=measure),
+               on_iteration)
         if measure <= settings.optimality_tolerance:
             reason = optimality_reason(measure, settings.optimality_tolerance)
             state.update(iteration=iteration + 1)
@@ -84,7 +97,7 @@ def paper_method(scene, space, builder, weights, history, checkpoint, state, saf
             scaling /= max(np.abs(total_gradient).max(), 1e-300)
         else:
             scaling = _rescaled(scaling, total_gradient, np.array(previous), barrier_scale * barrier_gradient,
-                                rebuild, settings)
+                                due, settings)
         step = -settings.step_size * scaling * total_gradient
         fraction, blocking = _fraction_to_boundary(space, z, step)
         if fraction < 1.0:
@@ -104,10 +117,10 @@ def paper_method(scene, space, builder, weights, history, checkpoint, state, saf
             if rebuild:     # W restarts once, as at the first iteration (1/‖∇L_b‖_∞)
                 state.update(scaling=np.ones(z.size).tolist(), previous_gradient=None, restarted=True)
                 scaling = np.ones(z.size)
-            else:           # a linearised gradient may be stale: rebuild first
-                state["since_build"] = settings.n_rebuild
+            else:           # a linearised (or surrogate) gradient may be stale: rebuild first
+                state.update(since_build=settings.n_rebuild, confirm=True)
             checkpoint.save(state, history, builder)
-    if center is not None and np.allclose(z, center["z"]) and prom is not None:
+    if center is not None and np.allclose(z, center["prom_z"]) and prom is not None:
         final = builder.evaluate(prom, z, weights)
     else:
         final = _final_evaluation(builder, weights, z, np.array(center["z"]))
@@ -161,9 +174,9 @@ def _barrier_gap_closed(space: DesignSpace, builder: PromBuilder, weights, final
     return names, evaluation
 
 
-def _rescaled(scaling, gradient, previous, barrier_part, built: bool, settings) -> np.ndarray:
+def _rescaled(scaling, gradient, previous, barrier_part, exact: bool, settings) -> np.ndarray:
     """W_i halves where ∂L_b/∂z_i changed sign (the source's rule). Beyond the source, at a design
-    where a PROM was just built (a linearised gradient holds no new information), W_i doubles
+    where a PROM was just built or simulated (a linearised gradient holds no new information), W_i doubles
     where the sign held, the barrier's part μ ∂B/∂z_i is under half of ∂L_b/∂z_i (away from the
     bounds' barrier layer) and the doubled step γ W_i |∂L_b/∂z_i| stays within the rebuild
     threshold: a parameter with a small gradient still reaches its bound."""
@@ -171,7 +184,7 @@ def _rescaled(scaling, gradient, previous, barrier_part, built: bool, settings) 
     scaling = np.where(sign_change < 0, 0.5 * scaling, scaling)
     outside_barrier_layer = np.abs(barrier_part) < 0.5 * np.abs(gradient)
     room = 2 * settings.step_size * scaling * np.abs(gradient) <= settings.rebuild_threshold
-    return np.where(built & (sign_change > 0) & outside_barrier_layer & room, 2.0 * scaling, scaling)
+    return np.where(exact & (sign_change > 0) & outside_barrier_layer & room, 2.0 * scaling, scaling)
 
 
 def _final_evaluation(builder: PromBuilder, weights, z, last_built) -> Evaluation:

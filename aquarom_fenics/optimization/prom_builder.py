@@ -1,6 +1,7 @@
 """PROMs centred on designs for the optimisers: built or taken from the cache, checked for a stable gait."""
 from __future__ import annotations
 
+import logging
 import time
 
 import numpy as np
@@ -18,34 +19,97 @@ from aquarom_fenics.reduction.reductor import build_prom
 STABILITY_STROKES = 2
 """Strokes the horizon must hold before the gait's stability is judged."""
 
+BASIS_REUSE_FRACTION = 0.5
+"""A PROM centred within this fraction of the validity radius of the last PROM whose basis was built
+(every |ξ - ξ_b|_k ≤ f r_k) reuses that basis; its tensors are projected at its own centre."""
+
+log = logging.getLogger("aquarom")
+
 
 class PromBuilder:
-    """Builds PROMs centred on designs, counting builds, cache reuses and their time."""
+    """Builds PROMs centred on designs, counting builds, cache reuses, basis reuses and their time.
+
+    ``basis_center`` is the centre of the last PROM whose basis was built (the source of reused
+    bases); a resumed run sets it from its checkpoint, and the PROM there comes from the cache.
+    """
 
     def __init__(self, scene: Scene, fish: Fish, space: DesignSpace):
         self.scene, self.fish, self.space = scene, fish, space
         self.builds = 0
         self.reused = 0
+        self.basis_reuses = 0
         self.last_size = 0
         self.build_time = 0.0
         self.solve_time = 0.0
+        self.radius = np.array(scene.validity_radii())
+        self.basis_center: np.ndarray | None = None
+        self.records: list[dict] = []        # per build: design, cache hit, basis source, time
+        self._basis_source: ReducedModel | None = None
 
     def build(self, z: np.ndarray) -> ReducedModel:
         started = time.perf_counter()
         center = z[: self.space.n_shapes]
+        source = self._basis_source_near(center)
         built = []
 
         def build_here():
-            built.append(build_prom(self.scene, xi_center=center, fish=self.fish))
+            built.append(build_prom(self.scene, xi_center=center, fish=self.fish, basis_from=source))
             return built[0]
 
-        prom = cached_prom(self.scene, center, build_here)
-        self.build_time += time.perf_counter() - started
+        prom = cached_prom(self.scene, center, build_here,
+                           basis_center=None if source is None else source.xi_center)
+        if source is None:
+            self._basis_source, self.basis_center = prom, center.copy()
+        elapsed = time.perf_counter() - started
+        self.build_time += elapsed
         self.builds += 1
         self.reused += not built
+        self.basis_reuses += source is not None
         self.last_size = prom.size
+        record = {"build": self.builds, "design": self.space.as_dict(z), "from_cache": not built,
+                  "basis_from": None if source is None else dict(zip(self.space.names, source.xi_center.tolist())),
+                  "radius_fraction": None if source is None else self._radius_fraction(center, source.xi_center),
+                  "time": elapsed}
+        self.records.append(record)
+        log.info("PROM %d at %s: %s; basis %s; %.2f s", self.builds, record["design"],
+                 "from the cache" if record["from_cache"] else "built",
+                 "built here" if source is None else f"reused from {record['basis_from']} (largest |Δξ_k| / r_k "
+                 f"{record['radius_fraction']:.2f}: every tensor projected here)", elapsed)
         self._refuse_unstable(prom, z)
         return prom
+
+    def _radius_fraction(self, xi: np.ndarray, other: np.ndarray) -> float:
+        """max_k |ξ_k - ξ'_k| / r_k, r the scene's validity radius (a parameter with r_k = 0, fixed by
+        equal bounds, counts 0 where ξ_k = ξ'_k, else infinity)."""
+        gap = np.abs(xi - other)
+        ratio = np.divide(gap, self.radius, out=np.where(gap > 0, np.inf, 0.0), where=self.radius > 0)
+        return float(np.max(ratio, initial=0.0))
+
+    def _basis_source_near(self, center: np.ndarray) -> ReducedModel | None:
+        """The PROM whose basis a PROM at ``center`` reuses, or None (its basis is built)."""
+        if self.basis_center is None or not center.size:
+            return None
+        if self._radius_fraction(center, self.basis_center) > BASIS_REUSE_FRACTION:
+            return None
+        if self._basis_source is None:      # resumed: the PROM at the basis centre is in the cache
+            source_center = self.basis_center.copy()
+            self._basis_source = cached_prom(self.scene, source_center,
+                                             lambda: build_prom(self.scene, xi_center=source_center, fish=self.fish))
+        return self._basis_source
+
+    def trusts(self, prom: ReducedModel | None, z: np.ndarray) -> bool:
+        """Whether z is inside the validity radius of ``prom`` (every |ξ - ξ_c|_k ≤ r_k)."""
+        return prom is not None and bool(np.all(np.abs(z[: self.space.n_shapes] - prom.xi_center)
+                                                <= prom.validity_radius))
+
+    def refuse_infeasible(self, prom: ReducedModel, z: np.ndarray) -> None:
+        """The checks of a build at z without building: InputError if the design check refuses z
+        or the PROM's gait at z is unstable."""
+        try:
+            self.fish.design(z[: self.space.n_shapes])
+        except InputError as refused:
+            raise InputError(f"design {self.space.as_dict(z)} is infeasible: {refused}") from None
+        self._refuse_unstable(prom, z)
 
     def _refuse_unstable(self, prom: ReducedModel, z: np.ndarray) -> None:
         """A design whose PROM gait is unstable (Floquet multiplier |μ| > 1.01 over the last stroke,

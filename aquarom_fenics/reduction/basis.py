@@ -112,6 +112,7 @@ def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int) -> tu
         eigenvalue = solver.getEigenpair(index, vector).real
         modes.append(vector.array.copy())
         frequencies.append(np.sqrt(max(eigenvalue, 0.0)) / (2 * np.pi))
+    solver.destroy()        # frees its factorisation (not freed with the Python object)
     return np.column_stack(modes), np.array(frequencies)
 
 
@@ -176,6 +177,7 @@ def build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
     if "tail_force" in responses:
         candidates.append(static_solve(unit_tail_force(fom)))
     timings["static_solves"] = time.perf_counter() - started - timings["vibration_modes"]
+    solver.destroy()        # frees the factorisation of K_0
     labels = candidate_labels(len(modes), settings.modal_derivatives, n_parameters, actuation_modes, responses)
     vectors, labels, dropped = mass_orthonormalise(fom, list(zip(labels, candidates)), settings.drop_tolerance)
     timings["basis_total"] = time.perf_counter() - started

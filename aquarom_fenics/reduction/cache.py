@@ -21,11 +21,18 @@ KINDS = ("prom", "fom")
 
 
 def cached_prom(scene: Scene, xi_center: np.ndarray, build, parametric: bool = True,
-                comm: MPI.Comm = MPI.COMM_WORLD):
-    """The PROM of ``scene`` at ``xi_center`` from the cache, or ``build()`` and store it."""
+                comm: MPI.Comm = MPI.COMM_WORLD, basis_center: np.ndarray | None = None):
+    """The PROM of ``scene`` at ``xi_center`` from the cache, or ``build()`` and store it.
+
+    ``basis_center``: the design whose basis the PROM reuses (None: its basis is built at
+    ``xi_center``); part of the entry's name, since the basis changes the PROM.
+    """
     from aquarom_fenics.reduction.prom import ReducedModel
 
     key = entry_key("prom", scene.hash, np.asarray(xi_center, dtype=float), parametric)
+    if basis_center is not None:
+        key = entry_key("prom", scene.hash, np.asarray(xi_center, dtype=float), parametric,
+                        "basis", np.asarray(basis_center, dtype=float))
 
     def checked_build():
         require_cache_writable("prom")

@@ -14,7 +14,7 @@ import numpy as np
 from mpi4py import MPI
 
 from aquarom_fenics import __version__
-from aquarom_fenics.reduction.basis import build_basis
+from aquarom_fenics.reduction.basis import ReductionBasis, build_basis
 from aquarom_fenics.geometry.fish import Fish, load_fish
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.physics.thrust_term import check_spine_is_not_moved
@@ -26,10 +26,12 @@ log = logging.getLogger("aquarom")
 
 
 def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI.Comm = MPI.COMM_WORLD,
-               parametric: bool = True) -> ReducedModel:
+               parametric: bool = True, basis_from: ReducedModel | None = None) -> ReducedModel:
     """The PROM of ``scene`` centred on ξ_c (a ROM, without ξ-terms, when ``parametric`` is False).
 
-    Each force term of the FOM projects itself on the basis (``reduce``).
+    Each force term of the FOM projects itself on the basis (``reduce``). With ``basis_from`` the
+    basis is that PROM's (same scene and mesh), not built again: only a subspace is reused, every
+    tensor and its ξ-derivatives are projected at ξ_c, so the PROM is exact for ξ_c on that subspace.
     """
     started = time.perf_counter()
     timings = {}
@@ -41,7 +43,7 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
     order = scene.reduction.taylor_order if p else 0
     check_spine_is_not_moved(fish)
 
-    basis = build_basis(fom, p)
+    basis = build_basis(fom, p) if basis_from is None else reused_basis(fom, basis_from)
     vectors = basis.vectors
     timings.update(basis.timings)
     projector = Projector(fom, vectors, p, order)
@@ -72,10 +74,13 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
     timings["total"] = time.perf_counter() - started
     m = vectors.shape[1]
     if comm.rank == 0:
-        log.info("PROM: m = %d (%s), p = %d, Taylor order %d; built %s; skipped %s; %.2f s (basis %.2f s, "
-                 "internal force %.2f s, other tensors %.2f s)", m, ", ".join(basis.labels), p, order,
-                 ", ".join(built), ", ".join(skipped) or "nothing", timings["total"], timings["basis_total"],
-                 timings["internal_force_tensors"], timings["other_tensors"])
+        origin = ("built" if basis_from is None else
+                  f"reused from the PROM at {dict(zip(basis_from.shape_names, np.round(basis_from.xi_center, 6).tolist()))}")
+        log.info("PROM: m = %d (%s), p = %d, Taylor order %d; basis %s; built %s; skipped %s; %.2f s (FOM set-up "
+                 "%.2f s, basis %.2f s, internal force %.2f s, other tensors %.2f s)", m, ", ".join(basis.labels), p,
+                 order, origin, ", ".join(built), ", ".join(skipped) or "nothing", timings["total"],
+                 timings["fom_setup"], timings["basis_total"], timings["internal_force_tensors"],
+                 timings["other_tensors"])
     return ReducedModel(
         scene_hash=scene.hash, software_version=__version__, shape_names=list(fish.shape_names[:p]),
         design_point=dict(zip(fish.shape_names, map(float, xi_center))),
@@ -83,3 +88,15 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
         basis=np.stack([fom.nodal_displacement(vectors[:, j]) for j in range(m)], axis=-1), dropped=basis.dropped,
         frequencies=basis.frequencies, elastic=elastic, muscle=muscle, inertia=inertia, drag=drag, thrust=thrust,
         observation=observation, cells=fom.n_cells, dofs=fom.n_global_dofs, timings=timings)
+
+
+def reused_basis(fom: FullOrderModel, prom: ReducedModel) -> ReductionBasis:
+    """The basis of ``prom`` on the owned dofs of ``fom`` (same mesh); its vectors are Vᵀ M V = I for
+    the PROM's own centre, not for the FOM's design (the projected mass M_r carries the difference)."""
+    started = time.perf_counter()
+    if prom.basis.shape[0] != fom.fish.nodes.points.shape[0] or prom.cells != fom.n_cells:
+        raise ValueError(f"the basis to reuse is on a mesh of {prom.basis.shape[0]} nodes, {prom.cells} cells; "
+                         f"this model has {fom.fish.nodes.points.shape[0]} nodes, {fom.n_cells} cells")
+    vectors = np.column_stack([fom.owned_values(prom.basis[:, :, j]) for j in range(prom.size)])
+    return ReductionBasis(vectors, list(prom.labels), list(prom.dropped), np.asarray(prom.frequencies),
+                          {"basis_total": time.perf_counter() - started})

@@ -47,6 +47,13 @@ class AnalyticBuilder(PromBuilder):
     def meshes(self, z):
         return True
 
+    def trusts(self, prom, z):
+        """The 'PROM' is the design it was built at: trusted within the scene's validity radius of it."""
+        return prom is not None and bool(np.all(np.abs(np.asarray(z) - prom) <= self.radius))
+
+    def refuse_infeasible(self, prom, z):
+        pass
+
 
 def toy(method, **optimizer):
     """The toy scene; the paper method's linearised steps re-linearise within a tenth of the wells' spacing."""

@@ -266,3 +266,19 @@ def test_a_design_whose_prom_is_unstable_is_refused_as_infeasible(monkeypatch):
     short = prom_builder.PromBuilder(toy_scene(), builder.fish, space)
     short._refuse_unstable(object(), z)          # one stroke: no periodic gait to judge, not asked
     assert len(verdicts) == 1
+
+
+def test_builder_reuses_the_basis_within_half_the_validity_radius_and_records_it(toy_fish):
+    scene = toy_scene("paper")
+    space = design_space(scene)
+    builder = prom_builder.PromBuilder(scene, toy_fish, space)
+    radius = np.array(scene.validity_radii())
+    first = builder.build(np.zeros(2))
+    near = builder.build(0.4 * radius)                       # within half the radius of the first: reused
+    far = builder.build(np.array([0.8 * radius[0], 0.0]))    # beyond it: a basis of its own
+    assert [record["basis_from"] for record in builder.records] == [None, {"z_tail": 0.0, "y_thin": 0.0}, None]
+    assert builder.records[1]["radius_fraction"] == pytest.approx(0.4)
+    assert builder.basis_reuses == 1 and builder.builds == 3
+    np.testing.assert_array_equal(near.basis, first.basis)
+    assert not np.array_equal(far.basis, first.basis)
+    np.testing.assert_array_equal(builder.basis_center, far.xi_center)

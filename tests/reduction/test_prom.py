@@ -65,6 +65,17 @@ def test_sampled_tensors_reproduce_every_projected_fom_force(scene, fish, prom):
     assert_prom_reproduces_the_projected_fom_forces(scene, fish, prom, samples=20)
 
 
+def test_a_prom_on_a_reused_basis_is_exact_for_its_own_centre(scene, fish, prom):
+    """The basis of the PROM at ξ = 0 reused at ξ_c (half the validity radius away): the same
+    vectors, every tensor projected again at ξ_c."""
+    center = 0.5 * np.array(scene.validity_radii()) * np.array([1.0, -1.0, 1.0])
+    moved = build_prom(scene, xi_center=center, fish=fish, basis_from=prom)
+    np.testing.assert_array_equal(moved.basis, prom.basis)
+    assert moved.labels == prom.labels and "vibration_modes" not in moved.timings
+    assert relative_error(moved.inertia.mass.constant, prom.inertia.mass.constant) > 1e-3
+    assert_prom_reproduces_the_projected_fom_forces(scene, fish, moved, samples=5)
+
+
 def assert_prom_reproduces_the_projected_fom_forces(scene, fish, prom, samples):
     """Vᵀ r of the FOM and the PROM's residual and internal force agree to 1e-9 at random states (SPEC §8)."""
     projected = ProjectedFOM(scene, fish, prom, prom.xi_center)
