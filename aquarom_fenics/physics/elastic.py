@@ -8,6 +8,7 @@ quadrature points (``fem/cellwise.py``, SPEC §8) into the force tensors of
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import ufl
@@ -94,12 +95,15 @@ class ReducedElastic:
     def tangents(self, time, eta, eta_dot, eta_ddot):
         return self.tangent(eta), None, None
 
+    @cached_property
+    def gradients(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(∂K1/∂ξ_k, ∂K2/∂ξ_k, ∂K3/∂ξ_k) at this design, each with a leading axis k of length p."""
+        return tuple(t.gradient(self.delta) for t in (self.tensors.linear, self.tensors.quadratic, self.tensors.cubic))
+
     def force_gradient(self, eta: np.ndarray) -> np.ndarray:
-        """∂f_int,r/∂ξ_k = K1_k η + K2_k η η + K3_k η η η, shape (p, m)."""
-        k1_k, k2_k, k3_k = (t.gradient(self.delta) for t in (self.tensors.linear, self.tensors.quadratic,
-                                                              self.tensors.cubic))
-        return (k1_k @ eta + np.einsum("kabc,b,c->ka", k2_k, eta, eta)
-                + np.einsum("kabcd,b,c,d->ka", k3_k, eta, eta, eta))
+        """∂f_int,r/∂ξ_k = K1_k η + K2_k η η + K3_k η η η, shape (p, m) (contracted one η at a time)."""
+        k1_k, k2_k, k3_k = self.gradients
+        return k1_k @ eta + (k2_k @ eta) @ eta + ((k3_k @ eta) @ eta) @ eta
 
     def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
         return self.force_gradient(eta)
