@@ -1,12 +1,15 @@
-"""`make study`: SO1–SO3 and the CO Pareto sweep (on each scene's mesh level), collected in one table.
+"""`make study`: SO1–SO3 and the CO Pareto sweep (on each scene's mesh), collected in one table.
 
-Writes every run under results/studies/ and results/studies/summary.md (case, parameters,
-cells, PROM dofs, builds, wall time, time per build, optimum, bounds active there, how the
+Writes every run under results/studies/ and results/studies/summary.md (case, mesh, parameters,
+cells, PROM dofs, builds, wall times, time per build, optimum, bounds active there, how the
 optimiser stopped, FOM distance nominal/optimal, ratio). SO2 runs from 3 starts (its source
-reports two local optima); its row is the best FOM-verified one.
+reports two local optima); its row is the best FOM-verified one. Each case keeps its rows in
+<case>/study_rows.md, and summary.md gathers the rows of every case in the output folder, so
+cases run one invocation at a time (`--cases so7 so8`) land in the same table.
 """
 import argparse
 import json
+import time
 from pathlib import Path
 
 from aquarom_fenics.geometry.fish import load_fish
@@ -18,53 +21,70 @@ from aquarom_fenics.optimization.study import pareto_sweep, run_optimization
 REPOSITORY = Path(__file__).resolve().parents[1]
 
 STARTS = {"so2": 3}      # [optimizer] starts per case (1 when not listed)
+ROWS = "study_rows.md"   # a case's table rows, inside its output folder
+HEADER = ["| case | mesh | parameters | cells | PROM dofs | builds (reused from the cache) | optimisation [s] | "
+          "FOM check [s] | case wall time [s] | time per build [s] | optimum | active | stop (iterations) | starts | "
+          "FOM nominal [cm] | FOM optimal [cm] | ratio |", "|---" * 17 + "|"]
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__)
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--level", type=int, help="mesh level for every case (default: each scene's own)")
+    parser.add_argument("--degree", type=int, choices=(1, 2), help="element degree for every case (default: each scene's own)")
     parser.add_argument("--cases", nargs="+", default=["so1", "so2", "so3", "co"])
     parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "studies")
     args = parser.parse_args()
-    lines = ["# Optimisation studies", "",
-             "| case | parameters | cells | PROM dofs | builds (reused from the cache) | wall time [s] | time per build [s] | optimum | "
-             "active | stop (iterations) | starts | FOM nominal [cm] | FOM optimal [cm] | ratio |", "|---" * 14 + "|"]
     for case in args.cases:
         scene = Scene.load(case)
-        if args.level is not None:
-            scene = scene.replace("mesh", level=args.level)
-        scene = scene.replace("optimizer", starts=STARTS.get(case, 1))
+        mesh = {name: value for name, value in (("level", args.level), ("degree", args.degree)) if value is not None}
+        scene = scene.replace("mesh", **mesh).replace("optimizer", starts=STARTS.get(case, 1))
+        started = time.perf_counter()
         fish = load_fish(scene)
         if scene.cooptimization.enabled:
             points = pareto_sweep(scene, args.out / case, fish=fish)
-            for point in points:
-                summary = json.loads((args.out / case / f"w1_{point['w1']:g}" / "summary.json").read_text())
-                lines.append(_row(f"{case} w1={point['w1']:g}", scene, fish, summary))
-            continue
-        run_optimization(scene, args.out / case, fish=fish)
-        lines.append(_row(case, scene, fish, json.loads((args.out / case / "summary.json").read_text())))
-    lines += ["", "Wall time and time per build include PROMs taken from the cache (a rerun reuses them); "
-              "`make bench` times every build from scratch."]
-    failures = [line for line in lines if "stopped" in line]
-    if failures:
+            summaries = [(f"{case} w1={point['w1']:g}", args.out / case / f"w1_{point['w1']:g}" / "summary.json")
+                         for point in points]
+        else:
+            run_optimization(scene, args.out / case, fish=fish)
+            summaries = [(case, args.out / case / "summary.json")]
+        case_time = time.perf_counter() - started
+        rows = [_row(name, scene, fish, json.loads(path.read_text()), case_time if k == 0 else None)
+                for k, (name, path) in enumerate(summaries)]
+        write_text_atomic(args.out / case / ROWS, "\n".join(rows) + "\n")
+        write_text_atomic(args.out / "summary.md", "\n".join(summary_lines(args.out)) + "\n")
+    print((args.out / "summary.md").read_text(), end="")
+
+
+def summary_lines(out: Path) -> list[str]:
+    """summary.md: the header and the rows of every case folder in ``out`` (SO cases, then CO)."""
+    folders = sorted((path.parent for path in out.glob(f"*/{ROWS}")), key=lambda path: (path.name == "co", path.name))
+    lines = ["# Optimisation studies", "", *HEADER]
+    lines += [row for folder in folders for row in (folder / ROWS).read_text().splitlines()]
+    lines += ["", "Optimisation and FOM check (nominal and optimal design) are those of the reported run (of the "
+              "best start of a multi-start case); the case wall time is the whole case (mesh, every start or "
+              "weight). PROMs and FOM distances taken from the cache count as reused; `make bench` times every "
+              "build from scratch."]
+    if any("stopped" in line for line in lines):
         lines += ["", "FOM runs marked 'stopped' did not converge: see each case's summary.json (fom_check.error)."]
     versions = software_versions()
-    lines += ["", f"aquarom_fenics {versions['aquarom_fenics']}, dolfinx {versions['dolfinx']}."]
-    write_text_atomic(args.out / "summary.md", "\n".join(lines) + "\n")
-    print("\n".join(lines))
+    return lines + ["", f"aquarom_fenics {versions['aquarom_fenics']}, dolfinx {versions['dolfinx']}."]
 
 
 def _centimetres(value):
     return "stopped" if value is None else f"{100 * value:.3f}"
 
 
-def _row(case, scene, fish, summary):
+def _row(case, scene, fish, summary, case_time: float | None) -> str:
+    """One table row of a case's summary.json; ``case_time`` [s] on the first row of a case only."""
     check = summary["fom_check"]
     optimum = ", ".join(f"{n} {v:+.3f}" for n, v in summary["optimum"].items())
     ratio = "n/a" if check["ratio"] is None else f"{check['ratio']:.2f}"
-    return (f"| {case} | {len(summary['optimum'])} | {fish.mesh.cells.shape[0]} | {summary['prom_size']} | "
+    timings = summary["timings"]
+    return (f"| {case} | P{scene.mesh.degree} level {scene.mesh.level} | {len(summary['optimum'])} | "
+            f"{fish.mesh.cells.shape[0]} | {summary['prom_size']} | "
             f"{summary['prom_builds']} ({summary.get('prom_builds_reused_from_cache', 0)}) | "
-            f"{summary['timings']['total']:.1f} | {summary['time_per_build']:.2f} | {optimum} | "
+            f"{timings['total']:.1f} | {timings['fom_check']:.1f} | "
+            f"{'' if case_time is None else f'{case_time:.1f}'} | {summary['time_per_build']:.2f} | {optimum} | "
             f"{', '.join(summary['bounds_active']) or 'none'} | "
             f"{'optimal' if summary['converged'] else summary['stop_reason']} ({summary['iterations']}) | "
             f"{_starts(summary)} | {_centimetres(check['nominal_distance'])} | {_centimetres(check['optimal_distance'])} | {ratio} |")
