@@ -49,19 +49,19 @@ def test_the_nominal_gait_is_stable(fish):
     assert reason.startswith("stable") and multiplier(reason) == pytest.approx(1.0, abs=1e-6)
 
 
-def test_twenty_times_the_muscle_stiffness_grows_before_the_prom_stops(fish):
-    """k × 20 stops the 2 s PROM at t = 1.14 s; over 1.1 s it completes, yet the last period already
-    multiplies a perturbation by more than 2."""
-    scene = coarse_scene(actuation={"stiffness": 1.2e6}, solver={"duration": 1.1})
+def test_a_gait_that_completes_can_still_be_unstable(fish):
+    """E / 20 completes the 2 s PROM run, yet one stroke multiplies a perturbation by more than 1.5."""
+    scene = coarse_scene(material={"young_modulus": 13e3})
     prom = build_prom(scene, fish=fish)
     assert simulate_reduced(prom, scene).completed
     stable, reason = reduced_stability(prom, scene)
     assert not stable and reason.startswith("unstable: a perturbation grows")
-    assert multiplier(reason) > 2.0 > FLOQUET_LIMIT
+    assert multiplier(reason) > 1.5 > FLOQUET_LIMIT
 
 
 def test_a_prom_that_stops_is_unstable_with_the_stop_as_reason(fish):
-    scene = coarse_scene(material={"young_modulus": 13e3})
+    """E = 8 kPa (k·A = 150 % of E) stops the PROM near t = 0.6 s."""
+    scene = coarse_scene(material={"young_modulus": 8e3})
     stable, reason = reduced_stability(build_prom(scene, fish=fish), scene)
     assert not stable and reason.startswith("unstable: the PROM stops") and "t = " in reason
 
