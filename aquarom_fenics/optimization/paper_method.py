@@ -63,8 +63,14 @@ def paper_method(scene, space, builder, weights, history, checkpoint, state, saf
                 else:
                     builder.refuse_infeasible(prom, z)
             except InputError as refused:      # the mesh check refuses the design: step back halfway
-                if center is None or np.abs(z - np.array(center["z"])).max() < settings.step_tolerance:
+                if center is None:
                     raise
+                if np.abs(z - np.array(center["z"])).max() < settings.step_tolerance:
+                    # every step from the last accepted design is refused: it is the answer
+                    reason = (f"the design check refuses every step from the last accepted design (within the "
+                              f"step tolerance {settings.step_tolerance:g}; {refused})")
+                    z = np.array(center["z"])
+                    break
                 log.warning("paper method: %s; stepping back towards the last linearisation centre", refused)
                 z = np.array(center["z"]) + 0.5 * (z - np.array(center["z"]))
                 scaling *= 0.5

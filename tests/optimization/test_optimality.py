@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from aquarom_fenics.errors import InputError
 from aquarom_fenics.optimization import optimize as optimize_module
 from aquarom_fenics.optimization import study
 from aquarom_fenics.optimization.cost import CostWeights, Evaluation, design_space, first_order
@@ -163,3 +164,26 @@ def test_paper_method_moves_a_bound_the_barrier_holds_off_onto_it(fish):
     assert result.optimum[0] == 0.2 and abs(result.optimum[1]) < 0.01 * 0.2
     assert result.converged
     assert [row["constraint"] for row in result.optimality.active] == ["z_tail = upper"]
+
+
+class CheckedSlopeBuilder(SlopeBuilder):
+    """SlopeBuilder whose design check refuses z_tail > 0.05 (as the mesh check refuses inverted cells)."""
+
+    def refuse_infeasible(self, prom, z):
+        if z[0] > 0.05:
+            raise InputError(f"design z_tail = {z[0]:.4f} is refused by the design check")
+
+    def build(self, z):
+        self.refuse_infeasible(None, z)
+        return super().build(z)
+
+    def meshes(self, z):
+        return z[0] <= 0.05
+
+
+def test_paper_method_stops_at_the_last_accepted_design_when_the_check_refuses_every_step(fish):
+    scene = toy("paper")
+    space = optimize_module.optimization_space(scene, fish)
+    result = optimize(scene, fish=fish, builder=CheckedSlopeBuilder(scene, fish, space))
+    assert result.stop_reason.startswith("the design check refuses every step"), result.stop_reason
+    assert 0.04 < result.optimum[0] <= 0.05 and abs(result.optimum[1]) < 0.01 * 0.2
