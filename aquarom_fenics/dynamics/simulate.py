@@ -66,8 +66,12 @@ def check_time_grid(scene: Scene) -> int:
 
 def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bool = False,
                  out_dir: Path | None = None, comm: MPI.Comm = MPI.COMM_WORLD, progress: bool = True,
-                 initial_velocity: np.ndarray | None = None, keep_states: bool = False) -> SimulationResult:
+                 initial_velocity: np.ndarray | None = None, keep_states: bool = False,
+                 keep_model: bool = False) -> SimulationResult:
     """Integrate the FOM of design ξ over [0, T]; outputs go to ``out_dir`` (rank 0 writes).
+
+    The result holds the model (``result.model``) with ``keep_states`` or ``keep_model``; otherwise
+    its PETSc objects are freed at the end of the run.
 
     A solver failure is reported in the result (``completed`` False, ``error`` the message) after
     the converged steps have been written; :class:`InputError` propagates.
@@ -143,6 +147,9 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
         vertices = fish.nodes.n_vertices
         write_run_outputs(Path(out_dir), scene, result, "fom", dict(zip(fish.shape_names, fish.parameter_vector(xi))),
                           model.rest_points[:vertices], fish.mesh.cells, displacements, comm, trajectory_written=True)
+    if not (keep_states or keep_model):
+        model.destroy()
+        result.model = None
     if interruption:
         raise Interrupted(interruption)
     return result

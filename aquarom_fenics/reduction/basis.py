@@ -112,7 +112,8 @@ def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int) -> tu
         eigenvalue = solver.getEigenpair(index, vector).real
         modes.append(vector.array.copy())
         frequencies.append(np.sqrt(max(eigenvalue, 0.0)) / (2 * np.pi))
-    solver.destroy()        # frees its factorisation (not freed with the Python object)
+    for petsc_object in (solver, vector, mass):
+        petsc_object.destroy()      # frees the factorisation and copies (not freed with the Python objects)
     return np.column_stack(modes), np.array(frequencies)
 
 
@@ -177,7 +178,8 @@ def build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
     if "tail_force" in responses:
         candidates.append(static_solve(unit_tail_force(fom)))
     timings["static_solves"] = time.perf_counter() - started - timings["vibration_modes"]
-    solver.destroy()        # frees the factorisation of K_0
+    for petsc_object in (solver, stiffness, variations.vector):
+        petsc_object.destroy()      # the factorisation of K_0 and the matrices behind it
     labels = candidate_labels(len(modes), settings.modal_derivatives, n_parameters, actuation_modes, responses)
     vectors, labels, dropped = mass_orthonormalise(fom, list(zip(labels, candidates)), settings.drop_tolerance)
     timings["basis_total"] = time.perf_counter() - started

@@ -113,4 +113,6 @@ class Projector:
                     self.directions[0].set_parameter(k)
                     self.directions[1].set_parameter(l)
                     second[k, l] = second[l, k] = project(2)
+        if storage is not None:
+            storage.destroy()
         return Taylor(constant, first, second)

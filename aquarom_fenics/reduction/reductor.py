@@ -81,13 +81,15 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
                  order, origin, ", ".join(built), ", ".join(skipped) or "nothing", timings["total"],
                  timings["fom_setup"], timings["basis_total"], timings["internal_force_tensors"],
                  timings["other_tensors"])
-    return ReducedModel(
+    prom = ReducedModel(
         scene_hash=scene.hash, software_version=__version__, shape_names=list(fish.shape_names[:p]),
         design_point=dict(zip(fish.shape_names, map(float, xi_center))),
         xi_center=xi_center[:p], validity_radius=np.array(scene.validity_radii()[:p]), labels=basis.labels,
         basis=np.stack([fom.nodal_displacement(vectors[:, j]) for j in range(m)], axis=-1), dropped=basis.dropped,
         frequencies=basis.frequencies, elastic=elastic, muscle=muscle, inertia=inertia, drag=drag, thrust=thrust,
         observation=observation, cells=fom.n_cells, dofs=fom.n_global_dofs, timings=timings)
+    fom.destroy()
+    return prom
 
 
 def reused_basis(fom: FullOrderModel, prom: ReducedModel) -> ReductionBasis:

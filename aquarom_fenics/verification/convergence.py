@@ -52,14 +52,19 @@ def measure(scene: Scene, fish: Fish | None = None) -> MeshCase:
     """The four quantities of the scene's nominal fish on its mesh level and element degree."""
     fish = fish or load_fish(scene)
     started = time.perf_counter()
-    run = simulate_fom(scene, fish=fish, progress=False)
+    run = simulate_fom(scene, fish=fish, progress=False, keep_model=True)
     wall_time = time.perf_counter() - started
-    if not run.completed:
-        raise RuntimeError(f"FOM of degree {scene.mesh.degree}, level {scene.mesh.level} stopped: {run.error}")
     model = run.model
-    _, frequencies = vibration_modes(model, clamped_stiffness(model), 1)
-    peak = scene.actuation.amplitude
-    deflection = model.spine_values(model.static_response(peak, -peak))[0, 1]
+    try:
+        if not run.completed:
+            raise RuntimeError(f"FOM of degree {scene.mesh.degree}, level {scene.mesh.level} stopped: {run.error}")
+        stiffness = clamped_stiffness(model)
+        _, frequencies = vibration_modes(model, stiffness, 1)
+        stiffness.destroy()
+        peak = scene.actuation.amplitude
+        deflection = model.spine_values(model.static_response(peak, -peak))[0, 1]
+    finally:
+        model.destroy()
     return MeshCase(scene.mesh.degree, scene.mesh.level, run.n_cells, run.n_dofs, float(run.distance),
                     float(run.tail_amplitude), float(frequencies[0]), float(deflection), wall_time)
 
