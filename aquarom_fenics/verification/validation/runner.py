@@ -18,8 +18,9 @@ from aquarom_fenics.verification.validation.cases import CACHED_STATUSES, Case, 
 from aquarom_fenics.verification.validation.compute import compute_fom, compute_mesh, compute_mpi, compute_reduced
 
 
-class CaseTimeLimit(Exception):
-    """Raised by the alarm when a case runs past its time limit."""
+class CaseTimeLimit(BaseException):
+    """Raised by the alarm when a case runs past its time limit; a BaseException (like Ctrl-C), so
+    that code catching Exception (e.g. a probe of gmsh's state) cannot swallow it."""
 
 
 class CasesCollected(Exception):
