@@ -11,17 +11,11 @@ from pathlib import Path
 from aquarom_fenics.api import Scene, build_prom, simulate
 from aquarom_fenics.io.outputs import software_versions
 from aquarom_fenics.io.persistence import write_json_atomic
-from aquarom_fenics.verification.compare import deviation
+from aquarom_fenics.verification.compare import model_errors
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 MESHES = ((2, 2), (2, 1), (1, 3), (1, 1))
 SO1_DESIGNS = ({}, {"z_tail": 0.1}, {"z_tail": -0.1, "y_thin": 0.03})
-
-
-def errors(fom, reduced) -> dict:
-    """Relative errors of the reduced run's distance and tail amplitude against the FOM's."""
-    return {"distance": deviation(reduced.distance, fom.distance)[1],
-            "tail_amplitude": deviation(reduced.tail_amplitude, fom.tail_amplitude)[1]}
 
 
 def nominal_row(degree: int, level: int) -> dict:
@@ -30,7 +24,7 @@ def nominal_row(degree: int, level: int) -> dict:
     row = {"degree": degree, "level": level, "fom_distance": fom.distance, "fom_tail_amplitude": fom.tail_amplitude}
     for label, response_vectors in (("items_1_5", False), ("default", True)):
         rom = simulate(scene.replace("reduction", response_vectors=response_vectors), model="rom")
-        row[label] = errors(fom, rom)
+        row[label] = model_errors(fom, rom)
     return row
 
 
@@ -43,7 +37,7 @@ def shape_rows() -> list[dict]:
         for design in SO1_DESIGNS:
             fom = simulate(scene, design)
             rows.append({"basis": label, "design": design,
-                         **errors(fom, simulate(scene, design, model="prom", prom=prom))})
+                         **model_errors(fom, simulate(scene, design, model="prom", prom=prom))})
     return rows
 
 
@@ -57,15 +51,15 @@ def main():
         rows.append(nominal_row(degree, level))
         row = rows[-1]
         print(f"degree {degree}, level {level}: FOM {100 * row['fom_distance']:.3f} cm; ROM distance error "
-              f"{100 * row['items_1_5']['distance']:+.2f} % (items 1–5), {100 * row['default']['distance']:+.2f} % "
-              f"(default); tail amplitude {100 * row['items_1_5']['tail_amplitude']:+.2f} %, "
-              f"{100 * row['default']['tail_amplitude']:+.2f} %", flush=True)
+              f"{100 * row['items_1_5']['distance_relative']:+.2f} % (items 1–5), {100 * row['default']['distance_relative']:+.2f} % "
+              f"(default); tail amplitude {100 * row['items_1_5']['tail_amplitude_relative']:+.2f} %, "
+              f"{100 * row['default']['tail_amplitude_relative']:+.2f} %", flush=True)
     report = {"nominal": rows, "versions": software_versions()}
     if args.shape_designs:
         report["so1_prom_degree2_level1"] = shape_rows()
         for row in report["so1_prom_degree2_level1"]:
-            print(f"SO1 PROM ({row['basis']}) at {row['design']}: distance {100 * row['distance']:+.2f} %, "
-                  f"tail amplitude {100 * row['tail_amplitude']:+.2f} %")
+            print(f"SO1 PROM ({row['basis']}) at {row['design']}: distance {100 * row['distance_relative']:+.2f} %, "
+                  f"tail amplitude {100 * row['tail_amplitude_relative']:+.2f} %")
     write_json_atomic(args.out, report)
     print(f"wrote {args.out}")
 
