@@ -122,8 +122,11 @@ def first_natural_frequency(model: "FullOrderModel") -> float | None:
 
     from aquarom_fenics.reduction.basis import clamped_stiffness, vibration_modes
 
+    stiffness = clamped_stiffness(model)
     try:
-        _, frequencies = vibration_modes(model, clamped_stiffness(model), 1)
+        _, frequencies = vibration_modes(model, stiffness, 1)
     except (RuntimeError, PETSc.Error):
         return None
+    finally:
+        stiffness.destroy()
     return float(frequencies[0])
