@@ -87,7 +87,22 @@ def paper_method(scene, space, builder, weights, history, checkpoint, state, saf
         total_gradient = np.where(space.free, gradient + barrier_scale * barrier_gradient, 0.0)
         measure = first_order(space, z, cost, gradient, settings.active_tolerance, barrier_scale).measure
         if measure <= settings.optimality_tolerance and not rebuild:
-            # optimal by a linearised gradient: confirm with a PROM built here before stopping
+            # optimal by a linearised gradient: confirmed by a PROM built where the barrier's nearly
+            # active bounds are active, if its first-order measure there passes; else by one built here
+            linearised = Evaluation(z, cost, gradient, distance, distance_gradient)
+            snapped = _barrier_gap_closed(space, builder, weights, linearised, settings.barrier_weight)
+            snapped_measure = None if snapped is None else first_order_at(scene, space, snapped[1]).measure
+            if snapped_measure is not None and snapped_measure <= settings.optimality_tolerance:
+                record(history, history_row(space, iteration, z, cost, gradient, distance, "approximated", started,
+                                            optimality=measure), on_iteration)
+                state.update(iteration=iteration + 1)
+                checkpoint.save(state, history, builder)
+                names, final = snapped
+                reason = (f"{optimality_reason(snapped_measure, settings.optimality_tolerance)} after "
+                          f"{', '.join(names)} moved from the barrier iterate onto the bound (a PROM built "
+                          f"there; linearised measure at the iterate {measure:.2e})")
+                _record_final(scene, space, history, iteration + 1, final, started, on_iteration)
+                return final.z, final, reason
             state.update(since_build=settings.n_rebuild, confirm=True)
             continue
         kind = "built" if rebuild else "surrogate" if surrogate else "approximated"

@@ -166,6 +166,26 @@ def test_paper_method_moves_a_bound_the_barrier_holds_off_onto_it(fish):
     assert [row["constraint"] for row in result.optimality.active] == ["z_tail = upper"]
 
 
+def test_paper_method_confirms_a_bound_optimum_with_one_build_on_the_bound(fish):
+    """Optimal by its linearised gradient next to the bound, the barrier iterate is not built: the
+    PROM built on the bound judges the first-order measure there."""
+    scene = toy("paper")
+    space = optimize_module.optimization_space(scene, fish)
+    built = []
+
+    class RecordingSlopeBuilder(SlopeBuilder):
+        def build(self, z):
+            built.append(np.array(z, dtype=float))
+            return super().build(z)
+
+    result = optimize(scene, fish=fish, builder=RecordingSlopeBuilder(scene, fish, space))
+    assert result.converged
+    assert [row["prom"] for row in result.history[-2:]] == ["approximated", "built"]
+    np.testing.assert_array_equal(built[-1], result.optimum)
+    barrier_iterate = [result.history[-2][f"xi_{name}"] for name in space.names]
+    assert not any(np.allclose(design, barrier_iterate) for design in built)
+
+
 class CheckedSlopeBuilder(SlopeBuilder):
     """SlopeBuilder whose design check refuses z_tail > 0.05 (as the mesh check refuses inverted cells)."""
 
