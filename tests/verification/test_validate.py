@@ -201,10 +201,10 @@ def synthetic_results(folder: Path):
     d = {"study": "d", "level": 1, "time_steps": [0.02, 0.01, 0.005], "grid_step": 0.02, "quantities": [
         {"name": "FOM head x, α_N = 0.02", "newmark_alpha": 0.02, "status": "completed", "differences": [4e-5, 2e-5],
          "ratios": [2.0], "ratio": 2.0, "pairs": ["0.02–0.01", "0.01–0.005"]},
-        {"name": "FOM head x, α_N = 0", "newmark_alpha": 0.0, "status": "completed", "differences": [4e-5, 1e-5],
-         "ratios": [4.0], "ratio": 4.0,
-         "pairs": ["0.02–0.01", "0.01–0.005"], "time": time_values.tolist(),
-         "difference_series": [values.tolist(), (values / 4).tolist()]},
+        {"name": "FOM head x, α_N = 0", "newmark_alpha": 0.0, "status": "completed",
+         "differences": [4e-5, 1e-5, 2.5e-6], "ratios": [4.0, 3.9], "window_ratios": [4.0], "finest_ratio": 3.9,
+         "ratio": 4.0, "pairs": ["0.02–0.01", "0.01–0.005", "0.005–0.0025"], "time": time_values.tolist(),
+         "difference_series": [values.tolist(), (values / 4).tolist(), (values / 15.6).tolist()]},
         {"name": "d head x / d ξ[y_thin] (PROM p=3)", "status": "completed", "differences": [4e-4, 1.1e-4],
          "ratios": [3.6], "ratio": 3.6, "pairs": ["0.02–0.01", "0.01–0.005"], "time": time_values.tolist(),
          "difference_series": [values.tolist(), (values / 3.6).tolist()]}]}
@@ -260,7 +260,8 @@ def test_report_writer_on_synthetic_results(tmp_path):
     assert "| ROM, source's basis | 1 | 1232 | 12 |" in text          # the case above 10%, with cells and k
     assert "](studies/so1/cost.png)" in text and "| so1 | 1.2 |" in text
     assert "**FAIL**" not in text.split("## a.")[0]                 # synthetic numbers meet every check
-    assert "| time-step ratio, FOM head x, α_N = 0.02 | 2.00 | → 2 (first order: γ = ½ + α_N) | — |" in text
+    assert "| time-step ratios, FOM head x, α_N = 0.02 | 2.00 | → 2 (first order: γ = ½ + α_N) | — |" in text
+    assert "| time-step ratios, FOM head x, α_N = 0 | 4.00 (finest pair 0.005–0.0025 s: 3.90) | 3.5–4.5 | pass |" in text
     assert "| 1 | 3 | 7944 | 6015 | 3.4 | -24." in text                      # degree-1 row against the reference
     assert "within 3 % of the reference distance: degree 2, level 2" in text
     assert "| h-0.1 | 1 | -0.1 | -0.001 | 2 | 0.3 | 0.01 | 0.1 | 0.5 | +0.500% | +5.0e-08% |" in text

@@ -5,9 +5,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aquarom_fenics.io.scene import SolverSection
+from aquarom_fenics.io.scene import Scene, SolverSection
 from aquarom_fenics.verification.convergence import MeshCase, mesh_convergence
 from aquarom_fenics.verification.validation.cases import fom_case, mesh_case, reduced_case
+from aquarom_fenics.verification.validation.report_format import RATIO_RANGE
 from aquarom_fenics.verification.validation.runner import Runner
 from aquarom_fenics.verification.validation.settings import Settings, base_scene
 
@@ -39,26 +40,36 @@ def convergence_schemes() -> tuple[ConvergenceScheme, ...]:
 
 
 def study_d(runner: Runner, settings: Settings) -> dict:
-    steps = settings.convergence_steps
+    """Successive-difference ratios of each model and scheme over ``settings.convergence_steps`` (the
+    window of the validation issue), the default scheme continued to finer steps per model: a
+    second-order scheme's ratios tend to 4 once h ω is small for every mode the run excites."""
+    schemes = convergence_schemes()
+    finer = dict(settings.finer_convergence_steps)
+    degree, level = convergence_mesh(settings)
     families = {}
-    for scheme in convergence_schemes():
+    for scheme in schemes:
         def scene(name="nominal", h=0.02, scheme=scheme):
-            return base_scene(settings, name, time_step=h, solver=dict(scheme.solver))
+            return base_scene(settings, name, level=level, degree=degree, time_step=h, solver=dict(scheme.solver))
+
+        def steps(model, scheme=scheme):
+            return tuple(settings.convergence_steps) + (finer.get(model, ()) if scheme is schemes[0] else ())
         tag = scheme.tag
-        families[(scheme, "FOM", f"FOM, {tag}")] = [fom_case(f"FOM h={h} {tag}", scene(h=h)) for h in steps]
+        families[(scheme, "FOM", f"FOM, {tag}")] = [fom_case(f"FOM h={h} {tag}", scene(h=h)) for h in steps("FOM")]
         families[(scheme, "ROM", f"ROM, {tag}")] = [reduced_case(f"ROM h={h} {tag}", scene(h=h), parametric=False)
-                                                   for h in steps]
+                                                   for h in steps("ROM")]
         families[(scheme, "PROM", f"PROM p=3 sensitivities, {tag}")] = [
             reduced_case(f"PROM SO1 h={h} {tag} with sensitivities", scene("so1", h), parametric=True,
-                         sensitivities=True) for h in steps]
+                         sensitivities=True) for h in steps("PROM")]
     cases = [case for family in families.values() for case in family]
     records = dict(zip((case.key for case in cases), runner.run("d", cases)))
-    coarse = steps[0]
-    result = {"study": "d", "level": settings.reference_level, "duration": settings.duration,
-              "time_steps": list(steps), "grid_step": coarse,
-              "schemes": [{"tag": scheme.tag} | scheme.facts() for scheme in convergence_schemes()], "quantities": []}
+    coarse = settings.convergence_steps[0]
+    window = len(settings.convergence_steps)
+    result = {"study": "d", "degree": degree, "level": level, "duration": settings.duration,
+              "time_steps": list(settings.convergence_steps), "finer_time_steps": finer, "grid_step": coarse,
+              "schemes": [{"tag": scheme.tag} | scheme.facts() for scheme in schemes], "quantities": []}
     for (scheme, model, name), family in families.items():
         runs = [records[case.key] for case in family]
+        steps = [case.scene.solver.time_step for case in family]
         facts = {"model": model} | scheme.facts()
         if any(run.get("status") != "completed" for run in runs):
             result["quantities"].append({"name": name, **facts, "status": "incomplete",
@@ -70,24 +81,34 @@ def study_d(runner: Runner, settings: Settings) -> dict:
             series = [on_grid(run["trajectory"]["time"], np.asarray(run["head_x_sensitivity"]), coarse) for run in runs]
             for index, parameter in enumerate(parameter_names):
                 result["quantities"].append(convergence(f"d head x / d ξ[{parameter}] (PROM p=3), {scheme.tag}",
-                                                        [s[1][:, index] for s in series], series[0][0], steps,
+                                                        [s[1][:, index] for s in series], series[0][0], steps, window,
                                                         facts | {"quantity": f"d head_x / d {parameter}"}))
             gradients = [np.asarray(run["distance_gradient"]) for run in runs]
             result["quantities"].append(convergence(f"d distance / d ξ (PROM p=3, norm over parameters), {scheme.tag}",
-                                                    gradients, None, steps, facts | {"quantity": "d distance / d xi"}))
+                                                    gradients, None, steps, window,
+                                                    facts | {"quantity": "d distance / d xi"}))
         else:
             for quantity, label in (("head_x", "head x"), ("tail_y", "tail y")):
                 series = [on_grid(run["trajectory"]["time"], np.asarray(run["trajectory"][quantity]), coarse)
                           for run in runs]
                 result["quantities"].append(convergence(f"{model} {label}, {scheme.tag}", [s[1] for s in series],
-                                                        series[0][0], steps, facts | {"quantity": quantity}))
+                                                        series[0][0], steps, window, facts | {"quantity": quantity}))
     return result
+
+
+def convergence_mesh(settings: Settings) -> tuple[int, int]:
+    """(degree, level) of study d: the settings' or, when None, the shipped nominal scene's."""
+    if settings.convergence_mesh is not None:
+        return settings.convergence_mesh
+    mesh = Scene.load("nominal").mesh
+    return mesh.degree, mesh.level
 
 
 def time_convergence_summary(study: dict) -> dict:
     """The ratios of study d per scheme, model and quantity (results/validation/time_convergence.json)."""
-    summary = {"level": study["level"], "duration": study["duration"], "time_steps": study["time_steps"],
-               "ratio_range_second_order": [3.5, 4.5], "schemes": []}
+    summary = {"degree": study.get("degree", 1), "level": study["level"], "duration": study["duration"],
+               "time_steps": study["time_steps"], "finer_time_steps": study.get("finer_time_steps", {}),
+               "ratio_range_second_order": list(RATIO_RANGE), "schemes": []}
     for scheme in study["schemes"]:
         entries = [q for q in study["quantities"] if q["integrator"] == scheme["integrator"]
                    and q.get("rho_infinity") == scheme.get("rho_infinity")
@@ -95,8 +116,8 @@ def time_convergence_summary(study: dict) -> dict:
         models = {}
         for entry in entries:
             models.setdefault(entry["model"], {})[entry.get("quantity", entry["name"])] = (
-                {"ratios": entry["ratios"], "differences": entry["differences"]} if entry["status"] == "completed"
-                else {"status": entry["status"], "message": entry.get("message")})
+                {key: entry.get(key) for key in ("pairs", "ratios", "window_ratios", "finest_ratio", "differences")}
+                if entry["status"] == "completed" else {"status": entry["status"], "message": entry.get("message")})
         summary["schemes"].append(scheme | {"models": models})
     return summary
 
@@ -108,13 +129,15 @@ def on_grid(time, values, step):
     return time[::stride], np.asarray(values)[::stride]
 
 
-def convergence(name, values, time, steps, facts: dict) -> dict:
-    """Successive differences ‖q_h - q_h/2‖_∞ and their ratio (≈ 4 for a second-order scheme)."""
+def convergence(name, values, time, steps, window, facts: dict) -> dict:
+    """Successive differences ‖q_h - q_h/2‖_∞ and their ratios (≈ 4 for a second-order scheme):
+    ``window_ratios`` over the first ``window`` steps, ``finest_ratio`` of the last three."""
     differences = [float(np.max(np.abs(np.asarray(a) - np.asarray(b)))) for a, b in zip(values, values[1:])]
     ratios = [first / second if second > 0 else None for first, second in zip(differences, differences[1:])]
-    entry = {"name": name, **facts, "status": "completed", "differences": differences,
-             "ratios": ratios,
-             "ratio": ratios[0] if ratios else None, "pairs": [f"{a:g}–{b:g}" for a, b in zip(steps, steps[1:])]}
+    entry = {"name": name, **facts, "status": "completed", "steps": list(steps), "differences": differences,
+             "ratios": ratios, "window_ratios": ratios[: max(window - 2, 0)],
+             "ratio": ratios[0] if ratios else None, "finest_ratio": ratios[-1] if ratios else None,
+             "pairs": [f"{a:g}–{b:g}" for a, b in zip(steps, steps[1:])]}
     if time is not None:
         entry["time"] = np.asarray(time).tolist()
         entry["difference_series"] = [np.abs(np.asarray(a) - np.asarray(b)).tolist() for a, b in zip(values, values[1:])]

@@ -31,6 +31,10 @@ def make_figures(out: Path) -> list[Path]:
     return written
 
 
+PAIR_STYLES = ("-", "--", ":", "-.", (0, (1, 1)), (0, (5, 1)), (0, (3, 1, 1, 1, 1, 1)))
+"""Line styles of the successive pairs of time steps."""
+
+
 def convergence_figure(study: dict, path: Path) -> Path:
     plt = pyplot()
     figure, axes = plt.subplots(1, 2, figsize=(14, 6))
@@ -39,7 +43,7 @@ def convergence_figure(study: dict, path: Path) -> Path:
             continue
         axis = axes[1] if "ξ" in quantity["name"] else axes[0]
         colour = None
-        for pair, series, style in zip(quantity["pairs"], quantity["difference_series"], ("-", "--", ":")):
+        for pair, series, style in zip(quantity["pairs"], quantity["difference_series"], PAIR_STYLES):
             values = np.asarray(series, dtype=float)
             values = np.where(values > 0, values, np.nan)     # t = 0: identical initial state
             line, = axis.semilogy(quantity["time"], values, style, color=colour, linewidth=1,

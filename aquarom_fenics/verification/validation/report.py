@@ -50,12 +50,17 @@ def checks(studies: dict, out: Path) -> list[list[str]]:
                 continue
             second_order = quantity.get("second_order", quantity.get("newmark_alpha", 0.0) == 0.0)
             required = f"{RATIO_RANGE[0]:g}–{RATIO_RANGE[1]:g}" if second_order else "→ 2 (first order: γ = ½ + α_N)"
-            if quantity.get("ratio") is None:
-                rows.append([f"time-step ratio, {quantity['name']}", quantity.get("status", "—"), required,
+            window = [r for r in quantity.get("window_ratios", [quantity.get("ratio")]) if r is not None]
+            if not window:
+                rows.append([f"time-step ratios, {quantity['name']}", quantity.get("status", "—"), required,
                              verdict(False) if second_order else "—"])
                 continue
-            ok = RATIO_RANGE[0] <= quantity["ratio"] <= RATIO_RANGE[1]
-            rows.append([f"time-step ratio, {quantity['name']}", fmt(quantity["ratio"], ".2f"), required,
+            ok = all(RATIO_RANGE[0] <= ratio <= RATIO_RANGE[1] for ratio in window)
+            finest = quantity.get("finest_ratio")
+            shown = ", ".join(fmt(ratio, ".2f") for ratio in window)
+            if finest is not None and len(quantity.get("ratios", [])) > len(window):
+                shown += f" (finest pair {quantity['pairs'][-1]} s: {fmt(finest, '.2f')})"
+            rows.append([f"time-step ratios, {quantity['name']}", shown, required,
                          verdict(ok) if second_order else "—"])
     b = studies.get("b")
     if b:

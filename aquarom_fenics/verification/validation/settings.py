@@ -20,7 +20,9 @@ class Settings:
     duration: float                          # s
     reference_level: int
     time_steps: tuple[float, ...]            # study c
-    convergence_steps: tuple[float, ...]     # study d
+    convergence_steps: tuple[float, ...]     # study d: the window every model and scheme runs
+    finer_convergence_steps: tuple[tuple[str, tuple[float, ...]], ...]   # study d, default scheme: (model, finer steps)
+    convergence_mesh: tuple[int, int] | None  # study d: (degree, level); None: each shipped scene's own mesh
     mpi_levels: tuple[int, ...]
     stress_level: int
     fine_prom_level: int
@@ -30,20 +32,24 @@ class Settings:
 
 FULL = Settings(quick=False, levels=(1, 2, 3, 4, 5), stiffnesses=(1.2e4, 2.5e4, 4e4, 6e4, 7.5e4), duration=2.0,
                 reference_level=3, time_steps=(0.04, 0.02, 0.01, 0.005), convergence_steps=(0.02, 0.01, 0.005, 0.0025),
-                mpi_levels=(4, 5), stress_level=3, fine_prom_level=5, time_limit=1800.0,
+                finer_convergence_steps=(("FOM", (0.00125,)), ("ROM", (0.00125, 0.000625, 0.0003125)),
+                                         ("PROM", (0.00125, 0.000625, 0.0003125))),
+                convergence_mesh=None, mpi_levels=(4, 5), stress_level=3, fine_prom_level=5, time_limit=1800.0,
                 mesh_series=((1, (1, 2, 3, 4, 5)), (2, (1, 2, 3))))
 QUICK = Settings(quick=True, levels=(1, 2), stiffnesses=(1.2e4, 6e4, 7.5e4), duration=0.4, reference_level=1,
                  time_steps=(0.04, 0.02, 0.01, 0.005), convergence_steps=(0.02, 0.01, 0.005, 0.0025),
-                 mpi_levels=(1, 2), stress_level=1, fine_prom_level=2, time_limit=300.0,
+                 finer_convergence_steps=(("ROM", (0.00125,)),), convergence_mesh=(1, 1), mpi_levels=(1, 2), stress_level=1, fine_prom_level=2, time_limit=300.0,
                  mesh_series=((1, (1, 2, 3)), (2, (1,))))
 
 
 def base_scene(settings: Settings, name: str = "nominal", level: int | None = None,
-               stiffness: float = REFERENCE_STIFFNESS, time_step: float = 0.02, solver: dict | None = None):
-    """A shipped scene at the study's level (linear tetrahedra: the studies sweep the five levels of
-    SPEC §11), stiffness, horizon and step; ``solver`` overrides [solver] values."""
+               stiffness: float = REFERENCE_STIFFNESS, time_step: float = 0.02, solver: dict | None = None,
+               degree: int = 1):
+    """A shipped scene at the study's level (linear tetrahedra unless ``degree`` says otherwise: the
+    studies sweep the five levels of SPEC §11), stiffness, horizon and step; ``solver`` overrides
+    [solver] values."""
     scene = Scene.load(name)
-    scene = scene.replace("mesh", level=level or settings.reference_level, degree=1)
+    scene = scene.replace("mesh", level=level or settings.reference_level, degree=degree)
     scene = scene.replace("actuation", stiffness=float(stiffness))
     scene = scene.replace("solver", duration=settings.duration, time_step=float(time_step), **(solver or {}))
     return scene.replace("output", plots=False, render=False, xdmf=False)
