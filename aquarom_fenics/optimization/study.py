@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from aquarom_fenics.optimization.background_fom import BackgroundFom, start_if_useful
 from aquarom_fenics.optimization.cost import CostWeights, design_space
 from aquarom_fenics.errors import InputError, Interrupted, SolverError
 from aquarom_fenics.geometry.fish import Fish, load_fish
@@ -51,8 +52,16 @@ class FomCheck:
         return self.optimal_distance / self.nominal_distance
 
 
+def fom_cache_path(scene: Scene, design: dict[str, float], amplitude: float | None) -> Path:
+    """The FOM cache entry of a design's distance (scene hash, design and amplitude)."""
+    if amplitude is not None:
+        scene = scene.replace("actuation", amplitude=amplitude)
+    return cache_root() / "fom" / f"{entry_key('fom', scene.hash, sorted(design.items()))}.json"
+
+
 def fom_distance(scene: Scene, fish: Fish, design: dict[str, float], amplitude: float | None) -> float:
     """Swimming distance of the FOM at a design, cached by scene hash, design and amplitude."""
+    path = fom_cache_path(scene, design, amplitude)
     if amplitude is not None:
         scene = scene.replace("actuation", amplitude=amplitude)
 
@@ -66,32 +75,40 @@ def fom_distance(scene: Scene, fish: Fish, design: dict[str, float], amplitude: 
     def save(distance: float, path: Path) -> None:
         write_json_atomic(path, {"design": design, "scene_hash": scene.hash, "distance": distance})
 
-    return get_or_compute(cache_root() / "fom" / f"{entry_key('fom', scene.hash, sorted(design.items()))}.json",
-                          simulate, save, load=lambda path: json.loads(path.read_text())["distance"],
+    return get_or_compute(path, simulate, save, load=lambda path: json.loads(path.read_text())["distance"],
                           comm=MPI.COMM_WORLD, label=f"FOM at {design}")
 
 
-def fom_check(scene: Scene, fish: Fish, result: OptimizationResult) -> FomCheck:
-    """FOM distances of the scene's nominal design (its start point) and of the optimum."""
+def design_and_amplitude(space, z: np.ndarray) -> tuple[dict[str, float], float | None]:
+    """The shape values of z by name, and the amplitude A when it is optimised too."""
+    shapes = space.n_shapes
+    return dict(zip(space.names[:shapes], map(float, z[:shapes]))), (float(z[-1]) if space.with_amplitude else None)
+
+
+def fom_check(scene: Scene, fish: Fish, result: OptimizationResult,
+              nominal_run: BackgroundFom | None = None) -> FomCheck:
+    """FOM distances of the scene's nominal design (its start point) and of the optimum; the optimum
+    first, while the nominal design's ``nominal_run`` (if any) finishes in the background."""
     started = time.perf_counter()
     space = result.space
-    shapes = space.n_shapes
+    errors = []
 
-    def split(z):
-        return dict(zip(space.names[:shapes], map(float, z[:shapes]))), (float(z[-1]) if space.with_amplitude else None)
-
-    distances, errors = [], []
-    nominal = design_space(scene).start
-    for z in (nominal, result.optimum):
+    def distance(z):
         try:
-            distances.append(fom_distance(scene, fish, *split(z)))
+            return fom_distance(scene, fish, *design_and_amplitude(space, z))
         except SolverError as failure:
-            distances.append(None)
             errors.append(str(failure))
+            return None
+
+    nominal = design_space(scene).start
+    optimal_distance = distance(result.optimum)
+    if nominal_run is not None:
+        nominal_run.finish(patience=time.perf_counter() - started)
+    nominal_distance = distance(nominal)
     first_built = next(row for row in result.history if row["prom"] == "built")
     prom_nominal = first_built["distance"] if np.array_equal(space.start, nominal) else None
-    return FomCheck(*distances, prom_nominal, result.evaluation.distance,
-                    time.perf_counter() - started, "; ".join(errors) or None)
+    return FomCheck(nominal_distance, optimal_distance, prom_nominal, result.evaluation.distance,
+                    time.perf_counter() - started, "; ".join(errors[::-1]) or None)
 
 
 def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights: CostWeights | None = None,
@@ -118,12 +135,18 @@ def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights:
         out_dir.mkdir(parents=True, exist_ok=True)
     history_file = out_dir / "history.csv"
     writer = HistoryWriter(history_file, history_columns(space), saved["history"] if saved else []) if is_writer else None
+    nominal = design_and_amplitude(space, design_space(scene).start)
+    nominal_run = start_if_useful(scene, *nominal, cached=fom_cache_path(scene, *nominal).exists())
     try:
         result = optimize(scene, fish=fish, weights=weights, checkpoint_path=checkpoint, resume=resume,
                           on_iteration=writer.write if writer else None, write_checkpoint=is_writer,
                           max_time=max_time, start=start)
-        check = fom_check(scene, fish, result)
-    except KeyboardInterrupt as stop:
+        check = fom_check(scene, fish, result, nominal_run)
+    except BaseException as stop:
+        if nominal_run is not None:
+            nominal_run.stop()
+        if not isinstance(stop, KeyboardInterrupt):
+            raise
         rows = writer.rows if writer else 0
         reason = f"{stop or 'interrupted'}" if isinstance(stop, Interrupted) else "interrupted (Ctrl-C)"
         if is_writer:
