@@ -27,6 +27,9 @@ from aquarom_fenics.io.scene_sections import (SECTIONS, ActuationSection, Coopti
 
 SCENES_DIR = shipped_scenes()
 
+FOM_SECTIONS = ("mesh", "material", "regions", "actuation", "fluid", "solver")
+"""The sections a FOM run reads (with the shape names): ``Scene.fom_hash`` keys the FOM cache."""
+
 
 @dataclass(frozen=True)
 class Scene:
@@ -93,7 +96,18 @@ class Scene:
     @property
     def hash(self) -> str:
         """SHA-256 (16 hex digits) of the resolved scene and of the mesh file's content."""
-        digest = hashlib.sha256(json.dumps(self.to_dict(), sort_keys=True, default=str).encode())
+        return self._digest(self.to_dict())
+
+    @property
+    def fom_hash(self) -> str:
+        """The hash of what a FOM run at a given design reads: mesh (and file), material, regions,
+        actuation, fluid, solver and the shape names; not the bounds, reduction, optimiser or output."""
+        data = self.to_dict()
+        selected = {section: data[section] for section in FOM_SECTIONS}
+        return self._digest(selected | {"shapes": [shape.name for shape in self.shapes]})
+
+    def _digest(self, data: dict) -> str:
+        digest = hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode())
         if self.mesh_file is not None and self.mesh_file.exists():
             digest.update(self.mesh_file.read_bytes())
         return digest.hexdigest()[:16]

@@ -53,10 +53,11 @@ class FomCheck:
 
 
 def fom_cache_path(scene: Scene, design: dict[str, float], amplitude: float | None) -> Path:
-    """The FOM cache entry of a design's distance (scene hash, design and amplitude)."""
+    """The FOM cache entry of a design's distance (``Scene.fom_hash``, design and amplitude): scenes
+    that differ only in what a FOM run does not read (optimiser, reduction, bounds) share it."""
     if amplitude is not None:
         scene = scene.replace("actuation", amplitude=amplitude)
-    return cache_root() / "fom" / f"{entry_key('fom', scene.hash, sorted(design.items()))}.json"
+    return cache_root() / "fom" / f"{entry_key('fom', scene.fom_hash, sorted(design.items()))}.json"
 
 
 def fom_distance(scene: Scene, fish: Fish, design: dict[str, float], amplitude: float | None) -> float:
@@ -73,7 +74,8 @@ def fom_distance(scene: Scene, fish: Fish, design: dict[str, float], amplitude: 
         return result.distance
 
     def save(distance: float, path: Path) -> None:
-        write_json_atomic(path, {"design": design, "scene_hash": scene.hash, "distance": distance})
+        write_json_atomic(path, {"design": design, "scene_hash": scene.hash, "fom_hash": scene.fom_hash,
+                                 "distance": distance})
 
     return get_or_compute(path, simulate, save, load=lambda path: json.loads(path.read_text())["distance"],
                           comm=MPI.COMM_WORLD, label=f"FOM at {design}")

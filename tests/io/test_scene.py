@@ -1,5 +1,6 @@
 """Scene files: shipped studies (SPEC §11), defaults (SPEC §2, §6), hashing, and bad input
 reported by the command line as one line with exit code 2."""
+import dataclasses
 import itertools
 import math
 import textwrap
@@ -482,3 +483,17 @@ def test_good_scene_reports_its_mesh(tmp_path, capfd):
     code, out, err = run_cli(["mesh", "so1", "--level", "1"], capfd)
     assert code == 0, err
     assert "block level 1" in out
+
+
+def test_fom_hash_ignores_what_a_fom_run_does_not_read():
+    scene = Scene.load("so1")
+    same_run = (scene.replace("optimizer", method="trust-region", step_size=0.1),
+                scene.replace("reduction", validity_fraction=0.3),
+                scene.replace("output", xdmf=True),
+                dataclasses.replace(scene, shapes=(dataclasses.replace(scene.shapes[0], lower=-0.4),) + scene.shapes[1:]))
+    for other in same_run:
+        assert other.hash != scene.hash and other.fom_hash == scene.fom_hash
+    for other in (scene.replace("solver", time_step=0.01), scene.replace("mesh", level=1),
+                  scene.replace("actuation", amplitude=0.3), scene.replace("fluid", drag=False),
+                  dataclasses.replace(scene, shapes=scene.shapes[:-1])):
+        assert other.fom_hash != scene.fom_hash
