@@ -1,7 +1,9 @@
 """FOM benchmark: the 2 s reference simulation on every mesh level, serial and `mpirun -n 2`.
 
 Writes results/bench/fom.json: cells, dofs, wall time, mean Newton iterations, peak memory,
-distance and tail amplitude per element degree, level and rank count, and the -n 2 speed-up.
+distance and tail amplitude per element degree, level and rank count, and the -n 2 speed-up. Each
+rank uses one BLAS thread; a third run per level is one rank with two BLAS threads (what a serial
+run gets by default on two cores: MUMPS factorises with OpenBLAS).
 Linear tetrahedra on --levels (default 1–5), quadratic ones on --quadratic-levels (default 1–3).
 Each run records the 1-minute load average before it starts: the cores may be shared.
 """
@@ -26,24 +28,27 @@ degree = {degree}
 """
 
 
-def run_level(level: int, ranks: int, work: Path, degree: int = 1) -> dict:
+def run_level(level: int, ranks: int, work: Path, degree: int = 1, blas_threads: int = 1) -> dict:
+    """One `aquarom simulate` of the reference scene; ``blas_threads`` per rank (OpenBLAS, in MUMPS)."""
     scene = work / f"degree{degree}-level{level}.toml"
     scene.write_text(SCENE.format(level=level, degree=degree))
-    out = work / f"degree{degree}-level{level}-n{ranks}"
+    out = work / f"degree{degree}-level{level}-n{ranks}-t{blas_threads}"
     shutil.rmtree(out, ignore_errors=True)
     command = [str(Path(sys.executable).with_name("aquarom")), "simulate", str(scene), "--out", str(out), "--no-progress"]
     if ranks > 1:
         command = ["mpirun", "-n", str(ranks)] + command
-    environment = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", OMP_NUM_THREADS="1")
+    environment = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
+                       OMP_NUM_THREADS=str(blas_threads), OPENBLAS_NUM_THREADS=str(blas_threads))
     load = os.getloadavg()[0]
     started = time.perf_counter()
     completed = subprocess.run(command, capture_output=True, text=True, env=environment)
     elapsed = time.perf_counter() - started
     if completed.returncode != 0:
-        return {"degree": degree, "level": level, "ranks": ranks, "load_average": load,
+        return {"degree": degree, "level": level, "ranks": ranks, "blas_threads": blas_threads, "load_average": load,
                 "failed": completed.stderr.strip().splitlines()[-1:]}
     summary = json.loads((out / "summary.json").read_text())
-    return {"degree": degree, "level": level, "ranks": ranks, "cells": summary["cells"], "dofs": summary["dofs"],
+    return {"degree": degree, "level": level, "ranks": ranks, "blas_threads": blas_threads,
+            "cells": summary["cells"], "dofs": summary["dofs"],
             "wall_time_simulation": summary["wall_time"], "wall_time_process": elapsed,
             "time_integration": summary["timings"]["time_integration"],
             "mean_newton_iterations": summary["mean_newton_iterations"],
@@ -62,13 +67,13 @@ def main():
     runs = []
     cases = [(1, level) for level in args.levels] + [(2, level) for level in args.quadratic_levels]
     for degree, level in cases:
-        for ranks in (1, 2):
-            runs.append(run_level(level, ranks, work, degree))
+        for ranks, threads in ((1, 1), (2, 1), (1, 2)):
+            runs.append(run_level(level, ranks, work, degree, threads))
             print(json.dumps(runs[-1]), flush=True)
     speedups = {}
     for degree, level in cases:
-        serial, parallel = (next(r for r in runs if (r["degree"], r["level"], r["ranks"]) == (degree, level, n))
-                            for n in (1, 2))
+        serial, parallel = (next(r for r in runs if (r["degree"], r["level"], r["ranks"], r["blas_threads"])
+                                 == (degree, level, n, 1)) for n in (1, 2))
         if "failed" not in serial and "failed" not in parallel:
             name = f"level{level}" if degree == 1 else f"degree{degree}-level{level}"
             speedups[name] = serial["wall_time_simulation"] / parallel["wall_time_simulation"]
