@@ -205,6 +205,10 @@ def synthetic_results(folder: Path):
          "differences": [4e-5, 1e-5, 2.5e-6], "ratios": [4.0, 3.9], "window_ratios": [4.0], "finest_ratio": 3.9,
          "ratio": 4.0, "pairs": ["0.02–0.01", "0.01–0.005", "0.005–0.0025"], "time": time_values.tolist(),
          "difference_series": [values.tolist(), (values / 4).tolist(), (values / 15.6).tolist()]},
+        {"name": "ROM head x, α_N = 0", "newmark_alpha": 0.0, "status": "completed",
+         "differences": [4e-5 / 4 ** k for k in range(6)], "ratios": [4.0] * 5, "window_ratios": [4.0, 4.0],
+         "finest_ratio": 4.0, "ratio": 4.0, "pairs": [f"{0.02 / 2 ** k:g}–{0.01 / 2 ** k:g}" for k in range(6)],
+         "time": time_values.tolist(), "difference_series": [(values / 4 ** k).tolist() for k in range(6)]},
         {"name": "d head x / d ξ[y_thin] (PROM p=3)", "status": "completed", "differences": [4e-4, 1.1e-4],
          "ratios": [3.6], "ratio": 3.6, "pairs": ["0.02–0.01", "0.01–0.005"], "time": time_values.tolist(),
          "difference_series": [values.tolist(), (values / 3.6).tolist()]}]}

@@ -46,7 +46,7 @@ def convergence_figure(study: dict, path: Path) -> Path:
         for pair, series, style in zip(quantity["pairs"], quantity["difference_series"], PAIR_STYLES):
             values = np.asarray(series, dtype=float)
             values = np.where(values > 0, values, np.nan)     # t = 0: identical initial state
-            line, = axis.semilogy(quantity["time"], values, style, color=colour, linewidth=1,
+            line, = axis.semilogy(quantity["time"], values, linestyle=style, color=colour, linewidth=1,
                                   label=f"{quantity['name']}, h = {pair} s")
             colour = line.get_color()
     axes[0].set_ylabel("|head x(h) − head x(h/2)| [m]")
