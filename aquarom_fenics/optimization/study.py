@@ -293,7 +293,10 @@ def _write_figures(out_dir, scene, fish, result, render):
 
 
 def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None) -> list[dict]:
-    """Co-optimisation over the scene's weights w_1 (w_2 = 1 - w_1): pareto.csv and pareto.png."""
+    """Co-optimisation over the scene's weights w_1 (w_2 = 1 - w_1): pareto.csv and pareto.png.
+
+    A point whose FOM check does not complete is no optimum of the model: it is marked
+    ``fom_check = infeasible`` with the FOM's stop reason, and left off the front."""
     fish = fish or load_fish(scene)
     co = scene.cooptimization
     points = []
@@ -304,6 +307,8 @@ def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None) -> list[
         points.append({"w1": w1, "amplitude": amplitude, "energy": weights.energy_term(amplitude),
                        "distance": check.optimal_distance if check.optimal_distance is not None else float("nan"),
                        "prom_distance": result.evaluation.distance,
+                       "fom_check": "completed" if check.optimal_distance is not None else "infeasible",
+                       "fom_check_reason": "" if check.optimal_distance is not None else (check.error or ""),
                        **{f"xi_{n}": float(v) for n, v in zip(result.space.names[:-1], result.optimum[:-1])}})
     if MPI.COMM_WORLD.rank == 0:
         table = io.StringIO()

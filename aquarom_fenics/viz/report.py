@@ -289,20 +289,28 @@ def plot_pareto(points: list[dict], out_path: Path) -> Path:
 
     Each point holds ``w1`` (weight of -d), ``distance`` [m], ``energy`` (α A², the cost's units)
     and ``amplitude`` A. A design is on the front when no other one swims as far or farther for
-    as little energy or less (and is better in one of the two).
+    as little energy or less (and is better in one of the two). A point without a FOM distance
+    (its FOM check stopped: NaN) is drawn as a cross at its ``prom_distance``, off the front.
     """
     plt = _pyplot()
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
     energy = np.array([point["energy"] for point in points], dtype=float)
     distance = 100 * np.array([point["distance"] for point in points], dtype=float)
-    on_front = _non_dominated(energy, distance)
+    feasible = np.isfinite(distance)
+    on_front = np.zeros(len(points), dtype=bool)
+    on_front[feasible] = _non_dominated(energy[feasible], distance[feasible])
     order = np.argsort(energy)
     front = order[on_front[order]]
     figure, axis = plt.subplots(figsize=(7, 5))
     axis.plot(energy[front], distance[front], "-o", color="tab:blue", label="non-dominated front", zorder=3)
-    axis.plot(energy[~on_front], distance[~on_front], "o", color="0.55", markerfacecolor="none",
+    dominated = feasible & ~on_front
+    axis.plot(energy[dominated], distance[dominated], "o", color="0.55", markerfacecolor="none",
               label="dominated", zorder=3)
+    if not feasible.all():
+        distance[~feasible] = [100 * point.get("prom_distance", np.nan) for point, ok in zip(points, feasible) if not ok]
+        axis.plot(energy[~feasible], distance[~feasible], "x", color="tab:red", zorder=3,
+                  label="infeasible: FOM check stops (PROM distance)")
     for point, x, y in zip(points, energy, distance):
         axis.annotate(f"w₁ {point['w1']:g}, A {point['amplitude']:.3g}", (x, y), xytext=(7, -3),
                       textcoords="offset points", va="top", fontsize=8)

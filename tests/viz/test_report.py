@@ -110,6 +110,23 @@ def test_pareto_writes_a_figure(tmp_path):
     assert_not_blank(read_rgb(path))
 
 
+def test_pareto_leaves_a_point_whose_fom_check_stopped_off_the_front(tmp_path, monkeypatch):
+    points = [{"w1": 0.2, "distance": 0.01, "energy": 0.001, "amplitude": 0.1, "prom_distance": 0.011},
+              {"w1": 0.5, "distance": 0.03, "energy": 0.004, "amplitude": 0.2, "prom_distance": 0.031},
+              {"w1": 0.9, "distance": float("nan"), "energy": 0.016, "amplitude": 0.4, "prom_distance": 0.09}]
+    drawn = {}
+    original = report._non_dominated
+
+    def recording(energy, distance):
+        drawn["front_input"] = distance.copy()
+        return original(energy, distance)
+
+    monkeypatch.setattr(report, "_non_dominated", recording)
+    path = report.plot_pareto(points, tmp_path / "pareto.png")
+    assert_not_blank(read_rgb(path))
+    assert drawn["front_input"].tolist() == [1.0, 3.0]          # the infeasible point is not on the front
+
+
 def test_non_dominated_keeps_the_points_no_other_beats():
     energy = np.array([1.0, 2.0, 2.0, 3.0, 1.0])
     distance = np.array([1.0, 3.0, 2.0, 2.5, 0.5])
