@@ -61,7 +61,7 @@ def fom_cache_path(scene: Scene, design: dict[str, float], amplitude: float | No
 
 
 def fom_distance(scene: Scene, fish: Fish, design: dict[str, float], amplitude: float | None) -> float:
-    """Swimming distance of the FOM at a design, cached by scene hash, design and amplitude."""
+    """Swimming distance of the FOM at a design, cached by ``Scene.fom_hash``, design and amplitude."""
     path = fom_cache_path(scene, design, amplitude)
     if amplitude is not None:
         scene = scene.replace("actuation", amplitude=amplitude)
