@@ -110,7 +110,8 @@ def main():
         fish = load_fish(base)
         build_prom(base, fish=fish)        # compile the forms once, outside the timings
         # the start design's FOM before the timings: no background FOM run shares the cores with them
-        fom_distance(base, fish, *design_and_amplitude(design_space(base), design_space(base).start))
+        space = design_space(base)
+        fom_distance(base, fish, *design_and_amplitude(space, space.start))
         for method in args.methods:
             scene = base.replace("optimizer", method=method, starts=1)
             with fresh_prom_cache():

@@ -62,9 +62,9 @@ def fom_cache_path(scene: Scene, design: dict[str, float], amplitude: float | No
 
 def fom_distance(scene: Scene, fish: Fish, design: dict[str, float], amplitude: float | None) -> float:
     """Swimming distance of the FOM at a design, cached by ``Scene.fom_hash``, design and amplitude."""
-    path = fom_cache_path(scene, design, amplitude)
     if amplitude is not None:
         scene = scene.replace("actuation", amplitude=amplitude)
+    path = fom_cache_path(scene, design, None)
 
     def simulate() -> float:
         require_cache_writable("fom")
@@ -137,7 +137,7 @@ def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights:
         out_dir.mkdir(parents=True, exist_ok=True)
     history_file = out_dir / "history.csv"
     writer = HistoryWriter(history_file, history_columns(space), saved["history"] if saved else []) if is_writer else None
-    nominal = design_and_amplitude(space, design_space(scene).start)
+    nominal = design_and_amplitude(space, space.start)
     nominal_run = start_if_useful(scene, *nominal, cached=fom_cache_path(scene, *nominal).exists())
     try:
         result = optimize(scene, fish=fish, weights=weights, checkpoint_path=checkpoint, resume=resume,

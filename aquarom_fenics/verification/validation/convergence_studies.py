@@ -51,15 +51,15 @@ def study_d(runner: Runner, settings: Settings) -> dict:
         def scene(name="nominal", h=0.02, scheme=scheme):
             return base_scene(settings, name, level=level, degree=degree, time_step=h, solver=dict(scheme.solver))
 
-        def steps(model, scheme=scheme):
+        def steps_of(model, scheme=scheme):
             return tuple(settings.convergence_steps) + (finer.get(model, ()) if scheme is schemes[0] else ())
         tag = scheme.tag
-        families[(scheme, "FOM", f"FOM, {tag}")] = [fom_case(f"FOM h={h} {tag}", scene(h=h)) for h in steps("FOM")]
+        families[(scheme, "FOM", f"FOM, {tag}")] = [fom_case(f"FOM h={h} {tag}", scene(h=h)) for h in steps_of("FOM")]
         families[(scheme, "ROM", f"ROM, {tag}")] = [reduced_case(f"ROM h={h} {tag}", scene(h=h), parametric=False)
-                                                   for h in steps("ROM")]
+                                                   for h in steps_of("ROM")]
         families[(scheme, "PROM", f"PROM p=3 sensitivities, {tag}")] = [
             reduced_case(f"PROM SO1 h={h} {tag} with sensitivities", scene("so1", h), parametric=True,
-                         sensitivities=True) for h in steps("PROM")]
+                         sensitivities=True) for h in steps_of("PROM")]
     cases = [case for family in families.values() for case in family]
     records = dict(zip((case.key for case in cases), runner.run("d", cases)))
     coarse = settings.convergence_steps[0]
