@@ -112,6 +112,9 @@ class NewtonSystem(Protocol):
     def norm(self, vector: np.ndarray) -> float:
         """Global Euclidean norm."""
 
+    def dot(self, left: np.ndarray, right: np.ndarray) -> float:
+        """Global Euclidean inner product."""
+
 
 @dataclass
 class NewtonSettings:
@@ -119,12 +122,16 @@ class NewtonSettings:
 
     min_time_step [s]: a step that fails is retried with a residual line search, then with h/2,
     h/4, … down to this; None never cuts (a failed step stops the run).
+
+    secant_updates: Broyden updates of S⁻¹ between factorisations (``BroydenSteps``), for systems
+    whose factorisation costs many solves; see ``secant_settings``.
     """
 
     tolerance: float = 1e-6
     max_iterations: int = 30
     contraction_to_refactor: float = 0.25
     iterations_per_factorization: int = 4
+    secant_updates: bool = False
     force_floor: float = 1e-12
     min_time_step: float | None = None
     line_search_halvings: int = 8
@@ -135,6 +142,14 @@ class NewtonSettings:
         """The settings of a scene's [solver] section."""
         return cls(tolerance=solver.tolerance, max_iterations=solver.max_iterations,
                    min_time_step=solver.min_time_step)
+
+    def secant_settings(self) -> "NewtonSettings":
+        """These settings with Broyden updates, factors refreshed after 20 iterations of a step or an
+        iteration contracting the residual by less than 0.7 (Broyden's residuals need not decrease
+        monotonically). On the default FOM (21k dofs, factorisation ≈ 20 solves) this takes 0.5
+        factorisations and 5.4 iterations per step instead of 0.9 and 4.1 (README "FOM speed")."""
+        return dataclasses.replace(self, secant_updates=True, contraction_to_refactor=0.7,
+                                   iterations_per_factorization=20)
 
 
 @dataclass
@@ -172,7 +187,8 @@ class StepFailure(Exception):
 
 @dataclass
 class _Newton:
-    """Modified Newton on one step; the factors of S are kept across iterations and steps."""
+    """Modified Newton on one step, or Broyden's method from its matrix; the factors of S are kept
+    across iterations and steps."""
 
     system: NewtonSystem
     settings: NewtonSettings
@@ -183,8 +199,10 @@ class _Newton:
 
         Factors are refreshed when an iteration contracts the residual by less than
         ``contraction_to_refactor`` or when they have served ``iterations_per_factorization``
-        iterations of the step. With ``line_search`` every iteration refactorises and the update
-        is u ← u - λ S⁻¹ r with the largest λ = 2^-k meeting ‖r(λ)‖ ≤ (1 - c λ) ‖r‖.
+        iterations of the step. The update is u ← u - S⁻¹ r, or with ``secant_updates`` the Broyden
+        step from the factors' S (its history restarts with every factorisation and every step).
+        With ``line_search`` every iteration refactorises and the update is u ← u - λ S⁻¹ r with the
+        largest λ = 2^-k meeting ‖r(λ)‖ ≤ (1 - c λ) ‖r‖.
         """
         settings, system = self.settings, self.system
         u_predicted, v_predicted = scheme.predict(*old)
@@ -193,6 +211,7 @@ class _Newton:
         iterations_with_factors = 0
         previous_norm = np.inf
         history = []
+        secant = BroydenSteps(system.dot)
 
         def residual_at(u_trial):
             v_trial, a_trial = scheme.correct(u_trial, u_predicted, v_predicted)
@@ -219,6 +238,7 @@ class _Newton:
                     self.have_factors = True
                     factorizations += 1
                     iterations_with_factors = 0
+                    secant.clear()
                 iterations_with_factors += 1
                 previous_norm = residual_norm
                 update = system.solve(residual)
@@ -226,6 +246,8 @@ class _Newton:
                 raise StepFailure(f"{failure}", f", Newton iteration {iteration}", history) from None
             if line_search:
                 u_new = self._search_line(residual_at, u_new, update, residual_norm, history)
+            elif settings.secant_updates:
+                u_new = u_new + secant.step(-update)
             else:
                 u_new = u_new - update
 
@@ -240,6 +262,36 @@ class _Newton:
                 return trial
             step *= 0.5
         raise StepFailure("line search found no decrease of the residual along the Newton direction", "", history)
+
+
+class BroydenSteps:
+    """Broyden's ("good") update of the inverse Newton matrix, kept as its steps (Kelley 1995, §8.3):
+    with H₀ = S⁻¹ of the factorised S and z = -H₀ r_{n+1},
+
+        z ← z + s_{j+1} (s_jᵀ z)/‖s_j‖²  (j = 0 … n-1),   s_{n+1} = z / (1 - s_nᵀ z/‖s_n‖²),
+
+    so that u_{n+2} = u_{n+1} + s_{n+1} uses H_{n+1}, which meets the secant conditions of every
+    step so far, without forming it. s₀ = -H₀ r₀ is the modified-Newton step."""
+
+    def __init__(self, dot):
+        self.dot = dot
+        self.steps: list[np.ndarray] = []
+        self.squared_norms: list[float] = []
+
+    def clear(self) -> None:
+        self.steps.clear()
+        self.squared_norms.clear()
+
+    def step(self, newton_step: np.ndarray) -> np.ndarray:
+        """s_{n+1} from z = -H₀ r_{n+1}."""
+        z = newton_step
+        for j in range(len(self.steps) - 1):
+            z = z + self.steps[j + 1] * (self.dot(self.steps[j], z) / self.squared_norms[j])
+        if self.steps:
+            z = z / (1.0 - self.dot(self.steps[-1], z) / self.squared_norms[-1])
+        self.steps.append(z)
+        self.squared_norms.append(self.dot(z, z))
+        return z
 
 
 def integrate(system: NewtonSystem, scheme: TimeScheme, n_steps: int, state, settings: NewtonSettings,

@@ -96,6 +96,9 @@ class ReducedSystem:
     def norm(self, vector):
         return float(np.linalg.norm(vector))
 
+    def dot(self, left, right):
+        return float(left @ right)
+
     # ------------------------------------------------------------------ ξ-derivatives
     def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
         """∂r/∂ξ_k at fixed (η, η̇, η̈), shape (m, p): the sum of the terms' parts."""

@@ -37,6 +37,7 @@ class SimulationResult:
     n_dofs: int
     error: str | None = None
     cut_steps: int = 0                            # sub-steps shorter than h taken by the step control
+    factorizations: int = 0                       # of Newton matrices, over the run
     timings: dict = field(default_factory=dict)
     states: list = field(default_factory=list)    # owned (u, u̇) per stored sample, when asked for
     model: FullOrderModel | None = None
@@ -48,7 +49,7 @@ class SimulationResult:
                 "cells": self.n_cells, "dofs": self.n_dofs, "steps": len(self.trajectory) - 1,
                 "cut_steps": self.cut_steps,
                 "mean_newton_iterations": float(iterations.mean()) if iterations.size else None,
-                "timings": self.timings}
+                "newton_factorizations": self.factorizations, "timings": self.timings}
 
 
 def check_time_grid(scene: Scene) -> int:
@@ -91,11 +92,12 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
     trajectory = Trajectory()
     states = []
     displacements = [] if out_dir is not None else None
-    cut_steps = 0
+    cut_steps = factorizations = 0
 
     def record(report: StepReport, u, v, a):
-        nonlocal cut_steps
+        nonlocal cut_steps, factorizations
         cut_steps = report.cut_steps
+        factorizations += report.factorizations
         values = model.observables(u)
         trajectory.append(report.time, values["head_x"], values["tail_y"], values["com_x"], report.iterations)
         if csv:
@@ -116,7 +118,7 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
     velocity = np.zeros(model.n_owned_dofs) if initial_velocity is None else model.owned_from_nodal(initial_velocity)
     zero = np.zeros(model.n_owned_dofs)
     record(StepReport(0, 0.0, 0, 0), zero, velocity, zero)
-    settings = NewtonSettings.from_solver(scene.solver)
+    settings = NewtonSettings.from_solver(scene.solver).secant_settings()
     error = interruption = None
     try:
         with _stop_between_steps() as stop_requested:
@@ -140,7 +142,7 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
         distance=swimming_distance(arrays["time"], arrays["com_x"]) if completed else None,
         tail_amplitude=tail_amplitude(arrays["time"], arrays["tail_y"]) if completed else None,
         completed=completed, wall_time=clock.perf_counter() - started, n_cells=model.n_cells,
-        n_dofs=model.n_global_dofs, error=error, cut_steps=cut_steps,
+        n_dofs=model.n_global_dofs, error=error, cut_steps=cut_steps, factorizations=factorizations,
         timings={"setup": setup_time, "time_integration": clock.perf_counter() - started - setup_time},
         states=states, model=model)
     if is_writer:

@@ -334,7 +334,10 @@ class FullOrderModel:
                         item.destroy()
 
     def norm(self, vector: np.ndarray) -> float:
-        return float(np.sqrt(self.comm.allreduce(float(vector @ vector), op=MPI.SUM)))
+        return float(np.sqrt(self.dot(vector, vector)))
+
+    def dot(self, left: np.ndarray, right: np.ndarray) -> float:
+        return float(self.comm.allreduce(float(left @ right), op=MPI.SUM))
 
     # ------------------------------------------------------------------ observables
     def owned_values(self, nodal: np.ndarray) -> np.ndarray:
