@@ -184,6 +184,26 @@ def create_matrix(compiled_form) -> PETSc.Mat:
     return fem_petsc.create_matrix(compiled_form)
 
 
+def create_matrix_with_entries(compiled_form, rows: np.ndarray, columns: np.ndarray) -> PETSc.Mat:
+    """The form's matrix with (rows[i], columns[i]) added to its sparsity pattern (global indices, rows
+    owned by this rank), so that terms adding entries outside the form's pattern need no reallocation
+    (PETSc reallocates the whole matrix for every row that overflows its preallocation)."""
+    form_matrix = assemble_matrix_into(create_matrix(compiled_form), compiled_form)
+    indptr, indices, _ = form_matrix.getValuesCSR()
+    first_row = form_matrix.getOwnershipRange()[0]
+    n_rows, n_columns = form_matrix.getLocalSize()[0], form_matrix.getSize()[1]
+    form_rows = np.repeat(np.arange(n_rows, dtype=np.int64), np.diff(indptr))
+    keys = np.unique(np.concatenate([form_rows * n_columns + indices,
+                                     (np.asarray(rows, dtype=np.int64) - first_row) * n_columns + columns]))
+    local_rows, pattern_columns = np.divmod(keys, n_columns)
+    pattern_indptr = np.searchsorted(local_rows, np.arange(n_rows + 1))
+    matrix = PETSc.Mat().createAIJ(form_matrix.getSizes(), bsize=form_matrix.getBlockSize(), comm=form_matrix.comm,
+                                   csr=(pattern_indptr.astype(PETSc.IntType), pattern_columns.astype(PETSc.IntType)))
+    matrix.setLGMap(*form_matrix.getLGMap())
+    form_matrix.destroy()
+    return matrix
+
+
 def assemble_vector_into(vector: PETSc.Vec, compiled_form) -> np.ndarray:
     """Assemble a linear form; returns the owned entries (a view of ``vector``)."""
     with vector.localForm() as local:

@@ -139,7 +139,11 @@ class FullOrderModel:
         if self.muscle.on:
             tangent = tangent + self.muscle.tangent_form
         self._tangent = fx.compile_form(tangent)
-        self.tangent_matrix = fx.create_matrix(self._tangent)
+        # The thrust and drag Jacobians add entries outside the tangent's pattern: reserve them.
+        entries = [term.newton_entries() for term in (self.thrust, self.drag) if term is not None]
+        self.tangent_matrix = fx.create_matrix_with_entries(
+            self._tangent, np.concatenate([rows for rows, _ in entries] + [np.zeros(0, dtype=np.int64)]),
+            np.concatenate([columns for _, columns in entries] + [np.zeros(0, dtype=np.int64)]))
         self.tangent_matrix.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
 
     @property

@@ -44,6 +44,11 @@ class DragTerm:
         """f_drag on the owned dofs [N]."""
         return drag_force(self.direction, self.fom.head_velocity_x(v))
 
+    def newton_entries(self) -> tuple[np.ndarray, np.ndarray]:
+        """(global rows, global columns) of the entries ``add_newton_matrix`` adds: the head x column."""
+        rows = self.fom.global_dofs(self.rows)
+        return rows, np.full(rows.size, self.fom.head_x_global_dof)
+
     def add_newton_matrix(self, matrix: PETSc.Mat, velocity_factor: float, v: np.ndarray) -> None:
         """S += -k_v ∂f/∂u̇ (f_drag is on the right of the equations of motion)."""
         column = drag_velocity_jacobian(self.direction[self.rows], self.fom.head_velocity_x(v))

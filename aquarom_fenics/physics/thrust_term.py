@@ -54,18 +54,28 @@ class ThrustTerm:
             force[3 * fom.spine_blocks + component] = nodal[fom.spine_index, component]
         return force
 
-    def add_newton_matrix(self, matrix: PETSc.Mat, scheme, u, v, a) -> None:
-        """S += -(k_u ∂f/∂u + k_v ∂f/∂u̇ + k_a ∂f/∂ü) on the owned spine rows (f_thrust is on the right)."""
+    def _coupled_spine_dofs(self):
+        """(spine index, its x-y global dofs, its neighbours' indices, their x-y global dofs) of every owned
+        spine node: the force on a spine node depends on its own and its neighbours' states."""
         fom = self.fom
-        jacobians = thrust_jacobians(self.spine, *self._spine_states(u, v, a))
-        block = -(scheme.stiffness_factor * jacobians[0] + scheme.velocity_factor * jacobians[1]
-                  + scheme.acceleration_factor * jacobians[2])
         n_spine = fom.spine_nodes.size
         spine_dofs = (3 * fom.spine_global_blocks[:, None] + np.arange(2)).astype(np.int32)
         for index in fom.spine_index:
             neighbours = np.arange(max(index - 1, 0), min(index + 2, n_spine))
-            rows = spine_dofs[index]
-            columns = spine_dofs[neighbours].ravel()
+            yield index, spine_dofs[index], neighbours, spine_dofs[neighbours].ravel()
+
+    def newton_entries(self) -> tuple[np.ndarray, np.ndarray]:
+        """(global rows, global columns) of the entries ``add_newton_matrix`` adds."""
+        pairs = [np.meshgrid(rows, columns, indexing="ij") for _, rows, _, columns in self._coupled_spine_dofs()]
+        return (np.concatenate([rows.ravel() for rows, _ in pairs]) if pairs else np.zeros(0, dtype=np.int32),
+                np.concatenate([columns.ravel() for _, columns in pairs]) if pairs else np.zeros(0, dtype=np.int32))
+
+    def add_newton_matrix(self, matrix: PETSc.Mat, scheme, u, v, a) -> None:
+        """S += -(k_u ∂f/∂u + k_v ∂f/∂u̇ + k_a ∂f/∂ü) on the owned spine rows (f_thrust is on the right)."""
+        jacobians = thrust_jacobians(self.spine, *self._spine_states(u, v, a))
+        block = -(scheme.stiffness_factor * jacobians[0] + scheme.velocity_factor * jacobians[1]
+                  + scheme.acceleration_factor * jacobians[2])
+        for index, rows, neighbours, columns in self._coupled_spine_dofs():
             values = block[np.ix_(2 * index + np.arange(2), (2 * neighbours[:, None] + np.arange(2)).ravel())]
             matrix.setValues(rows, columns, values, addv=PETSc.InsertMode.ADD_VALUES)
 
