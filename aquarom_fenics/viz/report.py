@@ -311,9 +311,8 @@ def plot_pareto(points: list[dict], out_path: Path) -> Path:
         distance[~feasible] = [100 * point.get("prom_distance", np.nan) for point, ok in zip(points, feasible) if not ok]
         axis.plot(energy[~feasible], distance[~feasible], "x", color="tab:red", zorder=3,
                   label="infeasible: FOM check stops (PROM distance)")
-    for point, x, y in zip(points, energy, distance):
-        axis.annotate(f"w₁ {point['w1']:g}, A {point['amplitude']:.3g}", (x, y), xytext=(7, -3),
-                      textcoords="offset points", va="top", fontsize=8)
+    for x, y, label in _pareto_labels(points, energy, distance):
+        axis.annotate(label, (x, y), xytext=(7, -3), textcoords="offset points", va="top", fontsize=8)
     axis.margins(x=0.15, y=0.1)
     axis.set_xlabel("energy term α A²")
     axis.set_ylabel("distance d [cm]")
@@ -324,6 +323,25 @@ def plot_pareto(points: list[dict], out_path: Path) -> Path:
     figure.savefig(out_path, dpi=DPI)
     plt.close(figure)
     return out_path
+
+
+def _pareto_labels(points, energy: np.ndarray, distance: np.ndarray, resolution: float = 0.02):
+    """(x, y, "w₁ …, A …") per group of points with the same amplitude (3 digits) that lie within
+    ``resolution`` of the plotted ranges of the group's first point: one label for the weights
+    that end at one design."""
+    finite = np.isfinite(distance)
+    spans = np.array([max(float(np.ptp(values[finite])), 1e-12) if finite.any() else 1.0
+                      for values in (energy, distance)])
+    groups = []                                     # [x, y, amplitude, weights]
+    for point, x, y in zip(points, energy, distance):
+        amplitude = f"{point['amplitude']:.3g}"
+        near = [group for group in groups if group[2] == amplitude and np.isfinite(y)
+                and np.all(np.abs(np.array([x - group[0], y - group[1]])) <= resolution * spans)]
+        if near:
+            near[0][3].append(f"{point['w1']:g}")
+        else:
+            groups.append([x, y, amplitude, [f"{point['w1']:g}"]])
+    return [(x, y, f"w₁ {', '.join(weights)}, A {amplitude}") for x, y, amplitude, weights in groups]
 
 
 def _non_dominated(energy: np.ndarray, distance: np.ndarray) -> np.ndarray:

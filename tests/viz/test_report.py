@@ -131,3 +131,14 @@ def test_non_dominated_keeps_the_points_no_other_beats():
     energy = np.array([1.0, 2.0, 2.0, 3.0, 1.0])
     distance = np.array([1.0, 3.0, 2.0, 2.5, 0.5])
     assert report._non_dominated(energy, distance).tolist() == [True, True, False, False, False]
+
+
+def test_pareto_labels_one_design_reached_by_several_weights_once():
+    points = [{"w1": 0.2, "amplitude": 0.1}, {"w1": 0.7, "amplitude": 0.4}, {"w1": 0.9, "amplitude": 0.4},
+              {"w1": 0.98, "amplitude": 0.4}]
+    energy = np.array([0.01, 0.16, 0.16, 0.16])
+    distance = np.array([10.0, 32.71, 32.67, 32.86])
+    labels = [label for _, _, label in report._pareto_labels(points, energy, distance)]
+    assert labels == ["w₁ 0.2, A 0.1", "w₁ 0.7, 0.9, 0.98, A 0.4"]
+    distance[2] = 20.0                              # no longer at the same place: its own label
+    assert len(report._pareto_labels(points, energy, distance)) == 3
