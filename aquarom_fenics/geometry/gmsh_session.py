@@ -16,14 +16,24 @@ GMSH_TETRAHEDRON = 4
 """gmsh element type of the linear tetrahedron."""
 
 
-def import_gmsh():
-    """Import gmsh, keeping the caller's SIGINT handler (the gmsh module resets it on import)."""
+@contextmanager
+def _keeping_sigint():
+    """Restore the caller's SIGINT handler afterwards: importing gmsh sets it to SIG_DFL, and
+    gmsh.finalize() sets it back to the handler of the import's time, which may be a temporary one
+    long gone (a simulation's Ctrl-C catcher would then swallow every later Ctrl-C)."""
     in_main_thread = threading.current_thread() is threading.main_thread()
     handler = signal.getsignal(signal.SIGINT) if in_main_thread else None
-    import gmsh
+    try:
+        yield
+    finally:
+        if in_main_thread and handler is not None:
+            signal.signal(signal.SIGINT, handler)
 
-    if in_main_thread and handler is not None:
-        signal.signal(signal.SIGINT, handler)
+
+def import_gmsh():
+    """Import gmsh, keeping the caller's SIGINT handler."""
+    with _keeping_sigint():
+        import gmsh
     return gmsh
 
 
@@ -72,7 +82,8 @@ def gmsh_model(name: str, options: dict[str, float]):
         yield gmsh
     finally:
         if started_here:
-            gmsh.finalize()
+            with _keeping_sigint():
+                gmsh.finalize()
         else:
             if gmsh.model.getCurrent() == name:
                 gmsh.model.remove()

@@ -1,4 +1,7 @@
 """Block meshes, mesh import and the tags of SPEC §3."""
+import subprocess
+import sys
+import textwrap
 
 import numpy as np
 import pytest
@@ -427,3 +430,23 @@ def test_tail_without_axis_node_is_an_input_error(coarse, coarse_tags):
     points[coarse_tags.tail_node, 1] += W / 8
     with pytest.raises(InputError, match="moved: no node on the body axis .* at the tail face"):
         tag_fish(FishMesh(points=points, cells=coarse.cells, source="moved"))
+
+
+def test_a_gmsh_session_leaves_the_callers_sigint_handler_in_place():
+    """gmsh.finalize() reinstalls the SIGINT handler of gmsh's import time; when that was a
+    temporary one (here a stand-in for a simulation's Ctrl-C catcher), every later Ctrl-C would be
+    swallowed. Run in a fresh interpreter, so that gmsh is imported under the temporary handler."""
+    script = textwrap.dedent("""
+        import signal
+        from aquarom_fenics.geometry import gmsh_session
+        temporary = lambda number, frame: None
+        signal.signal(signal.SIGINT, temporary)
+        gmsh_session.import_gmsh()
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        with gmsh_session.gmsh_model("probe", {}):
+            pass
+        print(signal.getsignal(signal.SIGINT) is signal.default_int_handler)
+    """)
+    completed = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert completed.returncode == 0, completed.stderr
+    assert completed.stdout.split()[-1] == "True"
