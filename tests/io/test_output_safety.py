@@ -222,8 +222,14 @@ def test_ctrl_c_writes_the_summary_and_exits_130(tmp_path, capsys, monkeypatch):
             signal.raise_signal(signal.SIGINT)   # to this (main) thread; its handler runs before this returns
 
     monkeypatch.setattr(outputs_module.TrajectoryCSV, "write", write_then_interrupt)
+    # As in an interactive process: a shell starts background jobs with SIGINT ignored, and a
+    # simulation rightly leaves an ignored Ctrl-C ignored.
+    interactive = signal.signal(signal.SIGINT, signal.default_int_handler)
     out = tmp_path / "run"
-    assert simulate(scene, out) == 130
+    try:
+        assert simulate(scene, out) == 130
+    finally:
+        signal.signal(signal.SIGINT, interactive)
     message = one_line(capsys)
     assert "interrupted at t = 0.06 s" in message and f"partial results in {out}/" in message
     summary = json.loads((out / "summary.json").read_text())
