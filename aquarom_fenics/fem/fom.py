@@ -140,10 +140,10 @@ class FullOrderModel:
             tangent = tangent + self.muscle.tangent_form
         self._tangent = fx.compile_form(tangent)
         # The thrust and drag Jacobians add entries outside the tangent's pattern: reserve them.
-        entries = [term.newton_entries() for term in (self.thrust, self.drag) if term is not None]
-        self.tangent_matrix = fx.create_matrix_with_entries(
-            self._tangent, np.concatenate([rows for rows, _ in entries] + [np.zeros(0, dtype=np.int64)]),
-            np.concatenate([columns for _, columns in entries] + [np.zeros(0, dtype=np.int64)]))
+        entries = [np.zeros((2, 0), dtype=np.int64)] + [np.stack(term.newton_entries())
+                                                        for term in (self.thrust, self.drag) if term is not None]
+        rows, columns = np.concatenate(entries, axis=1)
+        self.tangent_matrix = fx.create_matrix_with_entries(self._tangent, rows, columns)
         self.tangent_matrix.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
 
     @property

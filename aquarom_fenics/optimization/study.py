@@ -304,11 +304,12 @@ def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None) -> list[
         weights = CostWeights(distance=w1, energy=1.0 - w1, alpha=co.energy_weight)
         result, check = run_optimization(scene, Path(out_dir) / f"w1_{w1:g}", weights=weights, fish=fish, render=False)
         amplitude = float(result.optimum[-1])
+        completed = check.optimal_distance is not None
         points.append({"w1": w1, "amplitude": amplitude, "energy": weights.energy_term(amplitude),
-                       "distance": check.optimal_distance if check.optimal_distance is not None else float("nan"),
+                       "distance": check.optimal_distance if completed else float("nan"),
                        "prom_distance": result.evaluation.distance,
-                       "fom_check": "completed" if check.optimal_distance is not None else "infeasible",
-                       "fom_check_reason": "" if check.optimal_distance is not None else (check.error or ""),
+                       "fom_check": "completed" if completed else "infeasible",
+                       "fom_check_reason": "" if completed else (check.error or ""),
                        **{f"xi_{n}": float(v) for n, v in zip(result.space.names[:-1], result.optimum[:-1])}})
     if MPI.COMM_WORLD.rank == 0:
         table = io.StringIO()

@@ -39,6 +39,7 @@ class DragTerm:
         compiled = fx.compile_form(self.direction_form)
         self.direction = fx.assemble_vector_into(fx.create_vector(compiled), compiled).copy()
         self.rows = np.flatnonzero(self.direction)
+        self.global_rows = fom.global_dofs(self.rows)
 
     def force(self, v: np.ndarray) -> np.ndarray:
         """f_drag on the owned dofs [N]."""
@@ -46,15 +47,13 @@ class DragTerm:
 
     def newton_entries(self) -> tuple[np.ndarray, np.ndarray]:
         """(global rows, global columns) of the entries ``add_newton_matrix`` adds: the head x column."""
-        rows = self.fom.global_dofs(self.rows)
-        return rows, np.full(rows.size, self.fom.head_x_global_dof)
+        return self.global_rows, np.full(self.global_rows.size, self.fom.head_x_global_dof)
 
     def add_newton_matrix(self, matrix: PETSc.Mat, velocity_factor: float, v: np.ndarray) -> None:
         """S += -k_v ∂f/∂u̇ (f_drag is on the right of the equations of motion)."""
         column = drag_velocity_jacobian(self.direction[self.rows], self.fom.head_velocity_x(v))
-        rows = self.fom.global_dofs(self.rows)
         head = np.array([self.fom.head_x_global_dof], dtype=np.int32)
-        matrix.setValues(rows, head, (-velocity_factor * column).reshape(-1, 1), addv=PETSc.InsertMode.ADD_VALUES)
+        matrix.setValues(self.global_rows, head, (-velocity_factor * column).reshape(-1, 1), addv=PETSc.InsertMode.ADD_VALUES)
 
     def reduce(self, projector) -> "DragTensors":
         return DragTensors(projector.taylor(self.direction_form))

@@ -67,8 +67,9 @@ class ThrustTerm:
     def newton_entries(self) -> tuple[np.ndarray, np.ndarray]:
         """(global rows, global columns) of the entries ``add_newton_matrix`` adds."""
         pairs = [np.meshgrid(rows, columns, indexing="ij") for _, rows, _, columns in self._coupled_spine_dofs()]
-        return (np.concatenate([rows.ravel() for rows, _ in pairs]) if pairs else np.zeros(0, dtype=np.int32),
-                np.concatenate([columns.ravel() for _, columns in pairs]) if pairs else np.zeros(0, dtype=np.int32))
+        none = [np.zeros(0, dtype=np.int32)]          # a rank that owns no spine node
+        return (np.concatenate(none + [rows.ravel() for rows, _ in pairs]),
+                np.concatenate(none + [columns.ravel() for _, columns in pairs]))
 
     def add_newton_matrix(self, matrix: PETSc.Mat, scheme, u, v, a) -> None:
         """S += -(k_u ∂f/∂u + k_v ∂f/∂u̇ + k_a ∂f/∂ü) on the owned spine rows (f_thrust is on the right)."""
