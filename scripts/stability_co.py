@@ -1,10 +1,14 @@
-"""Stability of one design's FOM: completion, per-force energy balance and the spine's dominant mode.
+"""Stability of one design's FOM: completion, per-force energy balance, the spine's dominant mode, the tail's modes.
 
 For each time step and spine-force form: the PROM's stability verdict at the design, does the FOM at the design complete (cut steps), where
-does the energy come from (``aquarom_fenics.verification.energy``), and which spine motion carries the late-time
-response (``aquarom_fenics.verification.energy.spine_spectrum``). Writes <out>/stability_<name>.json.
+does the energy come from (``aquarom_fenics.verification.energy``), which spine motion carries the late-time
+response (``aquarom_fenics.verification.energy.spine_spectrum``) and, with ``--tail-radius``, the frozen linearisation
+of the tail region at the stored states, with the thrust and without it
+(``aquarom_fenics.verification.local_stability``). Writes <out>/stability_<name>.json.
 
     .venv/bin/python scripts/stability_co.py --optimum results/optimize/co/summary.json --level 3
+    .venv/bin/python scripts/stability_co.py --optimum results/pareto/co-default/w1_0.7/summary.json --level 2 \
+        --time-steps 0.02 --spine-forces source --no-prom --set solver.min_time_step=0.005 --tail-radius 0.015 --name co07
     .venv/bin/python scripts/stability_co.py --scene nominal --set material.young_modulus=52e3 \
         --set solver.min_time_step=1.0 --spine-forces source --no-prom --name soft
 """
@@ -20,11 +24,13 @@ import numpy as np
 
 from aquarom_fenics.dynamics.reduced_dynamics import reduced_stability
 from aquarom_fenics.dynamics.simulate import simulate_fom
+from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.io.persistence import write_json_atomic
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.reduction.reductor import build_prom
 from aquarom_fenics.verification.energy import energy_balance, spine_spectrum
+from aquarom_fenics.verification.local_stability import local_stability, region_dofs
 
 REPOSITORY = Path(__file__).resolve().parent.parent
 
@@ -46,7 +52,23 @@ def scene_overrides(assignments: list[str]) -> dict:
     return sections
 
 
-def run_case(scene: Scene, fish, xi, time_step: float, spine_force: str) -> dict:
+def tail_modes(scene: Scene, fish, xi, result, radius: float, every: int) -> dict:
+    """Frozen linearisation of the tail region (nodes within ``radius`` of the tail node) at every
+    ``every``-th stored state: fastest growth, its frequency and the step map's spectral radius, with the
+    thrust (the run's model) and with the thrust switched off (same states)."""
+    without_thrust = FullOrderModel(scene.replace("fluid", thrust=False), fish, xi)
+    h = scene.solver.time_step
+    records = {}
+    for name, model in (("with_thrust", result.model), ("without_thrust", without_thrust)):
+        dofs = region_dofs(model, fish.tags.tail_node, radius)
+        records[name] = [local_stability(model, step * h, *state, dofs, model.scheme).summary()
+                         for step, state in enumerate(result.states) if step % every == 0]
+    without_thrust.destroy()
+    return {"radius": radius, "region_dofs": int(dofs.size), **records}
+
+
+def run_case(scene: Scene, fish, xi, time_step: float, spine_force: str, tail_radius: float | None = None,
+             tail_every: int = 2) -> dict:
     scene = scene.replace("solver", time_step=time_step).replace("fluid", spine_force=spine_force)
     result = simulate_fom(scene, xi=xi, fish=fish, progress=False, keep_states=True)
     arrays = result.trajectory.arrays()
@@ -59,8 +81,11 @@ def run_case(scene: Scene, fish, xi, time_step: float, spine_force: str) -> dict
         record["energy"] = energy_balance(result).summary()
     model = result.model
     times = arrays["time"][: len(result.states)]
-    lateral = np.array([model.spine_values(u)[:, 1] for u, _ in result.states])
+    lateral = np.array([model.spine_values(u)[:, 1] for u, *_ in result.states])
     record["spine"] = spine_spectrum(times, lateral, scene.actuation.frequency)
+    if tail_radius:
+        record["tail_modes"] = tail_modes(scene, fish, xi, result, tail_radius, tail_every)
+    model.destroy()
     return record
 
 
@@ -77,6 +102,9 @@ def main(argv=None) -> int:
                         help="scene override, e.g. solver.integrator=newmark, solver.min_time_step=1.0 (no step "
                              "cuts), material.young_modulus=52e3")
     parser.add_argument("--no-prom", action="store_true", help="skip the PROM stability verdicts")
+    parser.add_argument("--tail-radius", type=float, help="also linearise the tail region of this radius [m] "
+                        "at every --tail-every-th stored state (serial)")
+    parser.add_argument("--tail-every", type=int, default=2)
     args = parser.parse_args(argv)
     scene = Scene.load(args.scene).replace("mesh", level=args.level)
     for section, values in scene_overrides(args.set).items():
@@ -93,8 +121,8 @@ def main(argv=None) -> int:
         print(f"PROM at the design, spine force {spine_force}: {reason}", flush=True)
     for spine_force in args.spine_forces.split(","):
         for time_step in (float(h) for h in args.time_steps.split(",")):
-            case = run_case(scene, fish, xi, time_step, spine_force)
-            print(json.dumps({k: v for k, v in case.items() if k != "spine"} | {
+            case = run_case(scene, fish, xi, time_step, spine_force, args.tail_radius, args.tail_every)
+            print(json.dumps({k: v for k, v in case.items() if k not in ("spine", "tail_modes")} | {
                 "spine_peak": case["spine"]["peak"]}, default=float), flush=True)
             cases.append(case)
     args.out.mkdir(parents=True, exist_ok=True)

@@ -39,7 +39,7 @@ class SimulationResult:
     cut_steps: int = 0                            # sub-steps shorter than h taken by the step control
     factorizations: int = 0                       # of Newton matrices, over the run
     timings: dict = field(default_factory=dict)
-    states: list = field(default_factory=list)    # owned (u, u̇) per stored sample, when asked for
+    states: list = field(default_factory=list)    # owned (u, u̇, ü) per stored sample, when asked for
     model: FullOrderModel | None = None
 
     def summary(self) -> dict:
@@ -105,7 +105,7 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
         if xdmf:
             _write_xdmf_sample(model, xdmf, u, report.time)
         if keep_states:
-            states.append((u.copy(), v.copy()))
+            states.append((u.copy(), v.copy(), a.copy()))
         if displacements is not None:
             displacements.append(model.nodal_displacement(u)[:fish.nodes.n_vertices])
         if bar:

@@ -114,8 +114,8 @@ def energy_balance(result) -> EnergyBalance:
     scheme = model.scheme
     comm = model.comm
     times = np.asarray(result.trajectory.time)
-    displacements = [u for u, _ in result.states]
-    velocities = [v for _, v in result.states]
+    displacements = [u for u, *_ in result.states]
+    velocities = [v for _, v, _ in result.states]
     states = list(zip(displacements, velocities, accelerations(scheme, velocities)))
 
     def dot(force, increment) -> float:

@@ -108,7 +108,7 @@ def test_energy_is_conserved_without_damping_and_forces():
     result = simulate_fom(scene, fish=fish, progress=False, keep_states=True,
                           initial_velocity=smooth_lateral_velocity(fish, 1e-4))
     assert result.completed and len(result.states) == 101
-    energy = np.array([result.model.kinetic_energy(v) + result.model.elastic_energy(u) for u, v in result.states])
+    energy = np.array([result.model.kinetic_energy(v) + result.model.elastic_energy(u) for u, v, _ in result.states])
     assert np.abs(energy - energy[0]).max() < 1e-6 * energy[0]
 
 

@@ -1,0 +1,121 @@
+"""Frozen-coefficient local stability: the step map of generalized-α and the FOM's tangents."""
+import numpy as np
+import pytest
+
+from aquarom_fenics.dynamics.integrator import TimeScheme
+from aquarom_fenics.dynamics.simulate import simulate_fom
+from aquarom_fenics.geometry.fish import load_fish
+from aquarom_fenics.verification.local_stability import (local_stability, pencil_eigenvalues, region_dofs,
+                                                         step_matrix, tangents)
+from conftest import coarse_scene
+
+
+def oscillator(omega, damping_ratio):
+    """1-dof ü + 2ζω u̇ + ω² u = 0 as (K, C, M)."""
+    return np.array([[omega ** 2]]), np.array([[2 * damping_ratio * omega]]), np.array([[1.0]])
+
+
+def radius(matrices, scheme):
+    return np.abs(np.linalg.eigvals(step_matrix(*matrices, scheme))).max()
+
+
+def test_step_map_damps_unresolved_modes_to_rho_infinity_and_follows_resolved_ones():
+    omega = 2 * np.pi * 1000.0
+    undamped = oscillator(omega, 0.0)
+    # ρ → ρ∞ as ωh → ∞ (slowly: the double root at infinity; 0.808 at ωh = 1e3)
+    assert radius(undamped, TimeScheme.generalized_alpha(1e6 / omega, 0.8)) == pytest.approx(0.8, abs=1e-3)
+    assert radius(undamped, TimeScheme.generalized_alpha(1e-3 / omega, 0.8)) == pytest.approx(1.0, abs=1e-6)
+    # negative damping: a resolved mode grows by e^{ζω h} per step, as the ODE does
+    growing = oscillator(omega, -0.05)
+    h = 0.01 / omega
+    assert radius(growing, TimeScheme.generalized_alpha(h, 0.8)) == pytest.approx(np.exp(0.05 * omega * h), rel=1e-6)
+    eigenvalues = pencil_eigenvalues(*growing)
+    assert np.sort(eigenvalues.imag) == pytest.approx([-omega * np.sqrt(1 - 0.05 ** 2), omega * np.sqrt(1 - 0.05 ** 2)])
+    assert eigenvalues.real == pytest.approx([0.05 * omega] * 2)
+
+
+def test_step_map_is_the_integrators_linear_step():
+    """G applied to a state equals one generalized-α step of M ü + C u̇ + K u = 0 solved directly."""
+    rng = np.random.default_rng(3)
+    mass = np.diag(rng.uniform(1, 2, 3))
+    stiffness = rng.normal(size=(3, 3)); stiffness = stiffness @ stiffness.T + 3 * np.eye(3)
+    damping = rng.normal(size=(3, 3))
+    scheme = TimeScheme.generalized_alpha(0.05, 0.6)
+    u, v = rng.normal(size=3), rng.normal(size=3)
+    a = np.linalg.solve(mass, -damping @ v - stiffness @ u)
+    u_predicted, v_predicted = scheme.predict(u, v, a)
+    # r(u_new) is linear: S u_new = rhs with S = ∂r/∂u_new
+    lead = (scheme.acceleration_factor * mass + scheme.velocity_factor * damping + scheme.stiffness_factor * stiffness)
+
+    def residual(u_new):
+        v_new, a_new = scheme.correct(u_new, u_predicted, v_predicted)
+        _, u_mid, v_mid, a_mid = scheme.evaluation_point(1.0, (u, v, a), (u_new, v_new, a_new))
+        return mass @ a_mid + damping @ v_mid + stiffness @ u_mid
+
+    u_new = u_predicted - np.linalg.solve(lead, residual(u_predicted))
+    expected = np.concatenate([u_new, *scheme.correct(u_new, u_predicted, v_predicted)])
+    assert step_matrix(stiffness, damping, mass, scheme) @ np.concatenate([u, v, a]) == pytest.approx(expected, rel=1e-10)
+
+
+@pytest.fixture(scope="module")
+def swimming_run():
+    scene = coarse_scene(solver={"duration": 0.2}, actuation={"amplitude": 0.4})
+    result = simulate_fom(scene, fish=load_fish(scene), progress=False, keep_states=True)
+    assert result.completed
+    yield scene, result
+    result.model.destroy()
+
+
+def test_tangents_are_the_derivatives_of_the_residual(swimming_run):
+    """K_t, C_t, M_t against central differences of r(t, u, u̇, ü) at a swimming state (thrust and drag on)."""
+    scene, result = swimming_run
+    model = result.model
+    u, v, a = result.states[-1]
+    time = scene.solver.duration
+    stiffness, damping, mass = tangents(model, time, u, v, a)
+    rng = np.random.default_rng(0)
+    free = np.setdiff1d(np.arange(u.size), model.fixed_dofs)
+    for position, matrix, scale in ((0, stiffness, 1e-4), (1, damping, 1e-2), (2, mass, 1.0)):
+        direction = np.zeros(u.size)
+        direction[free] = rng.normal(size=free.size)
+        state = [u, v, a]
+        plus = [x + scale * 1e-4 * direction if i == position else x for i, x in enumerate(state)]
+        minus = [x - scale * 1e-4 * direction if i == position else x for i, x in enumerate(state)]
+        difference = (model.residual(time, *plus)[0] - model.residual(time, *minus)[0]) / (2 * scale * 1e-4)
+        product = matrix @ direction
+        product[model.fixed_dofs] = 0.0
+        assert np.linalg.norm(difference - product) <= 1e-6 * np.linalg.norm(product)
+    # the Newton matrix of the run is left as it was
+    assert model.scheme.time_step == scene.solver.time_step
+
+
+def test_local_stability_of_the_tail_at_rest_is_stable(swimming_run):
+    """At rest nothing feeds the tail: every mode decays, the step map contracts."""
+    scene, result = swimming_run
+    model = result.model
+    dofs = region_dofs(model, model.fish.tags.tail_node, 0.04)
+    assert dofs.size > 30 and not np.intersect1d(dofs, model.fixed_dofs).size
+    zero = np.zeros(model.n_owned_dofs)
+    rest = local_stability(model, 0.0, zero, zero, zero, dofs, model.scheme)
+    assert rest.growth_rate < 0 and rest.spectral_radius < 1
+
+
+def test_stability_script_writes_the_tail_modes_with_and_without_the_thrust(tmp_path):
+    import importlib.util
+    import json
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "scripts" / "stability_co.py"
+    spec = importlib.util.spec_from_file_location("stability_co", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    assert script.main(["--scene", "nominal", "--level", "1", "--time-steps", "0.02", "--spine-forces", "source",
+                        "--no-prom", "--set", "solver.duration=0.2", "--tail-radius", "0.015", "--tail-every", "10",
+                        "--out", str(tmp_path), "--name", "short"]) == 0
+    case = json.loads((tmp_path / "stability_short.json").read_text())["cases"][0]
+    modes = case["tail_modes"]
+    assert case["completed"] and modes["region_dofs"] > 30
+    assert [m["time"] for m in modes["with_thrust"]] == pytest.approx([0.0, 0.2])
+    assert [m["time"] for m in modes["without_thrust"]] == pytest.approx([0.0, 0.2])
+    # without the thrust the tail's frozen modes decay at every state of this mild run
+    assert all(m["growth_rate"] < 0 and m["spectral_radius"] < 1 for m in modes["without_thrust"])
