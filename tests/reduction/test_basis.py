@@ -49,7 +49,7 @@ def test_response_vectors_are_candidates_of_the_default_basis_only(quadratic_sce
 def test_response_vectors_reduce_the_projection_residual_of_the_fom_swim(quadratic_scene, quadratic_fish, fom_run):
     """Σ_t ‖u - V Vᵀ M u‖_M² over the FOM's samples, with and without the response vectors."""
     fom = FullOrderModel(quadratic_scene, quadratic_fish)
-    snapshots = np.column_stack([u for u, _ in fom_run.states])
+    snapshots = np.column_stack([u for u, *_ in fom_run.states])
 
     def residual(scene):
         vectors = build_basis(FullOrderModel(scene, quadratic_fish), 0).vectors

@@ -37,7 +37,7 @@ def run_dir(tmp_path_factory):
     model = result.model
     run_outputs.write_displacement_series(out / run_outputs.DISPLACEMENT_FILE, model.fish.design(None),
                                       model.fish.mesh.cells, result.trajectory.arrays()["time"],
-                                      [model.nodal_displacement(u) for u, _ in result.states])
+                                      [model.nodal_displacement(u) for u, *_ in result.states])
     return out
 
 
