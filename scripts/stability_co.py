@@ -58,9 +58,9 @@ def tail_modes(scene: Scene, fish, xi, result, radius: float, every: int) -> dic
     thrust (the run's model) and with the thrust switched off (same states)."""
     without_thrust = FullOrderModel(scene.replace("fluid", thrust=False), fish, xi)
     h = scene.solver.time_step
+    dofs = region_dofs(result.model, fish.tags.tail_node, radius)      # same mesh, design and fixed dofs
     records = {}
     for name, model in (("with_thrust", result.model), ("without_thrust", without_thrust)):
-        dofs = region_dofs(model, fish.tags.tail_node, radius)
         records[name] = [local_stability(model, step * h, *state, dofs, model.scheme).summary()
                          for step, state in enumerate(result.states) if step % every == 0]
     without_thrust.destroy()

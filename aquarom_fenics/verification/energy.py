@@ -76,16 +76,6 @@ class EnergyBalance:
                          "relative_imbalance": self.relative_imbalance}
 
 
-def accelerations(scheme: TimeScheme, velocities) -> list[np.ndarray]:
-    """ü_n from the stored u̇_n: u̇_{n+1} = u̇_n + h (1 - γ) ü_n + h γ ü_{n+1}, ü_0 = 0 (the run starts at rest
-    with zero force)."""
-    h, gamma = scheme.time_step, scheme.gamma
-    values = [np.zeros_like(velocities[0])]
-    for v_old, v_new in zip(velocities, velocities[1:]):
-        values.append((v_new - v_old - h * (1.0 - gamma) * values[-1]) / (h * gamma))
-    return values
-
-
 def nodal_forces(model, time: float, u, v, a) -> dict[str, np.ndarray]:
     """The forces of the balance at one state, owned dofs [N]: f_act, the thrust's added-mass term
     and the rest of the thrust, f_drag, and the Rayleigh force C u̇."""
@@ -114,9 +104,9 @@ def energy_balance(result) -> EnergyBalance:
     scheme = model.scheme
     comm = model.comm
     times = np.asarray(result.trajectory.time)
-    displacements = [u for u, *_ in result.states]
-    velocities = [v for _, v, _ in result.states]
-    states = list(zip(displacements, velocities, accelerations(scheme, velocities)))
+    states = result.states                      # (u, u̇, ü) on the grid of h
+    displacements = [u for u, _, _ in states]
+    velocities = [v for _, v, _ in states]
 
     def dot(force, increment) -> float:
         return comm.allreduce(float(force @ increment), op=MPI.SUM)

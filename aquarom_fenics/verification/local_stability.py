@@ -84,25 +84,18 @@ def pencil_eigenvalues(stiffness: np.ndarray, damping: np.ndarray, mass: np.ndar
 
 
 def step_matrix(stiffness: np.ndarray, damping: np.ndarray, mass: np.ndarray, scheme: TimeScheme) -> np.ndarray:
-    """G with (δu, δu̇, δü)_{n+1} = G (δu, δu̇, δü)_n for M ü + C u̇ + K u = 0 under the scheme:
-
-        M ü_{n+1-α_m} + C u̇_{n+1-α_f} + K u_{n+1-α_f} = 0
-        u_{n+1} = u_n + h u̇_n + h²(½ - β) ü_n + h² β ü_{n+1},  u̇_{n+1} = u̇_n + h (1 - γ) ü_n + h γ ü_{n+1}
-    """
-    h, alpha_m, alpha_f = scheme.time_step, scheme.alpha_m, scheme.alpha_f
-    gamma, beta = scheme.gamma, scheme.beta
+    """G with (δu, δu̇, δü)_{n+1} = G (δu, δu̇, δü)_n: one step of the scheme (its own predictor,
+    corrector and evaluation point) on M ü + C u̇ + K u = 0, whose Newton step is exact:
+    u_{n+1} = ũ - S⁻¹ r(ũ), S = k_a M + k_v C + k_u K, ũ the predictor."""
     n = stiffness.shape[0]
-    identity, zero = np.eye(n), np.zeros((n, n))
-    # (1-α_m) M + (1-α_f) h γ C + (1-α_f) h² β K  multiplies ü_{n+1}
-    lead = (1 - alpha_m) * mass + (1 - alpha_f) * h * gamma * damping + (1 - alpha_f) * h * h * beta * stiffness
-    old = np.hstack([stiffness,
-                     damping + (1 - alpha_f) * h * stiffness,
-                     alpha_m * mass + (1 - alpha_f) * h * (1 - gamma) * damping
-                     + (1 - alpha_f) * h * h * (0.5 - beta) * stiffness])
-    acceleration = -np.linalg.solve(lead, old)
-    displacement = np.hstack([identity, h * identity, h * h * (0.5 - beta) * identity]) + h * h * beta * acceleration
-    velocity = np.hstack([zero, identity, h * (1 - gamma) * identity]) + h * gamma * acceleration
-    return np.vstack([displacement, velocity, acceleration])
+    old = tuple(np.hstack([np.eye(n) if block == k else np.zeros((n, n)) for block in range(3)]) for k in range(3))
+    u_predicted, v_predicted = scheme.predict(*old)
+    _, u_point, v_point, a_point = scheme.evaluation_point(
+        0.0, old, (u_predicted, v_predicted, np.zeros_like(u_predicted)))
+    residual = mass @ a_point + damping @ v_point + stiffness @ u_point
+    newton = scheme.acceleration_factor * mass + scheme.velocity_factor * damping + scheme.stiffness_factor * stiffness
+    u_new = u_predicted - np.linalg.solve(newton, residual)
+    return np.vstack([u_new, *scheme.correct(u_new, u_predicted, v_predicted)])
 
 
 def local_stability(model, time: float, u, v, a, dofs: np.ndarray, scheme: TimeScheme) -> LocalStability:
