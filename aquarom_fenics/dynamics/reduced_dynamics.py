@@ -131,6 +131,8 @@ class ReducedResult:
     error: str | None = None
     cut_steps: int = 0                            # sub-steps shorter than h taken by the step control
     states: np.ndarray | None = None              # (n_samples, m) η
+    velocities: np.ndarray | None = None          # (n_samples, m) η̇
+    accelerations: np.ndarray | None = None       # (n_samples, m) η̈
     sensitivities: np.ndarray | None = None       # (n_samples, m, p) dη/dξ
     distance_gradient: np.ndarray | None = None   # (p,) dd/dξ
     timings: dict = field(default_factory=dict)
@@ -164,8 +166,8 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
     m = prom.size
     columns = (prom.n_parameters if sensitivities else 0) + (1 if amplitude_sensitivity else 0)
     trajectory = Trajectory()
-    states = [np.zeros(m)]
     zero = np.zeros(m)
+    states, velocities, accelerations = [zero], [zero], [zero]
     trajectory.append(0.0, *system.observables(zero), 0)
     sensitivity = [np.zeros((m, columns))] * 3
     sensitivity_history = [np.zeros((m, columns))]
@@ -187,6 +189,8 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
         cut_steps = report.cut_steps
         trajectory.append(report.time, *system.observables(eta), report.iterations)
         states.append(eta.copy())
+        velocities.append(eta_dot.copy())
+        accelerations.append(eta_ddot.copy())
         if columns:
             sensitivity_history.append(sensitivity[0].copy())
 
@@ -200,7 +204,8 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
     arrays = trajectory.arrays()
     completed = error is None
     result = ReducedResult(
-        trajectory=trajectory, completed=completed, error=error, states=np.array(states), cut_steps=cut_steps,
+        trajectory=trajectory, completed=completed, error=error, states=np.array(states),
+        velocities=np.array(velocities), accelerations=np.array(accelerations), cut_steps=cut_steps,
         distance=swimming_distance(arrays["time"], arrays["com_x"]) if completed else None,
         tail_amplitude=tail_amplitude(arrays["time"], arrays["tail_y"]) if completed else None,
         wall_time=clock.perf_counter() - started)

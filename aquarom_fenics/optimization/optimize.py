@@ -110,12 +110,13 @@ def optimize(scene: Scene, fish: Fish | None = None, weights: CostWeights | None
             builder.basis_center = np.array(saved["basis_center"])
     started = time.perf_counter() - (history[-1]["wall_time"] if history else 0.0)
     algorithm = {"paper": paper_method, "trust-region": trust_region}[method]
+    log.info("stability of the designs: %s", builder.stability_plan())
     safeguard = Safeguard(started, max_time)
     optimum, evaluation, reason = algorithm(scene, space, builder, weights, history, checkpoint,
                                             saved["state"] if saved else None, safeguard,
                                             on_iteration or (lambda row: None))
     timings = {"prom_builds": builder.build_time, "prom_solves": builder.solve_time,
-               "total": time.perf_counter() - started}
+               "tail_screens": builder.screen_time, "total": time.perf_counter() - started}
     optimality = first_order_at(scene, space, evaluation)
     log.info("optimisation (%s) stopped: %s; first-order measure %.2e; %d PROM builds (%d reused from the cache, "
              "%d on an earlier basis), %.1f s", method, reason, optimality.measure, builder.builds, builder.reused,

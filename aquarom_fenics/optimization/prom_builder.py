@@ -14,6 +14,7 @@ from aquarom_fenics.optimization.cost import DesignSpace, Evaluation, evaluate
 from aquarom_fenics.reduction.cache import cached_prom
 from aquarom_fenics.reduction.prom import ReducedModel
 from aquarom_fenics.reduction.reductor import build_prom
+from aquarom_fenics.verification.local_stability import prom_tail_stability
 
 
 STABILITY_STROKES = 2
@@ -41,6 +42,7 @@ class PromBuilder:
         self.last_size = 0
         self.build_time = 0.0
         self.solve_time = 0.0
+        self.screen_time = 0.0               # the tail screens' time [s]
         self.radius = np.array(scene.validity_radii())
         self.basis_center: np.ndarray | None = None
         self.records: list[dict] = []        # per build: design, cache hit, basis source, time
@@ -111,15 +113,38 @@ class PromBuilder:
             raise InputError(f"design {self.space.as_dict(z)} is infeasible: {refused}") from None
         self._refuse_unstable(prom, z)
 
+    def stability_plan(self) -> str:
+        """What :meth:`_refuse_unstable` judges at every build, and what it skips, one line."""
+        scene = self.scene
+        if scene.solver.duration * scene.actuation.frequency < STABILITY_STROKES:
+            return f"not judged (horizon below {STABILITY_STROKES} strokes)"
+        floquet = "the PROM's Floquet test at every PROM build"
+        if not scene.optimizer.tail_screen:
+            return f"{floquet}; tail screen skipped ([optimizer] tail_screen = false)"
+        if not scene.fluid.thrust:
+            return f"{floquet}; tail screen skipped (thrust off: nothing drives the tail)"
+        return (f"{floquet}, then the tail screen (the FOM's tail region within "
+                f"{scene.optimizer.tail_region_radius:g} m linearised at the PROM's last-stroke states, growth limit "
+                f"{scene.optimizer.tail_growth_limit:g} 1/s)")
+
     def _refuse_unstable(self, prom: ReducedModel, z: np.ndarray) -> None:
         """A design whose PROM gait is unstable (Floquet multiplier |μ| > 1.01 over the last stroke,
         ``reduced_stability``) is refused like one the mesh check refuses: the optimisers step back.
-        Judged only on horizons of two strokes or more (a start-up from rest is no periodic gait)."""
+        Judged only on horizons of two strokes or more (a start-up from rest is no periodic gait).
+        With ``[optimizer] tail_screen`` and the thrust on, so is a design whose tail region the
+        thrust destabilises (``prom_tail_stability``)."""
         actuation = self.scene.actuation
         if self.scene.solver.duration * actuation.frequency < STABILITY_STROKES:
             return
         amplitude = float(z[-1]) if self.space.with_amplitude else None
-        stable, reason = reduced_stability(prom, self.scene, z[: self.space.n_shapes], amplitude)
+        xi = z[: self.space.n_shapes]
+        stable, reason = reduced_stability(prom, self.scene, xi, amplitude)
+        if stable and self.scene.optimizer.tail_screen and self.scene.fluid.thrust:
+            started = time.perf_counter()
+            stable, reason = prom_tail_stability(prom, self.scene, self.fish, xi, amplitude)
+            elapsed = time.perf_counter() - started
+            self.screen_time += elapsed
+            log.info("tail screen at %s: %s; %.1f s", self.space.as_dict(z), reason, elapsed)
         if not stable:
             raise InputError(f"design {self.space.as_dict(z)} is infeasible: its PROM is unstable ({reason})")
 

@@ -14,16 +14,25 @@ coefficients frozen at the state:
 
 Frozen coefficients describe modes much faster than the state changes (here kHz modes of the tail
 against a 1 Hz gait); the region must be small for dense eigenvalues (a few hundred nodes).
+
+:func:`prom_tail_stability` is the PROM-side screen built on it: the same linearisation at FOM states
+rebuilt from a PROM trajectory, for the tail modes the PROM's basis does not hold.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
+from mpi4py import MPI
 import scipy.sparse
 
 from aquarom_fenics.dynamics.integrator import TimeScheme
+from aquarom_fenics.dynamics.reduced_dynamics import Stability, simulate_reduced
+from aquarom_fenics.errors import InputError
+from aquarom_fenics.fem.fom import FullOrderModel
+from aquarom_fenics.geometry.fish import Fish
+from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.reduction.prom import ReducedModel
 
 
 @dataclass(frozen=True)
@@ -69,18 +78,22 @@ def tangents(model, time: float, u, v, a) -> tuple[scipy.sparse.csr_matrix, ...]
 def region_dofs(model, center_node: int, radius: float) -> np.ndarray:
     """Free dofs of the nodes within ``radius`` [m] of input node ``center_node`` (rest shape)."""
     positions = model.rest_points[model.layout.owned_nodes]
-    near = np.flatnonzero(np.linalg.norm(positions - model.rest_points[center_node], axis=1) < radius)
-    dofs = (3 * near[:, None] + np.arange(3)).ravel()
-    return np.setdiff1d(dofs, model.fixed_dofs)
+    distances = np.linalg.norm(positions - model.rest_points[center_node], axis=1)
+    near = np.flatnonzero(distances < radius)
+    dofs = np.setdiff1d((3 * near[:, None] + np.arange(3)).ravel(), model.fixed_dofs)
+    if not dofs.size:
+        free_nodes = np.setdiff1d(np.arange(positions.shape[0]), model.fixed_dofs // 3)
+        raise InputError(f"the region of radius {radius:g} m around node {center_node} holds no free node; "
+                         f"the nearest free node is {distances[free_nodes].min():.3g} m away: use a larger radius")
+    return dofs
 
 
 def pencil_eigenvalues(stiffness: np.ndarray, damping: np.ndarray, mass: np.ndarray) -> np.ndarray:
-    """λ with (λ² M + λ C + K) x = 0, from the companion pencil [[0, I], [-K, -C]] - λ [[I, 0], [0, M]]."""
+    """λ with (λ² M + λ C + K) x = 0: the eigenvalues of the companion matrix [[0, I], [-M⁻¹K, -M⁻¹C]]
+    (M, a mass matrix with the added mass, is invertible)."""
     n = stiffness.shape[0]
-    identity, zero = np.eye(n), np.zeros((n, n))
-    eigenvalues = scipy.linalg.eigvals(np.block([[zero, identity], [-stiffness, -damping]]),
-                                       np.block([[identity, zero], [zero, mass]]))
-    return eigenvalues[np.isfinite(eigenvalues)]
+    scaled_stiffness, scaled_damping = np.hsplit(np.linalg.solve(mass, np.hstack([stiffness, damping])), 2)
+    return np.linalg.eigvals(np.block([[np.zeros((n, n)), np.eye(n)], [-scaled_stiffness, -scaled_damping]]))
 
 
 def step_matrix(stiffness: np.ndarray, damping: np.ndarray, mass: np.ndarray, scheme: TimeScheme) -> np.ndarray:
@@ -98,11 +111,100 @@ def step_matrix(stiffness: np.ndarray, damping: np.ndarray, mass: np.ndarray, sc
     return np.vstack([u_new, *scheme.correct(u_new, u_predicted, v_predicted)])
 
 
+def region_tangents(model, time: float, u, v, a, dofs: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(K_t, C_t, M_t) of ``model`` at (t, u, u̇, ü) restricted to ``dofs`` (dense)."""
+    region = np.ix_(dofs, dofs)
+    return tuple(matrix[region].toarray() for matrix in tangents(model, time, u, v, a))
+
+
+def fastest_eigenvalue(stiffness: np.ndarray, damping: np.ndarray, mass: np.ndarray) -> complex:
+    """The eigenvalue λ of λ² M + λ C + K with the largest real part."""
+    eigenvalues = pencil_eigenvalues(stiffness, damping, mass)
+    return complex(eigenvalues[np.argmax(eigenvalues.real)])
+
+
 def local_stability(model, time: float, u, v, a, dofs: np.ndarray, scheme: TimeScheme) -> LocalStability:
     """The frozen linearisation of ``model`` at (t, u, u̇, ü) on ``dofs``: fastest growth and ρ at h."""
-    region = np.ix_(dofs, dofs)
-    stiffness, damping, mass = (matrix[region].toarray() for matrix in tangents(model, time, u, v, a))
-    eigenvalues = pencil_eigenvalues(stiffness, damping, mass)
-    fastest = eigenvalues[np.argmax(eigenvalues.real)]
+    stiffness, damping, mass = region_tangents(model, time, u, v, a, dofs)
+    fastest = fastest_eigenvalue(stiffness, damping, mass)
     radius = float(np.abs(np.linalg.eigvals(step_matrix(stiffness, damping, mass, scheme))).max())
-    return LocalStability(time, float(fastest.real), float(abs(fastest.imag) / (2 * np.pi)), radius)
+    return LocalStability(time, fastest.real, abs(fastest.imag) / (2 * np.pi), radius)
+
+
+TAIL_SAMPLE_INTERVAL = 0.02
+"""Time between the PROM states the tail screen linearises [s] (the growth windows last 0.04-0.1 s)."""
+
+
+@dataclass(frozen=True)
+class TailGrowth:
+    """The fastest tail mode the screen met over the PROM states it linearised."""
+
+    time: float                     # of the state [s]
+    growth_rate: float              # Re λ [1/s]
+    frequency: float                # |Im λ| / 2π [Hz]
+    states: int                     # states linearised
+
+
+def prom_tail_growth(prom: ReducedModel, scene: Scene, fish: Fish, xi=None,
+                     stop_above: float = np.inf) -> TailGrowth | str:
+    """The fastest tail mode at design ξ along the PROM's last stroke (or the PROM's stop message).
+
+    The PROM is integrated over the horizon; on its last stroke [T - 1/f, T], every
+    ``TAIL_SAMPLE_INTERVAL``, the FOM state is rebuilt from the basis V,
+
+        u = V η,  u̇ = V η̇,  ü = V η̈,
+
+    and the FOM at ξ is linearised about it on the tail region (free nodes within
+    ``[optimizer] tail_region_radius`` of the tail node), coefficients frozen: the largest Re λ of
+    λ² M_t + λ C_t + K_t. Stops at the first state whose growth rate exceeds ``stop_above`` [1/s].
+    Every rank computes the same (the FOM's tangents are gathered on one rank).
+    """
+    xi = prom.xi_center if xi is None else np.asarray(xi, dtype=float)
+    result = simulate_reduced(prom, scene, xi)
+    if not result.completed:
+        return result.error
+    times = result.trajectory.arrays()["time"]
+    window_start = max(scene.solver.duration - 1.0 / scene.actuation.frequency, 0.0)
+    stride = max(1, round(TAIL_SAMPLE_INTERVAL / scene.solver.time_step))
+    samples = [k for k in np.flatnonzero(times >= window_start - 1e-9) if k > 0 and k % stride == 0]
+    model = FullOrderModel(scene, fish, xi, comm=MPI.COMM_SELF)
+    fastest, count = TailGrowth(np.nan, -np.inf, np.nan, 0), 0
+    try:
+        basis = np.column_stack([model.owned_values(prom.basis[:, :, j]) for j in range(prom.size)])
+        dofs = region_dofs(model, fish.tags.tail_node, scene.optimizer.tail_region_radius)
+        for count, k in enumerate(samples, start=1):
+            state = (basis @ result.states[k], basis @ result.velocities[k], basis @ result.accelerations[k])
+            eigenvalue = fastest_eigenvalue(*region_tangents(model, times[k], *state, dofs))
+            if eigenvalue.real > fastest.growth_rate:
+                fastest = TailGrowth(float(times[k]), eigenvalue.real, abs(eigenvalue.imag) / (2 * np.pi), 0)
+            if eigenvalue.real > stop_above:
+                break
+    finally:
+        model.destroy()
+    return TailGrowth(fastest.time, fastest.growth_rate, fastest.frequency, count)
+
+
+def prom_tail_stability(prom: ReducedModel, scene: Scene, fish: Fish, xi=None,
+                        amplitude: float | None = None) -> Stability:
+    """Does the thrust destabilise the tail at design ξ (amplitude A)? A screen for the PROM, whose
+    basis has no tail-local modes and whose own Floquet test cannot see them (README, "What stops
+    the A = 0.4 CO designs"):
+
+        unstable ⇔ max_t max Re λ(t) > σ_max = ``[optimizer] tail_growth_limit`` [1/s]
+
+    over the states of :func:`prom_tail_growth`; the first state over the limit decides. A PROM
+    run that stops is unstable with its stop message as the reason.
+    """
+    if amplitude is not None:
+        scene = scene.replace("actuation", amplitude=amplitude)
+    settings = scene.optimizer
+    growth = prom_tail_growth(prom, scene, fish, xi, stop_above=settings.tail_growth_limit)
+    if isinstance(growth, str):
+        return Stability(False, f"unstable: the PROM stops ({growth})")
+    where = (f"the tail region's fastest mode (free nodes within {settings.tail_region_radius:g} m of the tail node, "
+             f"linearised at the PROM's states) grows at {growth.growth_rate:.3g} 1/s ({growth.frequency:.3g} Hz) "
+             f"at t = {growth.time:.3g} s")
+    if growth.growth_rate > settings.tail_growth_limit:
+        return Stability(False, f"unstable: {where}, above the limit {settings.tail_growth_limit:g} 1/s")
+    return Stability(True, f"stable: {where}, within the limit {settings.tail_growth_limit:g} 1/s "
+                           f"({growth.states} PROM states linearised)")

@@ -269,6 +269,33 @@ def test_a_design_whose_prom_is_unstable_is_refused_as_infeasible(monkeypatch):
     assert len(verdicts) == 1
 
 
+def test_the_tail_screen_follows_a_stable_floquet_test_when_the_scene_asks_and_the_thrust_is_on(monkeypatch):
+    screened = []
+
+    def tail_unstable(prom, scene, fish, xi, amplitude):
+        screened.append(np.array(xi))
+        return False, "unstable: the tail region's fastest mode grows at 426 1/s (2.17e+03 Hz) at t = 1.08 s"
+
+    monkeypatch.setattr(prom_builder, "reduced_stability", lambda prom, scene, xi, amplitude: (True, "stable"))
+    monkeypatch.setattr(prom_builder, "prom_tail_stability", tail_unstable)
+    scene = coarse_scene(shapes=TOY_SHAPES, solver={"duration": 2.0}, optimizer={"tail_screen": True})
+    space = design_space(scene)
+    z = np.array([0.1, 0.02])
+    builder = prom_builder.PromBuilder(scene, load_fish(scene), space)
+    assert builder.stability_plan().startswith("the PROM's Floquet test at every PROM build, then the tail screen")
+    with pytest.raises(InputError, match=r"infeasible: its PROM is unstable \(unstable: the tail region's fastest "
+                                         r"mode grows at 426 1/s"):
+        builder._refuse_unstable(object(), z)
+    np.testing.assert_array_equal(screened[0], z[: space.n_shapes])
+    assert builder.screen_time > 0
+    for changed, skipped in ((scene.replace("optimizer", tail_screen=False), "[optimizer] tail_screen = false"),
+                             (scene.replace("fluid", thrust=False), "thrust off: nothing drives the tail")):
+        other = prom_builder.PromBuilder(changed, builder.fish, space)
+        other._refuse_unstable(object(), z)
+        assert other.stability_plan().endswith(f"tail screen skipped ({skipped})")
+    assert len(screened) == 1
+
+
 def test_builder_reuses_the_basis_within_half_the_validity_radius_and_records_it(toy_fish):
     scene = toy_scene("paper")
     space = design_space(scene)

@@ -3,10 +3,14 @@ import numpy as np
 import pytest
 
 from aquarom_fenics.dynamics.integrator import TimeScheme
+from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
 from aquarom_fenics.dynamics.simulate import simulate_fom
+from aquarom_fenics.errors import InputError
+from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.geometry.fish import load_fish
-from aquarom_fenics.verification.local_stability import (local_stability, pencil_eigenvalues, region_dofs,
-                                                         step_matrix, tangents)
+from aquarom_fenics.reduction.reductor import build_prom
+from aquarom_fenics.verification.local_stability import (local_stability, pencil_eigenvalues, prom_tail_growth,
+                                                         prom_tail_stability, region_dofs, step_matrix, tangents)
 from conftest import coarse_scene
 
 
@@ -119,3 +123,60 @@ def test_stability_script_writes_the_tail_modes_with_and_without_the_thrust(tmp_
     assert [m["time"] for m in modes["without_thrust"]] == pytest.approx([0.0, 0.2])
     # without the thrust the tail's frozen modes decay at every state of this mild run
     assert all(m["growth_rate"] < 0 and m["spectral_radius"] < 1 for m in modes["without_thrust"])
+
+
+def test_a_region_without_free_nodes_is_refused_in_one_line(swimming_run):
+    _, result = swimming_run
+    model = result.model
+    with pytest.raises(InputError, match=r"radius 0 m around node \d+ holds no free node; the nearest free node is "
+                                         r"[\d.e-]+ m away: use a larger radius"):
+        region_dofs(model, model.fish.tags.tail_node, 0.0)
+
+
+@pytest.fixture(scope="module")
+def swimming_prom():
+    scene = coarse_scene(solver={"duration": 0.2}, actuation={"amplitude": 0.4})
+    fish = load_fish(scene)
+    return scene, fish, build_prom(scene, fish=fish)
+
+
+def test_the_tail_screen_linearises_the_fom_at_the_proms_rebuilt_states(swimming_prom):
+    """prom_tail_growth equals local_stability of the FOM at (V η, V η̇, V η̈) of every PROM step in the
+    window (here the whole horizon, shorter than a stroke), and the PROM's rates are those of its η."""
+    scene, fish, prom = swimming_prom
+    growth = prom_tail_growth(prom, scene, fish)
+    run = simulate_reduced(prom, scene)
+    h = scene.solver.time_step
+    scheme = TimeScheme.from_solver(scene.solver)
+    for k in range(len(run.states) - 1):      # (η̇, η̈)_{k+1} are the scheme's corrector of η_{k+1}
+        velocity, acceleration = scheme.correct(
+            run.states[k + 1], *scheme.predict(run.states[k], run.velocities[k], run.accelerations[k]))
+        np.testing.assert_allclose(velocity, run.velocities[k + 1], rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(acceleration, run.accelerations[k + 1], rtol=1e-10, atol=1e-9)
+    model = FullOrderModel(scene, fish)
+    basis = np.column_stack([model.owned_values(prom.basis[:, :, j]) for j in range(prom.size)])
+    dofs = region_dofs(model, fish.tags.tail_node, scene.optimizer.tail_region_radius)
+    times = run.trajectory.arrays()["time"]
+    rates = [local_stability(model, times[k], basis @ run.states[k], basis @ run.velocities[k],
+                             basis @ run.accelerations[k], dofs, model.scheme).growth_rate
+             for k in range(1, len(times))]
+    model.destroy()
+    assert growth.states == len(rates) == round(scene.solver.duration / h)
+    assert growth.growth_rate == pytest.approx(max(rates), rel=1e-8)
+    assert growth.time == pytest.approx(times[1 + int(np.argmax(rates))])
+
+
+def test_the_tail_screen_refuses_growth_above_the_limit(swimming_prom):
+    scene, fish, prom = swimming_prom
+    growth = prom_tail_growth(prom, scene, fish)
+    assert growth.growth_rate > 0         # the 0.4 stroke feeds the tail a little at this mesh
+    below = scene.replace("optimizer", tail_growth_limit=0.5 * growth.growth_rate)
+    stable, reason = prom_tail_stability(prom, below, fish)
+    assert not stable
+    radius = scene.optimizer.tail_region_radius
+    assert reason.startswith(f"unstable: the tail region's fastest mode (free nodes within {radius:g} m of the tail "
+                             f"node, linearised at the PROM's states) grows at {growth.growth_rate:.3g} 1/s")
+    assert reason.endswith(f"above the limit {0.5 * growth.growth_rate:g} 1/s")
+    stable, reason = prom_tail_stability(prom, scene.replace("optimizer", tail_growth_limit=2 * growth.growth_rate),
+                                         fish)
+    assert stable and f"({growth.states} PROM states linearised)" in reason
