@@ -89,6 +89,7 @@ class FullOrderModel:
         self._work_in = PETSc.Vec().createMPI((self.n_owned_dofs, self.n_global_dofs), comm=comm)
         self._work_out = self._work_in.duplicate()
         self._solver = None
+        self._inertia_damping = self._inertia_damping_on_newton_pattern = None
         self.set_time_step(TimeScheme.from_solver(scene.solver))
 
     # ------------------------------------------------------------------ set-up
@@ -199,6 +200,9 @@ class FullOrderModel:
     def set_time_step(self, scheme: TimeScheme) -> None:
         """The scheme's factors enter S = (1 - α_f) K_t + (1 - α_f)(γ/(βh)) C_t + ((1 - α_m)/(βh²)) M_t."""
         self.scheme = scheme
+        for previous in (self._inertia_damping, self._inertia_damping_on_newton_pattern):
+            if previous is not None:        # petsc4py does not free them (see destroy)
+                previous.destroy()
         self._inertia_damping = self.inertia.newton_block(scheme.acceleration_factor, scheme.velocity_factor)
         self._inertia_damping_on_newton_pattern = None
 

@@ -81,6 +81,17 @@ def test_newton_matrix_is_the_derivative_of_the_step_residual(shaped_model, inte
         assert relative_error(model.matvec(matrix, direction), finite_difference) < 1e-6
 
 
+
+def test_a_new_time_step_frees_the_matrices_of_the_previous_one(shaped_model):
+    """Step cuts and the tangent extraction change h many times per run: the Newton blocks of the old
+    step are destroyed (petsc4py would keep them: tens of MB per change at degree 2, level 2)."""
+    model = shaped_model
+    model.assemble_newton_matrix(0.0, *(np.zeros(model.n_owned_dofs),) * 3)
+    previous = (model._inertia_damping, model._inertia_damping_on_newton_pattern)
+    model.set_time_step(TimeScheme.from_solver(coarse_scene(solver={"time_step": 0.01}).solver))
+    assert [matrix.handle for matrix in previous] == [0, 0]
+    model.set_time_step(TimeScheme.from_solver(coarse_scene().solver))
+
 @pytest.mark.parametrize("degree", [1, 2])
 def test_design_pulled_back_equals_design_meshed_directly(degree):
     scene = coarse_scene(shapes=SHAPES, solver={"duration": 0.2}, mesh={"degree": degree})
