@@ -180,3 +180,34 @@ def test_the_tail_screen_refuses_growth_above_the_limit(swimming_prom):
     stable, reason = prom_tail_stability(prom, scene.replace("optimizer", tail_growth_limit=2 * growth.growth_rate),
                                          fish)
     assert stable and f"({growth.states} PROM states linearised)" in reason
+
+
+def test_tail_screen_script_records_each_pareto_points_screen_next_to_its_fom_check(tmp_path):
+    import importlib.util
+    import json
+    from pathlib import Path
+
+    repository = Path(__file__).resolve().parents[2]
+    spec = importlib.util.spec_from_file_location("tail_screen_co", repository / "scripts" / "tail_screen_co.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    scene_file = tmp_path / "co_coarse.toml"
+    scene_file.write_text((repository / "scenes" / "co.toml").read_text().replace("level = 2", "level = 1").replace(
+        "degree = 2", "degree = 1") + "\n[solver]\nduration = 0.2\n")
+    names = ("z_tail", "z_head", "y_lin_long_tail", "y_head", "y_ellipse")
+    for w1, amplitude, error in ((0.3, 0.1, None), (0.9, 0.4, "FOM stopped at t = 0.1 s")):
+        (tmp_path / "pareto" / f"w1_{w1}").mkdir(parents=True)
+        (tmp_path / "pareto" / f"w1_{w1}" / "summary.json").write_text(json.dumps({
+            "optimum": {**dict.fromkeys(names, 0.0), "amplitude": amplitude},
+            "cost_weights": {"distance": w1, "energy": 1 - w1, "alpha": 1.0},
+            "fom_check": {"error": error, "optimal_distance": None if error else 0.01}}))
+    assert script.main(["--pareto", str(tmp_path / "pareto"), "--scene", str(scene_file), "--radii", "0.015",
+                        "--out", str(tmp_path)]) == 0
+    record = json.loads((tmp_path / "tail_screen_co.json").read_text())
+    completed, stopped = record["points"]
+    assert (completed["w1"], completed["fom_completed"], stopped["fom_completed"]) == (0.3, True, False)
+    growth = [point["screen"]["0.015"]["growth_rate"] for point in (completed, stopped)]
+    assert all(point["screen"]["0.015"]["states"] == 10 for point in (completed, stopped))
+    separation = record["separation"]["0.015"]
+    assert (separation["largest_growth_of_completed"], separation["smallest_growth_of_stopped"]) == tuple(growth)
+    assert separation["limit_separates"] == (growth[0] <= record["tail_growth_limit"] < growth[1])
