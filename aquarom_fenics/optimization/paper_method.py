@@ -62,13 +62,13 @@ def paper_method(scene, space, builder, weights, history, checkpoint, state, saf
                     prom = builder.build(z)
                 else:
                     builder.refuse_infeasible(prom, z)
-            except InputError as refused:      # the mesh check refuses the design: step back halfway
+            except InputError as refused:      # the mesh check or a stability test refuses z: step back halfway
                 if center is None:
                     raise
                 if np.abs(z - np.array(center["z"])).max() < settings.step_tolerance:
                     # every step from the last accepted design is refused: it is the answer
-                    reason = (f"the design check refuses every step from the last accepted design (within the "
-                              f"step tolerance {settings.step_tolerance:g}; {refused})")
+                    reason = (f"every step from the last accepted design is refused (within the step tolerance "
+                              f"{settings.step_tolerance:g}; by the design check or the stability tests: {refused})")
                     z = np.array(center["z"])
                     break
                 log.warning("paper method: %s; stepping back towards the last linearisation centre", refused)

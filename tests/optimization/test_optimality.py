@@ -205,5 +205,5 @@ def test_paper_method_stops_at_the_last_accepted_design_when_the_check_refuses_e
     scene = toy("paper")
     space = optimize_module.optimization_space(scene, fish)
     result = optimize(scene, fish=fish, builder=CheckedSlopeBuilder(scene, fish, space))
-    assert result.stop_reason.startswith("the design check refuses every step"), result.stop_reason
+    assert result.stop_reason.startswith("every step from the last accepted design is refused"), result.stop_reason
     assert 0.04 < result.optimum[0] <= 0.05 and abs(result.optimum[1]) < 0.01 * 0.2
