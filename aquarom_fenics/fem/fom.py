@@ -262,9 +262,13 @@ class FullOrderModel:
         """S = ∂r_{n+1-α}/∂u_{n+1} = (1 - α_f) K_t + (1 - α_f)(γ/(βh)) C_t + ((1 - α_m)/(βh²)) M_t at the
         evaluation point (t, u, u̇, ü), with the exact thrust and drag Jacobians."""
         self._set_state(time, u)
-        matrix = fx.assemble_matrix_into(self.tangent_matrix, self._tangent)
-        if self.scheme.stiffness_factor != 1.0:
-            matrix.scale(self.scheme.stiffness_factor)
+        if self.scheme.stiffness_factor == 0.0:         # no K_t term (only the tangents' extraction asks)
+            matrix = self.tangent_matrix
+            matrix.zeroEntries()
+        else:
+            matrix = fx.assemble_matrix_into(self.tangent_matrix, self._tangent)
+            if self.scheme.stiffness_factor != 1.0:
+                matrix.scale(self.scheme.stiffness_factor)
         if self.thrust is not None:
             self.thrust.add_newton_matrix(matrix, self.scheme, u, v, a)
         if self.drag is not None:

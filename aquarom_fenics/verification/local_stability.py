@@ -66,14 +66,13 @@ def tangents(model, time: float, u, v, a) -> tuple[scipy.sparse.csr_matrix, ...]
     scheme = model.scheme
     matrices = []
     try:
-        for factors in ((1.0, 0.0, 0.0), (1.0, 1.0, 0.0), (1.0, 0.0, 1.0)):
+        for factors in ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)):     # K_t, then C_t and M_t
             model.set_time_step(_TangentFactors(*factors))
             rows, columns, values = model.assemble_newton_matrix(time, u, v, a).getValuesCSR()
             matrices.append(scipy.sparse.csr_matrix((values.copy(), columns.copy(), rows.copy())))
     finally:
         model.set_time_step(scheme)
-    stiffness, with_damping, with_mass = matrices
-    return stiffness, with_damping - stiffness, with_mass - stiffness
+    return tuple(matrices)
 
 
 def region_dofs(model, center_node: int, radius: float) -> np.ndarray:
