@@ -12,6 +12,8 @@ import numpy as np
 from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS, block_cache_path
 from aquarom_fenics.io.paths import bench_results
 from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.optimization.prom_builder import STABILITY_STROKES, stability_plan
+from aquarom_fenics.verification.local_stability import TAIL_SAMPLE_INTERVAL
 from aquarom_fenics.reduction.basis import candidate_labels, response_labels
 
 # Reference costs at 7944 cells (level 3, 2 cores): FOM 2 s simulation, PROM build with p
@@ -21,6 +23,8 @@ REFERENCE_FOM_SECONDS = 10.3
 REFERENCE_FOM_EXPONENT = 1.1
 QUADRATIC_COST_FACTOR = {1: 1.0, 2: 8.6}
 """Cost of a quadratic mesh against the linear one on the same cells (level 1 FOM: 16.4 s against 1.9 s)."""
+TAIL_SCREEN_SECONDS_PER_STATE = 0.63
+"""Tail screen per linearised state at the default mesh (degree 2, level 2: 32 s for 51 states)."""
 
 
 def power_law_fit(sizes, times) -> dict | None:
@@ -32,6 +36,16 @@ def power_law_fit(sizes, times) -> dict | None:
         return None
     exponent, intercept = np.polyfit(np.log(sizes[keep]), np.log(times[keep]), 1)
     return {"exponent": float(exponent), "prefactor": float(np.exp(intercept)), "points": int(keep.sum())}
+
+
+def tail_screen_seconds(scene: Scene) -> float:
+    """Estimated time of one tail screen [s] (0 when the optimisers skip it): the states of the last
+    stroke at the default mesh's cost per state, whatever the mesh."""
+    strokes = scene.solver.duration * scene.actuation.frequency
+    if not (scene.optimizer.tail_screen and scene.fluid.thrust) or strokes < STABILITY_STROKES:
+        return 0.0
+    interval = max(1, round(TAIL_SAMPLE_INTERVAL / scene.solver.time_step)) * scene.solver.time_step
+    return (round(1.0 / scene.actuation.frequency / interval) + 1) * TAIL_SCREEN_SECONDS_PER_STATE
 
 
 def fom_seconds(cells: int, steps: int, degree: int = 1) -> float:
@@ -120,8 +134,11 @@ def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
         builds = max(2, settings.max_iterations // max(settings.n_rebuild, 1)) if settings.method == "paper" else 8
         lines.append(f"optimiser: {settings.method}, at most {settings.max_iterations} iterations, ~{builds} PROM "
                      f"builds per run ({runs} run{'s' if runs > 1 else ''}), sensitivities dη/dξ at every built PROM")
+        screen = tail_screen_seconds(scene)
+        lines.append(f"stability: {stability_plan(scene)}" + (f", ~{screen:.0f} s per screen" if screen else ""))
         lines.append(f"FOM checks: start and optimal design per run (~{fom_time:.0f} s each; the start is cached)")
-        total = runs * (builds * (prom_build_seconds(cells, len(scene.shapes), degree) + 0.2) + 2 * fom_time)
+        total = runs * (builds * (prom_build_seconds(cells, len(scene.shapes), degree) + 0.2 + screen)
+                        + 2 * fom_time)
         lines.append(f"estimate: ~{total:.0f} s")
     elif command == "build":
         lines.append(f"estimate: ~{prom_build_seconds(cells, len(scene.shapes), degree):.1f} s")

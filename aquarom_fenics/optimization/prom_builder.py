@@ -27,6 +27,19 @@ BASIS_REUSE_FRACTION = 0.5
 log = logging.getLogger("aquarom")
 
 
+def stability_plan(scene: Scene) -> str:
+    """What :meth:`PromBuilder._refuse_unstable` judges at every build, and what it skips, one line."""
+    if scene.solver.duration * scene.actuation.frequency < STABILITY_STROKES:
+        return f"not judged (horizon below {STABILITY_STROKES} strokes)"
+    floquet = "the PROM's Floquet test at every PROM build"
+    if not scene.optimizer.tail_screen:
+        return f"{floquet}; tail screen skipped ([optimizer] tail_screen = false)"
+    if not scene.fluid.thrust:
+        return f"{floquet}; tail screen skipped (thrust off: nothing drives the tail)"
+    return (f"{floquet}, then the tail screen (the FOM's tail region within {scene.optimizer.tail_region_radius:g} m "
+            f"linearised at the PROM's last-stroke states, growth limit {scene.optimizer.tail_growth_limit:g} 1/s)")
+
+
 class PromBuilder:
     """Builds PROMs centred on designs, counting builds, cache reuses, basis reuses and their time.
 
@@ -114,18 +127,7 @@ class PromBuilder:
         self._refuse_unstable(prom, z)
 
     def stability_plan(self) -> str:
-        """What :meth:`_refuse_unstable` judges at every build, and what it skips, one line."""
-        scene = self.scene
-        if scene.solver.duration * scene.actuation.frequency < STABILITY_STROKES:
-            return f"not judged (horizon below {STABILITY_STROKES} strokes)"
-        floquet = "the PROM's Floquet test at every PROM build"
-        if not scene.optimizer.tail_screen:
-            return f"{floquet}; tail screen skipped ([optimizer] tail_screen = false)"
-        if not scene.fluid.thrust:
-            return f"{floquet}; tail screen skipped (thrust off: nothing drives the tail)"
-        return (f"{floquet}, then the tail screen (the FOM's tail region within "
-                f"{scene.optimizer.tail_region_radius:g} m linearised at the PROM's last-stroke states, growth limit "
-                f"{scene.optimizer.tail_growth_limit:g} 1/s)")
+        return stability_plan(self.scene)
 
     def _refuse_unstable(self, prom: ReducedModel, z: np.ndarray) -> None:
         """A design whose PROM gait is unstable (Floquet multiplier |μ| > 1.01 over the last stroke,
