@@ -24,8 +24,8 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-from mpi4py import MPI
 import scipy.sparse
+from mpi4py import MPI
 
 from aquarom_fenics.dynamics.integrator import TimeScheme
 from aquarom_fenics.dynamics.reduced_dynamics import Stability, simulate_reduced
