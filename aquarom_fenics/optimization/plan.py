@@ -12,8 +12,8 @@ import numpy as np
 from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS, block_cache_path
 from aquarom_fenics.io.paths import bench_results
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.optimization.prom_builder import STABILITY_STROKES, stability_plan
-from aquarom_fenics.verification.local_stability import TAIL_SAMPLE_INTERVAL
+from aquarom_fenics.optimization.prom_builder import screens_tail, stability_plan
+from aquarom_fenics.verification.local_stability import tail_sample_steps
 from aquarom_fenics.reduction.basis import candidate_labels, response_labels
 
 # Reference costs at 7944 cells (level 3, 2 cores): FOM 2 s simulation, PROM build with p
@@ -41,11 +41,7 @@ def power_law_fit(sizes, times) -> dict | None:
 def tail_screen_seconds(scene: Scene) -> float:
     """Estimated time of one tail screen [s] (0 when the optimisers skip it): the states of the last
     stroke at the default mesh's cost per state, whatever the mesh."""
-    strokes = scene.solver.duration * scene.actuation.frequency
-    if not (scene.optimizer.tail_screen and scene.fluid.thrust) or strokes < STABILITY_STROKES:
-        return 0.0
-    interval = max(1, round(TAIL_SAMPLE_INTERVAL / scene.solver.time_step)) * scene.solver.time_step
-    return (round(1.0 / scene.actuation.frequency / interval) + 1) * TAIL_SCREEN_SECONDS_PER_STATE
+    return tail_sample_steps(scene).size * TAIL_SCREEN_SECONDS_PER_STATE if screens_tail(scene) else 0.0
 
 
 def fom_seconds(cells: int, steps: int, degree: int = 1) -> float:

@@ -27,9 +27,20 @@ BASIS_REUSE_FRACTION = 0.5
 log = logging.getLogger("aquarom")
 
 
+def judges_stability(scene: Scene) -> bool:
+    """Whether the horizon holds the strokes a stability verdict needs (a start-up from rest is no
+    periodic gait)."""
+    return scene.solver.duration * scene.actuation.frequency >= STABILITY_STROKES
+
+
+def screens_tail(scene: Scene) -> bool:
+    """Whether the builds run the tail screen: judged horizon, ``[optimizer] tail_screen``, thrust on."""
+    return judges_stability(scene) and scene.optimizer.tail_screen and scene.fluid.thrust
+
+
 def stability_plan(scene: Scene) -> str:
     """What :meth:`PromBuilder._refuse_unstable` judges at every build, and what it skips, one line."""
-    if scene.solver.duration * scene.actuation.frequency < STABILITY_STROKES:
+    if not judges_stability(scene):
         return f"not judged (horizon below {STABILITY_STROKES} strokes)"
     floquet = "the PROM's Floquet test at every PROM build"
     if not scene.optimizer.tail_screen:
@@ -135,13 +146,12 @@ class PromBuilder:
         Judged only on horizons of two strokes or more (a start-up from rest is no periodic gait).
         With ``[optimizer] tail_screen`` and the thrust on, so is a design whose tail region the
         thrust destabilises (``prom_tail_stability``)."""
-        actuation = self.scene.actuation
-        if self.scene.solver.duration * actuation.frequency < STABILITY_STROKES:
+        if not judges_stability(self.scene):
             return
         amplitude = float(z[-1]) if self.space.with_amplitude else None
         xi = z[: self.space.n_shapes]
         stable, reason = reduced_stability(prom, self.scene, xi, amplitude)
-        if stable and self.scene.optimizer.tail_screen and self.scene.fluid.thrust:
+        if stable and screens_tail(self.scene):
             started = time.perf_counter()
             stable, reason = prom_tail_stability(prom, self.scene, self.fish, xi, amplitude)
             elapsed = time.perf_counter() - started

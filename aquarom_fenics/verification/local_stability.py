@@ -29,11 +29,13 @@ from mpi4py import MPI
 
 from aquarom_fenics.dynamics.integrator import TimeScheme
 from aquarom_fenics.dynamics.reduced_dynamics import Stability, simulate_reduced
+from aquarom_fenics.dynamics.simulate import check_time_grid
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.geometry.fish import Fish
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.reduction.prom import ReducedModel
+from aquarom_fenics.reduction.reductor import reused_basis
 
 
 @dataclass(frozen=True)
@@ -137,6 +139,16 @@ TAIL_SAMPLE_INTERVAL = 0.02
 midline crossings)."""
 
 
+def tail_sample_steps(scene: Scene) -> np.ndarray:
+    """Steps k (t = k h) whose states the tail screen linearises: the last stroke [T - 1/f, T] (the
+    whole horizon if shorter), every ``TAIL_SAMPLE_INTERVAL``, never the rest state k = 0."""
+    h, n_steps = scene.solver.time_step, check_time_grid(scene)
+    window_start = max(scene.solver.duration - 1.0 / scene.actuation.frequency, 0.0)
+    stride = max(1, round(TAIL_SAMPLE_INTERVAL / h))
+    steps = np.arange(max(int(np.ceil(window_start / h - 1e-9)), 1), n_steps + 1)
+    return steps[steps % stride == 0]
+
+
 @dataclass(frozen=True)
 class TailGrowth:
     """The fastest tail mode the screen met over the PROM states it linearised."""
@@ -166,15 +178,12 @@ def prom_tail_growth(prom: ReducedModel, scene: Scene, fish: Fish, xi=None,
     if not result.completed:
         return result.error
     times = result.trajectory.arrays()["time"]
-    window_start = max(scene.solver.duration - 1.0 / scene.actuation.frequency, 0.0)
-    stride = max(1, round(TAIL_SAMPLE_INTERVAL / scene.solver.time_step))
-    samples = [k for k in np.flatnonzero(times >= window_start - 1e-9) if k > 0 and k % stride == 0]
     model = FullOrderModel(scene, fish, xi, comm=MPI.COMM_SELF)
     fastest, count = TailGrowth(np.nan, -np.inf, np.nan, 0), 0
     try:
-        basis = np.column_stack([model.owned_values(prom.basis[:, :, j]) for j in range(prom.size)])
+        basis = reused_basis(model, prom).vectors
         dofs = region_dofs(model, fish.tags.tail_node, scene.optimizer.tail_region_radius)
-        for count, k in enumerate(samples, start=1):
+        for count, k in enumerate(tail_sample_steps(scene), start=1):
             state = (basis @ result.states[k], basis @ result.velocities[k], basis @ result.accelerations[k])
             eigenvalue = fastest_eigenvalue(*region_tangents(model, times[k], *state, dofs))
             if eigenvalue.real > fastest.growth_rate:

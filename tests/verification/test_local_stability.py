@@ -8,7 +8,7 @@ from aquarom_fenics.dynamics.simulate import simulate_fom
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.geometry.fish import load_fish
-from aquarom_fenics.reduction.reductor import build_prom
+from aquarom_fenics.reduction.reductor import build_prom, reused_basis
 from aquarom_fenics.verification.local_stability import (local_stability, pencil_eigenvalues, prom_tail_growth,
                                                          prom_tail_stability, region_dofs, step_matrix, tangents)
 from conftest import coarse_scene
@@ -154,7 +154,7 @@ def test_the_tail_screen_linearises_the_fom_at_the_proms_rebuilt_states(swimming
         np.testing.assert_allclose(velocity, run.velocities[k + 1], rtol=1e-10, atol=1e-12)
         np.testing.assert_allclose(acceleration, run.accelerations[k + 1], rtol=1e-10, atol=1e-9)
     model = FullOrderModel(scene, fish)
-    basis = np.column_stack([model.owned_values(prom.basis[:, :, j]) for j in range(prom.size)])
+    basis = reused_basis(model, prom).vectors
     dofs = region_dofs(model, fish.tags.tail_node, scene.optimizer.tail_region_radius)
     times = run.trajectory.arrays()["time"]
     rates = [local_stability(model, times[k], basis @ run.states[k], basis @ run.velocities[k],
