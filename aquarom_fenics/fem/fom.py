@@ -10,6 +10,9 @@ points, SPEC §4) or meshed directly (``moved_mesh``, u_ξ = 0).
 """
 from __future__ import annotations
 
+from collections.abc import Iterator
+from dataclasses import dataclass
+
 import numpy as np
 import ufl
 from mpi4py import MPI
@@ -26,6 +29,15 @@ from aquarom_fenics.physics.elastic import ElasticTerm
 from aquarom_fenics.physics.inertia import InertiaTerm
 from aquarom_fenics.physics.muscle import MuscleTerm
 from aquarom_fenics.physics.thrust_term import ThrustTerm
+
+
+@dataclass(frozen=True)
+class TangentFactors:
+    """Factors of S = k_u K_t + k_v C_t + k_a M_t that pick one tangent."""
+
+    stiffness_factor: float
+    velocity_factor: float
+    acceleration_factor: float
 
 
 def direct_solver(comm: MPI.Comm) -> PETSc.KSP:
@@ -89,7 +101,8 @@ class FullOrderModel:
         self._work_in = PETSc.Vec().createMPI((self.n_owned_dofs, self.n_global_dofs), comm=comm)
         self._work_out = self._work_in.duplicate()
         self._solver = None
-        self._inertia_damping = self._inertia_damping_on_newton_pattern = None
+        self._inertia_damping = None
+        self._on_newton_pattern: dict[str, PETSc.Mat] = {}
         self.set_time_step(TimeScheme.from_solver(scene.solver))
 
     # ------------------------------------------------------------------ set-up
@@ -200,11 +213,10 @@ class FullOrderModel:
     def set_time_step(self, scheme: TimeScheme) -> None:
         """The scheme's factors enter S = (1 - α_f) K_t + (1 - α_f)(γ/(βh)) C_t + ((1 - α_m)/(βh²)) M_t."""
         self.scheme = scheme
-        for previous in (self._inertia_damping, self._inertia_damping_on_newton_pattern):
+        for previous in (self._inertia_damping, self._on_newton_pattern.pop("inertia_damping", None)):
             if previous is not None:        # petsc4py does not free them (see destroy)
                 previous.destroy()
         self._inertia_damping = self.inertia.newton_block(scheme.acceleration_factor, scheme.velocity_factor)
-        self._inertia_damping_on_newton_pattern = None
 
     # ------------------------------------------------------------------ evaluations
     def set_displacement(self, u: np.ndarray) -> None:
@@ -261,31 +273,45 @@ class FullOrderModel:
     def assemble_newton_matrix(self, time, u, v, a) -> PETSc.Mat:
         """S = ∂r_{n+1-α}/∂u_{n+1} = (1 - α_f) K_t + (1 - α_f)(γ/(βh)) C_t + ((1 - α_m)/(βh²)) M_t at the
         evaluation point (t, u, u̇, ü), with the exact thrust and drag Jacobians."""
+        return self._combine_tangents(self.scheme, ("inertia_damping", self._inertia_damping), time, u, v, a)
+
+    def tangents(self, time, u, v, a) -> Iterator[PETSc.Mat]:
+        """K_t = ∂r/∂u, C_t = ∂r/∂u̇ and M_t = ∂r/∂ü at (t, u, u̇, ü), in that order, each in the Newton
+        matrix's storage and valid until the next one is made (fixed dofs: unit rows); the Newton
+        matrix of the scheme is made anew at its next assembly."""
+        yield self._combine_tangents(TangentFactors(1.0, 0.0, 0.0), None, time, u, v, a)
+        yield self._combine_tangents(TangentFactors(0.0, 1.0, 0.0), ("damping", self.damping_matrix), time, u, v, a)
+        yield self._combine_tangents(TangentFactors(0.0, 0.0, 1.0), ("mass", self.mass_matrix), time, u, v, a)
+
+    def _combine_tangents(self, factors, constant: tuple[str, PETSc.Mat] | None, time, u, v, a) -> PETSc.Mat:
+        """k_u K_t + k_v C_t + k_a M_t from the factors' k and ``constant`` = (name, k_a M + k_v C)."""
         self._set_state(time, u)
-        if self.scheme.stiffness_factor == 0.0:         # no K_t term (only the tangents' extraction asks)
-            matrix = self.tangent_matrix
+        matrix = self.tangent_matrix
+        if factors.stiffness_factor == 0.0:
             matrix.zeroEntries()
         else:
-            matrix = fx.assemble_matrix_into(self.tangent_matrix, self._tangent)
-            if self.scheme.stiffness_factor != 1.0:
-                matrix.scale(self.scheme.stiffness_factor)
+            fx.assemble_matrix_into(matrix, self._tangent)
+            if factors.stiffness_factor != 1.0:
+                matrix.scale(factors.stiffness_factor)
         if self.thrust is not None:
-            self.thrust.add_newton_matrix(matrix, self.scheme, u, v, a)
+            self.thrust.add_newton_matrix(matrix, factors, u, v, a)
         if self.drag is not None:
-            self.drag.add_newton_matrix(matrix, self.scheme.velocity_factor, v)
+            self.drag.add_newton_matrix(matrix, factors.velocity_factor, v)
         matrix.assemble()
-        matrix.axpy(1.0, self._inertia_damping_on(matrix), structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+        if constant is not None:
+            matrix.axpy(1.0, self._stored_on_newton_pattern(*constant),
+                        structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
         matrix.zeroRowsColumns(self.global_dofs(self.fixed_dofs), diag=1.0)
         return matrix
 
-    def _inertia_damping_on(self, matrix: PETSc.Mat) -> PETSc.Mat:
-        """(1 - α_f)(γ/(βh)) C + ((1 - α_m)/(βh²)) M stored on the pattern of the Newton matrix (tangent,
+    def _stored_on_newton_pattern(self, name: str, constant: PETSc.Mat) -> PETSc.Mat:
+        """A copy of ``constant`` (kept under ``name``) on the pattern of the Newton matrix (tangent,
         thrust and drag entries), so that adding it is one pass over the values."""
-        if self._inertia_damping_on_newton_pattern is None:
-            padded = matrix.duplicate(copy=False)
-            padded.axpy(1.0, self._inertia_damping, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
-            self._inertia_damping_on_newton_pattern = padded
-        return self._inertia_damping_on_newton_pattern
+        if name not in self._on_newton_pattern:
+            padded = self.tangent_matrix.duplicate(copy=False)
+            padded.axpy(1.0, constant, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+            self._on_newton_pattern[name] = padded
+        return self._on_newton_pattern[name]
 
     def factorize(self, time, u, v, a) -> None:
         if self._solver is None:

@@ -38,15 +38,6 @@ from aquarom_fenics.reduction.prom import ReducedModel
 from aquarom_fenics.reduction.reductor import reused_basis
 
 
-@dataclass(frozen=True)
-class _TangentFactors:
-    """Factors of the Newton matrix S = k_u K_t + k_v C_t + k_a M_t that pick one tangent."""
-
-    stiffness_factor: float
-    velocity_factor: float
-    acceleration_factor: float
-
-
 @dataclass
 class LocalStability:
     """The region's frozen linearisation at one state."""
@@ -62,19 +53,15 @@ class LocalStability:
 
 
 def tangents(model, time: float, u, v, a) -> tuple[scipy.sparse.csr_matrix, ...]:
-    """(K_t, C_t, M_t) of a serial FOM at a state, from its Newton matrix (fixed dofs: unit rows)."""
+    """(K_t, C_t, M_t) of a serial FOM at a state (fixed dofs: unit rows)."""
     if model.comm.size > 1:
         raise ValueError("the local stability analysis runs on one rank")
-    scheme = model.scheme
-    matrices = []
-    try:
-        for factors in ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)):     # K_t, then C_t and M_t
-            model.set_time_step(_TangentFactors(*factors))
-            rows, columns, values = model.assemble_newton_matrix(time, u, v, a).getValuesCSR()
-            matrices.append(scipy.sparse.csr_matrix((values.copy(), columns.copy(), rows.copy())))
-    finally:
-        model.set_time_step(scheme)
-    return tuple(matrices)
+    return tuple(_scipy_copy(matrix) for matrix in model.tangents(time, u, v, a))
+
+
+def _scipy_copy(matrix) -> scipy.sparse.csr_matrix:
+    rows, columns, values = matrix.getValuesCSR()
+    return scipy.sparse.csr_matrix((values.copy(), columns.copy(), rows.copy()))
 
 
 def region_dofs(model, center_node: int, radius: float) -> np.ndarray:

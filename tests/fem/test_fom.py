@@ -87,7 +87,7 @@ def test_a_new_time_step_frees_the_matrices_of_the_previous_one(shaped_model):
     step are destroyed (petsc4py would keep them: tens of MB per change at degree 2, level 2)."""
     model = shaped_model
     model.assemble_newton_matrix(0.0, *(np.zeros(model.n_owned_dofs),) * 3)
-    previous = (model._inertia_damping, model._inertia_damping_on_newton_pattern)
+    previous = (model._inertia_damping, model._on_newton_pattern["inertia_damping"])
     model.set_time_step(TimeScheme.from_solver(coarse_scene(solver={"time_step": 0.01}).solver))
     assert [matrix.handle for matrix in previous] == [0, 0]
     model.set_time_step(TimeScheme.from_solver(coarse_scene().solver))
@@ -170,3 +170,21 @@ def test_steps_that_fail_are_cut_and_counted_in_the_summary(tmp_path):
     assert len(result.trajectory) == 26        # the samples stay on the grid of h
     uncut = simulate_fom(strong.replace("solver", min_time_step=strong.solver.time_step), progress=False)
     assert not uncut.completed and uncut.cut_steps == 0
+
+
+def test_tangents_combine_to_the_newton_matrix(shaped_model):
+    """k_u K_t + k_v C_t + k_a M_t = S on the free rows at a moving state, and S is intact after the tangents."""
+    model = shaped_model
+    rng = np.random.default_rng(1)
+    u, v, a = (scale * rng.normal(size=model.n_owned_dofs) for scale in (1e-4, 1e-3, 1e-2))
+    u[model.fixed_dofs] = v[model.fixed_dofs] = a[model.fixed_dofs] = 0.0
+    direction = rng.normal(size=model.n_owned_dofs)
+    direction[model.fixed_dofs] = 0.0
+    newton_product = model.matvec(model.assemble_newton_matrix(0.3, u, v, a), direction)
+    scheme = model.scheme
+    factors = (scheme.stiffness_factor, scheme.velocity_factor, scheme.acceleration_factor)
+    combined = sum(factor * model.matvec(matrix, direction)
+                   for factor, matrix in zip(factors, model.tangents(0.3, u, v, a)))
+    free = free_dofs_mask(model)
+    assert relative_error(combined[free], newton_product[free]) < 1e-12
+    assert relative_error(model.matvec(model.assemble_newton_matrix(0.3, u, v, a), direction), newton_product) < 1e-14
