@@ -85,8 +85,11 @@ def clamped_stiffness(fom: FullOrderModel) -> PETSc.Mat:
     return matrix
 
 
-def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int) -> tuple[np.ndarray, np.ndarray]:
-    """The ``count`` lowest modes (owned dofs, columns) and their frequencies ω/2π [Hz]."""
+def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int,
+                    factors: PETSc.KSP | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The ``count`` lowest modes (owned dofs, columns) and their frequencies ω/2π [Hz], from
+    (K - σ M)⁻¹ M x = x/(ω² - σ) at σ = 0. ``factors``, a direct solver of ``stiffness``, lends its
+    factorisation of K to the shift-invert and keeps it for the caller's own solves."""
     mass = fom.mass_matrix.copy()
     mass.zeroRowsColumns(fom.global_dofs(fom.clamped_dofs), diag=0.0)
     solver = SLEPc.EPS().create(fom.comm)
@@ -98,10 +101,14 @@ def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int) -> tu
     spectral = solver.getST()
     spectral.setType(SLEPc.ST.Type.SINVERT)
     spectral.setShift(0.0)
-    inner = spectral.getKSP()
-    inner.setType("preonly")
-    inner.getPC().setType("lu")
-    inner.getPC().setFactorSolverType("mumps")
+    if factors is not None:
+        spectral.setMatMode(SLEPc.ST.MatMode.INPLACE)       # K - 0 M is K itself: no copy, no new factors
+        spectral.setKSP(factors)
+    else:
+        inner = spectral.getKSP()
+        inner.setType("preonly")
+        inner.getPC().setType("lu")
+        inner.getPC().setFactorSolverType("mumps")
     solver.setTolerances(1e-12, 200)
     solver.solve()
     if solver.getConverged() < count:
@@ -112,6 +119,10 @@ def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int) -> tu
         eigenvalue = solver.getEigenpair(index, vector).real
         modes.append(vector.array.copy())
         frequencies.append(np.sqrt(max(eigenvalue, 0.0)) / (2 * np.pi))
+    if factors is not None:     # the EPS would reset a KSP it still holds, factors included, when destroyed
+        placeholder = PETSc.KSP().create(fom.comm)
+        spectral.setKSP(placeholder)
+        placeholder.destroy()
     for petsc_object in (solver, vector, mass):
         petsc_object.destroy()      # frees the factorisation and copies (not freed with the Python objects)
     return np.column_stack(modes), np.array(frequencies)
@@ -156,7 +167,7 @@ def build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
     rigid = np.zeros(fom.n_owned_dofs)
     rigid[0::3] = 1.0
     candidates = [rigid]
-    modes, frequencies = vibration_modes(fom, stiffness, settings.vibration_modes)
+    modes, frequencies = vibration_modes(fom, stiffness, settings.vibration_modes, factors=solver)
     timings["vibration_modes"] = time.perf_counter() - started
     modes = [modes[:, i] / fom.norm(modes[:, i]) for i in range(modes.shape[1])]
     candidates += modes
