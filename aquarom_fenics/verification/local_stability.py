@@ -20,7 +20,6 @@ rebuilt from a PROM trajectory, for the tail modes the PROM's basis does not hol
 """
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -146,8 +145,8 @@ class TailGrowth:
     states: int                     # states linearised
 
 
-def prom_tail_growth(prom: ReducedModel, scene: Scene, fish: Fish, xi=None,
-                     stop_above: float = np.inf) -> TailGrowth | str:
+def prom_tail_growth(prom: ReducedModel, scene: Scene, fish: Fish, xi=None, stop_above: float = np.inf,
+                     comm: MPI.Comm = MPI.COMM_WORLD) -> TailGrowth | str:
     """The fastest tail mode at design ξ along the PROM's last stroke (or the PROM's stop message).
 
     The PROM is integrated over the horizon; on its last stroke [T - 1/f, T], every
@@ -158,28 +157,40 @@ def prom_tail_growth(prom: ReducedModel, scene: Scene, fish: Fish, xi=None,
     and the FOM at ξ is linearised about it on the tail region (free nodes within
     ``[optimizer] tail_region_radius`` of the tail node), coefficients frozen: the largest Re λ of
     λ² M_t + λ C_t + K_t. Stops at the first state whose growth rate exceeds ``stop_above`` [1/s].
-    Every rank computes the same (the FOM's tangents are gathered on one rank).
+    The ranks of ``comm`` share the states (each linearises its own on one rank) and return the
+    same answer as one rank: the states up to the first one over the limit.
     """
     xi = prom.xi_center if xi is None else np.asarray(xi, dtype=float)
     result = simulate_reduced(prom, scene, xi)
     if not result.completed:
         return result.error
     times = result.trajectory.arrays()["time"]
+    steps = tail_sample_steps(scene)
     model = FullOrderModel(scene, fish, xi, comm=MPI.COMM_SELF)
-    fastest, count = TailGrowth(np.nan, -np.inf, np.nan, 0), 0
+    rates, failure = [], None           # (position in steps, λ) of this rank's states
     try:
         basis = reused_basis(model, prom).vectors
         dofs = region_dofs(model, fish.tags.tail_node, scene.optimizer.tail_region_radius)
-        for count, k in enumerate(tail_sample_steps(scene), start=1):
+        for position in range(comm.rank, steps.size, comm.size):
+            k = steps[position]
             state = (basis @ result.states[k], basis @ result.velocities[k], basis @ result.accelerations[k])
-            eigenvalue = fastest_eigenvalue(*region_tangents(model, times[k], *state, dofs))
-            if eigenvalue.real > fastest.growth_rate:
-                fastest = TailGrowth(float(times[k]), eigenvalue.real, abs(eigenvalue.imag) / (2 * np.pi), count)
-            if eigenvalue.real > stop_above:
+            rates.append((position, fastest_eigenvalue(*region_tangents(model, times[k], *state, dofs))))
+            if rates[-1][1].real > stop_above:
                 break
+    except Exception as error:          # raised on every rank below, so that none waits for the others
+        failure = error
     finally:
         model.destroy()
-    return dataclasses.replace(fastest, states=count)
+    gathered = comm.allgather((rates, failure))
+    for _, error in gathered:
+        if error is not None:
+            raise error
+    rates = sorted((item for part, _ in gathered for item in part), key=lambda item: item[0])
+    over = [position for position, eigenvalue in rates if eigenvalue.real > stop_above]
+    linearised = [(position, eigenvalue) for position, eigenvalue in rates if not over or position <= over[0]]
+    position, eigenvalue = max(linearised, key=lambda item: item[1].real)   # the first of equal maxima
+    return TailGrowth(float(times[steps[position]]), eigenvalue.real, abs(eigenvalue.imag) / (2 * np.pi),
+                      len(linearised))
 
 
 def prom_tail_stability(prom: ReducedModel, scene: Scene, fish: Fish, xi=None,

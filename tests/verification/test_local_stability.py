@@ -10,7 +10,8 @@ from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.reduction.reductor import build_prom, reused_basis
 from aquarom_fenics.verification.local_stability import (local_stability, pencil_eigenvalues, prom_tail_growth,
-                                                         prom_tail_stability, region_dofs, step_matrix, tangents)
+                                                         prom_tail_stability, region_dofs, step_matrix,
+                                                         tail_sample_steps, tangents)
 from conftest import coarse_scene
 
 
@@ -211,3 +212,62 @@ def test_tail_screen_script_records_each_pareto_points_screen_next_to_its_fom_ch
     separation = record["separation"]["0.015"]
     assert (separation["largest_growth_of_completed"], separation["smallest_growth_of_stopped"]) == tuple(growth)
     assert separation["limit_separates"] == (growth[0] <= record["tail_growth_limit"] < growth[1])
+
+
+SCREEN_UNDER_MPI = """
+import json, sys
+from aquarom_fenics.geometry.fish import load_fish
+from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.reduction.reductor import build_prom
+from aquarom_fenics.verification.local_stability import prom_tail_growth
+from mpi4py import MPI
+
+scene = Scene.load(sys.argv[1])
+fish = load_fish(scene)
+prom = build_prom(scene, fish=fish)
+growths = [prom_tail_growth(prom, scene, fish, stop_above=float(limit)) for limit in sys.argv[2:]]
+if MPI.COMM_WORLD.rank == 0:
+    print(json.dumps([[g.time, g.growth_rate, g.states] for g in growths]))
+"""
+
+
+def test_ranks_share_the_tail_screens_states_and_answer_as_one_rank(swimming_prom, tmp_path):
+    """Under mpirun -n 2 each rank linearises every other state; the fastest mode, its time and the
+    states counted up to the first one over the limit are those of the serial screen."""
+    import json
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    if shutil.which("mpirun") is None:
+        pytest.skip("mpirun not installed")
+    scene, fish, prom = swimming_prom
+    rates = _screened_growth_rates(prom, scene, fish)
+    limits = [np.inf, float(np.median(rates))]
+    assert np.flatnonzero(rates > limits[1])[0] < rates.size - 1       # the second screen stops early
+    serial = [prom_tail_growth(prom, scene, fish, stop_above=limit) for limit in limits]
+    scene_file, script = tmp_path / "scene.toml", tmp_path / "screen.py"
+    scene_file.write_text(scene.to_toml())
+    script.write_text(SCREEN_UNDER_MPI)
+    completed = subprocess.run(["mpirun", "-n", "2", sys.executable, str(script), str(scene_file), *map(str, limits)],
+                               capture_output=True, text=True, timeout=600, env=os.environ)
+    assert completed.returncode == 0, completed.stderr
+    parallel = json.loads(completed.stdout.strip().splitlines()[-1])
+    for one_rank, two_ranks in zip(serial, parallel):
+        assert (one_rank.time, one_rank.states) == (two_ranks[0], two_ranks[2])
+        assert two_ranks[1] == pytest.approx(one_rank.growth_rate, rel=1e-6, abs=1e-6)
+
+
+def _screened_growth_rates(prom, scene, fish) -> np.ndarray:
+    """Growth rate of the tail at each state the screen linearises, in time order."""
+    run = simulate_reduced(prom, scene)
+    model = FullOrderModel(scene, fish)
+    basis = reused_basis(model, prom).vectors
+    dofs = region_dofs(model, fish.tags.tail_node, scene.optimizer.tail_region_radius)
+    times = run.trajectory.arrays()["time"]
+    rates = [local_stability(model, times[k], basis @ run.states[k], basis @ run.velocities[k],
+                             basis @ run.accelerations[k], dofs, model.scheme).growth_rate
+             for k in tail_sample_steps(scene)]
+    model.destroy()
+    return np.array(rates)
