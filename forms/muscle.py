@@ -9,12 +9,12 @@ from .kinematics import relative_gradient, total_gradient, volume_ratio
 FIBRE = ufl.as_vector((1.0, 0.0, 0.0))
 
 
-def muscle_energy(displacement, shape_gradient_field, stiffness, activations, indicators,
+def muscle_energy(displacement, shape_gradient_field, stiffness, activations, muscle_measures,
                   nominal_volume=False):
-    """Σ_j ½ k a_j ∫ χ_j |F_2 m|² det F_1 dV_0  [J].
+    """Σ_j ½ k a_j ∫_muscle_j |F_2 m|² det F_1 dV_0  [J].
 
-    ``activations`` a_j and ``indicators`` χ_j (cell indicator of muscle j) are paired.
-    With ``nominal_volume`` the source's variant Σ_j ½ k a_j ∫ χ_j |F m|² dV_0 is used.
+    ``activations`` a_j and ``muscle_measures`` dx_j (the measure of muscle j's cells) are paired.
+    With ``nominal_volume`` the source's variant Σ_j ½ k a_j ∫_muscle_j |F m|² dV_0 is used.
     """
     if nominal_volume:
         stretch = total_gradient(displacement, shape_gradient_field) * FIBRE
@@ -22,5 +22,5 @@ def muscle_energy(displacement, shape_gradient_field, stiffness, activations, in
     else:
         stretch = relative_gradient(displacement, shape_gradient_field) * FIBRE
         volume = volume_ratio(shape_gradient_field)
-    activation_field = sum(a * chi for a, chi in zip(activations, indicators))
-    return 0.5 * stiffness * activation_field * ufl.inner(stretch, stretch) * volume * ufl.dx
+    density = 0.5 * stiffness * ufl.inner(stretch, stretch) * volume
+    return sum(a * density * dx for a, dx in zip(activations, muscle_measures))

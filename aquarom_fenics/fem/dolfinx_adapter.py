@@ -163,6 +163,17 @@ def owned_cells(mesh) -> np.ndarray:
     return np.arange(mesh.topology.index_map(3).size_local, dtype=np.int32)
 
 
+def cell_measure(mesh, regions: dict[int, np.ndarray]) -> ufl.Measure:
+    """dx whose ``dx(i)`` integrates over the cells of region i only (input-mesh cell indices)."""
+    owned = owned_cells(mesh)
+    region_of_cell = np.zeros(owned.size, dtype=np.int32)
+    for region, cells in regions.items():
+        region_of_cell[np.isin(input_cell_indices(mesh)[owned], cells)] = region
+    tagged = np.flatnonzero(region_of_cell).astype(np.int32)
+    tags = dolfinx_mesh.meshtags(mesh, 3, tagged, region_of_cell[tagged])
+    return ufl.Measure("dx", domain=mesh, subdomain_data=tags)
+
+
 def tensor_constant(mesh, shape) -> fem.Constant:
     """A constant tensor whose ``value`` can be set between evaluations."""
     return fem.Constant(mesh, np.zeros(shape))

@@ -17,6 +17,9 @@ from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.forms.muscle import muscle_energy
 from aquarom_fenics.reduction.projection import Taylor, stack_taylor
 
+LEFT, RIGHT = 1, 2
+"""Region numbers of the muscles' cells in the forms' measure."""
+
 ANTAGONIST_PATTERN = np.array([1.0, -1.0])
 """(a_left, a_right) per unit of A sin(2π f t): the left muscle contracts while the right extends."""
 
@@ -43,17 +46,14 @@ class MuscleTerm:
         self.amplitude, self.frequency = scene.actuation.amplitude, scene.actuation.frequency
         self.on = scene.actuation.stiffness > 0 and scene.actuation.amplitude > 0
         self._activations = [fx.constant(fom.mesh, 0.0), fx.constant(fom.mesh, 0.0)]
-        self.indicators = []
-        for cells, name in ((tags.left_muscle_cells, "left_muscle"), (tags.right_muscle_cells, "right_muscle")):
-            indicator = np.zeros(fom.n_cells)
-            indicator[cells] = 1.0
-            self.indicators.append(fom.cell_field(indicator, name))
+        muscles = fx.cell_measure(fom.mesh, {LEFT: tags.left_muscle_cells, RIGHT: tags.right_muscle_cells})
+        self.measures = [muscles(LEFT), muscles(RIGHT)]
         self.negative_force_form = self.tangent_form = None
         if self.on:
             u = fom.displacement
             energy = fom.stiffness_rule(muscle_energy(
                 u, fom.shape_gradients["stiffness"], fx.constant(fom.mesh, scene.actuation.stiffness),
-                self._activations, self.indicators, nominal_volume=scene.actuation.muscle_volume == "nominal"))
+                self._activations, self.measures, nominal_volume=scene.actuation.muscle_volume == "nominal"))
             self.negative_force_form = ufl.derivative(energy, u, fom.test_function)
             self.tangent_form = ufl.derivative(self.negative_force_form, u, fom.trial_function)
             self._negative_force = fx.compile_form(self.negative_force_form)

@@ -101,12 +101,10 @@ def test_mass_forms_integrate_the_density_over_the_shape_varied_volume(cell):
 
 def muscle_energy_of(cell, activation, nominal_volume=False, displacement=None):
     mesh, space, u, shape_gradient = cell
-    indicator = fx.new_function(fx.cellwise_constant_space(mesh), "muscle")
-    indicator.x.array[:] = 1.0
-    activations = [fx.constant(mesh, activation), fx.constant(mesh, 0.0)]
-    other = fx.new_function(fx.cellwise_constant_space(mesh), "other_muscle")
+    activations = [fx.constant(mesh, activation), fx.constant(mesh, 0.5)]
+    muscles = fx.cell_measure(mesh, {1: np.array([0]), 2: np.array([], dtype=np.int64)})   # the cell is muscle 1
     energy = muscle_energy(displacement if displacement is not None else u, shape_gradient,
-                           fx.constant(mesh, 6e4), activations, [indicator, other], nominal_volume)
+                           fx.constant(mesh, 6e4), activations, [muscles(1), muscles(2)], nominal_volume)
     return integral(energy)
 
 
