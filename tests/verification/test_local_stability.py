@@ -141,6 +141,19 @@ def swimming_prom():
     return scene, fish, build_prom(scene, fish=fish)
 
 
+def growth_rates_at(prom, scene, fish, steps) -> np.ndarray:
+    """Growth rate of the tail region at the FOM states (V η, V η̇, V η̈) of the PROM's steps k."""
+    run = simulate_reduced(prom, scene)
+    model = FullOrderModel(scene, fish)
+    basis = reused_basis(model, prom).vectors
+    dofs = region_dofs(model, fish.tags.tail_node, scene.optimizer.tail_region_radius)
+    times = run.trajectory.arrays()["time"]
+    rates = [local_stability(model, times[k], basis @ run.states[k], basis @ run.velocities[k],
+                             basis @ run.accelerations[k], dofs, model.scheme).growth_rate for k in steps]
+    model.destroy()
+    return np.array(rates)
+
+
 def test_the_tail_screen_linearises_the_fom_at_the_proms_rebuilt_states(swimming_prom):
     """prom_tail_growth equals local_stability of the FOM at (V η, V η̇, V η̈) of every PROM step in the
     window (here the whole horizon, shorter than a stroke), and the PROM's rates are those of its η."""
@@ -154,14 +167,8 @@ def test_the_tail_screen_linearises_the_fom_at_the_proms_rebuilt_states(swimming
             run.states[k + 1], *scheme.predict(run.states[k], run.velocities[k], run.accelerations[k]))
         np.testing.assert_allclose(velocity, run.velocities[k + 1], rtol=1e-10, atol=1e-12)
         np.testing.assert_allclose(acceleration, run.accelerations[k + 1], rtol=1e-10, atol=1e-9)
-    model = FullOrderModel(scene, fish)
-    basis = reused_basis(model, prom).vectors
-    dofs = region_dofs(model, fish.tags.tail_node, scene.optimizer.tail_region_radius)
     times = run.trajectory.arrays()["time"]
-    rates = [local_stability(model, times[k], basis @ run.states[k], basis @ run.velocities[k],
-                             basis @ run.accelerations[k], dofs, model.scheme).growth_rate
-             for k in range(1, len(times))]
-    model.destroy()
+    rates = growth_rates_at(prom, scene, fish, range(1, len(times)))
     assert growth.states == len(rates) == round(scene.solver.duration / h)
     assert growth.growth_rate == pytest.approx(max(rates), rel=1e-8)
     assert growth.time == pytest.approx(times[1 + int(np.argmax(rates))])
@@ -243,7 +250,7 @@ def test_ranks_share_the_tail_screens_states_and_answer_as_one_rank(swimming_pro
     if shutil.which("mpirun") is None:
         pytest.skip("mpirun not installed")
     scene, fish, prom = swimming_prom
-    rates = _screened_growth_rates(prom, scene, fish)
+    rates = growth_rates_at(prom, scene, fish, tail_sample_steps(scene))
     limits = [np.inf, float(np.median(rates))]
     assert np.flatnonzero(rates > limits[1])[0] < rates.size - 1       # the second screen stops early
     serial = [prom_tail_growth(prom, scene, fish, stop_above=limit) for limit in limits]
@@ -257,17 +264,3 @@ def test_ranks_share_the_tail_screens_states_and_answer_as_one_rank(swimming_pro
     for one_rank, two_ranks in zip(serial, parallel):
         assert (one_rank.time, one_rank.states) == (two_ranks[0], two_ranks[2])
         assert two_ranks[1] == pytest.approx(one_rank.growth_rate, rel=1e-6, abs=1e-6)
-
-
-def _screened_growth_rates(prom, scene, fish) -> np.ndarray:
-    """Growth rate of the tail at each state the screen linearises, in time order."""
-    run = simulate_reduced(prom, scene)
-    model = FullOrderModel(scene, fish)
-    basis = reused_basis(model, prom).vectors
-    dofs = region_dofs(model, fish.tags.tail_node, scene.optimizer.tail_region_radius)
-    times = run.trajectory.arrays()["time"]
-    rates = [local_stability(model, times[k], basis @ run.states[k], basis @ run.velocities[k],
-                             basis @ run.accelerations[k], dofs, model.scheme).growth_rate
-             for k in tail_sample_steps(scene)]
-    model.destroy()
-    return np.array(rates)
