@@ -277,8 +277,9 @@ class FullOrderModel:
 
     def tangents(self, time, u, v, a) -> Iterator[PETSc.Mat]:
         """K_t = ∂r/∂u, C_t = ∂r/∂u̇ and M_t = ∂r/∂ü at (t, u, u̇, ü), in that order, each in the Newton
-        matrix's storage and valid until the next one is made (fixed dofs: unit rows); the Newton
-        matrix of the scheme is made anew at its next assembly."""
+        matrix's storage and valid until the next one is made (fixed dofs: unit rows). For use between
+        runs: the Newton matrix of the scheme is made anew at its next assembly, and a solver still
+        holding factors of the old one would refactorise what the storage holds."""
         yield self._combine_tangents(TangentFactors(1.0, 0.0, 0.0), None, time, u, v, a)
         yield self._combine_tangents(TangentFactors(0.0, 1.0, 0.0), ("damping", self.damping_matrix), time, u, v, a)
         yield self._combine_tangents(TangentFactors(0.0, 0.0, 1.0), ("mass", self.mass_matrix), time, u, v, a)
