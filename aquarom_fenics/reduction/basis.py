@@ -95,7 +95,7 @@ def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int,
     solver = SLEPc.EPS().create(fom.comm)
     solver.setOperators(stiffness, mass)
     solver.setProblemType(SLEPc.EPS.ProblemType.GHEP)
-    solver.setDimensions(count)
+    solver.setDimensions(count, 2 * count + 6)     # a Krylov space of 8 for one mode: one restart, 8 solves
     solver.setWhichEigenpairs(SLEPc.EPS.Which.TARGET_MAGNITUDE)
     solver.setTarget(0.0)
     spectral = solver.getST()
