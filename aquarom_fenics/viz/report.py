@@ -318,7 +318,7 @@ def plot_pareto(points: list[dict], out_path: Path) -> Path:
     axis.set_ylabel("distance d [cm]")
     axis.set_title("co-optimization: distance against actuation energy")
     axis.grid(alpha=0.3)
-    axis.legend(loc="best", fontsize=8)
+    axis.legend(loc="lower right", fontsize=8)      # a front rises to the right: that corner stays empty
     figure.tight_layout()
     figure.savefig(out_path, dpi=DPI)
     plt.close(figure)
