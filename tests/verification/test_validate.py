@@ -285,3 +285,18 @@ def test_energy_balance_of_a_run_with_cut_steps_is_not_available():
     record = energy_record(SimpleNamespace(cut_steps=2))
     assert record == {"available": False, "message": record["message"]}
     assert "not available" in record["message"] and "2 steps" in record["message"]
+
+
+def test_successive_differences_over_the_last_stroke_leave_out_the_start_transient():
+    """q_h(t) = h² sin t + (start-up ringing that does not converge, t < 1 s): over the whole run the
+    ratios stall near 1, over t ≥ 1 s they are those of the h² error, 4."""
+    from aquarom_fenics.verification.validation.convergence_studies import convergence
+
+    time = np.linspace(0.0, 2.0, 101)
+    steps = [0.02, 0.01, 0.005, 0.0025]
+    ringing = [1e-4 * np.cos(40 * time + k) * (time < 1.0) for k in range(len(steps))]
+    values = [h ** 2 * np.sin(time) + ring for h, ring in zip(steps, ringing)]
+    entry = convergence("q", values, time, steps, len(steps), {}, last_stroke_start=1.0)
+    assert min(entry["window_ratios"]) < 2.0
+    assert entry["last_stroke_window_ratios"] == pytest.approx([4.0, 4.0], rel=1e-6)
+    assert "last_stroke_window_ratios" not in convergence("q", values, time, steps, len(steps), {})

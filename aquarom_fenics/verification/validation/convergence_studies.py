@@ -64,6 +64,8 @@ def study_d(runner: Runner, settings: Settings) -> dict:
     records = dict(zip((case.key for case in cases), runner.run("d", cases)))
     coarse = settings.convergence_steps[0]
     window = len(settings.convergence_steps)
+    frequency = base_scene(settings, "nominal", level=level, degree=degree).actuation.frequency
+    last_stroke = max(settings.duration - 1.0 / frequency, 0.0)
     result = {"study": "d", "degree": degree, "level": level, "duration": settings.duration,
               "time_steps": list(settings.convergence_steps), "finer_time_steps": finer, "grid_step": coarse,
               "schemes": [{"tag": scheme.tag} | scheme.facts() for scheme in schemes], "quantities": []}
@@ -82,7 +84,8 @@ def study_d(runner: Runner, settings: Settings) -> dict:
             for index, parameter in enumerate(parameter_names):
                 result["quantities"].append(convergence(f"d head x / d ξ[{parameter}] (PROM p=3), {scheme.tag}",
                                                         [s[1][:, index] for s in series], series[0][0], steps, window,
-                                                        facts | {"quantity": f"d head_x / d {parameter}"}))
+                                                        facts | {"quantity": f"d head_x / d {parameter}"},
+                                                        last_stroke))
             gradients = [np.asarray(run["distance_gradient"]) for run in runs]
             result["quantities"].append(convergence(f"d distance / d ξ (PROM p=3, norm over parameters), {scheme.tag}",
                                                     gradients, None, steps, window,
@@ -92,7 +95,8 @@ def study_d(runner: Runner, settings: Settings) -> dict:
                 series = [on_grid(run["trajectory"]["time"], np.asarray(run["trajectory"][quantity]), coarse)
                           for run in runs]
                 result["quantities"].append(convergence(f"{model} {label}, {scheme.tag}", [s[1] for s in series],
-                                                        series[0][0], steps, window, facts | {"quantity": quantity}))
+                                                        series[0][0], steps, window, facts | {"quantity": quantity},
+                                                        last_stroke))
     return result
 
 
@@ -116,7 +120,8 @@ def time_convergence_summary(study: dict) -> dict:
         models = {}
         for entry in entries:
             models.setdefault(entry["model"], {})[entry.get("quantity", entry["name"])] = (
-                {key: entry.get(key) for key in ("pairs", "ratios", "window_ratios", "finest_ratio", "differences")}
+                {key: entry.get(key) for key in ("pairs", "ratios", "window_ratios", "finest_ratio", "differences",
+                                                 "last_stroke_start", "last_stroke_window_ratios")}
                 if entry["status"] == "completed" else {"status": entry["status"], "message": entry.get("message")})
         summary["schemes"].append(scheme | {"models": models})
     return summary
@@ -129,11 +134,13 @@ def on_grid(time, values, step):
     return time[::stride], np.asarray(values)[::stride]
 
 
-def convergence(name, values, time, steps, window, facts: dict) -> dict:
+def convergence(name, values, time, steps, window, facts: dict, last_stroke_start: float | None = None) -> dict:
     """Successive differences ‖q_h - q_h/2‖_∞ and their ratios (≈ 4 for a second-order scheme):
-    ``window_ratios`` over the first ``window`` steps, ``finest_ratio`` of the last three."""
+    ``window_ratios`` over the first ``window`` steps, ``finest_ratio`` of the last three. For a time
+    series with ``last_stroke_start`` also ``last_stroke_window_ratios``, the same with the maxima
+    taken over t ≥ that time (the stroke the distance is measured on, after the start's transient)."""
     differences = [float(np.max(np.abs(np.asarray(a) - np.asarray(b)))) for a, b in zip(values, values[1:])]
-    ratios = [first / second if second > 0 else None for first, second in zip(differences, differences[1:])]
+    ratios = successive_ratios(differences)
     entry = {"name": name, **facts, "status": "completed", "steps": list(steps), "differences": differences,
              "ratios": ratios, "window_ratios": ratios[: max(window - 2, 0)],
              "ratio": ratios[0] if ratios else None, "finest_ratio": ratios[-1] if ratios else None,
@@ -141,7 +148,17 @@ def convergence(name, values, time, steps, window, facts: dict) -> dict:
     if time is not None:
         entry["time"] = np.asarray(time).tolist()
         entry["difference_series"] = [np.abs(np.asarray(a) - np.asarray(b)).tolist() for a, b in zip(values, values[1:])]
+        if last_stroke_start is not None:
+            late = np.asarray(time) >= last_stroke_start - 1e-12
+            late_differences = [float(np.max(series[late])) for series in map(np.asarray, entry["difference_series"])]
+            entry["last_stroke_start"] = last_stroke_start
+            entry["last_stroke_window_ratios"] = successive_ratios(late_differences)[: max(window - 2, 0)]
     return entry
+
+
+def successive_ratios(differences: list[float]) -> list[float | None]:
+    """d_k / d_{k+1} of successive differences (None where d_{k+1} = 0)."""
+    return [first / second if second > 0 else None for first, second in zip(differences, differences[1:])]
 
 
 def study_mesh_convergence(runner: Runner, settings: Settings) -> dict:

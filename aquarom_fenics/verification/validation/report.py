@@ -60,6 +60,9 @@ def checks(studies: dict, out: Path) -> list[list[str]]:
             shown = ", ".join(fmt(ratio, ".2f") for ratio in window)
             if finest is not None and len(quantity.get("ratios", [])) > len(window):
                 shown += f" (finest pair {quantity['pairs'][-1]} s: {fmt(finest, '.2f')})"
+            if quantity.get("last_stroke_window_ratios"):       # shown, not judged: the target is the whole run
+                shown += (f"; last stroke only (t ≥ {quantity['last_stroke_start']:g} s): "
+                          + ", ".join(fmt(ratio, ".2f") for ratio in quantity["last_stroke_window_ratios"]))
             rows.append([f"time-step ratios, {quantity['name']}", shown, required,
                          verdict(ok) if second_order else "—"])
     b = studies.get("b")
