@@ -161,7 +161,7 @@ def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights:
     if is_writer:
         writer.close()
         _write_summary(out_dir, scene, result, check, weights or CostWeights())
-        _write_figures(out_dir, scene, fish, result, render)
+    _write_figures(out_dir, scene, fish, result, render)
     return result, check
 
 
@@ -187,7 +187,7 @@ def run_multistart(scene: Scene, out_dir: Path, resume: bool = False, weights: C
                         "distinct_optima": _distinct_optima(space, [r.optimum for r, _ in runs],
                                                             settings.active_tolerance),
                         "local_optima": optima})
-        _write_figures(out_dir, scene, fish, result, render)
+    _write_figures(out_dir, scene, fish, result, render)
     return result, check
 
 
@@ -274,10 +274,13 @@ def _write_summary(out_dir, scene, result, check, weights, multistart: dict | No
 
 
 def _write_figures(out_dir, scene, fish, result, render):
+    """The history plots and the renders of the optimum. Called on every rank: the optimal design's
+    XDMF is written collectively; rank 0 draws."""
     from aquarom_fenics.viz.report import plot_optimization_history, render_nominal_and_optimal
 
+    is_writer = MPI.COMM_WORLD.rank == 0
     space = result.space
-    if scene.output.plots:
+    if scene.output.plots and is_writer:
         active = [row["constraint"] for row in result.optimality.active]
         plot_optimization_history(result.history, list(space.names), list(zip(space.lower, space.upper)), out_dir,
                                   active=active)
@@ -287,9 +290,10 @@ def _write_figures(out_dir, scene, fish, result, render):
         from aquarom_fenics.viz.render import render_design
 
         render_design(fish, fish.design(optimal), optimal, out_dir / "optimal")
-        nominal = dict(zip(space.names[:shapes], map(float, space.start[:shapes])))
-        render_nominal_and_optimal(fish, fish.design(nominal), fish.design(optimal), out_dir / "nominal_vs_optimal.png",
-                                   f"{scene.name}: nominal and optimal design")
+        if is_writer:
+            nominal = dict(zip(space.names[:shapes], map(float, space.start[:shapes])))
+            render_nominal_and_optimal(fish, fish.design(nominal), fish.design(optimal),
+                                       out_dir / "nominal_vs_optimal.png", f"{scene.name}: nominal and optimal design")
 
 
 def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None) -> list[dict]:

@@ -1,5 +1,6 @@
 """Shape optimisation (SPEC §10) on the coarsest mesh with a short horizon."""
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -126,6 +127,29 @@ def test_optimize_command_writes_its_outputs(tmp_path, capsys):
                  "optimal/design.xdmf"):
         assert (out / name).exists(), name
     assert "FOM check" in capsys.readouterr().out
+
+
+@pytest.mark.mpi
+def test_optimize_under_mpirun_renders_the_optimum_and_ends(tmp_path):
+    """Every rank takes part in the optimum's collective XDMF write (rank 0 alone waited there for ever)."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    if shutil.which("mpirun") is None:
+        pytest.skip("mpirun not installed")
+    scene = tmp_path / "toy.toml"
+    scene.write_text('[mesh]\nlevel = 1\n[solver]\nduration = 1.0\n[optimizer]\nmax_iterations = 1\n'
+                     '[shapes]\nz_tail = { bounds = [-0.2, 0.2] }\n')
+    out = tmp_path / "run"
+    aquarom = Path(sys.executable).with_name("aquarom")
+    completed = subprocess.run(["mpirun", "-n", "2", str(aquarom), "optimize", str(scene), "--out", str(out)],
+                               capture_output=True, text=True, timeout=600, env=os.environ)
+    assert completed.returncode == 0, completed.stderr
+    for name in ("summary.json", "cost.png", "nominal_vs_optimal.png", "optimal/design.xdmf", "optimal/design.png",
+                 "manifest.json"):
+        assert (out / name).exists(), name
 
 
 def test_infeasible_constraints_are_refused():
