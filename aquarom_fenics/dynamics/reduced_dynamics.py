@@ -18,7 +18,8 @@ from threadpoolctl import threadpool_limits
 from aquarom_fenics.dynamics.integrator import IntegrationStopped, NewtonSettings, StepReport, TimeScheme, between, integrate
 from aquarom_fenics.reduction.prom import ReducedModel
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.dynamics.trajectory import Trajectory, swimming_distance, tail_amplitude, window_mask, DISTANCE_WINDOW
+from aquarom_fenics.dynamics.trajectory import (Trajectory, swimming_distance, tail_amplitude, window_mask,
+                                                DISTANCE_WINDOW, last_stroke_start)
 
 
 
@@ -316,7 +317,7 @@ def reduced_stability(prom: ReducedModel, scene: Scene, xi=None, amplitude: floa
     scheme = TimeScheme.from_solver(scene.solver)
     system = ReducedSystem(prom, scene, xi, scheme, amplitude)
     m = prom.size
-    window_start = max(scene.solver.duration - 1.0 / scene.actuation.frequency, 0.0)
+    window_start = last_stroke_start(scene.solver.duration, scene.actuation.frequency)
     try:
         transition = transition_matrix(system, scheme, n_steps, NewtonSettings.from_solver(scene.solver),
                                        window_start)

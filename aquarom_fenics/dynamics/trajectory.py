@@ -31,6 +31,11 @@ class Trajectory:
         return len(self.time)
 
 
+def last_stroke_start(duration: float, frequency: float) -> float:
+    """Start of the last actuation period [T - 1/f, T] [s], 0 when the horizon is shorter."""
+    return max(duration - 1.0 / frequency, 0.0)
+
+
 def window_mask(time: np.ndarray, window: float) -> np.ndarray:
     """Samples with t ≥ T - window (with a tolerance of a thousandth of the step)."""
     time = np.asarray(time)

@@ -44,7 +44,7 @@ from aquarom_fenics.optimization.cost import (CostWeights, DesignSpace, Evaluati
                                               first_order_at, meshable_space)
 from aquarom_fenics.optimization.history import Checkpoint, Safeguard
 from aquarom_fenics.optimization.paper_method import paper_method
-from aquarom_fenics.optimization.prom_builder import PromBuilder
+from aquarom_fenics.optimization.prom_builder import PromBuilder, stability_plan
 from aquarom_fenics.optimization.trust_region import trust_region
 
 log = logging.getLogger("aquarom")
@@ -110,7 +110,7 @@ def optimize(scene: Scene, fish: Fish | None = None, weights: CostWeights | None
             builder.basis_center = np.array(saved["basis_center"])
     started = time.perf_counter() - (history[-1]["wall_time"] if history else 0.0)
     algorithm = {"paper": paper_method, "trust-region": trust_region}[method]
-    log.info("stability of the designs: %s", builder.stability_plan())
+    log.info("stability of the designs: %s", stability_plan(scene))
     safeguard = Safeguard(started, max_time)
     optimum, evaluation, reason = algorithm(scene, space, builder, weights, history, checkpoint,
                                             saved["state"] if saved else None, safeguard,

@@ -137,9 +137,6 @@ class PromBuilder:
             raise InputError(f"design {self.space.as_dict(z)} is infeasible: {refused}") from None
         self._refuse_unstable(prom, z)
 
-    def stability_plan(self) -> str:
-        return stability_plan(self.scene)
-
     def _refuse_unstable(self, prom: ReducedModel, z: np.ndarray) -> None:
         """A design whose PROM gait is unstable (Floquet multiplier |μ| > 1.01 over the last stroke,
         ``reduced_stability``) is refused like one the mesh check refuses: the optimisers step back.

@@ -29,6 +29,7 @@ from mpi4py import MPI
 from aquarom_fenics.dynamics.integrator import TimeScheme
 from aquarom_fenics.dynamics.reduced_dynamics import Stability, simulate_reduced
 from aquarom_fenics.dynamics.simulate import check_time_grid
+from aquarom_fenics.dynamics.trajectory import last_stroke_start
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.geometry.fish import Fish
@@ -129,7 +130,7 @@ def tail_sample_steps(scene: Scene) -> np.ndarray:
     """Steps k (t = k h) whose states the tail screen linearises: the last stroke [T - 1/f, T] (the
     whole horizon if shorter), every ``TAIL_SAMPLE_INTERVAL``, never the rest state k = 0."""
     h, n_steps = scene.solver.time_step, check_time_grid(scene)
-    window_start = max(scene.solver.duration - 1.0 / scene.actuation.frequency, 0.0)
+    window_start = last_stroke_start(scene.solver.duration, scene.actuation.frequency)
     stride = max(1, round(TAIL_SAMPLE_INTERVAL / h))
     steps = np.arange(max(int(np.ceil(window_start / h - 1e-9)), 1), n_steps + 1)
     return steps[steps % stride == 0]

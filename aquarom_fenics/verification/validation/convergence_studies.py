@@ -5,6 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from aquarom_fenics.dynamics import trajectory
 from aquarom_fenics.io.scene import Scene, SolverSection
 from aquarom_fenics.verification.convergence import MeshCase, mesh_convergence
 from aquarom_fenics.verification.validation.cases import fom_case, mesh_case, reduced_case
@@ -64,8 +65,7 @@ def study_d(runner: Runner, settings: Settings) -> dict:
     records = dict(zip((case.key for case in cases), runner.run("d", cases)))
     coarse = settings.convergence_steps[0]
     window = len(settings.convergence_steps)
-    frequency = base_scene(settings, "nominal", level=level, degree=degree).actuation.frequency
-    last_stroke = max(settings.duration - 1.0 / frequency, 0.0)
+    last_stroke = trajectory.last_stroke_start(settings.duration, cases[0].scene.actuation.frequency)
     result = {"study": "d", "degree": degree, "level": level, "duration": settings.duration,
               "time_steps": list(settings.convergence_steps), "finer_time_steps": finer, "grid_step": coarse,
               "schemes": [{"tag": scheme.tag} | scheme.facts() for scheme in schemes], "quantities": []}
@@ -138,21 +138,22 @@ def convergence(name, values, time, steps, window, facts: dict, last_stroke_star
     """Successive differences ‖q_h - q_h/2‖_∞ and their ratios (≈ 4 for a second-order scheme):
     ``window_ratios`` over the first ``window`` steps, ``finest_ratio`` of the last three. For a time
     series with ``last_stroke_start`` also ``last_stroke_window_ratios``, the same with the maxima
-    taken over t ≥ that time (the stroke the distance is measured on, after the start's transient)."""
-    differences = [float(np.max(np.abs(np.asarray(a) - np.asarray(b)))) for a, b in zip(values, values[1:])]
+    taken over t ≥ that time (the periodic gait, after the start's transient)."""
+    gaps = [np.abs(np.asarray(a) - np.asarray(b)) for a, b in zip(values, values[1:])]
+    differences = [float(np.max(gap)) for gap in gaps]
     ratios = successive_ratios(differences)
+    in_window = max(window - 2, 0)
     entry = {"name": name, **facts, "status": "completed", "steps": list(steps), "differences": differences,
-             "ratios": ratios, "window_ratios": ratios[: max(window - 2, 0)],
+             "ratios": ratios, "window_ratios": ratios[:in_window],
              "ratio": ratios[0] if ratios else None, "finest_ratio": ratios[-1] if ratios else None,
              "pairs": [f"{a:g}–{b:g}" for a, b in zip(steps, steps[1:])]}
     if time is not None:
         entry["time"] = np.asarray(time).tolist()
-        entry["difference_series"] = [np.abs(np.asarray(a) - np.asarray(b)).tolist() for a, b in zip(values, values[1:])]
+        entry["difference_series"] = [gap.tolist() for gap in gaps]
         if last_stroke_start is not None:
             late = np.asarray(time) >= last_stroke_start - 1e-12
-            late_differences = [float(np.max(series[late])) for series in map(np.asarray, entry["difference_series"])]
             entry["last_stroke_start"] = last_stroke_start
-            entry["last_stroke_window_ratios"] = successive_ratios(late_differences)[: max(window - 2, 0)]
+            entry["last_stroke_window_ratios"] = successive_ratios([float(np.max(gap[late])) for gap in gaps])[:in_window]
     return entry
 
 
