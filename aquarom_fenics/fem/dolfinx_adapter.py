@@ -192,24 +192,30 @@ def create_vector(compiled_form) -> PETSc.Vec:
 
 
 def create_matrix(compiled_form) -> PETSc.Mat:
-    return fem_petsc.create_matrix(compiled_form)
+    """The form's matrix in block storage (BAIJ, one 3×3 block per pair of displacement nodes): the
+    assembly inserts whole blocks (the default Newton matrix: 44 ms instead of 134 ms with scalar AIJ
+    rows), and products are about twice as fast."""
+    return fem_petsc.create_matrix(compiled_form, "baij")
 
 
 def create_matrix_with_entries(compiled_form, rows: np.ndarray, columns: np.ndarray) -> PETSc.Mat:
     """The form's matrix with (rows[i], columns[i]) added to its sparsity pattern (global indices, rows
-    owned by this rank), so that terms adding entries outside the form's pattern need no reallocation
-    (PETSc reallocates the whole matrix for every row that overflows its preallocation)."""
+    owned by this rank; their node blocks are added), so that terms adding entries outside the form's
+    pattern need no reallocation (PETSc reallocates the matrix for every row that overflows)."""
     form_matrix = assemble_matrix_into(create_matrix(compiled_form), compiled_form)
+    block = form_matrix.getBlockSize()
     indptr, indices, _ = form_matrix.getValuesCSR()
     first_row = form_matrix.getOwnershipRange()[0]
     n_rows, n_columns = form_matrix.getLocalSize()[0], form_matrix.getSize()[1]
     form_rows = np.repeat(np.arange(n_rows, dtype=np.int64), np.diff(indptr))
-    keys = np.unique(np.concatenate([form_rows * n_columns + indices,
-                                     (np.asarray(rows, dtype=np.int64) - first_row) * n_columns + columns]))
-    local_rows, pattern_columns = np.divmod(keys, n_columns)
-    pattern_indptr = np.searchsorted(local_rows, np.arange(n_rows + 1))
-    matrix = PETSc.Mat().createAIJ(form_matrix.getSizes(), bsize=form_matrix.getBlockSize(), comm=form_matrix.comm,
-                                   csr=(pattern_indptr.astype(PETSc.IntType), pattern_columns.astype(PETSc.IntType)))
+    scalar_rows = np.concatenate([form_rows, np.asarray(rows, dtype=np.int64) - first_row])
+    scalar_columns = np.concatenate([indices, np.asarray(columns, dtype=np.int64)])
+    n_block_columns = n_columns // block
+    keys = np.unique((scalar_rows // block) * n_block_columns + scalar_columns // block)
+    block_rows, block_columns = np.divmod(keys, n_block_columns)
+    block_indptr = np.searchsorted(block_rows, np.arange(n_rows // block + 1))
+    matrix = PETSc.Mat().createBAIJ(form_matrix.getSizes(), block, comm=form_matrix.comm,
+                                    csr=(block_indptr.astype(PETSc.IntType), block_columns.astype(PETSc.IntType)))
     matrix.setLGMap(*form_matrix.getLGMap())
     form_matrix.destroy()
     return matrix
