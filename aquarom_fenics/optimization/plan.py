@@ -23,8 +23,8 @@ REFERENCE_FOM_SECONDS = 10.3
 REFERENCE_FOM_EXPONENT = 1.1
 QUADRATIC_COST_FACTOR = {1: 1.0, 2: 8.6}
 """Cost of a quadratic mesh against the linear one on the same cells (level 1 FOM: 16.4 s against 1.9 s)."""
-TAIL_SCREEN_SECONDS_PER_STATE = 0.44
-"""Tail screen per linearised state at the default mesh (degree 2, level 2: 22 s for 51 states)."""
+TAIL_SCREEN_SECONDS_PER_STATE = 0.33
+"""Tail screen per linearised state at the default mesh (degree 2, level 2: 16.5 s for 51 states)."""
 
 
 def power_law_fit(sizes, times) -> dict | None:
