@@ -52,7 +52,7 @@ class EvaluationCounter:
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3, 4, 5], help="levels at degree 1")
+    parser.add_argument("--levels", type=int, nargs="*", default=[1, 2, 3, 4, 5], help="levels at degree 1")
     parser.add_argument("--quadratic-levels", type=int, nargs="*", default=[1, 2, 3], help="levels at degree 2")
     parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "bench" / "prom.json")
     args = parser.parse_args()
