@@ -47,9 +47,12 @@ def symmetric_coordinates(tensors: np.ndarray) -> np.ndarray:
 
 class CellSampler:
     """Compiled expressions of the strain, its ξ-derivatives, the weight and ψ at the quadrature
-    points of the FOM's elastic energy; every array has one row per (owned cell, point)."""
+    points of the FOM's elastic energy; every array has one row per (owned cell, point).
 
-    def __init__(self, fom, taylor_order: int):
+    The strain and its p first ξ-derivatives are one stacked expression, so that each sampled u
+    costs one evaluation for all of them (the coefficient u is packed and tabulated once)."""
+
+    def __init__(self, fom, taylor_order: int, n_parameters: int):
         self.fom = fom
         self.cells = fx.owned_cells(fom.mesh)
         self.degree = fom.quadrature_degrees["stiffness"]
@@ -60,16 +63,21 @@ class CellSampler:
         shape_gradient = fom.shape_gradients["stiffness"]
         strain = green_lagrange_strain(self.direction, shape_gradient)
         weight = abs(ufl.JacobianDeterminant(fom.mesh)) * volume_ratio(shape_gradient)
-        self.strain = [self._compile(strain)]
         self.weight = [self._compile(weight)]
-        first_strain = fom.shape_derivative(strain, self.shape_directions[0])
         first_weight = fom.shape_derivative(weight, self.shape_directions[0])
         if taylor_order >= 1:
-            self.strain.append(self._compile(first_strain))
             self.weight.append(self._compile(first_weight))
         if taylor_order >= 2:
-            self.strain.append(self._compile(fom.shape_derivative(first_strain, self.shape_directions[1])))
             self.weight.append(self._compile(fom.shape_derivative(first_weight, self.shape_directions[1])))
+            self.second_strain = self._compile(ufl.as_vector(_flat(fom.shape_derivative(
+                fom.shape_derivative(strain, self.shape_directions[0]), self.shape_directions[1]))))
+        self.parameter_directions = []
+        for k in range(n_parameters if taylor_order >= 1 else 0):
+            self.parameter_directions.append(fom.shape_direction(f"parameter_direction_{k}"))
+            self.parameter_directions[k].set_parameter(k)
+        self.strains = self._compile(ufl.as_vector(
+            _flat(strain) + [value for direction in self.parameter_directions
+                             for value in _flat(fom.shape_derivative(strain, direction))]))
         self.unit_strain = fx.tensor_constant(fom.mesh, (3, 3))
         self.energy_density = self._compile(svk_energy_density(
             self.unit_strain, fom.elastic.young_modulus, fom.elastic.poisson_ratio))
@@ -105,31 +113,39 @@ class CellSampler:
                 moduli[:, a, b] = moduli[:, b, a] = density(SYMMETRIC_BASIS[a] + SYMMETRIC_BASIS[b]) - single[a] - single[b]
         return moduli
 
-    def strain_coefficients(self, vectors: np.ndarray, expression) -> tuple[np.ndarray, np.ndarray]:
-        """(e, q) of E(V η) = e η + ½ q η η: shapes (m, n_samples, 6) and (n_pairs, n_samples, 6).
+    def whitened_strain_coefficients(self, vectors: np.ndarray, expression, count: int,
+                                     transform: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(ẽ, q̃) = (Rᵀ e, Rᵀ q) of E(V η) = e η + ½ q η η for each of the ``count`` strains stacked in
+        ``expression``: shapes (m, 6 n_samples) and (n_pairs, 6 n_samples), R from :func:`whitening`.
 
-        q is stored for the pairs j ≤ k of :func:`pair_index`. Sampled at u = ±V_j and
-        u = V_j + V_k; exact because E is quadratic in u (the ξ-derivative expressions as well).
+        q is stored for the pairs j ≤ k of :func:`pair_index`. Sampled at u = ±V_j and u = V_j + V_k
+        (exact: E is quadratic in u, its ξ-derivatives as well), whitened sample by sample.
         """
         m = vectors.shape[1]
 
-        def strain_of(owned):
+        def strains_of(owned):         # (count, 6 n_samples)
             fx.set_owned_values(self.direction, owned)
-            return symmetric_coordinates(self.evaluate(expression, 9))
+            values = self.evaluate(expression, 9 * count).reshape(self.n_samples, count, 9)
+            return whiten(symmetric_coordinates(values).transpose(1, 0, 2), transform)
 
-        plus = [strain_of(vectors[:, j]) for j in range(m)]
-        minus = [strain_of(-vectors[:, j]) for j in range(m)]
-        linear = np.stack([(p - n) / 2.0 for p, n in zip(plus, minus)])
+        plus = [strains_of(vectors[:, j]) for j in range(m)]
+        minus = [strains_of(-vectors[:, j]) for j in range(m)]
+        linear = np.stack([(p - n) / 2.0 for p, n in zip(plus, minus)], axis=1)
         diagonal = [p + n for p, n in zip(plus, minus)]
         pairs = pair_list(m)
-        quadratic = np.empty((len(pairs), self.n_samples, 6))
+        quadratic = np.empty((count, len(pairs), linear.shape[2]))
         for number, (j, k) in enumerate(pairs):
             if j == k:
-                quadratic[number] = diagonal[j]
+                quadratic[:, number] = diagonal[j]
             else:
-                both = strain_of(vectors[:, j] + vectors[:, k])
-                quadratic[number] = both - linear[j] - linear[k] - 0.5 * (diagonal[j] + diagonal[k])
-        return linear, quadratic
+                both = strains_of(vectors[:, j] + vectors[:, k])
+                quadratic[:, number] = both - linear[:, j] - linear[:, k] - 0.5 * (diagonal[j] + diagonal[k])
+        return [(linear[i], quadratic[i]) for i in range(count)]
+
+
+def _flat(tensor) -> list:
+    """The 9 components of a 3×3 UFL tensor, row-major."""
+    return [tensor[i, j] for i in range(3) for j in range(3)]
 
 
 def pair_list(m: int) -> list[tuple[int, int]]:
@@ -195,9 +211,14 @@ def internal_force_taylor(sampler: CellSampler, vectors: np.ndarray, n_parameter
 
     def strain(indices):
         if indices not in whitened:
-            sampler.set_shape_directions(*indices)
-            linear, quadratic = sampler.strain_coefficients(vectors, sampler.strain[len(indices)])
-            whitened[indices] = (whiten(linear, transform), whiten(quadratic, transform))
+            if len(indices) <= 1:       # E and every ∂E/∂ξ_k from one evaluation per sampled u
+                stacked = [()] + [(k,) for k in range(len(sampler.parameter_directions))]
+                whitened.update(zip(stacked, sampler.whitened_strain_coefficients(
+                    vectors, sampler.strains, len(stacked), transform)))
+            else:
+                sampler.set_shape_directions(*indices)
+                whitened[indices] = sampler.whitened_strain_coefficients(vectors, sampler.second_strain, 1,
+                                                                         transform)[0]
         return whitened[indices]
 
     def weight(indices):

@@ -55,7 +55,7 @@ class ElasticTerm:
 
     def reduce(self, projector) -> "ElasticTensors":
         """(K1, K2, K3) on the projector's basis with their Taylor terms in ξ, sampled at the quadrature points."""
-        sampler = CellSampler(self.fom, projector.order)
+        sampler = CellSampler(self.fom, projector.order, projector.n_parameters)
         taylor = internal_force_taylor(sampler, projector.vectors, projector.n_parameters, projector.order,
                                        self.fom.comm)
         terms = list(taylor) + [None] * (3 - len(taylor))     # (constant, first, second), each (K1, K2, K3)
