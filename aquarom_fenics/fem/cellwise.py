@@ -128,10 +128,10 @@ class CellSampler:
             values = self.evaluate(expression, 9 * count).reshape(self.n_samples, count, 9)
             return whiten(symmetric_coordinates(values).transpose(1, 0, 2), transform)
 
-        plus = [strains_of(vectors[:, j]) for j in range(m)]
-        minus = [strains_of(-vectors[:, j]) for j in range(m)]
-        linear = np.stack([(p - n) / 2.0 for p, n in zip(plus, minus)], axis=1)
-        diagonal = [p + n for p, n in zip(plus, minus)]
+        signed = [(strains_of(vectors[:, j]), strains_of(-vectors[:, j])) for j in range(m)]
+        linear = np.stack([(plus - minus) / 2.0 for plus, minus in signed], axis=1)
+        diagonal = [plus + minus for plus, minus in signed]
+        del signed
         pairs = pair_list(m)
         quadratic = np.empty((count, len(pairs), linear.shape[2]))
         for number, (j, k) in enumerate(pairs):
