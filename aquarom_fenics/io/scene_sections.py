@@ -69,6 +69,7 @@ class ActuationSection:
     stiffness: float = _spec(6e4, _non_negative, "muscle stiffness k [Pa]")
     amplitude: float = _spec(0.2, _non_negative, "A in a_left = A sin(2π f t), a_right = -a_left")
     frequency: float = _spec(1.0, _positive, "f [Hz]")
+    start_ramp: float = _spec(0.0, _non_negative, "τ [s] of a smooth start a(t) sin²(π t / 2τ) for t < τ; 0: SPEC's A sin(2π f t) from t = 0")
     muscle_volume: str = _spec("shape", _one_of("shape", "nominal"), "muscle energy over the shape-varied (SPEC default) or nominal volume")
 
 

@@ -1,6 +1,9 @@
 """Muscle actuation (SPEC §5): f_act = -∂Π_act/∂u with the muscle energy of ``forms/muscle.py``,
 
-    Π_act = Σ_j ½ k a_j(t) ∫_muscle_j |F_2 m|² dV_ξ,   (a_left, a_right) = A sin(2π f t) (1, -1).
+    Π_act = Σ_j ½ k a_j(t) ∫_muscle_j |F_2 m|² dV_ξ,   (a_left, a_right) = A r(t) sin(2π f t) (1, -1),
+
+r = 1 (SPEC) or, with ``[actuation] start_ramp`` τ > 0, the smooth start r(t) = sin²(π t / 2τ) for
+t < τ (then a ~ t³ at t = 0 instead of a jump of ȧ that rings the stiff modes).
 
 The activation law and its derivative in A are written here once, for the full and the reduced
 model. Π_act is linear in each a_j: the reduced force is -Σ_j a_j (b_j + B_j η) with b_j, B_j the
@@ -24,14 +27,21 @@ ANTAGONIST_PATTERN = np.array([1.0, -1.0])
 """(a_left, a_right) per unit of A sin(2π f t): the left muscle contracts while the right extends."""
 
 
-def unit_activations(frequency: float, time: float) -> np.ndarray:
-    """∂(a_left, a_right)/∂A = sin(2π f t) (1, -1)."""
-    return np.sin(2.0 * np.pi * frequency * time) * ANTAGONIST_PATTERN
+def start_ramp(time: float, ramp_time: float) -> float:
+    """r(t) = sin²(π t / 2τ) for t < τ, else 1 (τ = ``ramp_time`` [s]; r = 1 for τ = 0)."""
+    if time >= ramp_time:
+        return 1.0
+    return float(np.sin(0.5 * np.pi * time / ramp_time) ** 2)
 
 
-def activations(amplitude: float, frequency: float, time: float) -> np.ndarray:
-    """(a_left, a_right) = A sin(2π f t) (1, -1)."""
-    return amplitude * unit_activations(frequency, time)
+def unit_activations(frequency: float, time: float, ramp_time: float = 0.0) -> np.ndarray:
+    """∂(a_left, a_right)/∂A = r(t) sin(2π f t) (1, -1)."""
+    return start_ramp(time, ramp_time) * np.sin(2.0 * np.pi * frequency * time) * ANTAGONIST_PATTERN
+
+
+def activations(amplitude: float, frequency: float, time: float, ramp_time: float = 0.0) -> np.ndarray:
+    """(a_left, a_right) = A r(t) sin(2π f t) (1, -1)."""
+    return amplitude * unit_activations(frequency, time, ramp_time)
 
 
 class MuscleTerm:
@@ -44,6 +54,7 @@ class MuscleTerm:
         scene, tags = fom.scene, fom.fish.tags
         self.fom = fom
         self.amplitude, self.frequency = scene.actuation.amplitude, scene.actuation.frequency
+        self.ramp_time = scene.actuation.start_ramp
         self.on = scene.actuation.stiffness > 0 and scene.actuation.amplitude > 0
         self._activations = [fx.constant(fom.mesh, 0.0), fx.constant(fom.mesh, 0.0)]
         muscles = fx.cell_measure(fom.mesh, {LEFT: tags.left_muscle_cells, RIGHT: tags.right_muscle_cells})
@@ -66,7 +77,7 @@ class MuscleTerm:
 
     def set_time(self, time: float) -> None:
         """The activations of the scene's law at time t."""
-        self.set_activations(activations(self.amplitude, self.frequency, time))
+        self.set_activations(activations(self.amplitude, self.frequency, time, self.ramp_time))
 
     def force(self) -> np.ndarray:
         """f_act = -∂Π_act/∂u at the FOM's displacement and the current activations [N]."""
@@ -95,21 +106,22 @@ class MuscleTensors:
     constant: Taylor                     # b_j (2, m): ∂Π_act,j/∂u at rest for a_j = 1 (left, right)
     linear: Taylor                       # B_j (2, m, m): ∂²Π_act,j/∂u² for a_j = 1
 
-    def at(self, delta: np.ndarray, amplitude: float, frequency: float) -> "ReducedMuscle":
-        return ReducedMuscle(self, delta, amplitude, frequency)
+    def at(self, delta: np.ndarray, amplitude: float, frequency: float, ramp_time: float = 0.0) -> "ReducedMuscle":
+        return ReducedMuscle(self, delta, amplitude, frequency, ramp_time)
 
 
 class ReducedMuscle:
     """The reduced muscles at one design ξ and amplitude A (a :class:`ReducedTerm`)."""
 
-    def __init__(self, tensors: MuscleTensors, delta: np.ndarray, amplitude: float, frequency: float):
+    def __init__(self, tensors: MuscleTensors, delta: np.ndarray, amplitude: float, frequency: float,
+                 ramp_time: float = 0.0):
         self.tensors, self.delta = tensors, delta
-        self.amplitude, self.frequency = amplitude, frequency
+        self.amplitude, self.frequency, self.ramp_time = amplitude, frequency, ramp_time
         self.constant = tensors.constant.at(delta)
         self.linear = tensors.linear.at(delta)
 
     def activations(self, time: float) -> np.ndarray:
-        return activations(self.amplitude, self.frequency, time)
+        return activations(self.amplitude, self.frequency, time, self.ramp_time)
 
     def _per_activation(self, a: np.ndarray, eta: np.ndarray) -> np.ndarray:
         """Σ_j a_j (b_j + B_j η)."""
@@ -120,7 +132,7 @@ class ReducedMuscle:
 
     def amplitude_derivative(self, time: float, eta: np.ndarray) -> np.ndarray:
         """∂r/∂A = Σ_j (∂a_j/∂A) (b_j + B_j η)."""
-        return self._per_activation(unit_activations(self.frequency, time), eta)
+        return self._per_activation(unit_activations(self.frequency, time, self.ramp_time), eta)
 
     def tangents(self, time, eta, eta_dot, eta_ddot):
         """K_t part Σ_j a_j B_j."""

@@ -59,6 +59,19 @@ def test_activation_law_and_its_amplitude_derivative():
     np.testing.assert_allclose(unit_activations(frequency, time), central, rtol=1e-8)
 
 
+def test_the_smooth_start_leaves_the_activation_at_rest_to_second_order_and_ends_at_the_ramp_time():
+    """a(t) = A sin²(π t / 2τ) sin(2π f t) ~ t³ near t = 0: a, ȧ and ä vanish (a jump of ȧ rings the
+    stiff modes); for t ≥ τ it is SPEC's law, and τ = 0 is SPEC's law everywhere."""
+    frequency, ramp, step = 1.0, 0.5, 1e-4
+    left = [activations(0.2, frequency, t, ramp)[0] for t in (0.0, step, 2 * step)]
+    assert left[0] == 0.0
+    assert abs(left[1]) < 1e-9 and abs(left[2] / left[1] - 8.0) < 1e-2      # cubic: doubling t multiplies by 8
+    for time in (0.5, 0.73, 1.6):
+        np.testing.assert_array_equal(activations(0.2, frequency, time, ramp), activations(0.2, frequency, time))
+    np.testing.assert_array_equal(activations(0.2, frequency, 0.3, 0.0), activations(0.2, frequency, 0.3))
+    assert 0.0 < activations(0.2, frequency, 0.2, ramp)[0] < activations(0.2, frequency, 0.2)[0]
+
+
 def test_drag_jacobian_is_the_derivative_of_the_drag_law_in_the_head_velocity():
     direction, velocity, step = np.array([-0.3, 0.0, -1.2]), 0.07, 1e-7
     central = (drag_force(direction, velocity + step) - drag_force(direction, velocity - step)) / (2 * step)
