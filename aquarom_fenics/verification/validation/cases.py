@@ -103,6 +103,8 @@ def describe(record: dict) -> str:
     if energy.get("available") and energy.get("numerical_dissipation_relative") is not None:
         parts.append(f"numerical dissipation {100 * energy['numerical_dissipation_relative']:+.2f}%, "
                      f"energy imbalance {100 * energy['relative_imbalance']:.1e}%")
+    elif energy.get("available"):
+        parts.append(f"no energy throughput (work of the forces {energy.get('throughput', 0.0):.3g} J)")
     elif energy:
         parts.append(f"energy balance {energy['message']}")
     return ", ".join(parts)
