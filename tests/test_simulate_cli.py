@@ -102,3 +102,22 @@ def test_inverting_design_is_refused(tmp_path, capsys):
                  "--no-progress"]) == 2
     assert "y_thin=1.5" in capsys.readouterr().err
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.mpi
+def test_compare_and_check_under_two_ranks_end_and_agree_with_one(tmp_path):
+    """Every rank takes part in the collective calls of `compare` (FOM, PROM, plot) and `check`
+    (tensor and Taylor tests): both exit under mpirun, and compare's numbers are the serial ones."""
+    if shutil.which("mpirun") is None:
+        pytest.skip("mpirun not installed")
+    scene = write_scene(tmp_path, extra='[shapes]\ny_thin = { bounds = [-0.15, 0.15] }')
+    assert main(["compare", str(scene), "--out", str(tmp_path / "serial")]) == 0
+    aquarom = Path(sys.executable).with_name("aquarom")
+    for command in (["compare", str(scene), "--out", str(tmp_path / "parallel")], ["check", str(scene)]):
+        completed = subprocess.run(["mpirun", "-n", "2", str(aquarom), *command],
+                                   capture_output=True, text=True, timeout=600, env=os.environ)
+        assert completed.returncode == 0, (command[0], completed.stderr[-2000:])
+    serial, parallel = (json.loads((tmp_path / name / "compare.json").read_text()) for name in ("serial", "parallel"))
+    for model in ("fom", "prom"):
+        assert parallel[model]["distance"] == pytest.approx(serial[model]["distance"], rel=1e-7, abs=1e-12)
+    assert "all checks passed" in completed.stdout
