@@ -34,8 +34,8 @@ def green_lagrange_strain(displacement, shape_gradient_field):
     Written with H = F_2 - I: F_2ᵀ F_2 - I would cancel to round-off, leaving a relative error of
     about 1e-16 / |H| (1e-5 at the strains of a smooth start's first step, where Newton stalls).
     """
-    stretch = relative_displacement_gradient(displacement, shape_gradient_field)
-    return 0.5 * (stretch + stretch.T + stretch.T * stretch)
+    gradient = relative_displacement_gradient(displacement, shape_gradient_field)
+    return 0.5 * (gradient + gradient.T + gradient.T * gradient)
 
 
 def volume_ratio(shape_gradient_field):
