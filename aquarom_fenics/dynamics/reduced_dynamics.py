@@ -47,7 +47,7 @@ class ReducedSystem:
         self.muscle = prom.muscle.at(d, scene.actuation.amplitude if amplitude is None else amplitude,
                                      scene.actuation.frequency, scene.actuation.start_ramp)
         self.thrust = prom.thrust.at(d, scene.fluid.spine_force) if prom.thrust is not None else None
-        self.drag = prom.drag.at(d, prom.observation.head_x_row) if prom.drag is not None else None
+        self.drag = prom.drag.at(d) if prom.drag is not None else None
         self.terms = [term for term in (self.elastic, self.muscle, self.inertia, self.thrust, self.drag)
                       if term is not None]
         self.com_weights = self.inertia.com_weights

@@ -28,7 +28,8 @@ from aquarom_fenics.physics.drag import DragTerm
 from aquarom_fenics.physics.elastic import ElasticTerm
 from aquarom_fenics.physics.inertia import InertiaTerm
 from aquarom_fenics.physics.muscle import MuscleTerm
-from aquarom_fenics.physics.thrust_term import ThrustTerm
+from aquarom_fenics.physics.stations import StationAverages, station_averages
+from aquarom_fenics.physics.thrust_term import StationThrustTerm, ThrustTerm
 
 
 @dataclass(frozen=True)
@@ -96,11 +97,14 @@ class FullOrderModel:
         fx.set_nodal_values(self.shape_displacement, self.layout, shape_displacement)
         self._build_shape_gradients(np.zeros_like(self.xi) if moved_mesh else self.xi)
         self._build_spine()
+        self._build_stations()
         self._build_boundary_conditions()
         self._build_terms(rest_points)
         self._work_in = PETSc.Vec().createMPI((self.n_owned_dofs, self.n_global_dofs), comm=comm)
         self._work_out = self._work_in.duplicate()
         self._solver = None
+        self._krylov = False
+        self._exact_operator = None
         self._inertia_damping = None
         self._on_newton_pattern: dict[str, PETSc.Mat] = {}
         self.set_time_step(TimeScheme.from_solver(scene.solver))
@@ -148,7 +152,8 @@ class FullOrderModel:
         self.rest_stiffness = self.elastic.rest_stiffness()
         self.inertia = InertiaTerm(self, self.rest_stiffness)
         self.drag = DragTerm(self) if fluid.drag else None
-        self.thrust = ThrustTerm(self, rest_points) if fluid.thrust else None
+        thrust_term = ThrustTerm if self.station_averages is None else StationThrustTerm
+        self.thrust = thrust_term(self, rest_points) if fluid.thrust else None
         tangent = self.elastic.tangent_form
         if self.muscle.on:
             tangent = tangent + self.muscle.tangent_form
@@ -196,6 +201,19 @@ class FullOrderModel:
         head = self.owned_positions(np.array([tags.head_spine_node]))[0]
         self._head_x_owned = 3 * head  # empty on ranks that do not own the head node
 
+    def _build_stations(self):
+        """The station averages B and the head average (SPEC §5), or None for ``stations = "nodes"``;
+        the head's reference x-velocity weights on the owned x dofs (the head node for "nodes")."""
+        n_stations = self.scene.fluid.stations
+        if n_stations == "nodes":
+            self.station_averages = None
+            self._head_velocity_weights = np.ones(self._head_x_owned.size)
+            self._head_velocity_dofs = self._head_x_owned
+            return
+        self.station_averages = averages_of(self.fish, n_stations)
+        self._head_velocity_weights = self.station_averages.head_weights[self.layout.owned_nodes]
+        self._head_velocity_dofs = 3 * np.arange(self.layout.n_owned_blocks)
+
     def _build_boundary_conditions(self):
         """Swimming: head nodes fixed in y and z, free in x (SPEC §5). Clamped: all head dofs."""
         head = self.fish.tags.head_nodes
@@ -239,7 +257,15 @@ class FullOrderModel:
         return self.comm.allreduce(local, op=MPI.SUM)
 
     def head_velocity_x(self, v: np.ndarray) -> float:
-        return self.comm.allreduce(float(v[self._head_x_owned].sum()), op=MPI.SUM)
+        """The drag's reference velocity v_x [m/s]: the head's volume average of u̇_x (the head node's
+        u̇_x with ``stations = "nodes"``)."""
+        local = float(self._head_velocity_weights @ v[self._head_velocity_dofs])
+        return self.comm.allreduce(local, op=MPI.SUM)
+
+    def head_velocity_row(self, vectors: np.ndarray) -> np.ndarray:
+        """(m,) the row giving v_x from reduced velocities η̇ of the owned dof columns ``vectors``."""
+        local = self._head_velocity_weights @ vectors[self._head_velocity_dofs]
+        return self.comm.allreduce(local, op=MPI.SUM)
 
     def internal_force(self, u: np.ndarray) -> np.ndarray:
         """f_int(u) = ∂Π/∂u, owned entries [N]."""
@@ -314,10 +340,51 @@ class FullOrderModel:
             self._on_newton_pattern[name] = padded
         return self._on_newton_pattern[name]
 
+    def newton_correction(self, time, u, v, a):
+        """x ↦ (S_exact - S) x at the evaluation point, S the assembled Newton matrix: the stations'
+        coupling Bᵀ J B and the head-averaged drag, which stay out of the sparse matrix (None for the
+        nodal model, whose matrix is exact)."""
+        parts = []
+        if self.station_averages is not None and self.thrust is not None:
+            parts.append(self.thrust.newton_correction(self.scheme, u, v, a))
+        if self.drag is not None:
+            parts.append(self.drag.newton_correction(self.scheme.velocity_factor, v))
+        parts = [part for part in parts if part is not None]
+        if not parts:
+            return None
+        return lambda x: sum(part(x) for part in parts)
+
+    def exact_newton_product(self, time, u, v, a, x: np.ndarray) -> np.ndarray:
+        """S_exact x = ∂r_{n+1-α}/∂u_{n+1} x, owned dofs (fixed dofs: identity)."""
+        product = self.matvec(self.assemble_newton_matrix(time, u, v, a), x)
+        correction = self.newton_correction(time, u, v, a)
+        if correction is not None:
+            free = x.copy()
+            free[self.fixed_dofs] = 0.0
+            extra = correction(free)
+            extra[self.fixed_dofs] = 0.0
+            product = product + extra
+        return product
+
     def factorize(self, time, u, v, a) -> None:
-        if self._solver is None:
-            self._solver = direct_solver(self.comm)
-        self._solver.setOperators(self.assemble_newton_matrix(time, u, v, a))
+        """Factorise S at the evaluation point. With ``[solver] newton_coupling = "krylov"`` and a coupling
+        outside the matrix (stations), later solves are GMRES on S_exact of this point, preconditioned
+        by the factors of S; with "lumped" they use the factors alone (modified Newton)."""
+        matrix = self.assemble_newton_matrix(time, u, v, a)
+        correction = self.newton_correction(time, u, v, a) if self.scene.solver.newton_coupling == "krylov" else None
+        if self._solver is None or (correction is not None) != self._krylov:
+            if self._solver is not None:
+                self._solver.destroy()
+            self._solver = direct_solver(self.comm) if correction is None else coupled_solver(self.comm)
+            self._krylov = correction is not None
+        if correction is None:
+            self._solver.setOperators(matrix)
+            return
+        if self._exact_operator is None:
+            self._exact_operator = PETSc.Mat().createPython(matrix.getSizes(), _ExactNewtonOperator(), comm=self.comm)
+            self._exact_operator.setUp()
+        self._exact_operator.getPythonContext().set(matrix, correction, self.fixed_dofs)
+        self._solver.setOperators(self._exact_operator, matrix)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         return self.solve_with(self._solver, rhs)
@@ -364,6 +431,8 @@ class FullOrderModel:
         """Free the PETSc matrices, vectors and solvers of the model and its terms. petsc4py does not
         free them when the Python objects go (measured: 29 MB per degree-2, level-1 model, 67 MB after a
         factorisation), so whoever is done with a model calls this; the model is unusable afterwards."""
+        if self._exact_operator is not None:
+            self._exact_operator.destroy()
         owners = [self, *(term for term in (self.elastic, self.muscle, self.inertia, self.drag, self.thrust) if term)]
         for owner in owners:
             for value in list(vars(owner).values()):
@@ -417,6 +486,50 @@ class FullOrderModel:
         nodal = np.zeros((self.fish.nodes.points.shape[0], 3))
         nodal[self.layout.owned_nodes] = u.reshape(-1, 3)
         return self.comm.allreduce(nodal, op=MPI.SUM)
+
+
+def coupled_solver(comm: MPI.Comm) -> PETSc.KSP:
+    """GMRES preconditioned by an LU (MUMPS) of the preconditioning matrix, whose factors are kept
+    until that matrix changes; relative tolerance 1e-10, at most 100 iterations."""
+    solver = PETSc.KSP().create(comm)
+    solver.setType("gmres")
+    solver.setTolerances(rtol=1e-10, atol=0.0, max_it=100)
+    preconditioner = solver.getPC()
+    preconditioner.setType("lu")
+    preconditioner.setFactorSolverType("mumps")
+    return solver
+
+
+class _ExactNewtonOperator:
+    """PETSc Python matrix y = S x + c(x): the assembled Newton matrix S plus the coupling c outside
+    it (zero on the fixed dofs, whose rows and columns of S are the identity)."""
+
+    def set(self, matrix: PETSc.Mat, correction, fixed_dofs: np.ndarray) -> None:
+        self.matrix, self.correction, self.fixed_dofs = matrix, correction, fixed_dofs
+
+    def mult(self, operator, x: PETSc.Vec, y: PETSc.Vec) -> None:
+        self.matrix.mult(x, y)
+        values = x.array_r.copy()
+        values[self.fixed_dofs] = 0.0
+        extra = self.correction(values)
+        extra[self.fixed_dofs] = 0.0
+        y.array[:] += extra
+
+
+_AVERAGES: dict[tuple[int, int], StationAverages] = {}
+
+
+def averages_of(fish: Fish, n_stations: int) -> StationAverages:
+    """The station averages of a fish's nominal mesh, computed once per fish and station count."""
+    import weakref
+
+    key = (id(fish), n_stations)
+    if key not in _AVERAGES:
+        tags = fish.tags
+        _AVERAGES[key] = station_averages(fish.mesh.points, fish.mesh.cells, fish.nodes, tags.box, n_stations,
+                                          tags.head_cells)
+        weakref.finalize(fish, _AVERAGES.pop, key, None)
+    return _AVERAGES[key]
 
 
 class ShapeDirection:

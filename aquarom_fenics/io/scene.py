@@ -205,7 +205,9 @@ def _section_from_dict(cls, table: dict, where: str, section: str):
         if key not in fields:
             raise InputError(f"{where}: unknown key [{section}] {key}; valid keys: {', '.join(fields)}")
         spec = fields[key]
-        value = _coerce(value, spec.default, f"{where}: [{section}] {key}", spec.metadata["variable_length"])
+        coerce = spec.metadata.get("coerce")
+        value = (coerce(value, f"{where}: [{section}] {key}") if coerce else
+                 _coerce(value, spec.default, f"{where}: [{section}] {key}", spec.metadata["variable_length"]))
         check = spec.metadata.get("check")
         problem = check(value) if check else None
         if problem:

@@ -23,9 +23,21 @@ def _one_of(*choices):
     return check
 
 
-def _spec(default, check=None, doc="", variable_length=False):
-    """A scene field: its default, an optional validity check and a unit/meaning for the docs."""
-    return field(default=default, metadata={"check": check, "doc": doc, "variable_length": variable_length})
+def _spec(default, check=None, doc="", variable_length=False, coerce=None):
+    """A scene field: its default, an optional validity check and a unit/meaning for the docs;
+    ``coerce(value, where)`` replaces the type check by the default's type where a key takes
+    values of more than one type."""
+    return field(default=default, metadata={"check": check, "doc": doc, "variable_length": variable_length,
+                                            "coerce": coerce})
+
+
+def _station_count(value, where):
+    """An integer N_s ≥ 2 or the string "nodes"."""
+    from aquarom_fenics.errors import InputError
+
+    if value == "nodes" or (isinstance(value, int) and not isinstance(value, bool) and 2 <= value <= 2000):
+        return value
+    raise InputError(f"{where} must be an integer number of station intervals in [2, 2000] or \"nodes\", got {value!r}")
 
 
 def _interval_within(low, high):
@@ -76,7 +88,8 @@ class ActuationSection:
 @dataclass(frozen=True)
 class FluidSection:
     density: float = _spec(1000.0, _positive, "ρ_w [kg/m³]")
-    thrust: bool = _spec(True, None, "Lighthill reactive thrust on the spine")
+    thrust: bool = _spec(True, None, "Lighthill reactive thrust, through the stations")
+    stations: int | str = _spec(40, None, "N_s: the thrust acts through N_s + 1 cross-section stations (averages over slabs of L/N_s); \"nodes\": on the spine nodes (the source's model, no mesh limit)", coerce=_station_count)
     drag: bool = _spec(True, None, "form drag on the skin")
     spine_force: str = _spec("source", _one_of("source", "lagrangian"), "spine force -d/dt(∂T_a/∂v) ('source') or with +∂T_a/∂x ('lagrangian', exchanges no energy by itself)")
 
@@ -111,6 +124,7 @@ class SolverSection:
     min_time_step: float = _spec(1e-3, _positive, "a step whose Newton fails is retried with h/2, h/4, … down to this [s]")
     tolerance: float = _spec(1e-6, _positive, "relative Newton tolerance")
     max_iterations: int = _spec(30, _positive, "Newton iterations per step")
+    newton_coupling: str = _spec("lumped", _one_of("lumped", "krylov"), "FOM with stations: the Newton matrix holds the sparse part and a lumped added mass; 'lumped' solves with its factors (modified Newton), 'krylov' solves the exact coupled system by GMRES preconditioned by them")
 
 
 @dataclass(frozen=True)

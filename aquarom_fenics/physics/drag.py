@@ -1,8 +1,10 @@
-"""Form drag (SPEC §5): f_drag = g(ξ) v_x², v_x the x-velocity of the head node.
+"""Form drag (SPEC §5): f_drag = g(ξ) v_x², v_x = w·u̇ the head's x-velocity.
 
+w averages u̇_x over the head's volume (with ``[fluid] stations = "nodes"``: the head node's u̇_x).
 g is the skin form of ``forms/drag.py`` on the rest shape. The law, its Jacobian
-∂f/∂u̇ = 2 g v_x e_head_xᵀ (a single column, at the head's x dof) and its ξ-derivative
-∂f/∂ξ_k = (∂g/∂ξ_k) v_x² are written here once, for the full and the reduced model.
+∂f/∂u̇ = 2 g v_x wᵀ (rank one) and its ξ-derivative ∂f/∂ξ_k = (∂g/∂ξ_k) v_x² are written here once,
+for the full and the reduced model. In the FOM's Newton matrix only the single-column Jacobian of
+the nodal model is kept; the head average's (dense over the head) is left to the Newton updates.
 """
 from __future__ import annotations
 
@@ -45,28 +47,47 @@ class DragTerm:
         """f_drag on the owned dofs [N]."""
         return drag_force(self.direction, self.fom.head_velocity_x(v))
 
+    @property
+    def nodal(self) -> bool:
+        """The nodal model: v_x of the head node, whose Jacobian column goes into the Newton matrix."""
+        return self.fom.station_averages is None
+
     def newton_entries(self) -> tuple[np.ndarray, np.ndarray]:
         """(global rows, global columns) of the entries ``add_newton_matrix`` adds: the head x column."""
+        if not self.nodal:
+            none = np.zeros(0, dtype=np.int32)
+            return none, none
         return self.global_rows, np.full(self.global_rows.size, self.fom.head_x_global_dof)
 
     def add_newton_matrix(self, matrix: PETSc.Mat, velocity_factor: float, v: np.ndarray) -> None:
-        """S += -k_v ∂f/∂u̇ (f_drag is on the right of the equations of motion)."""
+        """S += -k_v ∂f/∂u̇ (f_drag is on the right of the equations of motion), for the nodal model."""
+        if not self.nodal:
+            return
         column = drag_velocity_jacobian(self.direction[self.rows], self.fom.head_velocity_x(v))
         head = np.array([self.fom.head_x_global_dof], dtype=np.int32)
         matrix.setValues(self.global_rows, head, (-velocity_factor * column).reshape(-1, 1), addv=PETSc.InsertMode.ADD_VALUES)
 
+    def newton_correction(self, velocity_factor: float, v: np.ndarray):
+        """x ↦ (S_exact - S_matrix) x of the head-averaged drag: -k_v 2 g v_x (w·x) (rank one), None for
+        the nodal model (its column is in the matrix)."""
+        if self.nodal:
+            return None
+        column = -velocity_factor * drag_velocity_jacobian(self.direction, self.fom.head_velocity_x(v))
+        return lambda x: column * self.fom.head_velocity_x(x)
+
     def reduce(self, projector) -> "DragTensors":
-        return DragTensors(projector.taylor(self.direction_form))
+        return DragTensors(projector.taylor(self.direction_form), self.fom.head_velocity_row(projector.vectors))
 
 
 @dataclass
 class DragTensors:
-    """The reduced drag: f_drag,r = g_r v_x², v_x = (head x row of V)·η̇."""
+    """The reduced drag: f_drag,r = g_r v_x², v_x = (wᵀ V)·η̇."""
 
     direction: Taylor                    # g_r = Vᵀ g, (m,)
+    velocity_row: np.ndarray             # (m,) wᵀ V: the head's x-velocity from η̇
 
-    def at(self, delta: np.ndarray, head_x_row: np.ndarray) -> "ReducedDrag":
-        return ReducedDrag(self, delta, head_x_row)
+    def at(self, delta: np.ndarray) -> "ReducedDrag":
+        return ReducedDrag(self, delta, self.velocity_row)
 
 
 class ReducedDrag:

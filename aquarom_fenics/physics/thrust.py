@@ -227,6 +227,26 @@ def thrust_force_per_virtual_mass(
     return per_mass
 
 
+def thrust_force_per_rest_length(geometry: SpineGeometry, displacement, velocity, acceleration) -> np.ndarray:
+    """∂f/∂ℓ_0,i of the thrust at fixed positions, (n_segments, n_nodes, 2) [N/m].
+
+    With t, n and ṅ each ∝ 1/ℓ_0: f_tail = ½ m̃ (v·n)² t ∝ ℓ_0⁻³, f_spine = -m̃ ℓ_0 [...] ∝ ℓ_0⁻¹ and
+    g = m̃ (v·n) Rᵀ v ∝ ℓ_0⁻¹, so ∂f/∂ℓ_0 = -(3 f_tail + f_spine ± g)/ℓ_0 per segment.
+    """
+    state = _segment_state(geometry, displacement, velocity, acceleration)
+    n_segments = geometry.n_nodes - 1
+    segments = np.arange(n_segments)
+    mass = geometry.virtual_mass[:, None]
+    per_length = np.zeros((n_segments, geometry.n_nodes, 2))
+    per_length[segments, segments] = -mass * _spine_force_per_mass(state) / state.rest_length[:, None]
+    per_length[0, 0] += -3.0 * geometry.virtual_mass[0] * _tail_force_per_mass(state) / state.rest_length[0]
+    if geometry.lagrangian:
+        position_force = -mass * _position_force_per_mass(state) / state.rest_length[:, None]
+        per_length[segments, segments + 1] += position_force
+        per_length[segments, segments] -= position_force
+    return per_length
+
+
 def thrust_jacobians(
     geometry: SpineGeometry, displacement, velocity, acceleration
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -1,9 +1,11 @@
 """The Lighthill thrust of ``thrust.py`` as a term of the full and the reduced model (SPEC §5, §8).
 
-FOM: the force on the spine nodes' x-y dofs and its exact Jacobians in the Newton matrix.
-Reduced: the same law, evaluated exactly on the reduced spine coordinates x_spine = V_spine η;
-its virtual mass is quadratic in ξ (z_dorsal linear), the spine's rest x-y does not move with the
-catalog's shape variations (checked when the PROM is built).
+FOM, stations (the default, ``[fluid] stations = N_s``): the law on the station averages
+x̄ = B(X + u_ξ + u), v̄ = B u̇, ā = B ü, acting on the body by f = Bᵀ F (``StationThrustTerm``).
+FOM, ``stations = "nodes"`` (the source's model, for comparison): the law on the spine nodes, its
+exact Jacobians in the Newton matrix (``ThrustTerm``).
+Reduced: the same law, evaluated exactly on the reduced kinematics W η (W = B V, or V at the spine
+nodes); its virtual mass is quadratic in ξ (z_dorsal linear), the rest stations linear in ξ (B U).
 """
 from __future__ import annotations
 
@@ -13,8 +15,13 @@ import numpy as np
 from petsc4py import PETSc
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.physics.thrust import (SpineGeometry, thrust_force, thrust_force_per_virtual_mass,
-                                           thrust_jacobians, virtual_mass, virtual_mass_gradient)
+from mpi4py import MPI
+
+from aquarom_fenics.geometry.shapes import shape_displacement
+from aquarom_fenics.physics.stations import dorsal_profile
+from aquarom_fenics.physics.thrust import (SpineGeometry, thrust_force, thrust_force_per_rest_length,
+                                           thrust_force_per_virtual_mass, thrust_jacobians, virtual_mass,
+                                           virtual_mass_gradient)
 
 
 def shape_rows(fish) -> np.ndarray:
@@ -23,13 +30,14 @@ def shape_rows(fish) -> np.ndarray:
 
 
 def check_spine_is_not_moved(fish) -> None:
-    """The reduced thrust keeps the spine's rest x-y; no catalog shape moves it (all vanish on the axis)."""
+    """The nodal thrust (``stations = "nodes"``) keeps the spine's rest x-y in the PROM; no catalog
+    shape moves it (all vanish on the axis)."""
     spine_rows = shape_rows(fish)[fish.tags.spine_nodes, :2]
     moving = np.flatnonzero(np.abs(spine_rows).max(axis=(0, 1)) > 1e-12 * max(fish.tags.box.length, 1.0))
     if moving.size:
         names = ", ".join(fish.shape_names[k] for k in moving)
-        raise InputError(f"shape variations {names} move the spine in x-y; the PROM supports shape "
-                         "variations that vanish on the body axis")
+        raise InputError(f"shape variations {names} move the spine in x-y; with [fluid] stations = \"nodes\" the "
+                         "PROM supports shape variations that vanish on the body axis (use stations = N_s)")
 
 
 class ThrustTerm:
@@ -84,19 +92,143 @@ class ThrustTerm:
         """The spine rows of V, the rest spine and the dorsal heights with their exact ξ-gradient."""
         fom, tags = self.fom, self.fom.fish.tags
         spine_rows = np.stack([fom.rows_at(projector.vectors, node) for node in tags.spine_nodes])[:, :2]
-        return ThrustData(spine_rows=spine_rows, spine_rest_xy=self.spine.rest_xy, dorsal_z=self.dorsal_z,
-                          dorsal_z_gradient=shape_rows(fom.fish)[tags.dorsal_nodes, 2, :projector.n_parameters],
+        p = projector.n_parameters
+        return ThrustData(rows=spine_rows, rest_xy=self.spine.rest_xy,
+                          rest_xy_gradient=np.zeros(self.spine.rest_xy.shape + (p,)), dorsal_z=self.dorsal_z,
+                          dorsal_z_gradient=shape_rows(fom.fish)[tags.dorsal_nodes, 2, :p],
                           fluid_density=fom.scene.fluid.density)
+
+
+class StationThrustTerm:
+    """The thrust through the stations of one FOM (SPEC §5): station kinematics x̄ = B(X + u_ξ + u),
+    v̄ = B u̇, ā = B ü, the Lighthill law of ``thrust.py`` on them, and f_thrust = Σ_i B_iᵀ F_i.
+
+    The exact Jacobian Bᵀ J B couples whole slabs and stays out of the sparse Newton matrix; the
+    matrix gets the lumped stand-in of the added mass, Σ_i b_ij m̃_i ℓ_0,i n_i n_iᵀ on node j's x-y
+    block (exact for a rigid motion of a slab), and Newton converges on the exact residual.
+    """
+
+    def __init__(self, fom, rest_points: np.ndarray):
+        self.fom = fom
+        fish, fluid = fom.fish, fom.scene.fluid
+        averages = fom.station_averages
+        self.owned_weights = averages.weights[:, fom.layout.owned_nodes].tocsr()      # (N_s + 1, owned nodes)
+        self.owned_weights_t = self.owned_weights.T.tocsr()
+        rest_xy = averages.average(rest_points[:, :2])
+        self.rear_points = rear_station_points(fish, averages)
+        self.dorsal_z = self.rear_points[:, 2] + self.rear_points_shift(fom.xi)
+        self.spine = SpineGeometry(rest_xy, virtual_mass(self.dorsal_z, fluid.density), fluid.spine_force)
+        n_owned = self.owned_weights.shape[1]
+        self._block_rows = np.arange(n_owned + 1, dtype=np.int32)
+        self._block_columns = fom.layout.global_block[:n_owned].astype(np.int32)
+
+    def rear_points_shift(self, xi: np.ndarray) -> np.ndarray:
+        """Δz of the dorsal skin at the rear stations for the design ξ: Σ_k ξ_k U_k,z (exact)."""
+        return self.dorsal_gradient(xi.size) @ xi if xi.size else np.zeros(self.rear_points.shape[0])
+
+    def dorsal_gradient(self, n_parameters: int) -> np.ndarray:
+        """(N_s, p) ∂z_dorsal/∂ξ_k at the rear stations: U_k,z of the exact shape fields there."""
+        fish = self.fom.fish
+        names = fish.shape_names[:n_parameters]
+        if not names:
+            return np.zeros((self.rear_points.shape[0], 0))
+        return np.column_stack([shape_displacement(name, self.rear_points, fish.tags.box)[:, 2] for name in names])
+
+    def station_values(self, owned: np.ndarray) -> np.ndarray:
+        """(N_s + 1, 2) x-y station averages B_i of an owned dof array, on every rank."""
+        local = self.owned_weights @ owned.reshape(-1, 3)[:, :2]
+        return self.fom.comm.allreduce(local, op=MPI.SUM)
+
+    def _station_states(self, u, v, a):
+        return [self.station_values(x) for x in (u, v, a)]
+
+    def force(self, u, v, a) -> np.ndarray:
+        """f_thrust = Σ_i B_iᵀ F_i on the owned dofs [N]."""
+        stations = thrust_force(self.spine, *self._station_states(u, v, a))
+        force = np.zeros((self.owned_weights.shape[1], 3))
+        force[:, :2] = self.owned_weights_t @ stations
+        return force.ravel()
+
+    def newton_entries(self) -> tuple[np.ndarray, np.ndarray]:
+        """No entries beyond the tangent's pattern: the lumped added mass sits on the nodes' diagonal blocks."""
+        none = np.zeros(0, dtype=np.int32)
+        return none, none
+
+    def add_newton_matrix(self, matrix: PETSc.Mat, scheme, u, v, a) -> None:
+        """S += k_a Σ_i b_ij m̃_i ℓ_0,i n_i n_iᵀ on each owned node j's x-y block (the lumped -k_a ∂f/∂ü)."""
+        added_mass = thrust_jacobians(self.spine, *self._station_states(u, v, a))[2]
+        n = self.spine.n_nodes
+        station_blocks = added_mass.reshape(n, 2, n, 2)[np.arange(n), :, np.arange(n), :]      # (n, 2, 2)
+        nodal = (self.owned_weights_t @ station_blocks.reshape(n, 4)).reshape(-1, 2, 2)
+        blocks = np.zeros((nodal.shape[0], 3, 3))
+        blocks[:, :2, :2] = -scheme.acceleration_factor * nodal
+        matrix.setValuesBlockedCSR(self._block_rows, self._block_columns, blocks.ravel(),
+                                   addv=PETSc.InsertMode.ADD_VALUES)
+
+    def newton_correction(self, scheme, u, v, a):
+        """x ↦ (S_exact - S_matrix) x of the thrust at (u, u̇, ü): -Bᵀ (k_u J_u + k_v J_u̇ + k_a J_ü) B x, the
+        exact coupling of the stations, less the lumped added mass the matrix holds (owned dofs)."""
+        jacobians = thrust_jacobians(self.spine, *self._station_states(u, v, a))
+        station_block = -(scheme.stiffness_factor * jacobians[0] + scheme.velocity_factor * jacobians[1]
+                          + scheme.acceleration_factor * jacobians[2])
+        n = self.spine.n_nodes
+        added_mass = jacobians[2].reshape(n, 2, n, 2)[np.arange(n), :, np.arange(n), :]
+        lumped = -scheme.acceleration_factor * (self.owned_weights_t @ added_mass.reshape(n, 4)).reshape(-1, 2, 2)
+
+        def apply(x: np.ndarray) -> np.ndarray:
+            nodal = x.reshape(-1, 3)[:, :2]
+            correction = np.zeros((nodal.shape[0], 3))
+            stations = (station_block @ self.station_values(x).ravel()).reshape(-1, 2)
+            correction[:, :2] = self.owned_weights_t @ stations - np.einsum("jab,jb->ja", lumped, nodal)
+            return correction.ravel()
+        return apply
+
+    def unit_tail_force(self) -> np.ndarray:
+        """B_0ᵀ e_x: a unit x-force [N] on the tail station, on the owned dofs."""
+        force = np.zeros((self.owned_weights.shape[1], 3))
+        force[:, 0] = self.owned_weights[0].toarray().ravel()
+        return force.ravel()
+
+    def reduce(self, projector) -> "ThrustData":
+        """B V (station kinematics exact in η and ξ), the rest stations with their exact ξ-gradient B U,
+        and the dorsal heights with theirs."""
+        fom = self.fom
+        p, m = projector.n_parameters, projector.vectors.shape[1]
+        columns = projector.vectors.reshape(-1, 3, m)[:, :2, :].reshape(-1, 2 * m)
+        rows = fom.comm.allreduce(self.owned_weights @ columns, op=MPI.SUM).reshape(-1, 2, m)
+        shape_xy = shape_rows(fom.fish)[:, :2, :p].reshape(-1, 2 * p)
+        rest_gradient = fom.station_averages.weights @ shape_xy
+        return ThrustData(rows=rows, rest_xy=self.spine.rest_xy, rest_xy_gradient=np.asarray(rest_gradient).reshape(-1, 2, p),
+                          dorsal_z=self.dorsal_z, dorsal_z_gradient=self.dorsal_gradient(p),
+                          fluid_density=fom.scene.fluid.density)
+
+
+def rear_station_points(fish, averages) -> np.ndarray:
+    """(N_s, 3) relative positions (X_r, 0, z_dorsal(X_r)) of the nominal dorsal skin on y = 0 at every
+    segment's rear station; z_dorsal interpolates the skin nodes on y = 0 above the axis (their
+    highest z at each x)."""
+    tags = fish.tags
+    relative = tags.box.relative(fish.nodes.points)
+    skin = tags.skin_nodes
+    on_plane = skin[(np.abs(relative[skin, 1]) <= tags.tolerance) & (relative[skin, 2] > tags.tolerance)]
+    x, z = relative[on_plane, 0], relative[on_plane, 2]
+    same_x = np.abs(x[:, None] - x[None, :]) <= tags.tolerance
+    highest = np.where(same_x, z[None, :], -np.inf).max(axis=1)
+    rear_x = averages.stations[:-1] - tags.box.x_head
+    profile = dorsal_profile(x, highest)
+    return np.column_stack([rear_x, np.zeros_like(rear_x), profile(rear_x)])
 
 
 @dataclass
 class ThrustData:
-    """What the reduced thrust needs: f_thrust,r = V_spineᵀ f_thrust(V_spine η, V_spine η̇, V_spine η̈; ξ)."""
+    """What the reduced thrust needs: f_thrust,r = Wᵀ f_thrust(W η, W η̇, W η̈; ξ) with W the x-y rows of
+    the kinematic points (B V for stations, V at the spine nodes for the nodal model)."""
 
-    spine_rows: np.ndarray               # (n_spine, 2, m): x-y rows of V at the spine nodes
-    spine_rest_xy: np.ndarray            # (n_spine, 2) at ξ_c
+    rows: np.ndarray                     # (n_points, 2, m): W
+    rest_xy: np.ndarray                  # (n_points, 2) rest x-y at ξ_c [m]
+    rest_xy_gradient: np.ndarray         # (n_points, 2, p) ∂(rest x-y)/∂ξ: B U (exact; zero for the nodal model)
     dorsal_z: np.ndarray                 # (n_segments,) z_dorsal - z_axis at ξ_c
-    dorsal_z_gradient: np.ndarray        # (n_segments, p) ∂z_dorsal/∂ξ (U rows: exact)
+    dorsal_z_gradient: np.ndarray        # (n_segments, p) ∂z_dorsal/∂ξ (exact)
     fluid_density: float                 # ρ_w [kg/m³]
 
     def at(self, delta: np.ndarray, spine_force: str) -> "ReducedThrust":
@@ -108,9 +240,12 @@ class ReducedThrust:
 
     def __init__(self, data: ThrustData, delta: np.ndarray, spine_force: str):
         self.data = data
+        moves = delta.size and np.any(data.rest_xy_gradient)
+        self.moving_rest = bool(moves)
         self.dorsal_z = data.dorsal_z + data.dorsal_z_gradient @ delta if delta.size else data.dorsal_z
-        self.spine = SpineGeometry(data.spine_rest_xy, virtual_mass(self.dorsal_z, data.fluid_density), spine_force)
-        self.rows = data.spine_rows.reshape(-1, data.spine_rows.shape[-1])      # (2 n_spine, m)
+        rest_xy = data.rest_xy + data.rest_xy_gradient @ delta if moves else data.rest_xy
+        self.spine = SpineGeometry(rest_xy, virtual_mass(self.dorsal_z, data.fluid_density), spine_force)
+        self.rows = data.rows.reshape(-1, data.rows.shape[-1])      # (2 n_points, m)
 
     def _spine_states(self, eta, eta_dot, eta_ddot):
         return [(self.rows @ x).reshape(-1, 2) for x in (eta, eta_dot, eta_ddot)]
@@ -119,13 +254,25 @@ class ReducedThrust:
         return self.rows.T @ thrust_force(self.spine, *self._spine_states(eta, eta_dot, eta_ddot)).ravel()
 
     def tangents(self, time, eta, eta_dot, eta_ddot):
-        """-V_spineᵀ (∂f/∂u, ∂f/∂u̇, ∂f/∂ü) V_spine."""
+        """-Wᵀ (∂f/∂u, ∂f/∂u̇, ∂f/∂ü) W."""
         jacobians = thrust_jacobians(self.spine, *self._spine_states(eta, eta_dot, eta_ddot))
         return tuple(-(self.rows.T @ jacobian @ self.rows) for jacobian in jacobians)
 
     def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
-        """-V_spineᵀ Σ_i (∂f/∂m̃_i) ∂m̃_i/∂ξ_k, shape (p, m)."""
-        per_mass = thrust_force_per_virtual_mass(self.spine, *self._spine_states(eta, eta_dot, eta_ddot))
+        """-Wᵀ ∂f/∂ξ_k, shape (p, m): through the virtual masses, Σ_i (∂f/∂m̃_i) ∂m̃_i/∂ξ_k, and, where the
+        shape moves the rest points (x̄_rest = B(X + U ξ)), through the positions and rest lengths:
+        (∂f/∂u) B U_k + Σ_s (∂f/∂ℓ_0,s) ê_s·(B U_k,f - B U_k,r)."""
+        states = self._spine_states(eta, eta_dot, eta_ddot)
+        per_mass = thrust_force_per_virtual_mass(self.spine, *states)
         mass_gradient = virtual_mass_gradient(self.dorsal_z, self.data.dorsal_z_gradient, self.data.fluid_density)
-        thrust_k = np.einsum("snc,sk->knc", per_mass, mass_gradient).reshape(mass_gradient.shape[1], -1)
-        return -(thrust_k @ self.rows)
+        thrust_k = np.einsum("snc,sk->knc", per_mass, mass_gradient)
+        if self.moving_rest:
+            gradient = self.data.rest_xy_gradient                             # (n, 2, p)
+            p = gradient.shape[-1]
+            stiffness = thrust_jacobians(self.spine, *states)[0]
+            thrust_k = thrust_k + (stiffness @ gradient.reshape(-1, p)).T.reshape(p, -1, 2)
+            chord = np.diff(self.spine.rest_xy, axis=0) / self.spine.rest_length[:, None]
+            length_gradient = np.einsum("sc,sck->sk", chord, np.diff(gradient, axis=0))
+            per_length = thrust_force_per_rest_length(self.spine, *states)
+            thrust_k = thrust_k + np.einsum("snc,sk->knc", per_length, length_gradient)
+        return -(thrust_k.reshape(mass_gradient.shape[1], -1) @ self.rows)

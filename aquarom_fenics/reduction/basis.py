@@ -208,8 +208,11 @@ def unit_actuation_force(fom: FullOrderModel) -> np.ndarray:
     return fom.muscle.force()
 
 
-def unit_tail_force(fom: FullOrderModel) -> np.ndarray:
-    """e_tail,x: a unit force [N] in x at the tail node, the direction of f_tail = ½ m̃ (v·n)² t at rest."""
+def unit_tail_force(fom: FullOrderModel, nodal: bool = False) -> np.ndarray:
+    """A unit force [N] in x on the tail, the direction of f_tail = ½ m̃ (v·n)² t at rest: B_0ᵀ e_x on the
+    tail station (e_tail,x on the tail node with ``stations = "nodes"`` or ``nodal``)."""
+    if not nodal and fom.station_averages is not None and fom.thrust is not None:
+        return fom.thrust.unit_tail_force()
     force = np.zeros(fom.n_owned_dofs)
     blocks, _ = fom.owned_positions(np.array([fom.fish.tags.tail_node]))
     force[3 * blocks] = 1.0

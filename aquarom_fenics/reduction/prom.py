@@ -3,8 +3,8 @@
     M_r(ξ) η̈ + C_r(ξ) η̇ + f_int,r(η; ξ) = f_thrust,r + f_drag,r + f_act,r
 
 Every ξ-dependent tensor is a Taylor polynomial in Δξ = ξ - ξ_c around the design the PROM was
-built on; the thrust is evaluated exactly on the reduced spine coordinates (its virtual mass is
-quadratic in ξ, its geometry does not move with the catalog's shape variations).
+built on; the thrust is evaluated exactly on the reduced station kinematics B V η (its virtual
+mass is quadratic in ξ, its rest stations linear).
 """
 from __future__ import annotations
 
@@ -23,8 +23,9 @@ from aquarom_fenics.physics.inertia import InertiaTensors
 from aquarom_fenics.physics.muscle import MuscleTensors
 from aquarom_fenics.physics.thrust_term import ThrustData
 
-FORMAT_VERSION = 2
-"""2: the tensors grouped per force term (elastic, muscle, inertia, drag, thrust, observation)."""
+FORMAT_VERSION = 3
+"""2: the tensors grouped per force term (elastic, muscle, inertia, drag, thrust, observation);
+3: the thrust's kinematic rows (stations) and the drag's reference-velocity row."""
 ZIP_MAGIC = b"PK\x03\x04"       # first bytes of a .npz (zip) archive
 
 

@@ -41,7 +41,8 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
     timings["fom_setup"] = time.perf_counter() - started
     p = len(fish.shape_names) if parametric else 0
     order = scene.reduction.taylor_order if p else 0
-    check_spine_is_not_moved(fish)
+    if scene.fluid.thrust and scene.fluid.stations == "nodes":
+        check_spine_is_not_moved(fish)
 
     basis = build_basis(fom, p) if basis_from is None else reused_basis(fom, basis_from)
     vectors = basis.vectors
@@ -61,7 +62,8 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
                 ("thrust", thrust is not None, "off in the scene"))
     for name, present, reason in optional:
         if present:
-            built.append("thrust (exact on the reduced spine)" if name == "thrust" else name)
+            built.append(f"thrust (exact on the reduced {'spine' if scene.fluid.stations == 'nodes' else 'stations'})"
+                         if name == "thrust" else name)
         else:
             skipped.append(f"{name} ({reason})")
     if not p:

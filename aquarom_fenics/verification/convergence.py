@@ -1,8 +1,10 @@
 """Mesh convergence of the FOM: per (degree, level) case four quantities, a Richardson reference.
 
 Quantities of the reference fish (SPEC §2, §10): the swimming distance and tail amplitude of the
-FOM run, the first natural frequency (head clamped) and the static tail deflection with the
-muscles at their peak (a_left = A, a_right = -A, head clamped, fully nonlinear).
+FOM run, the first natural frequency (head clamped), the static tail deflection with the
+muscles at their peak (a_left = A, a_right = -A, head clamped, fully nonlinear) and the tail
+station's static compliance under a unit x-force on it (head clamped, B_0 K_0⁻¹ B_0ᵀ: the
+quantity a point force has no mesh limit of, SPEC §5).
 
 The reference of each quantity is Richardson's extrapolation of the three finest cases of one
 series (one element degree), with the mesh size h = (cells)^(-1/3) (levels are not refined by
@@ -20,13 +22,14 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from aquarom_fenics.reduction.basis import clamped_stiffness, vibration_modes
+from aquarom_fenics.fem.fom import FullOrderModel, direct_solver
+from aquarom_fenics.reduction.basis import clamped_stiffness, unit_tail_force, vibration_modes
 from aquarom_fenics.geometry.fish import Fish, load_fish
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.dynamics.simulate import simulate_fom
 
-QUANTITIES = ("distance", "tail_amplitude", "first_frequency", "static_tail_deflection")
-"""Measured per case; units m, m, Hz, m."""
+QUANTITIES = ("distance", "tail_amplitude", "first_frequency", "static_tail_deflection", "tail_compliance")
+"""Measured per case; units m, m, Hz, m, m/N."""
 
 DEFAULT_TOLERANCE = 0.03
 """The default (degree, level) is the cheapest whose FOM distance is within 3% of the reference."""
@@ -45,6 +48,7 @@ class MeshCase:
     tail_amplitude: float            # m
     first_frequency: float           # Hz
     static_tail_deflection: float    # m, tail y
+    tail_compliance: float           # m/N, tail station x under a unit x-force on it
     wall_time: float                 # s, the FOM run (set-up and time integration)
 
 
@@ -63,10 +67,32 @@ def measure(scene: Scene, fish: Fish | None = None) -> MeshCase:
         stiffness.destroy()
         peak = scene.actuation.amplitude
         deflection = model.spine_values(model.static_response(peak, -peak))[0, 1]
+        compliance = tail_compliances(model)["station" if model.station_averages is not None else "node"]
     finally:
         model.destroy()
     return MeshCase(scene.mesh.degree, scene.mesh.level, run.n_cells, run.n_dofs, float(run.distance),
-                    float(run.tail_amplitude), float(frequencies[0]), float(deflection), wall_time)
+                    float(run.tail_amplitude), float(frequencies[0]), float(deflection), float(compliance),
+                    wall_time)
+
+
+def tail_compliances(model: FullOrderModel) -> dict[str, float]:
+    """Static x-compliance [m/N] at rest, head clamped, under a unit x-force: ``node`` of the tail node
+    (e_tail,xᵀ K_0⁻¹ e_tail,x) and, with stations, ``station`` of the tail station (B_0 K_0⁻¹ B_0ᵀ e_x)."""
+    stiffness = clamped_stiffness(model)
+    solver = direct_solver(model.comm)
+    solver.setOperators(stiffness)
+    forces = {"node": unit_tail_force(model, nodal=True)}
+    if model.station_averages is not None and model.thrust is not None:
+        forces["station"] = unit_tail_force(model)
+    try:
+        compliances = {}
+        for name, force in forces.items():
+            force[model.clamped_dofs] = 0.0
+            compliances[name] = model.dot(force, model.solve_with(solver, force))
+    finally:
+        solver.destroy()
+        stiffness.destroy()
+    return compliances
 
 
 def richardson(cells, values) -> dict:

@@ -168,19 +168,24 @@ def test_reduced_inertia_xi_derivative_includes_the_rayleigh_damping(rng):
 
 
 def test_reduced_drag_damping_and_xi_derivative(rng):
-    tensors, head = DragTensors(random_taylor(rng, (M,))), rng.standard_normal(M)
+    tensors = DragTensors(random_taylor(rng, (M,)), rng.standard_normal(M))
     eta, eta_dot, eta_ddot = state(rng)
-    term = tensors.at(np.full(P, 0.2), head)
+    term = tensors.at(np.full(P, 0.2))
     assert_close(term.tangents(0.0, eta, eta_dot, eta_ddot)[1], central_jacobian(lambda v: -term.force(v), eta_dot))
     assert_close(term.parameter_derivative(0.0, eta, eta_dot, eta_ddot),
-                 central_parameter_derivative(lambda d: -tensors.at(d, head).force(eta_dot)))
+                 central_parameter_derivative(lambda d: -tensors.at(d).force(eta_dot)))
 
 
 @pytest.mark.parametrize("spine_force", ["source", "lagrangian"])
-def test_reduced_thrust_tangents_and_virtual_mass_xi_derivative(rng, spine_force):
+@pytest.mark.parametrize("rest_moves", [False, True])
+def test_reduced_thrust_tangents_and_xi_derivative(rng, spine_force, rest_moves):
+    """The ξ-derivative through the virtual mass and, when the shape moves the rest stations
+    (x̄_rest = B(X + U ξ), e.g. xz_concave_tail), through their positions and rest lengths."""
     n_spine = 5
-    data = ThrustData(spine_rows=0.1 * rng.standard_normal((n_spine, 2, M)),
-                      spine_rest_xy=np.column_stack([np.linspace(-0.2, 0.0, n_spine), np.zeros(n_spine)]),
+    rest_gradient = 0.005 * rng.standard_normal((n_spine, 2, P)) if rest_moves else np.zeros((n_spine, 2, P))
+    data = ThrustData(rows=0.1 * rng.standard_normal((n_spine, 2, M)),
+                      rest_xy=np.column_stack([np.linspace(-0.2, 0.0, n_spine), np.zeros(n_spine)]),
+                      rest_xy_gradient=rest_gradient,
                       dorsal_z=rng.uniform(0.02, 0.04, n_spine - 1),
                       dorsal_z_gradient=0.01 * rng.standard_normal((n_spine - 1, P)), fluid_density=1000.0)
     eta, eta_dot, eta_ddot = (10 * x for x in state(rng))

@@ -27,7 +27,7 @@ def test_richardson_uses_the_three_finest_cases_and_falls_back_on_oscillation():
 
 
 def case(degree, level, cells, distance, wall_time):
-    return MeshCase(degree, level, cells, 3 * cells, distance, 0.02, 5.0, 0.025, wall_time)
+    return MeshCase(degree, level, cells, 3 * cells, distance, 0.02, 5.0, 0.025, 1e-3, wall_time)
 
 
 def test_default_is_the_cheapest_case_within_three_percent_of_the_reference():

@@ -235,9 +235,9 @@ def synthetic_results(folder: Path):
            "quick": True, "studies": list(STUDIES), "cases": {"cached": 3, "computed": 4}, "wall_time": 42.0}
     from aquarom_fenics.verification.convergence import MeshCase, mesh_convergence
 
-    quadratic = [MeshCase(2, level, cells, 5 * cells, 0.045 - 3.0 / cells, 0.03, 5.8, 0.027, 10.0 * level)
+    quadratic = [MeshCase(2, level, cells, 5 * cells, 0.045 - 3.0 / cells, 0.03, 5.8, 0.027, 1e-3, 10.0 * level)
                  for level, cells in ((1, 1232), (2, 4176), (3, 7944))]
-    mesh = mesh_convergence(quadratic + [MeshCase(1, 3, 7944, 6015, 0.034, 0.026, 6.4, 0.0226, 9.0)]) | {"failed": []}
+    mesh = mesh_convergence(quadratic + [MeshCase(1, 3, 7944, 6015, 0.034, 0.026, 6.4, 0.0226, 1e-3, 9.0)]) | {"failed": []}
     for name, data in (("a", a), ("b", b), ("c", c), ("d", d), ("e", e), ("stress", stress),
                        ("mesh_convergence", mesh), ("run", run)):
         (folder / f"{name}.json").write_text(json.dumps(data))

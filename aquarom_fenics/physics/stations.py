@@ -1,0 +1,128 @@
+"""Cross-section stations: averages of the body's motion over slabs of fixed size (SPEC §5).
+
+N_s + 1 stations at nominal X_i = -L + i L / N_s (i = 0 at the tail face, N_s at the head face).
+Station i averages a nodal field w over the hat h_i of the station grid in nominal x, with the
+nominal volume:
+
+    B_i(w) = ∫ h_i(X) w dV_0 / ∫ h_i(X) dV_0 = Σ_j b_ij w_j,   b_ij = ∫ h_i φ_j dV_0 / ∫ h_i dV_0
+
+(φ_j the Lagrange basis, Σ_j φ_j = 1, so Σ_j b_ij = 1: a rigid motion moves every station with it).
+The hats form a partition of unity; the end stations' half-hats cover the first and last slab.
+B is one linear map for every design (the nominal volume), so reduced station kinematics B V η
+are exact in ξ. The head average (the drag's reference velocity) is the same average with the
+head cells' indicator in place of h_i.
+
+Everything here is plain numpy on the nominal mesh (every rank holds it); integrals use a
+quadrature rule of degree ``STATION_QUADRATURE_DEGREE`` per cell (the hats have kinks inside
+cells: the rule converges with the mesh, like the rest of the discretisation).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import sparse
+
+from aquarom_fenics.geometry.mesh import TETRAHEDRON_EDGES, LagrangeNodes, signed_cell_volumes
+from aquarom_fenics.geometry.shapes import reference_to_cells
+
+STATION_QUADRATURE_DEGREE = 8
+"""Degree of the per-cell rule for ∫ h_i φ_j dV_0 (φ_j of degree ≤ 2 times a kinked hat)."""
+
+
+def station_positions(length: float, x_tail: float, n_stations: int) -> np.ndarray:
+    """(N_s + 1,) nominal x [m] of the stations, tail -> head: X_i = x_tail + i L / N_s."""
+    return x_tail + length * np.arange(n_stations + 1) / n_stations
+
+
+def hat_functions(x: np.ndarray, stations: np.ndarray) -> np.ndarray:
+    """(N_s + 1, n) values of the hats h_i at nominal x: piecewise linear, h_i(X_j) = δ_ij."""
+    spacing = np.diff(stations)
+    x = np.clip(np.asarray(x, dtype=float), stations[0], stations[-1])
+    values = np.zeros((stations.size, x.size))
+    slab = np.clip(np.searchsorted(stations, x, side="right") - 1, 0, spacing.size - 1)
+    # h_{slab+1} = (x - X_slab)/Δ, h_slab = 1 - h_{slab+1} on [X_slab, X_slab+1]
+    fraction = (x - stations[slab]) / spacing[slab]
+    columns = np.arange(x.size)
+    values[slab, columns] = 1.0 - fraction
+    values[slab + 1, columns] += fraction
+    return values
+
+
+def lagrange_basis(reference_points: np.ndarray, degree: int) -> np.ndarray:
+    """(n_q, 4 or 10) values of the Lagrange basis at reference points, in the node order of
+    ``LagrangeNodes.cell_nodes`` (vertices, then the edges of ``TETRAHEDRON_EDGES``)."""
+    reference_points = np.asarray(reference_points, dtype=float)
+    barycentric = np.column_stack([1.0 - reference_points.sum(axis=1), reference_points])
+    if degree == 1:
+        return barycentric
+    # vertex a: λ_a (2 λ_a - 1); edge (a, b): 4 λ_a λ_b
+    vertices = barycentric * (2.0 * barycentric - 1.0)
+    edges = 4.0 * barycentric[:, TETRAHEDRON_EDGES[:, 0]] * barycentric[:, TETRAHEDRON_EDGES[:, 1]]
+    return np.hstack([vertices, edges])
+
+
+def weighted_node_integrals(points: np.ndarray, cells: np.ndarray, nodes: LagrangeNodes, weight) -> np.ndarray:
+    """(n_weights, n_nodes) ∫ w_i(X) φ_j dV_0 for the weights ``weight(X) -> (n_weights, n)`` over the
+    nominal mesh (``points``, ``cells``), one quadrature rule per cell."""
+    import basix
+
+    reference, quadrature_weights = basix.make_quadrature(basix.CellType.tetrahedron, STATION_QUADRATURE_DEGREE)
+    basis = lagrange_basis(reference, nodes.degree)                         # (n_q, n_local)
+    positions = reference_to_cells(points, cells, reference)                # (n_cells, n_q, 3)
+    jacobian = 6.0 * np.abs(signed_cell_volumes(points, cells))             # |det J| per cell
+    weights = weight(positions.reshape(-1, 3)).reshape(-1, *positions.shape[:2])   # (n_w, n_cells, n_q)
+    # ∫_cell w φ_a dV = Σ_q w(x_q) φ_a(X_q) ω_q |det J|
+    local = np.einsum("wcq,qa,q,c->wca", weights, basis, quadrature_weights, jacobian)
+    n_weights, n_nodes = weights.shape[0], nodes.points.shape[0]
+    rows = np.repeat(np.arange(n_weights), local.shape[1] * local.shape[2])
+    columns = np.tile(nodes.cell_nodes.ravel(), n_weights)
+    return sparse.coo_matrix((local.ravel(), (rows, columns)), shape=(n_weights, n_nodes)).toarray()
+
+
+@dataclass(frozen=True)
+class StationAverages:
+    """The averaging maps of one nominal mesh: rows b_i over the nodes (Σ_j b_ij = 1).
+
+    stations: (N_s + 1,) nominal x [m], tail -> head.
+    weights: (N_s + 1, n_nodes) b_ij of the station averages B_i (applied to each component).
+    head_weights: (n_nodes,) the head-volume average (the drag's reference velocity).
+    """
+
+    stations: np.ndarray
+    weights: sparse.csr_matrix
+    head_weights: np.ndarray
+
+    @property
+    def n_stations(self) -> int:
+        return self.stations.size
+
+    def average(self, nodal: np.ndarray) -> np.ndarray:
+        """(N_s + 1, k) averages of an (n_nodes, k) nodal field."""
+        return self.weights @ nodal
+
+
+def station_averages(mesh_points: np.ndarray, mesh_cells: np.ndarray, nodes: LagrangeNodes, box, n_stations: int,
+                     head_cells: np.ndarray) -> StationAverages:
+    """B and the head average on the nominal mesh (``box``: the fish's bounding box)."""
+    if n_stations < 2:
+        raise ValueError(f"need at least 2 station intervals, got {n_stations}")
+    stations = station_positions(box.length, box.x_tail, n_stations)
+    hat_integrals = weighted_node_integrals(mesh_points, mesh_cells, nodes,
+                                            lambda x: hat_functions(x[:, 0], stations))
+    weights = hat_integrals / hat_integrals.sum(axis=1, keepdims=True)
+    head_integrals = weighted_node_integrals(mesh_points, mesh_cells[head_cells], _cell_subset(nodes, head_cells),
+                                             lambda x: np.ones((1, x.shape[0])))[0]
+    return StationAverages(stations, sparse.csr_matrix(weights), head_integrals / head_integrals.sum())
+
+
+def _cell_subset(nodes: LagrangeNodes, cells: np.ndarray) -> LagrangeNodes:
+    return LagrangeNodes(nodes.degree, nodes.points, nodes.cell_nodes[cells], nodes.edges, nodes.n_vertices)
+
+
+def dorsal_profile(relative_x: np.ndarray, relative_z: np.ndarray):
+    """z(X) of the nominal dorsal skin on y = 0, piecewise linear through the given skin nodes
+    (relative coordinates [m]), as a function of relative x."""
+    order = np.argsort(relative_x, kind="stable")
+    x, z = np.asarray(relative_x)[order], np.asarray(relative_z)[order]
+    return lambda at: np.interp(at, x, z)
