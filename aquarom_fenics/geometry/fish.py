@@ -5,6 +5,7 @@ rank holds the same small numpy description; dolfinx distributes the cells after
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,6 +21,11 @@ from aquarom_fenics.geometry.design_check import check_exact_design
 from aquarom_fenics.geometry.shapes import design_points, reference_to_cells, shape_gradients, shape_matrix
 from aquarom_fenics.geometry.tags import FishTags, tag_fish
 
+
+log = logging.getLogger("aquarom")
+
+_WARNED: set[str] = set()
+"""Design-check warnings already logged in this process (an optimiser meets a design many times)."""
 
 MASS_QUADRATURE_DEGREE = {1: 2, 2: 6}
 """Per element degree k: the lowest rule degree ≥ 2k (exact for φ_i·φ_j) whose default rule has
@@ -95,13 +101,17 @@ class Fish:
     def design(self, xi) -> np.ndarray:
         """Checked nodal positions x_0 + U ξ of the design.
 
-        InputError unless det F_1 = det(I + ∇u_ξ) > 0.1 at every quadrature point of the forms,
-        with ∇u_ξ of the exact shape fields (SPEC §4).
+        InputError unless det F_1 = det(I + ∇u_ξ) > 0 at every quadrature point of the forms, with
+        ∇u_ξ of the exact shape fields (SPEC §4); a warning (logged once per design) where it falls
+        below 0.1.
         """
         xi = self.parameter_vector(xi)
         moved = design_points(self.nodes.points, self.shape_matrix, xi)
-        check_exact_design(self.mesh.points, self.mesh.cells, lambda points: self.shape_gradient(xi, points),
-                           self.integration_points(), dict(zip(self.shape_names, xi)), regions=self.tags)
+        warning = check_exact_design(self.mesh.points, self.mesh.cells, lambda points: self.shape_gradient(xi, points),
+                                     self.integration_points(), dict(zip(self.shape_names, xi)), regions=self.tags)
+        if warning and warning not in _WARNED:
+            _WARNED.add(warning)
+            log.warning("%s", warning)
         return moved
 
 

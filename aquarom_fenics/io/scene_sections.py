@@ -132,7 +132,7 @@ class ReductionSection:
     basis: str = _spec("default", _one_of("default", "paper"), "'paper' drops the actuation modes ψ, θ_ψ")
     vibration_modes: int = _spec(1, _positive, "number of vibration modes n_vm")
     modal_derivatives: bool = _spec(True, None, "static modal derivatives θ_ij")
-    response_vectors: bool = _spec(True, None, "with basis = 'default': the static responses ψ_m to the muscles' stiffness on ψ and τ to the thrust's tail force")
+    response_vectors: bool = _spec(True, None, "with basis = 'default': the static responses ψ_m to the muscles' stiffness on ψ and, with stations = \"nodes\", τ to the thrust's tail-node force")
     taylor_order: int = _spec(1, _one_of(1, 2), "order of the PROM's Taylor expansion in ξ")
     drop_tolerance: float = _spec(1e-8, _positive, "basis vectors whose remaining mass-norm is below this are dropped")
     validity_fraction: float = _spec(0.25, _positive, "PROM validity radius of a parameter as a fraction of its largest |bound| (a shape's own `radius` overrides it)")

@@ -196,7 +196,7 @@ def meshable_space(space: DesignSpace, fish) -> tuple[DesignSpace, list[str]]:
                 middle = 0.5 * (good + bad)
                 good, bad = (middle, bad) if _meshes(fish, space, k, middle) else (good, middle)
             notes.append(f"{space.names[k]} {side} bound {bounds[k]:g} → {good:.4g} (beyond it the design check "
-                         "refuses: det F_1 < 0.1 at a quadrature point)")
+                         "refuses: det F_1 ≤ 0 at a quadrature point)")
             bounds[k] = good
     restricted = DesignSpace(space.names, lower, upper, space.start, space.constraint_matrix, space.constraint_bound,
                              space.with_amplitude)

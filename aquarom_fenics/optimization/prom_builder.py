@@ -165,7 +165,7 @@ class PromBuilder:
             self.solve_time += time.perf_counter() - started
 
     def meshes(self, z: np.ndarray) -> bool:
-        """The design check of SPEC §4 (det F_1 > 0.1 everywhere) at the shapes of z."""
+        """The design check of SPEC §4 (det F_1 > 0 everywhere) at the shapes of z."""
         try:
             self.fish.design(z[: self.space.n_shapes])
             return True

@@ -196,9 +196,9 @@ class StationThrustTerm:
         p, m = projector.n_parameters, projector.vectors.shape[1]
         columns = projector.vectors.reshape(-1, 3, m)[:, :2, :].reshape(-1, 2 * m)
         rows = fom.comm.allreduce(self.owned_weights @ columns, op=MPI.SUM).reshape(-1, 2, m)
-        shape_xy = shape_rows(fom.fish)[:, :2, :p].reshape(-1, 2 * p)
+        shape_xy = shape_rows(fom.fish)[:, :2, :p].reshape(fom.fish.nodes.points.shape[0], 2 * p)
         rest_gradient = fom.station_averages.weights @ shape_xy
-        return ThrustData(rows=rows, rest_xy=self.spine.rest_xy, rest_xy_gradient=np.asarray(rest_gradient).reshape(-1, 2, p),
+        return ThrustData(rows=rows, rest_xy=self.spine.rest_xy, rest_xy_gradient=np.asarray(rest_gradient).reshape(self.spine.n_nodes, 2, p),
                           dorsal_z=self.dorsal_z, dorsal_z_gradient=self.dorsal_gradient(p),
                           fluid_density=fom.scene.fluid.density)
 

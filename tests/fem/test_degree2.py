@@ -130,3 +130,17 @@ def test_the_design_check_samples_the_points_where_the_fom_integrates():
         return np.stack([cell[np.lexsort(np.round(cell, 12).T)] for cell in points])
 
     np.testing.assert_allclose(sorted_per_cell(fom_points), sorted_per_cell(check_points), atol=1e-12)
+
+
+SO2_PAPER_OPTIMUM = {"z_tail": -0.49, "z_head": 0.32, "y_lin_long_tail": 0.39, "y_head": 0.49, "y_ellipse": 0.49}
+"""The SO2 optimum of the method's source: strongly squeezed at the head's corners, inverted nowhere."""
+
+
+def test_the_paper_so2_optimum_is_valid_with_a_warning_naming_the_squeezed_head_cells(caplog):
+    from aquarom_fenics.io.scene import Scene
+
+    fish = load_fish(Scene.load("so2").replace("mesh", level=2))
+    with caplog.at_level("WARNING", logger="aquarom"):
+        fish.design(SO2_PAPER_OPTIMUM)
+    warnings = [record.getMessage() for record in caplog.records if record.levelname == "WARNING"]
+    assert len(warnings) == 1 and "shrinks 12 of" in warnings[0] and "(head)" in warnings[0]

@@ -246,11 +246,11 @@ def test_designs_within_study_bounds_pass(mesh, xi_by_name):
     check_design(*mesh, moved_mesh(mesh, xi_by_name), xi_by_name)
 
 
-@pytest.mark.parametrize("xi_by_name", [{"y_thin": 1.0}, {"y_thin": 1.5}, {"y_thin": 0.95},
+@pytest.mark.parametrize("xi_by_name", [{"y_thin": 1.0}, {"y_thin": 1.5},
                                         {"z_tail": 0.2, "y_thin": 1.2},
                                         # fields add: y vanishes at the head's top and bottom edges
                                         {"y_head": 0.5, "y_ellipse": 0.5}])
-def test_inverted_flat_or_shrunk_cells_raise_naming_the_parameters(mesh, xi_by_name):
+def test_inverted_or_flat_cells_raise_naming_the_parameters(mesh, xi_by_name):
     with pytest.raises(InputError) as error:
         check_design(*mesh, moved_mesh(mesh, xi_by_name), xi_by_name, label="start design")
     message = str(error.value)
@@ -261,13 +261,16 @@ def test_inverted_flat_or_shrunk_cells_raise_naming_the_parameters(mesh, xi_by_n
     assert "reduce the parameters" in message
 
 
-def test_inversion_reports_counts_and_the_worst_cell(mesh):
+def test_inversion_reports_counts_and_a_squeezed_design_is_valid_with_a_warning(mesh):
+    """Only what the continuum inverts is refused; cells squeezed below 0.1 of their volume are named in
+    a one-line warning and the design runs."""
     points, cells = mesh
-    with pytest.raises(InputError, match=rf"inverts or flattens {len(cells)} and shrinks 0 more "
-                                         rf"of {len(cells)} cells"):
+    with pytest.raises(InputError, match=rf"inverts or flattens {len(cells)} of {len(cells)} cells"):
         check_design(points, cells, moved_mesh(mesh, {"y_thin": 1.5}), {"y_thin": 1.5})
-    with pytest.raises(InputError, match=rf"inverts or flattens 0 and shrinks {len(cells)} more"):
-        check_design(points, cells, moved_mesh(mesh, {"y_thin": 0.95}), {"y_thin": 0.95})
+    warning = check_design(points, cells, moved_mesh(mesh, {"y_thin": 0.95}), {"y_thin": 0.95})
+    assert warning.startswith(f"design y_thin=0.95 shrinks {len(cells)} of {len(cells)} cells below 0.1")
+    assert "\n" not in warning and "volume ratio 0.05" in warning
+    assert check_design(points, cells, moved_mesh(mesh, {"y_thin": 0.85}), {"y_thin": 0.85}) is None
 
 
 def test_check_design_does_not_depend_on_nominal_cell_orientation(mesh):

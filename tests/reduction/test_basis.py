@@ -37,8 +37,9 @@ def rom_errors(scene, fish, fom_run):
 
 def test_response_vectors_are_candidates_of_the_default_basis_only(quadratic_scene, quadratic_fish):
     fom = FullOrderModel(quadratic_scene, quadratic_fish)
-    assert build_basis(fom, 0).labels == ["rigid_x", "mode_1", "theta_1_1", "psi", "theta_psi", "psi_muscle",
-                                          "tail_force"]
+    assert build_basis(fom, 0).labels == ["rigid_x", "mode_1", "theta_1_1", "psi", "theta_psi", "psi_muscle"]
+    nodal = quadratic_scene.replace("fluid", stations="nodes")
+    assert build_basis(FullOrderModel(nodal, quadratic_fish), 0).labels[-2:] == ["psi_muscle", "tail_force"]
     without_thrust = quadratic_scene.replace("fluid", thrust=False)
     assert build_basis(FullOrderModel(without_thrust, quadratic_fish), 0).labels[-2:] == ["theta_psi", "psi_muscle"]
     for reduction in ({"response_vectors": False}, {"basis": "paper"}):

@@ -56,7 +56,7 @@ def test_rom_model_runs_through_the_cli(tmp_path):
     scene = write_scene(tmp_path)
     assert main(["simulate", str(scene), "--model", "rom", "--xi", "z_tail=-0.2", "--out", str(tmp_path / "rom")]) == 0
     summary = json.loads((tmp_path / "rom" / "summary.json").read_text())
-    assert summary["basis"] == ["rigid_x", "mode_1", "theta_1_1", "psi", "theta_psi", "psi_muscle", "tail_force"]
+    assert summary["basis"] == ["rigid_x", "mode_1", "theta_1_1", "psi", "theta_psi", "psi_muscle"]
 
 
 def test_prom_file_of_another_scene_is_refused(built, tmp_path, capsys):

@@ -7,7 +7,7 @@ import numpy as np
 
 from aquarom_fenics.dynamics import trajectory
 from aquarom_fenics.io.scene import Scene, SolverSection
-from aquarom_fenics.verification.convergence import MeshCase, mesh_convergence
+from aquarom_fenics.verification.convergence import QUANTITIES, MeshCase, mesh_convergence, richardson
 from aquarom_fenics.verification.validation.cases import fom_case, mesh_case, reduced_case
 from aquarom_fenics.verification.validation.report_format import RATIO_RANGE
 from aquarom_fenics.verification.validation.runner import Runner
@@ -188,3 +188,26 @@ def study_mesh_convergence(runner: Runner, settings: Settings) -> dict:
     failed = [{"label": record["label"], "status": record["status"], "message": record.get("message")}
               for record in records if record["status"] != "completed"]
     return mesh_convergence(measured) | {"failed": failed}
+
+
+def study_stations(runner: Runner, settings: Settings) -> dict:
+    """Convergence in the station count N_s on one mesh (SPEC §5, "Measured"): the nominal fish's
+    quantities per N_s and, per quantity, Richardson's reference in the station spacing L/N_s."""
+    degree, level = settings.station_mesh
+    counts = list(settings.station_counts)
+    cases = [mesh_case(f"degree {degree}, level {level}, N_s = {count}",
+                       base_scene(settings, level=level, degree=degree).replace("fluid", stations=count))
+             for count in counts]
+    records = runner.run("stations", cases)
+    rows = [{"stations": count, **{name: record.get(name) for name in QUANTITIES}, "status": record["status"]}
+            for count, record in zip(counts, records)]
+    completed = [row for row in rows if row["status"] == "completed"]
+    reference = {}
+    if len(completed) >= 3:
+        # richardson's h = cells^(-1/3): pass N_s³ so that h is the station spacing in units of L
+        spacing_cells = [row["stations"] ** 3 for row in completed]
+        reference = {name: richardson(spacing_cells, [row[name] for row in completed]) for name in QUANTITIES}
+        for row in rows:
+            if row["status"] == "completed":
+                row["distance_error"] = row["distance"] / reference["distance"]["value"] - 1.0
+    return {"degree": degree, "level": level, "rows": rows, "reference": reference}

@@ -28,6 +28,8 @@ class Settings:
     fine_prom_level: int
     time_limit: float                        # s per case
     mesh_series: tuple[tuple[int, tuple[int, ...]], ...]   # (degree, levels) of the mesh-convergence study
+    station_counts: tuple[int, ...] = (20, 40, 80, 160)      # N_s of the station study
+    station_mesh: tuple[int, int] = (2, 3)                    # its (degree, level): a converged mesh
 
 
 FULL = Settings(quick=False, levels=(1, 2, 3, 4, 5), stiffnesses=(1.2e4, 2.5e4, 4e4, 6e4, 7.5e4), duration=2.0,
@@ -39,7 +41,7 @@ FULL = Settings(quick=False, levels=(1, 2, 3, 4, 5), stiffnesses=(1.2e4, 2.5e4, 
 QUICK = Settings(quick=True, levels=(1, 2), stiffnesses=(1.2e4, 6e4, 7.5e4), duration=0.4, reference_level=1,
                  time_steps=(0.04, 0.02, 0.01, 0.005), convergence_steps=(0.02, 0.01, 0.005, 0.0025),
                  finer_convergence_steps=(("ROM", (0.00125,)),), convergence_mesh=(1, 1), mpi_levels=(1, 2), stress_level=1, fine_prom_level=2, time_limit=300.0,
-                 mesh_series=((1, (1, 2, 3)), (2, (1,))))
+                 mesh_series=((1, (1, 2, 3)), (2, (1,))), station_counts=(10, 20, 40), station_mesh=(1, 1))
 
 
 def base_scene(settings: Settings, name: str = "nominal", level: int | None = None,

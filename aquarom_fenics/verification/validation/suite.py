@@ -18,17 +18,17 @@ from aquarom_fenics.io.outputs import software_versions
 from aquarom_fenics.io.persistence import write_json_atomic
 from aquarom_fenics.verification.validation.accuracy import study_a, study_b, study_c
 from aquarom_fenics.verification.validation.convergence_studies import (study_d, study_mesh_convergence,
-                                                                        time_convergence_summary)
+                                                                        study_stations, time_convergence_summary)
 from aquarom_fenics.verification.validation.figures import make_figures
 from aquarom_fenics.verification.validation.report import write_report
 from aquarom_fenics.verification.validation.runner import CasesCollected, Runner, compute_in_parallel
 from aquarom_fenics.verification.validation.settings import Settings
 from aquarom_fenics.verification.validation.stability import study_e, study_stress
 
-STUDIES = ("a", "b", "c", "d", "e", "stress", "mesh_convergence")
+STUDIES = ("a", "b", "c", "d", "e", "stress", "mesh_convergence", "stations")
 
 STUDY_FUNCTIONS = {"a": study_a, "b": study_b, "c": study_c, "d": study_d, "e": study_e, "stress": study_stress,
-                   "mesh_convergence": study_mesh_convergence}
+                   "mesh_convergence": study_mesh_convergence, "stations": study_stations}
 
 
 def run(settings: Settings, out: Path, report_path: Path, studies=STUDIES, recompute_failed=False,
