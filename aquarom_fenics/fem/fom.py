@@ -354,6 +354,25 @@ class FullOrderModel:
             return None
         return lambda x: sum(part(x) for part in parts)
 
+    def tangent_coupling_blocks(self, time, u, v, a, dofs: np.ndarray) -> tuple[np.ndarray, ...] | None:
+        """The parts of (K_t, C_t, M_t)[dofs, dofs] that ``tangents`` leaves out of the matrices (the
+        stations' coupling less the lumped added mass, the head-averaged drag), dense, for a small region
+        of owned dofs; None for the nodal model."""
+        if self.station_averages is None:
+            return None
+        blocks = []
+        for factors in (TangentFactors(1.0, 0.0, 0.0), TangentFactors(0.0, 1.0, 0.0), TangentFactors(0.0, 0.0, 1.0)):
+            block = np.zeros((dofs.size, dofs.size))
+            if self.thrust is not None:
+                block += self.thrust.coupling_block(factors, u, v, a, dofs)
+            if self.drag is not None and factors.velocity_factor:
+                block += self.drag.coupling_block(factors.velocity_factor, v, dofs)
+            fixed = np.isin(dofs, self.fixed_dofs)
+            block[fixed, :] = 0.0
+            block[:, fixed] = 0.0
+            blocks.append(block)
+        return tuple(blocks)
+
     def exact_newton_product(self, time, u, v, a, x: np.ndarray) -> np.ndarray:
         """S_exact x = ∂r_{n+1-α}/∂u_{n+1} x, owned dofs (fixed dofs: identity)."""
         product = self.matvec(self.assemble_newton_matrix(time, u, v, a), x)

@@ -75,6 +75,16 @@ class DragTerm:
         column = -velocity_factor * drag_velocity_jacobian(self.direction, self.fom.head_velocity_x(v))
         return lambda x: column * self.fom.head_velocity_x(x)
 
+    def coupling_block(self, velocity_factor: float, v: np.ndarray, dofs: np.ndarray) -> np.ndarray | None:
+        """(S_exact - S_matrix)[dofs, dofs] = -k_v 2 v_x g_R w_Rᵀ on owned ``dofs``; None for the nodal model."""
+        if self.nodal:
+            return None
+        fom = self.fom
+        weights = np.zeros(fom.n_owned_dofs)
+        weights[fom._head_velocity_dofs] = fom._head_velocity_weights
+        column = -velocity_factor * drag_velocity_jacobian(self.direction[dofs], fom.head_velocity_x(v))
+        return np.outer(column, weights[dofs])
+
     def reduce(self, projector) -> "DragTensors":
         return DragTensors(projector.taylor(self.direction_form), self.fom.head_velocity_row(projector.vectors))
 

@@ -165,15 +165,35 @@ class StationThrustTerm:
         matrix.setValuesBlockedCSR(self._block_rows, self._block_columns, blocks.ravel(),
                                    addv=PETSc.InsertMode.ADD_VALUES)
 
+    def _coupling(self, factors, u, v, a):
+        """(-(k_u J_u + k_v J_u̇ + k_a J_ü) in station space, (2(N_s+1))², and the lumped added mass
+        -k_a Σ_i b_ij J_ü,ii per owned node, (n, 2, 2)) for the factors k of a tangent combination."""
+        jacobians = thrust_jacobians(self.spine, *self._station_states(u, v, a))
+        station_block = -(factors.stiffness_factor * jacobians[0] + factors.velocity_factor * jacobians[1]
+                          + factors.acceleration_factor * jacobians[2])
+        n = self.spine.n_nodes
+        added_mass = jacobians[2].reshape(n, 2, n, 2)[np.arange(n), :, np.arange(n), :]
+        lumped = -factors.acceleration_factor * (self.owned_weights_t @ added_mass.reshape(n, 4)).reshape(-1, 2, 2)
+        return station_block, lumped
+
+    def coupling_block(self, factors, u, v, a, dofs: np.ndarray) -> np.ndarray:
+        """The dense block (S_exact - S_matrix)[dofs, dofs] of one rank's owned ``dofs`` (a small region)."""
+        station_block, lumped = self._coupling(factors, u, v, a)
+        nodes, components = dofs // 3, dofs % 3
+        planar = components < 2
+        averaging = np.zeros((self.spine.n_nodes, 2, dofs.size))        # B restricted to the dofs
+        averaging[:, components[planar], np.flatnonzero(planar)] = self.owned_weights[:, nodes[planar]].toarray()
+        averaging = averaging.reshape(-1, dofs.size)
+        block = averaging.T @ station_block @ averaging
+        same_node = (nodes[:, None] == nodes[None, :]) & planar[:, None] & planar[None, :]
+        rows, columns = np.nonzero(same_node)
+        block[rows, columns] -= lumped[nodes[rows], components[rows], components[columns]]
+        return block
+
     def newton_correction(self, scheme, u, v, a):
         """x ↦ (S_exact - S_matrix) x of the thrust at (u, u̇, ü): -Bᵀ (k_u J_u + k_v J_u̇ + k_a J_ü) B x, the
         exact coupling of the stations, less the lumped added mass the matrix holds (owned dofs)."""
-        jacobians = thrust_jacobians(self.spine, *self._station_states(u, v, a))
-        station_block = -(scheme.stiffness_factor * jacobians[0] + scheme.velocity_factor * jacobians[1]
-                          + scheme.acceleration_factor * jacobians[2])
-        n = self.spine.n_nodes
-        added_mass = jacobians[2].reshape(n, 2, n, 2)[np.arange(n), :, np.arange(n), :]
-        lumped = -scheme.acceleration_factor * (self.owned_weights_t @ added_mass.reshape(n, 4)).reshape(-1, 2, 2)
+        station_block, lumped = self._coupling(scheme, u, v, a)
 
         def apply(x: np.ndarray) -> np.ndarray:
             nodal = x.reshape(-1, 3)[:, :2]

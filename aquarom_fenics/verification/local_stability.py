@@ -53,7 +53,8 @@ class LocalStability:
 
 
 def tangents(model, time: float, u, v, a) -> tuple[scipy.sparse.csr_matrix, ...]:
-    """(K_t, C_t, M_t) of a serial FOM at a state (fixed dofs: unit rows)."""
+    """(K_t, C_t, M_t) of a serial FOM at a state as the model's matrices hold them (fixed dofs: unit
+    rows); with stations the coupling over slabs is not in them (see :func:`region_tangents`)."""
     if model.comm.size > 1:
         raise ValueError("the local stability analysis runs on one rank")
     return tuple(_scipy_copy(matrix) for matrix in model.tangents(time, u, v, a))
@@ -101,9 +102,14 @@ def step_matrix(stiffness: np.ndarray, damping: np.ndarray, mass: np.ndarray, sc
 
 
 def region_tangents(model, time: float, u, v, a, dofs: np.ndarray) -> tuple[np.ndarray, ...]:
-    """(K_t, C_t, M_t) of ``model`` at (t, u, u̇, ü) restricted to ``dofs`` (dense)."""
+    """(K_t, C_t, M_t) of ``model`` at (t, u, u̇, ü) restricted to ``dofs`` (dense), exact: with stations
+    the slab coupling Bᵀ J B and the head-averaged drag restricted to the region are added."""
     region = np.ix_(dofs, dofs)
-    return tuple(matrix[region].toarray() for matrix in tangents(model, time, u, v, a))
+    blocks = [matrix[region].toarray() for matrix in tangents(model, time, u, v, a)]
+    coupling = model.tangent_coupling_blocks(time, u, v, a, dofs)
+    if coupling is not None:
+        blocks = [block + extra for block, extra in zip(blocks, coupling)]
+    return tuple(blocks)
 
 
 def fastest_eigenvalue(stiffness: np.ndarray, damping: np.ndarray, mass: np.ndarray) -> complex:

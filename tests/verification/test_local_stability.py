@@ -11,7 +11,7 @@ from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.reduction.reductor import build_prom, reused_basis
 from aquarom_fenics.verification.local_stability import (local_stability, pencil_eigenvalues, prom_tail_growth,
                                                          prom_tail_stability, region_dofs, step_matrix,
-                                                         tail_sample_steps, tangents)
+                                                         region_tangents, tail_sample_steps, tangents)
 from conftest import coarse_scene
 
 
@@ -72,24 +72,24 @@ def swimming_run():
 
 
 def test_tangents_are_the_derivatives_of_the_residual(swimming_run):
-    """K_t, C_t, M_t against central differences of r(t, u, u̇, ü) at a swimming state (thrust and drag on)."""
+    """K_t, C_t, M_t on a region (the tail's) against central differences of r(t, u, u̇, ü) at a swimming
+    state (thrust through the stations and drag on): the matrices plus the stations' coupling."""
     scene, result = swimming_run
     model = result.model
     u, v, a = result.states[-1]
     time = scene.solver.duration
-    stiffness, damping, mass = tangents(model, time, u, v, a)
+    dofs = region_dofs(model, model.fish.tags.tail_node, scene.optimizer.tail_region_radius)
     rng = np.random.default_rng(0)
-    free = np.setdiff1d(np.arange(u.size), model.fixed_dofs)
-    for position, matrix, scale in ((0, stiffness, 1e-4), (1, damping, 1e-2), (2, mass, 1.0)):
+    tangents_at = region_tangents(model, time, u, v, a, dofs)
+    for position, matrix, scale in ((0, tangents_at[0], 1e-4), (1, tangents_at[1], 1e-2), (2, tangents_at[2], 1.0)):
         direction = np.zeros(u.size)
-        direction[free] = rng.normal(size=free.size)
+        direction[dofs] = rng.normal(size=dofs.size)
         state = [u, v, a]
         plus = [x + scale * 1e-4 * direction if i == position else x for i, x in enumerate(state)]
         minus = [x - scale * 1e-4 * direction if i == position else x for i, x in enumerate(state)]
         difference = (model.residual(time, *plus)[0] - model.residual(time, *minus)[0]) / (2 * scale * 1e-4)
-        product = matrix @ direction
-        product[model.fixed_dofs] = 0.0
-        assert np.linalg.norm(difference - product) <= 1e-6 * np.linalg.norm(product)
+        product = matrix @ direction[dofs]
+        assert np.linalg.norm(difference[dofs] - product) <= 1e-6 * np.linalg.norm(product)
     # the Newton matrix of the run is left as it was
     assert model.scheme.time_step == scene.solver.time_step
 
@@ -174,8 +174,21 @@ def test_the_tail_screen_linearises_the_fom_at_the_proms_rebuilt_states(swimming
     assert growth.time == pytest.approx(times[1 + int(np.argmax(rates))])
 
 
-def test_the_tail_screen_refuses_growth_above_the_limit(swimming_prom):
+@pytest.fixture(scope="module")
+def nodal_swimming_prom():
+    """The nodal thrust (``stations = "nodes"``), whose point force on the tail node feeds tail modes."""
+    scene = coarse_scene(solver={"duration": 0.2}, actuation={"amplitude": 0.4}, fluid={"stations": "nodes"})
+    fish = load_fish(scene)
+    return scene, fish, build_prom(scene, fish=fish)
+
+
+def test_through_the_stations_the_tail_modes_decay(swimming_prom):
     scene, fish, prom = swimming_prom
+    assert prom_tail_growth(prom, scene, fish).growth_rate < 0
+
+
+def test_the_tail_screen_refuses_growth_above_the_limit(nodal_swimming_prom):
+    scene, fish, prom = nodal_swimming_prom
     growth = prom_tail_growth(prom, scene, fish)
     assert growth.growth_rate > 0         # the 0.4 stroke feeds the tail a little at this mesh
     below = scene.replace("optimizer", tail_growth_limit=0.5 * growth.growth_rate)

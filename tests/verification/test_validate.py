@@ -80,12 +80,14 @@ def test_stress_case_rom_is_clean(runner, case_id):
 
 
 def test_alpha_zero_has_no_numerical_dissipation(runner):
-    """Newmark with γ = ½, β = ¼ conserves energy: its numerical dissipation is zero up to O(Δu³)."""
+    """Newmark with γ = ½, β = ¼ conserves energy: its numerical dissipation is zero up to O(Δu³); the
+    default generalized-α at the same h = 0.02 s removes more. (At h = 0.05 s, 6 steps of the 0.3 s run,
+    the O(h²) error of the thrust's trapezoidal work outweighs the scheme's dissipation: -0.28 % of the
+    actuation's work through the stations.)"""
     record = runner.compute(fom_case("alpha 0", stress_scene("alpha-0"), energy=True))
     assert record["status"] == "completed"
     assert abs(record["energy"]["numerical_dissipation_relative"]) < 5e-3
-    damped = runner.compute(fom_case("h 0.05", stress_scene("reference").replace("solver", time_step=0.05),
-                                     energy=True))
+    damped = runner.compute(fom_case("reference", stress_scene("reference"), energy=True))
     assert damped["energy"]["numerical_dissipation_relative"] > abs(record["energy"]["numerical_dissipation_relative"])
 
 
@@ -274,7 +276,7 @@ def test_report_writer_on_synthetic_results(tmp_path):
 
 def test_report_without_results_says_what_is_missing(tmp_path):
     text = write_report(tmp_path / "validation", tmp_path / "REPORT.md").read_text()
-    assert text.count("*Not run yet*") == 7
+    assert text.count("*Not run yet*") == len(STUDIES)
 
 
 def test_energy_balance_of_a_run_with_cut_steps_is_not_available():

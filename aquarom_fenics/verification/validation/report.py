@@ -18,7 +18,8 @@ from aquarom_fenics.verification.validation.report_format import (BUILD_EXPONENT
                                                                    TOLERANCE_REFERENCE, cases_above, fmt, link,
                                                                    load_studies, percent, reference_row, table)
 from aquarom_fenics.verification.validation.report_sections import (section_a, section_b, section_c, section_d,
-                                                                     section_e, section_mesh, section_stress)
+                                                                     section_e, section_mesh, section_stations,
+                                                                     section_stress)
 
 
 def checks(studies: dict, out: Path) -> list[list[str]]:
@@ -119,6 +120,7 @@ def write_report(out: Path, report: Path, studies_summary: Path | None = None) -
     section_e(lines, studies.get("e"))
     section_stress(lines, studies.get("stress"), out, report)
     section_mesh(lines, studies.get("mesh_convergence"), out, report)
+    section_stations(lines, studies.get("stations"))
     _section_validity(lines, out / "prom_validity.md", report)
     _section_optimisation(lines, studies_summary or report.parent / "studies" / "summary.md", report)
     lines += ["## Reproduce", "", "    make validate                                   # every study, cached per case",

@@ -184,10 +184,11 @@ def section_mesh(lines, study, out, report):
     if not study or not study.get("rows"):
         return not_run(lines, title)
     units = {"distance": ("cm", 100.0), "tail_amplitude": ("cm", 100.0), "first_frequency": ("Hz", 1.0),
-             "static_tail_deflection": ("cm", 100.0)}
+             "static_tail_deflection": ("cm", 100.0), "tail_compliance": ("mm/N", 1e3)}
     lines += [title, "",
               "The nominal fish per element degree and mesh level: swimming distance, tail amplitude, first natural "
-              "frequency (head clamped) and static tail deflection with the muscles at their peak (head clamped). "
+              "frequency (head clamped), static tail deflection with the muscles at their peak (head clamped) and the "
+              "tail station's static x-compliance under a unit x-force on it (head clamped). "
               "Reference: Richardson extrapolation of the three finest cases of the highest degree with h = "
               "cells^(-1/3); its estimated error is the correction |f* − f_finest|. When the differences change sign "
               "(no order, shown as —) the finest value is the reference and the last difference its error.", ""]
@@ -197,11 +198,12 @@ def section_mesh(lines, study, out, report):
                      f"{units[name][0]}", str(ref.get("degree"))] for name, ref in study["reference"].items()])
     lines += [""]
     lines += table(["degree", "level", "cells", "dofs", "distance [cm]", "error", "tail amplitude [cm]",
-                    "f_1 [Hz]", "static tail y [cm]", "wall time [s]"],
+                    "f_1 [Hz]", "static tail y [cm]", "tail compliance [mm/N]", "wall time [s]"],
                    [[str(row["degree"]), str(row["level"]), str(row["cells"]), str(row["dofs"]),
                      fmt(row["distance"], ".4g", 100.0), percent(row["relative_error_distance"], 1),
                      fmt(row["tail_amplitude"], ".4g", 100.0), fmt(row["first_frequency"], ".4g"),
-                     fmt(row["static_tail_deflection"], ".4g", 100.0), fmt(row["wall_time"], ".1f")]
+                     fmt(row["static_tail_deflection"], ".4g", 100.0), fmt(row.get("tail_compliance"), ".4g", 1e3),
+                     fmt(row["wall_time"], ".1f")]
                     for row in study["rows"]])
     default = study.get("default")
     lines += ["", ("Cheapest (degree, level) within 3 % of the reference distance: "
@@ -211,6 +213,28 @@ def section_mesh(lines, study, out, report):
     for failure in study.get("failed", []):
         lines += [f"- {failure['label']}: {failure['status']}, {short(failure.get('message'))}"]
     show_figure(lines, out, report, "mesh", "Mesh convergence", "FOM wall time against the error of each quantity.")
+
+
+def section_stations(lines, study):
+    title = "## Station count"
+    if not study or not study.get("rows"):
+        return not_run(lines, title)
+    lines += [title, "",
+              f"The nominal fish on degree {study['degree']}, level {study['level']} per station count N_s (the thrust "
+              "acts through N_s + 1 stations, SPEC §5). Reference: Richardson extrapolation in the station spacing "
+              "L/N_s of the three finest counts.", ""]
+    reference = study.get("reference") or {}
+    if "distance" in reference:
+        ref = reference["distance"]
+        lines += [f"Distance reference {fmt(ref['value'], '.4g', 100.0)} cm, observed order "
+                  f"{fmt(ref.get('observed_order'), '.2f')}, estimated error {fmt(ref['estimated_error'], '.2g', 100.0)} cm.",
+                  ""]
+    lines += table(["N_s", "status", "distance [cm]", "error", "tail amplitude [cm]", "tail compliance [mm/N]"],
+                   [[str(row["stations"]), row["status"], fmt(row.get("distance"), ".4g", 100.0),
+                     percent(row.get("distance_error"), 1) if row.get("distance_error") is not None else "—",
+                     fmt(row.get("tail_amplitude"), ".4g", 100.0), fmt(row.get("tail_compliance"), ".4g", 1e3)]
+                    for row in study["rows"]])
+    lines += [""]
 
 
 def section_e(lines, study):
