@@ -210,7 +210,7 @@ class FullOrderModel:
             self._head_velocity_weights = np.ones(self._head_x_owned.size)
             self._head_velocity_dofs = self._head_x_owned
             return
-        self.station_averages = averages_of(self.fish, n_stations)
+        self.station_averages = averages_of(self.fish, n_stations, self.scene.fluid.tail_station)
         self._head_velocity_weights = self.station_averages.head_weights[self.layout.owned_nodes]
         self._head_velocity_dofs = 3 * np.arange(self.layout.n_owned_blocks)
 
@@ -535,18 +535,23 @@ class _ExactNewtonOperator:
         y.array[:] += extra
 
 
-_AVERAGES: dict[tuple[int, int], StationAverages] = {}
+_AVERAGES: dict[tuple[int, int, str], StationAverages] = {}
 
 
-def averages_of(fish: Fish, n_stations: int) -> StationAverages:
-    """The station averages of a fish's nominal mesh, computed once per fish and station count."""
+def averages_of(fish: Fish, n_stations: int, tail_station: str = "slab") -> StationAverages:
+    """The station averages of a fish's nominal mesh, computed once per fish, station count and tail
+    station ("slab": the half-hat over the last slab; "face": the end face x = -L)."""
     import weakref
 
-    key = (id(fish), n_stations)
+    key = (id(fish), n_stations, tail_station)
     if key not in _AVERAGES:
         tags = fish.tags
+        face = None
+        if tail_station == "face":
+            on_tail = np.abs(tags.box.relative(fish.mesh.points)[:, 0] + tags.box.length) <= tags.tolerance
+            face = tags.skin_facets[on_tail[tags.skin_facets].all(axis=1)]
         _AVERAGES[key] = station_averages(fish.mesh.points, fish.mesh.cells, fish.nodes, tags.box, n_stations,
-                                          tags.head_cells)
+                                          tags.head_cells, face)
         weakref.finalize(fish, _AVERAGES.pop, key, None)
     return _AVERAGES[key]
 

@@ -102,15 +102,48 @@ class StationAverages:
         return self.weights @ nodal
 
 
+TRIANGLE_EDGES = np.array([[0, 1], [1, 2], [0, 2]])
+"""Local vertices of a triangle's edges, in the order of the degree-2 face basis below."""
+
+
+def triangle_basis(reference_points: np.ndarray, degree: int) -> np.ndarray:
+    """(n_q, 3 or 6) Lagrange basis on the reference triangle: vertices, then the edges of TRIANGLE_EDGES."""
+    barycentric = np.column_stack([1.0 - reference_points.sum(axis=1), reference_points])
+    if degree == 1:
+        return barycentric
+    vertices = barycentric * (2.0 * barycentric - 1.0)
+    edges = 4.0 * barycentric[:, TRIANGLE_EDGES[:, 0]] * barycentric[:, TRIANGLE_EDGES[:, 1]]
+    return np.hstack([vertices, edges])
+
+
+def face_average_weights(mesh_points: np.ndarray, facets: np.ndarray, nodes: LagrangeNodes) -> np.ndarray:
+    """(n_nodes,) b_j = ∫_face φ_j dA / area over the triangles ``facets`` (vertex indices)."""
+    import basix
+
+    reference, quadrature_weights = basix.make_quadrature(basix.CellType.triangle, 2 * nodes.degree)
+    basis = triangle_basis(reference, nodes.degree)
+    corners = np.asarray(mesh_points, dtype=float)[facets]
+    areas = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    facet_nodes = facets if nodes.degree == 1 else np.hstack(
+        [facets, nodes.nodes_of_pairs(facets[:, TRIANGLE_EDGES].reshape(-1, 2)).reshape(-1, 3)])
+    # ∫_facet φ_a dA = 2 A Σ_q φ_a(X_q) ω_q
+    local = 2.0 * areas[:, None] * (quadrature_weights @ basis)[None, :]
+    weights = np.bincount(facet_nodes.ravel(), local.ravel(), minlength=nodes.points.shape[0])
+    return weights / areas.sum()
+
+
 def station_averages(mesh_points: np.ndarray, mesh_cells: np.ndarray, nodes: LagrangeNodes, box, n_stations: int,
-                     head_cells: np.ndarray) -> StationAverages:
-    """B and the head average on the nominal mesh (``box``: the fish's bounding box)."""
+                     head_cells: np.ndarray, tail_face: np.ndarray | None = None) -> StationAverages:
+    """B and the head average on the nominal mesh (``box``: the fish's bounding box). With ``tail_face``
+    (the triangles of the end face x = -L) the tail station averages that face instead of its half-hat."""
     if n_stations < 2:
         raise ValueError(f"need at least 2 station intervals, got {n_stations}")
     stations = station_positions(box.length, box.x_tail, n_stations)
     hat_integrals = weighted_node_integrals(mesh_points, mesh_cells, nodes,
                                             lambda x: hat_functions(x[:, 0], stations))
     weights = hat_integrals / hat_integrals.sum(axis=1, keepdims=True)
+    if tail_face is not None:
+        weights[0] = face_average_weights(mesh_points, tail_face, nodes)
     head_integrals = weighted_node_integrals(mesh_points, mesh_cells[head_cells], _cell_subset(nodes, head_cells),
                                              lambda x: np.ones((1, x.shape[0])))[0]
     return StationAverages(stations, sparse.csr_matrix(weights), head_integrals / head_integrals.sum())

@@ -101,7 +101,7 @@ SO8 = {"z_tail": (-0.5, 0.5), "z_head": (-0.5, 0.5), "y_thin": (-0.15, 0.15),
 SO9 = {"z_tail": (-0.5, 0.5), "z_head": (-0.5, 0.5), "z_tail_step": (-0.5, 0.5),
        "z_tail_lin": (-0.5, 0.5), "y_lin_long_tail": (-0.4, 0.4), "y_ellipse": (-0.4, 0.4)}
 
-DEFAULT_MESH = (2, 2)      # (level, degree): the cheapest mesh within 3% of the converged distance (README)
+DEFAULT_MESH = (3, 2)      # (level, degree): the cheapest mesh within 3% of the converged distance (validation)
 FINE_MESH = (4, 1)         # SO4–SO6: SO1–SO3 on the 16k-cell level (SPEC §11)
 STUDIES = {
     "so1": (SO1, DEFAULT_MESH), "so2": (SO2, DEFAULT_MESH), "so3": (SO3, DEFAULT_MESH),
@@ -291,11 +291,11 @@ def test_hash_follows_the_content_of_the_mesh_file(tmp_path):
 def test_replace_changes_one_value_and_keeps_the_rest():
     scene = Scene.load("so1")
     coarse = scene.replace("mesh", level=1)
-    assert coarse.mesh.level == 1 and scene.mesh.level == 2
+    assert coarse.mesh.level == 1 and scene.mesh.level == 3
     assert coarse.mesh.translate == scene.mesh.translate and coarse.mesh.degree == scene.mesh.degree
     assert coarse.shapes == scene.shapes and coarse.solver == scene.solver
     assert coarse.hash != scene.hash
-    assert coarse.replace("mesh", level=2).hash == scene.hash
+    assert coarse.replace("mesh", level=3).hash == scene.hash
     shifted = scene.replace("regions", muscle_range=(-0.9, -0.4))
     assert shifted.regions.muscle_range == (-0.9, -0.4)
     assert scene.replace("cooptimization", weights=[0.5]).cooptimization.weights == (0.5,)

@@ -55,3 +55,17 @@ def test_the_head_average_weighs_head_nodes_only(averages):
     assert np.all(stations.head_weights[outside] == 0.0)
     centroid = stations.head_weights @ fish.nodes.points
     assert centroid[0] == pytest.approx(-0.35 * 0.2 / 2, rel=0.05)
+
+
+@pytest.mark.parametrize("degree", [1, 2])
+def test_the_face_tail_station_averages_the_end_face(degree):
+    """[fluid] tail_station = "face": station 0 is the average over the end face x = -L (its x is -L,
+    its y and z the face's centre)."""
+    from aquarom_fenics.fem.fom import averages_of
+
+    fish = load_fish(coarse_scene(mesh={"degree": degree}))
+    face = averages_of(fish, 10, "face")
+    assert face.weights[0].sum() == pytest.approx(1.0)
+    np.testing.assert_allclose(face.average(fish.nodes.points)[0], [-0.2, 0.0, 0.0], atol=1e-12)
+    slab = averages_of(fish, 10, "slab")
+    assert (face.weights[1:] != slab.weights[1:]).nnz == 0
