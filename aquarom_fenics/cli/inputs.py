@@ -50,6 +50,15 @@ def check_inputs(args, scene):
     return scene, xi
 
 
+def run_design(scene, xi: dict[str, float]) -> dict[str, float]:
+    """The design a command runs: the scene's start values of every shape, overridden by --xi.
+
+    Every model of a command (FOM, ROM, PROM) runs this same design, so a comparison compares
+    one design and ``simulate`` without --xi runs what ``build`` and ``optimize`` start from.
+    """
+    return {shape.name: shape.start for shape in scene.shapes} | xi
+
+
 def say(text: str) -> None:
     if MPI.COMM_WORLD.rank == 0:
         print(text, flush=True)
