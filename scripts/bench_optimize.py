@@ -129,7 +129,7 @@ def main():
                          "active": result.optimality.active,
                          "optimum": result.space.as_dict(result.optimum),
                          "prom_distance_optimal": result.evaluation.distance,
-                         "fom_nominal_distance": check.nominal_distance, "fom_optimal_distance": check.optimal_distance,
+                         "fom_start_distance": check.start_distance, "fom_optimal_distance": check.optimal_distance,
                          "fom_ratio": check.ratio, "fom_check_time": check.time})
             print(runs[-1], flush=True)
             if name == "so1" and method == "paper" and not args.no_corners:

@@ -27,7 +27,7 @@ def run(arguments: list[str]) -> None:
 GALLERY = Path(__file__).resolve().parents[1] / "docs" / "gallery"
 GALLERY_FILES = {"so1-shapes/shapes.png": "so1_shapes.png", "nominal-fom/trajectory.png": "nominal_trajectory.png",
                  "nominal-compare/compare.png": "nominal_rom_vs_fom.png", "so1-optimize/cost.png": "so1_cost.png",
-                 "so1-optimize/nominal_vs_optimal.png": "so1_nominal_vs_optimal.png",
+                 "so1-optimize/start_vs_optimal.png": "so1_start_vs_optimal.png",
                  "so1-optimal-fom/animation.gif": "so1_optimal_swimming.gif"}
 
 

@@ -27,7 +27,7 @@ def main():
     print("|---" * (len(names) + 5) + "|")
     for stiffness, optimum, check, builds in rows:
         nominal, optimal = (f"{100 * d:.3f}" if d is not None else "stopped"
-                            for d in (check.nominal_distance, check.optimal_distance))
+                            for d in (check.start_distance, check.optimal_distance))
         ratio = f"{check.ratio:.2f}" if check.ratio is not None else "n/a"
         print(f"| {stiffness:g} | " + " | ".join(f"{optimum[n]:+.3f}" for n in names)
               + f" | {nominal} | {optimal} | {ratio} | {builds} |")

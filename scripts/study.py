@@ -60,7 +60,7 @@ def summary_lines(out: Path) -> list[str]:
     folders = sorted((path.parent for path in out.glob(f"*/{ROWS}")), key=lambda path: (path.name == "co", path.name))
     lines = ["# Optimisation studies", "", *HEADER]
     lines += [row for folder in folders for row in (folder / ROWS).read_text().splitlines()]
-    lines += ["", "Optimisation and FOM check (nominal and optimal design) are those of the reported run (of the "
+    lines += ["", "Optimisation and FOM check (start and optimal design) are those of the reported run (of the "
               "best start of a multi-start case); the case wall time is the whole case (mesh, every start or "
               "weight). PROMs and FOM distances taken from the cache count as reused; `make bench` times every "
               "build from scratch."]
@@ -87,7 +87,7 @@ def _row(case, scene, fish, summary, case_time: float | None) -> str:
             f"{'' if case_time is None else f'{case_time:.1f}'} | {summary['time_per_build']:.2f} | {optimum} | "
             f"{', '.join(summary['bounds_active']) or 'none'} | "
             f"{'optimal' if summary['converged'] else summary['stop_reason']} ({summary['iterations']}) | "
-            f"{_starts(summary)} | {_centimetres(check['nominal_distance'])} | {_centimetres(check['optimal_distance'])} | {ratio} |")
+            f"{_starts(summary)} | {_centimetres(check['start_distance'])} | {_centimetres(check['optimal_distance'])} | {ratio} |")
 
 
 def _starts(summary) -> str:

@@ -39,3 +39,16 @@ def test_simulate_fom_without_xi_runs_the_start_design(tmp_path):
     scene = start_scene(tmp_path)
     assert main(["simulate", str(scene), "--out", str(tmp_path / "fom"), "--no-progress"]) == 0
     assert json.loads((tmp_path / "fom" / "summary.json").read_text())["xi"] == {"z_tail": 0.1}
+
+
+def test_the_fom_check_names_the_start_design_not_the_nominal_one():
+    import dataclasses
+
+    from aquarom_fenics.optimization.study import FomCheck
+
+    names = {field.name for field in dataclasses.fields(FomCheck)}
+    assert {"start_distance", "prom_start_distance"} <= names
+    assert not any("nominal" in name for name in names)
+    check = FomCheck(start_distance=0.02, optimal_distance=0.03, prom_start_distance=0.021,
+                     prom_optimal_distance=0.031, time=1.0)
+    assert check.ratio == pytest.approx(1.5)

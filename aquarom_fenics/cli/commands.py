@@ -80,7 +80,7 @@ def run_optimize(args) -> int:
         + f"; {result.builds} PROM builds, {result.timings['total']:.1f} s ({result.stop_reason})")
     if check.error:
         raise SolverError(f"FOM check: {check.error}; the optimisation outputs are in {out}/")
-    say(f"FOM check: nominal {100 * check.nominal_distance:.3f} cm, optimal {100 * check.optimal_distance:.3f} cm "
+    say(f"FOM check: start {100 * check.start_distance:.3f} cm, optimal {100 * check.optimal_distance:.3f} cm "
         f"(PROM {100 * check.prom_optimal_distance:.3f} cm), ratio {check.ratio:.2f}; outputs in {shown(args, out)}/")
     return 0
 

@@ -32,24 +32,24 @@ log = logging.getLogger("aquarom")
 
 @dataclass
 class FomCheck:
-    """FOM distances [m] of the nominal (start) and optimal designs and their ratio.
+    """FOM distances [m] of the start and optimal designs and their ratio.
 
-    A FOM run that stops leaves its distance None and the reason in ``error``; the PROM's nominal
+    A FOM run that stops leaves its distance None and the reason in ``error``; the PROM's start
     distance is None for a run from another start (multi-start).
     """
 
-    nominal_distance: float | None
+    start_distance: float | None
     optimal_distance: float | None
-    prom_nominal_distance: float | None
+    prom_start_distance: float | None
     prom_optimal_distance: float
     time: float
     error: str | None = None
 
     @property
     def ratio(self) -> float | None:
-        if self.nominal_distance is None or self.optimal_distance is None:
+        if self.start_distance is None or self.optimal_distance is None:
             return None
-        return self.optimal_distance / self.nominal_distance
+        return self.optimal_distance / self.start_distance
 
 
 def fom_cache_path(scene: Scene, design: dict[str, float], amplitude: float | None) -> Path:
@@ -88,9 +88,9 @@ def design_and_amplitude(space, z: np.ndarray) -> tuple[dict[str, float], float 
 
 
 def fom_check(scene: Scene, fish: Fish, result: OptimizationResult,
-              nominal_run: BackgroundFom | None = None) -> FomCheck:
-    """FOM distances of the scene's nominal design (its start point) and of the optimum; the optimum
-    first, while the nominal design's ``nominal_run`` (if any) finishes in the background."""
+              start_run: BackgroundFom | None = None) -> FomCheck:
+    """FOM distances of the scene's start design (its start point) and of the optimum; the optimum
+    first, while the start design's ``start_run`` (if any) finishes in the background."""
     started = time.perf_counter()
     space = result.space
     errors = []
@@ -102,14 +102,14 @@ def fom_check(scene: Scene, fish: Fish, result: OptimizationResult,
             errors.append(str(failure))
             return None
 
-    nominal = design_space(scene).start
+    start = design_space(scene).start
     optimal_distance = distance(result.optimum)
-    if nominal_run is not None:
-        nominal_run.finish(patience=time.perf_counter() - started)
-    nominal_distance = distance(nominal)
+    if start_run is not None:
+        start_run.finish(patience=time.perf_counter() - started)
+    start_distance = distance(start)
     first_built = next(row for row in result.history if row["prom"] == "built")
-    prom_nominal = first_built["distance"] if np.array_equal(space.start, nominal) else None
-    return FomCheck(nominal_distance, optimal_distance, prom_nominal, result.evaluation.distance,
+    prom_start = first_built["distance"] if np.array_equal(space.start, start) else None
+    return FomCheck(start_distance, optimal_distance, prom_start, result.evaluation.distance,
                     time.perf_counter() - started, "; ".join(errors[::-1]) or None)
 
 
@@ -137,16 +137,16 @@ def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights:
         out_dir.mkdir(parents=True, exist_ok=True)
     history_file = out_dir / "history.csv"
     writer = HistoryWriter(history_file, history_columns(space), saved["history"] if saved else []) if is_writer else None
-    nominal = design_and_amplitude(space, space.start)
-    nominal_run = start_if_useful(scene, *nominal, cached=fom_cache_path(scene, *nominal).exists())
+    start = design_and_amplitude(space, space.start)
+    start_run = start_if_useful(scene, *start, cached=fom_cache_path(scene, *start).exists())
     try:
         result = optimize(scene, fish=fish, weights=weights, checkpoint_path=checkpoint, resume=resume,
                           on_iteration=writer.write if writer else None, write_checkpoint=is_writer,
                           max_time=max_time, start=start)
-        check = fom_check(scene, fish, result, nominal_run)
+        check = fom_check(scene, fish, result, start_run)
     except BaseException as stop:
-        if nominal_run is not None:
-            nominal_run.stop()
+        if start_run is not None:
+            start_run.stop()
         if not isinstance(stop, KeyboardInterrupt):
             raise
         rows = writer.rows if writer else 0
@@ -261,8 +261,8 @@ def _write_summary(out_dir, scene, result, check, weights, multistart: dict | No
         "prom_size": result.prom_size,
         "cost_weights": {"distance": weights.distance, "energy": weights.energy, "alpha": weights.alpha},
         "prom_distance_optimal": result.evaluation.distance,
-        "fom_check": {"nominal_distance": check.nominal_distance, "optimal_distance": check.optimal_distance,
-                      "prom_nominal_distance": check.prom_nominal_distance,
+        "fom_check": {"start_distance": check.start_distance, "optimal_distance": check.optimal_distance,
+                      "prom_start_distance": check.prom_start_distance,
                       "prom_optimal_distance": check.prom_optimal_distance, "ratio": check.ratio,
                       "error": check.error},
         "timings": result.timings | {"fom_check": check.time},
@@ -276,7 +276,7 @@ def _write_summary(out_dir, scene, result, check, weights, multistart: dict | No
 def _write_figures(out_dir, scene, fish, result, render):
     """The history plots and the renders of the optimum. Called on every rank: the optimal design's
     XDMF is written collectively; rank 0 draws."""
-    from aquarom_fenics.viz.report import plot_optimization_history, render_nominal_and_optimal
+    from aquarom_fenics.viz.report import plot_optimization_history, render_start_and_optimal
 
     is_writer = MPI.COMM_WORLD.rank == 0
     space = result.space
@@ -291,9 +291,9 @@ def _write_figures(out_dir, scene, fish, result, render):
 
         render_design(fish, fish.design(optimal), optimal, out_dir / "optimal")
         if is_writer:
-            nominal = dict(zip(space.names[:shapes], map(float, space.start[:shapes])))
-            render_nominal_and_optimal(fish, fish.design(nominal), fish.design(optimal),
-                                       out_dir / "nominal_vs_optimal.png", f"{scene.name}: nominal and optimal design")
+            start = dict(zip(space.names[:shapes], map(float, space.start[:shapes])))
+            render_start_and_optimal(fish, fish.design(start), fish.design(optimal),
+                                       out_dir / "start_vs_optimal.png", f"{scene.name}: start and optimal design")
 
 
 def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None) -> list[dict]:

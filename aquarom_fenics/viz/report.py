@@ -1,4 +1,4 @@
-"""Figures of an optimization (SPEC §10): history, nominal against optimal fish, Pareto front.
+"""Figures of an optimization (SPEC §10): history, start against optimal fish, Pareto front.
 
 Plain data in, PNG files out (matplotlib Agg, dpi 120). Distances are given in metres and drawn in
 centimetres; design parameters ξ are dimensionless. Calling these on one rank only is the
@@ -41,11 +41,11 @@ LEGEND_HEIGHT = 0.5
 """Height [inch] kept free below the panels of a figure for its legend."""
 
 VIEW_PANEL_SIZE = (720, 300)
-"""Width and height [px] of one pyvista render of the nominal/optimal sheet."""
+"""Width and height [px] of one pyvista render of the start/optimal sheet."""
 
 VIEW_FIGURE_WIDTH = 11.0
 VIEW_FIGURE_FRAME = 1.6
-"""Width [inch] of the nominal/optimal sheet, and the height [inch] of its title, labels and legend."""
+"""Width [inch] of the start/optimal sheet, and the height [inch] of its title, labels and legend."""
 
 VIEW_MARGIN = 0.08
 """Free border around the framed fish on every side, as a fraction of its largest extent."""
@@ -61,7 +61,7 @@ sits on the right flank (-y) like the design pictures of ``render``.
 """
 
 AXIS_NAMES = "xyz"
-OUTLINE_LABEL = "nominal outline"
+OUTLINE_LABEL = "block outline (ξ = 0)"
 
 
 def _pyplot():
@@ -188,20 +188,20 @@ def _integer_ticks(axis) -> None:
     axis.xaxis.set_major_locator(MaxNLocator(integer=True))
 
 
-def render_nominal_and_optimal(fish, nominal_points: np.ndarray, optimal_points: np.ndarray, out_path: Path,
+def render_start_and_optimal(fish, start_points: np.ndarray, optimal_points: np.ndarray, out_path: Path,
                                title: str) -> Path:
-    """Write one PNG: nominal | optimal fish seen from above (y along x) and from the side (z along x).
+    """Write one PNG: start | optimal fish seen from above (y along x) and from the side (z along x).
 
-    ``nominal_points`` and ``optimal_points`` are nodal positions [m] on ``fish.mesh.cells``. All
+    ``start_points`` and ``optimal_points`` are nodal positions [m] on ``fish.mesh.cells``. All
     four renders share one parallel projection scale, so lengths compare across panels; the axes
-    are in centimetres and the optimal panels show the nominal outline in grey.
+    are in centimetres and the optimal panels show the outline of the block (ξ = 0) in grey.
     """
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    framed = np.vstack([nominal_points, optimal_points])
+    framed = np.vstack([start_points, optimal_points])
     low, high = _framed_box(framed)
     scale = _parallel_scale(low, high, VIEW_PANEL_SIZE)
-    designs = (("nominal", nominal_points, False), ("optimal", optimal_points, True))
+    designs = (("start", start_points, False), ("optimal", optimal_points, True))
     images = _render_views(fish, designs, low, high, scale)
     _compose_views(images, [name for name, _, _ in designs], low, high, scale, out_path, title)
     return out_path

@@ -87,7 +87,7 @@ def test_nominal_and_optimal_shows_the_thinner_fish_from_above(tmp_path):
     scene = scene_from_dict({"mesh": {"level": 1}, "shapes": {"y_thin": {"bounds": [-0.15, 0.15]}}})
     fish = load_fish(scene)
     optimal = fish.design({"y_thin": 0.1})
-    path = report.render_nominal_and_optimal(fish, fish.mesh.points, optimal, tmp_path / "fish.png", "y_thin = 0.1")
+    path = report.render_start_and_optimal(fish, fish.mesh.points, optimal, tmp_path / "fish.png", "y_thin = 0.1")
     assert path == tmp_path / "fish.png"
     picture = read_rgb(path)
     assert picture.shape[1] == round(report.VIEW_FIGURE_WIDTH * report.DPI)
