@@ -38,7 +38,11 @@ def test_compare_without_xi_runs_the_start_design_on_both_sides(tmp_path, capsys
 def test_simulate_fom_without_xi_runs_the_start_design(tmp_path):
     scene = start_scene(tmp_path)
     assert main(["simulate", str(scene), "--out", str(tmp_path / "fom"), "--no-progress"]) == 0
-    assert json.loads((tmp_path / "fom" / "summary.json").read_text())["xi"] == {"z_tail": 0.1}
+    summary = json.loads((tmp_path / "fom" / "summary.json").read_text())
+    assert summary["xi"] == {"z_tail": 0.1}
+    assert summary["units"]["distance"] == "m" and summary["units"]["wall_time"] == "s"
+    header = (tmp_path / "fom" / "trajectory.csv").read_text().splitlines()[0]
+    assert header == "time_s,head_x_m,tail_y_m,com_x_m,newton_iterations"
 
 
 def test_the_fom_check_names_the_start_design_not_the_nominal_one():

@@ -92,8 +92,8 @@ def run_pareto(args) -> int:
     out = claim_output(args, args.out or Path("results") / "pareto" / scene.name)
     points = pareto_sweep(scene, out)
     for point in points:
-        fom = (f"FOM distance {100 * point['distance']:.3f} cm" if point["fom_check"] == "completed"
-               else f"FOM check stopped (infeasible), PROM distance {100 * point['prom_distance']:.3f} cm")
+        fom = (f"FOM distance {100 * point['distance_m']:.3f} cm" if point["fom_check"] == "completed"
+               else f"FOM check stopped (infeasible), PROM distance {100 * point['prom_distance_m']:.3f} cm")
         say(f"w1 = {point['w1']:.2f}: amplitude {point['amplitude']:.3f}, energy {point['energy']:.4f}, {fom}")
     say(f"outputs in {shown(args, out)}/ (pareto.csv, pareto.png, one folder per weight)")
     return 0

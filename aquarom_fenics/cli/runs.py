@@ -54,6 +54,11 @@ def reduced_model(scene, xi: dict, model: str, prom_file: Path | None):
                                                           parametric=model == "prom"), parametric=model == "prom")
 
 
+COMPARE_UNITS = {"design": "1 (shape parameters are dimensionless)", "errors": "m for absolute errors, "
+                 "1 for *_relative", "fom": "as in a run's summary.json", "speedup": "1 (FOM / reduced wall time)"}
+"""The ``units`` block of compare.json."""
+
+
 @contextmanager
 def build_command_on_refusal(scene, design: dict):
     """A validity-radius refusal ends with the command that builds a PROM centred on the design."""
@@ -122,7 +127,8 @@ def run_compare(args) -> int:
     if MPI.COMM_WORLD.rank == 0:
         write_json_atomic(out / "compare.json", {"design": design, "xi_given": xi, "model": args.model, "errors": errors,
                                                  "fom": full.summary(), args.model: reduced.summary(),
-                                                 "speedup": full.wall_time / reduced.wall_time})
+                                                 "speedup": full.wall_time / reduced.wall_time,
+                                                 "units": COMPARE_UNITS})
         plot_comparison(out / "compare.png", {"FOM": full.trajectory.arrays(),
                                               args.model.upper(): reduced.trajectory.arrays()},
                         f"{scene.name}: FOM against {args.model.upper()}")

@@ -221,13 +221,17 @@ def _distinct_optima(space, optima: list[np.ndarray], tolerance: float) -> list[
     return groups
 
 
+HISTORY_FILE_UNITS = {"distance": "distance_m", "cost": "cost_m", "wall_time": "wall_time_s"}
+"""history.csv's header names of the columns with a unit (ξ, gradients and ratios are dimensionless)."""
+
+
 class HistoryWriter(IncrementalCSV):
     """history.csv, one row per iteration in the columns of :func:`history_columns`; a resumed run
     starts from the checkpoint's rows (a row written after the last checkpoint is made again, not
     duplicated)."""
 
     def __init__(self, path: Path, columns: list[str], checkpoint_rows: list[dict]):
-        super().__init__(path, columns)
+        super().__init__(path, [HISTORY_FILE_UNITS.get(column, column) for column in columns])
         self.header = columns
         for row in checkpoint_rows:
             self.write(row)
@@ -239,6 +243,13 @@ class HistoryWriter(IncrementalCSV):
 def _csv_value(value):
     """An empty cell for a missing value (a JSON null in a resumed row is the same as None)."""
     return "" if value is None else value
+
+
+OPTIMIZATION_SUMMARY_UNITS = {
+    "optimum": "1 (ξ dimensionless; amplitude A as [actuation] amplitude)", "prom_distance_optimal": "m",
+    "fom_check": "m for the distances, 1 for ratio", "timings": "s", "time_per_build": "s",
+    "cost_weights": "1"}
+"""The ``units`` block of an optimisation's summary.json."""
 
 
 def _write_summary(out_dir, scene, result, check, weights, multistart: dict | None = None):
@@ -267,7 +278,7 @@ def _write_summary(out_dir, scene, result, check, weights, multistart: dict | No
                       "error": check.error},
         "timings": result.timings | {"fom_check": check.time},
         "time_per_build": result.timings["prom_builds"] / max(result.builds, 1),
-        "versions": software_versions()}
+        "versions": software_versions(), "units": OPTIMIZATION_SUMMARY_UNITS}
     if multistart is not None:
         summary["multistart"] = multistart
     write_json_atomic(out_dir / "summary.json", summary)
@@ -310,8 +321,8 @@ def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None) -> list[
         amplitude = float(result.optimum[-1])
         completed = check.optimal_distance is not None
         points.append({"w1": w1, "amplitude": amplitude, "energy": weights.energy_term(amplitude),
-                       "distance": check.optimal_distance if completed else float("nan"),
-                       "prom_distance": result.evaluation.distance,
+                       "distance_m": check.optimal_distance if completed else float("nan"),
+                       "prom_distance_m": result.evaluation.distance,
                        "fom_check": "completed" if completed else "infeasible",
                        "fom_check_reason": "" if completed else (check.error or ""),
                        **{f"xi_{n}": float(v) for n, v in zip(result.space.names[:-1], result.optimum[:-1])}})

@@ -17,10 +17,10 @@ DPI = 120
 """Resolution [dots per inch] of every figure."""
 
 PROM_MARKERS = {
-    "built": dict(marker="o", markersize=7, color="tab:blue", label="PROM built"),
-    "approximated": dict(marker="^", markersize=6, color="tab:orange", label="approximated (η_c + S Δξ)"),
-    "surrogate": dict(marker="D", markersize=5, color="tab:green", label="surrogate (PROM at centre)"),
-    "rejected": dict(marker="o", markersize=6, color="0.55", markerfacecolor="none", label="rejected step"),
+    "built": dict(marker="o", markersize=7, color="tab:blue", label="new PROM built at the iterate"),
+    "approximated": dict(marker="^", markersize=6, color="tab:orange", label="first-order estimate from the last PROM"),
+    "surrogate": dict(marker="D", markersize=5, color="tab:green", label="last PROM simulated at the iterate"),
+    "rejected": dict(marker="o", markersize=6, color="0.55", markerfacecolor="none", label="step rejected"),
 }
 """Marker of an iteration by how its cost was obtained (the row's ``prom``)."""
 
@@ -102,7 +102,7 @@ def _plot_cost_history(rows: list[dict], path: Path) -> None:
     figure, (cost_axis, distance_axis) = plt.subplots(2, 1, figsize=(7, 5.5), sharex=True)
     _plot_iterates(cost_axis, rows, [row["cost"] for row in rows])
     _plot_iterates(distance_axis, rows, [100 * row["distance"] for row in rows])
-    cost_axis.set_ylabel("cost L")
+    cost_axis.set_ylabel("cost L [m]")
     distance_axis.set_ylabel("distance d [cm]")
     distance_axis.set_xlabel("iteration")
     _integer_ticks(distance_axis)
@@ -287,16 +287,16 @@ def _compose_views(images: np.ndarray, design_names: list[str], low: np.ndarray,
 def plot_pareto(points: list[dict], out_path: Path) -> Path:
     """Write the distance [cm] against the energy term α A² of co-optimized designs, front joined.
 
-    Each point holds ``w1`` (weight of -d), ``distance`` [m], ``energy`` (α A², the cost's units)
+    Each point holds ``w1`` (weight of -d), ``distance_m`` [m], ``energy`` (α A², the cost's units)
     and ``amplitude`` A. A design is on the front when no other one swims as far or farther for
     as little energy or less (and is better in one of the two). A point without a FOM distance
-    (its FOM check stopped: NaN) is drawn as a cross at its ``prom_distance``, off the front.
+    (its FOM check stopped: NaN) is drawn as a cross at its ``prom_distance_m``, off the front.
     """
     plt = _pyplot()
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
     energy = np.array([point["energy"] for point in points], dtype=float)
-    distance = 100 * np.array([point["distance"] for point in points], dtype=float)
+    distance = 100 * np.array([point["distance_m"] for point in points], dtype=float)
     feasible = np.isfinite(distance)
     on_front = np.zeros(len(points), dtype=bool)
     on_front[feasible] = _non_dominated(energy[feasible], distance[feasible])
@@ -308,7 +308,7 @@ def plot_pareto(points: list[dict], out_path: Path) -> Path:
     axis.plot(energy[dominated], distance[dominated], "o", color="0.55", markerfacecolor="none",
               label="dominated", zorder=3)
     if not feasible.all():
-        distance[~feasible] = [100 * point.get("prom_distance", np.nan) for point, ok in zip(points, feasible) if not ok]
+        distance[~feasible] = [100 * point.get("prom_distance_m", np.nan) for point, ok in zip(points, feasible) if not ok]
         axis.plot(energy[~feasible], distance[~feasible], "x", color="tab:red", zorder=3,
                   label="infeasible: FOM check stops (PROM distance)")
     for x, y, label in _pareto_labels(points, energy, distance):
