@@ -75,6 +75,7 @@ def run_reduced_model(scene, xi: dict, model: str, prom_file: Path | None, out: 
     from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
     from aquarom_fenics.geometry.fish import load_fish
     from aquarom_fenics.io.run_outputs import write_run_outputs
+    from aquarom_fenics.io.xdmf import cell_regions
 
     reduced = reduced_model(scene, xi, model, prom_file)
     xi_vector = np.array([xi.get(name, reduced.design_point.get(name, 0.0)) for name in reduced.shape_names])
@@ -87,7 +88,8 @@ def run_reduced_model(scene, xi: dict, model: str, prom_file: Path | None, out: 
                           np.einsum("ndm,sm->snd", reduced.basis[:vertices], result.states), MPI.COMM_WORLD,
                           extra={"cells": reduced.cells, "dofs": reduced.dofs, "reduced_size": reduced.size,
                                  "basis": reduced.labels, "basis_dropped": reduced.dropped,
-                                 "build_timings": reduced.timings})
+                                 "build_timings": reduced.timings},
+                          regions=cell_regions(fish.tags, fish.mesh.cells.shape[0]))
     return result
 
 
