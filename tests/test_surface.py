@@ -103,3 +103,95 @@ def test_the_validity_radius_refusal_names_the_build_command(tmp_path, capsys):
     assert main(["simulate", str(scene), "--model", "prom", "--xi", "z_tail=-0.1", "--out", str(tmp_path / "run"),
                  "--no-progress"]) == 2
     assert f"aquarom build {scene} --xi z_tail=-0.1 --out PROM.npz" in capsys.readouterr().err
+
+
+def test_verbose_is_accepted_after_the_subcommand(tmp_path, capsys):
+    scene = start_scene(tmp_path)
+    assert main(["mesh", str(scene), "-v"]) == 0
+    assert main(["-v", "mesh", str(scene)]) == 0
+    assert "cells" in capsys.readouterr().out
+
+
+def test_weight_is_refused_on_a_scene_without_cooptimisation(tmp_path, capsys):
+    scene = start_scene(tmp_path)
+    assert main(["optimize", str(scene), "--weight", "0.3", "--dry-run"]) == 2
+    assert "--weight 0.3" in capsys.readouterr().err
+
+
+def test_an_xi_outside_the_bounds_is_a_warning(tmp_path, capsys):
+    scene = start_scene(tmp_path)
+    assert main(["shapes", str(scene), "--xi", "z_tail=0.5", "--dry-run"]) == 0
+    assert "warning: --xi z_tail=0.5 is outside" in capsys.readouterr().err
+
+
+def test_set_overrides_a_scene_value_validated_like_the_file(tmp_path, capsys):
+    scene = start_scene(tmp_path)
+    assert main(["simulate", str(scene), "--set", "solver.duration=0.1", "--set", "shapes.z_tail.start=0.05",
+                 "--out", str(tmp_path / "run"), "--no-progress"]) == 0
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["scene_values"]["solver"]["duration"] == 0.1 and summary["xi"] == {"z_tail": 0.05}
+    capsys.readouterr()
+    for setting, named in (("solver.duration=-1", "duration"), ("solver.durration=1", "durration"),
+                           ("shapes.z_tail.start=0.5", "outside its bounds"), ("solver", "section.key=value")):
+        assert main(["simulate", str(scene), "--set", setting, "--dry-run"]) == 2, setting
+        error = capsys.readouterr().err
+        assert f"--set {setting}" in error and named in error and "Traceback" not in error
+
+
+def test_aquarom_cache_moves_the_mesh_cache_and_cache_list_shows_the_folders(tmp_path, monkeypatch, capsys):
+    from aquarom_fenics.io.paths import mesh_cache
+
+    monkeypatch.setenv("AQUAROM_CACHE", str(tmp_path / "cache"))
+    assert mesh_cache() == tmp_path / "cache" / "meshes"
+    assert main(["cache", "list"]) == 0
+    out = capsys.readouterr().out
+    for folder in ("prom", "fom", "meshes"):
+        assert str(tmp_path / "cache" / folder) in out
+
+
+def test_api_optimize_handles_its_folder_like_the_cli_and_names_the_optimum(tmp_path, monkeypatch):
+    from aquarom_fenics import api
+    from aquarom_fenics.errors import InputError
+
+    scene = api.Scene.load(start_scene(tmp_path)).replace("optimizer", method="trust-region", max_iterations=1)
+    out = tmp_path / "opt"
+    result, check = api.optimize(scene, out)
+    summary = json.loads((out / "summary.json").read_text())
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert result.optimum_dict == summary["optimum"] and set(result.optimum_dict) == {"z_tail"}
+    assert result.prom_builds == summary["prom_builds"]
+    assert summary["fom_check"]["start_distance"] == check.start_distance
+    assert manifest["scene"]["hash"] == scene.hash and "summary.json" in manifest["files"]
+    with pytest.raises(InputError, match="exists"):
+        api.optimize(scene, out)
+
+    def quick(scene, folder, **options):       # the folder handling of a forced run, without the optimiser
+        (folder / "summary.json").write_text("{}")
+        return result, check
+
+    monkeypatch.setattr(api, "run_optimization", quick)
+    api.optimize(scene, out, force=True)
+    assert json.loads((out / "summary.json").read_text()) == {}
+    assert json.loads((out / "manifest.json").read_text())["files"] == ["summary.json"]
+
+
+def test_set_log_level_shows_each_warning_once_and_details_on_request(capsys):
+    import logging
+
+    from aquarom_fenics import set_log_level
+
+    log = logging.getLogger("aquarom")
+    try:
+        set_log_level("warning")
+        for _ in range(3):
+            log.warning("basis: the same warning")
+        log.info("a detail")
+        err = capsys.readouterr().err
+        assert err.count("basis: the same warning") == 1 and "a detail" not in err
+        set_log_level("info")
+        log.info("a detail")
+        assert "a detail" in capsys.readouterr().err
+        with pytest.raises(ValueError):
+            set_log_level("loud")
+    finally:
+        set_log_level("warning")

@@ -62,6 +62,7 @@ def run_shapes(args) -> int:
 
 
 def run_optimize(args) -> int:
+    from aquarom_fenics.cli.parser import DEFAULT_WEIGHT
     from aquarom_fenics.optimization.cost import CostWeights
     from aquarom_fenics.optimization.optimize import DEFAULT_MAX_TIME
     from aquarom_fenics.optimization.study import run_optimization
@@ -69,7 +70,8 @@ def run_optimize(args) -> int:
     scene, _ = check_inputs(args, load_scene(args))
     weights = CostWeights()
     if scene.cooptimization.enabled:
-        weights = CostWeights(args.weight, 1.0 - args.weight, scene.cooptimization.energy_weight)
+        weight = DEFAULT_WEIGHT if args.weight is None else args.weight
+        weights = CostWeights(weight, 1.0 - weight, scene.cooptimization.energy_weight)
     out = claim_output(args, args.out or Path("results") / "optimize" / scene.name, resume=args.resume)
     result, check = run_optimization(scene, out, resume=args.resume, weights=weights,
                                      max_time=DEFAULT_MAX_TIME if args.max_time is None else args.max_time)
@@ -77,7 +79,7 @@ def run_optimize(args) -> int:
     space = result.space
     say(f"{scene.name} ({scene.optimizer.method}): optimum "
         + ", ".join(f"{n} = {v:.4g}" for n, v in zip(space.names, result.optimum))
-        + f"; {result.builds} PROM builds, {result.timings['total']:.1f} s ({result.stop_reason})")
+        + f"; {result.prom_builds} PROM builds, {result.timings['total']:.1f} s ({result.stop_reason})")
     if check.error:
         raise SolverError(f"FOM check: {check.error}; the optimisation outputs are in {out}/")
     say(f"FOM check: start {100 * check.start_distance:.3f} cm, optimal {100 * check.optimal_distance:.3f} cm "
@@ -150,8 +152,8 @@ def run_cache(args) -> int:
     from aquarom_fenics.reduction.cache import clear, listing
 
     if args.action == "list":
-        for kind, entries, size in listing():
-            say(f"{kind:15s} {entries:5d} entries {size / 1e6:9.1f} MB")
+        for kind, folder, entries, size in listing():
+            say(f"{kind:15s} {entries:5d} entries {size / 1e6:9.1f} MB  {folder}")
         return 0
     for folder in clear(args.kind or ["prom", "fom"]):
         say(f"removed {folder}")

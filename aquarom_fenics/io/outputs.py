@@ -277,3 +277,21 @@ def _make_folder(path: Path) -> None:
         for folder in created:
             folder.rmdir()
         raise
+
+
+def write_manifest(folder: Path, command: str, arguments: dict, scene, timings: dict) -> None:
+    """manifest.json of a run's folder: command and arguments, scene (name, source, hash, values),
+    versions, git commit, host cores, MPI ranks, timings per phase [s] and the date."""
+    import time
+
+    from mpi4py import MPI
+
+    from aquarom_fenics.io.paths import PACKAGE
+
+    write_json_atomic(Path(folder) / MANIFEST, {
+        "command": command, "arguments": {key: str(value) for key, value in arguments.items()},
+        "scene": None if scene is None else {"name": scene.name, "source": scene.source, "hash": scene.hash,
+                                             "values": scene.to_dict()},
+        "versions": software_versions(), "git_commit": git_commit(PACKAGE.parent),
+        "host_cores": os.cpu_count(), "mpi_ranks": MPI.COMM_WORLD.size, "timings": timings,
+        "date": time.strftime("%Y-%m-%d %H:%M:%S")})

@@ -137,8 +137,8 @@ def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights:
         out_dir.mkdir(parents=True, exist_ok=True)
     history_file = out_dir / "history.csv"
     writer = HistoryWriter(history_file, history_columns(space), saved["history"] if saved else []) if is_writer else None
-    start = design_and_amplitude(space, space.start)
-    start_run = start_if_useful(scene, *start, cached=fom_cache_path(scene, *start).exists())
+    start_design = design_and_amplitude(space, space.start)
+    start_run = start_if_useful(scene, *start_design, cached=fom_cache_path(scene, *start_design).exists())
     try:
         result = optimize(scene, fish=fish, weights=weights, checkpoint_path=checkpoint, resume=resume,
                           on_iteration=writer.write if writer else None, write_checkpoint=is_writer,
@@ -202,7 +202,7 @@ def _local_optimum(k: int, start, result: OptimizationResult, check: FomCheck) -
     return {"start_index": k + 1, "directory": f"start_{k + 1}", "start": space.as_dict(start),
             "optimum": space.as_dict(result.optimum), "prom_distance": result.evaluation.distance,
             "fom_distance": check.optimal_distance, "fom_error": check.error, "stop_reason": result.stop_reason,
-            "converged": result.converged, "iterations": result.iterations, "prom_builds": result.builds,
+            "converged": result.converged, "iterations": result.iterations, "prom_builds": result.prom_builds,
             "active": [row["constraint"] for row in result.optimality.active]}
 
 
@@ -267,7 +267,7 @@ def _write_summary(out_dir, scene, result, check, weights, multistart: dict | No
                        "active_definition": "slack ≤ active_tolerance · range of the bound or constraint row; "
                                             "multiplier > 0: the constraint holds the optimum",
                        "active": result.optimality.active},
-        "iterations": result.iterations, "prom_builds": result.builds,
+        "iterations": result.iterations, "prom_builds": result.prom_builds,
         "prom_builds_reused_from_cache": result.reused, "prom_builds_on_an_earlier_basis": result.basis_reuses,
         "prom_size": result.prom_size,
         "cost_weights": {"distance": weights.distance, "energy": weights.energy, "alpha": weights.alpha},
@@ -277,7 +277,7 @@ def _write_summary(out_dir, scene, result, check, weights, multistart: dict | No
                       "prom_optimal_distance": check.prom_optimal_distance, "ratio": check.ratio,
                       "error": check.error},
         "timings": result.timings | {"fom_check": check.time},
-        "time_per_build": result.timings["prom_builds"] / max(result.builds, 1),
+        "time_per_build": result.timings["prom_builds"] / max(result.prom_builds, 1),
         "versions": software_versions(), "units": OPTIMIZATION_SUMMARY_UNITS}
     if multistart is not None:
         summary["multistart"] = multistart
