@@ -27,9 +27,8 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     comm = MPI.COMM_WORLD
     agreement = comm.Dup() if comm.size > 1 else None
-    set_log_level("info" if args.verbose else "warning")      # details (INFO) only with --verbose
-    logging.getLogger("aquarom").setLevel(logging.INFO if comm.rank == 0 and args.verbose
-                                          else logging.WARNING if comm.rank == 0 else logging.ERROR)
+    set_log_level("info" if args.verbose else "warning")      # the console shows details only with --verbose
+    logging.getLogger("aquarom").setLevel(logging.INFO if comm.rank == 0 else logging.ERROR)  # records for any handler
     started = time.perf_counter()
     line = None
     try:

@@ -12,7 +12,7 @@ EXAMPLES = {
                 "  mpirun -n 2 aquarom simulate so1 --xi y_thin=0.1 --out results/so1-thin\n"
                 "  aquarom simulate so1 --model prom --prom results/so1-prom.npz --xi y_thin=0.05",
     "build": "aquarom build so1 --out results/so1-prom.npz",
-    "compare": "aquarom compare so1 --xi y_thin=0.05 --level 1 --out results/so1-compare",
+    "compare": "aquarom compare so1 --xi y_thin=0.03 --level 1 --out results/so1-compare",
     "optimize": "aquarom optimize so1 --level 1 --out results/so1-opt\n  aquarom optimize so1 --out results/so1-opt --resume",
     "pareto": "aquarom pareto co --level 1 --out results/co-pareto",
     "animate": "aquarom animate results/nominal-fom --fps 20 --stride 2",
