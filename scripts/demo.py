@@ -32,7 +32,7 @@ GALLERY_FILES = {"so1-shapes/shapes.png": "so1_shapes.png", "nominal-fom/traject
 
 
 def refresh_gallery(out: Path) -> None:
-    """Copy the pictures the README's gallery shows from this demo run."""
+    """Copy the pictures the manual's gallery (docs/gallery.md) shows from this demo run."""
     GALLERY.mkdir(parents=True, exist_ok=True)
     for source, name in GALLERY_FILES.items():
         shutil.copyfile(out / source, GALLERY / name)

@@ -2,7 +2,7 @@
 
 Writes every run under results/studies/ and results/studies/summary.md (case, mesh, parameters,
 cells, PROM dofs, builds, wall times, time per build, optimum, bounds active there, how the
-optimiser stopped, FOM distance nominal/optimal, ratio). SO2 runs from 3 starts (its source
+optimiser stopped, FOM distance start/optimal, ratio). SO2 runs from 3 starts (its source
 reports two local optima); its row is the best FOM-verified one. Each case keeps its rows in
 <case>/study_rows.md, and summary.md gathers the rows of every case in the output folder, so
 cases run one invocation at a time (`--cases so7 so8`) land in the same table.
@@ -24,7 +24,7 @@ STARTS = {"so2": 3}      # [optimizer] starts per case (1 when not listed)
 ROWS = "study_rows.md"   # a case's table rows, inside its output folder
 HEADER = ["| case | mesh | parameters | cells | PROM dofs | builds (reused from the cache) | optimisation [s] | "
           "FOM check [s] | case wall time [s] | time per build [s] | optimum | active | stop (iterations) | starts | "
-          "FOM nominal [cm] | FOM optimal [cm] | ratio |", "|---" * 17 + "|"]
+          "FOM start [cm] | FOM optimal [cm] | ratio |", "|---" * 17 + "|"]
 
 
 def main():

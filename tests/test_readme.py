@@ -149,7 +149,7 @@ def test_every_command_of_the_user_guide_runs_as_a_dry_run(page, command, tmp_pa
 def test_the_readme_walkthrough_runs_at_level_1(tmp_path, monkeypatch, capsys):
     """The README's commands in order, for real, on a 0.2 s horizon with two optimiser iterations."""
     monkeypatch.chdir(tmp_path)
-    commands = [command for page, command in documented_commands() if page == "README.md"]
+    commands = [command for page, command in documented_commands() if page == "README.md" and NOT_RUN not in command]
     assert [aquarom_arguments(c)[0] for c in commands] == ["mesh", "simulate", "build", "compare", "optimize",
                                                            "animate", "shapes"]
     for command in commands:

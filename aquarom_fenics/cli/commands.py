@@ -119,7 +119,8 @@ def run_basis(args) -> int:
     out = claim_output(args, args.out or Path("results") / "basis" / scene.name)
     prom = build_prom(scene, xi_center={s.name: s.start for s in scene.shapes}, fish=fish)
     files = render_basis_sheet(prom, fish, out)
-    dropped = f"; dropped as dependent: {', '.join(prom.dropped)}" if prom.dropped else ""
+    dropped = (f"; left out: {', '.join(prom.dropped)} (numerical combinations of the others, "
+               "the basis spans the same motions)" if prom.dropped else "")
     say(f"basis of {scene.name}: m = {prom.size} ({', '.join(prom.labels)}){dropped}; wrote {shown(args, files[0])}")
     return 0
 

@@ -72,6 +72,16 @@ class OptimizationResult:
         return int(self.history[-1]["iteration"])
 
     @property
+    def prom_builds_reused_from_cache(self) -> int:
+        """``reused`` under its summary.json name."""
+        return self.reused
+
+    @property
+    def prom_builds_on_an_earlier_basis(self) -> int:
+        """``basis_reuses`` under its summary.json name."""
+        return self.basis_reuses
+
+    @property
     def optimum_dict(self) -> dict[str, float]:
         """The optimum by name, as summary.json's ``optimum``: {shape name: ξ, ["amplitude": A]}."""
         return self.space.as_dict(self.optimum)
