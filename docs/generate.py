@@ -73,14 +73,36 @@ def command_help_page() -> str:
     return "\n".join(lines)
 
 
-def report_page() -> str:
-    report = REPOSITORY / "results" / "REPORT.md"
-    if report.is_file():
-        text = report.read_text()
-        return text.replace("\n# ", "\n## ")
-    return ("## Validation report\n\nNo report in this checkout: `make validate` "
-            "writes `results/REPORT.md` (hours on two cores; every case is cached) and the next "
-            "`make docs` shows it here.\n")
+def report_page(results: Path, folder: Path) -> str:
+    """The validation report ``results/REPORT.md`` as a page in ``folder``: its figures copied
+    beside it, its links to data files written as paths; or how to make it when it is missing."""
+    import re
+    import shutil
+
+    report = results / "REPORT.md"
+    if not report.is_file():
+        return ("## Validation report\n\nNo report in this checkout: `make validate` writes "
+                "`results/REPORT.md` (hours on two cores; every case is cached) and the next "
+                "`make docs` shows it here.\n")
+
+    def figure(match) -> str:
+        caption, target = match.group(1), match.group(2)
+        source = results / target
+        if target.startswith(("http:", "https:", "/")) or not source.is_file():
+            return f"{caption} (`{target}`, not found)"
+        copy = folder / target
+        copy.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(source, copy)
+        return f"![{caption}]({target})"
+
+    def data_link(match) -> str:
+        text, target = match.group(1), match.group(2)
+        return match.group(0) if target.startswith(("http:", "https:")) else f"{text} (`results/{target}`)"
+
+    text = re.sub(r"!\[([^\]]*)\]\(([^)]+)\)", figure, report.read_text())
+    text = re.sub(r"(?<!!)\[([^\]]*)\]\(([^)]+)\)", data_link, text)
+    text = re.sub(r"^#", "##", text, flags=re.M)          # one level below the Validation page
+    return text
 
 
 def write_if_changed(path: Path, text: str) -> None:
@@ -93,7 +115,7 @@ def write_generated_pages(folder: Path) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     write_if_changed(folder / "scene_keys.rst", scene_keys_page())
     write_if_changed(folder / "cli_help.rst", command_help_page())
-    write_if_changed(folder / "report.md", report_page())
+    write_if_changed(folder / "report.md", report_page(REPOSITORY / "results", folder))
 
 
 if __name__ == "__main__":

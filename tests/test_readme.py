@@ -169,3 +169,18 @@ def test_make_docs_is_a_target():
     assert re.search(r"^docs: setup\n\t.*sphinx -W", makefile, flags=re.M)
     assert "python3-sphinx" in (REPOSITORY / "scripts" / "setup.sh").read_text()
     assert os.path.exists(DOCS / "conf.py")
+
+
+def test_the_validation_report_is_shown_with_its_figures_and_data_paths(tmp_path):
+    from generate import report_page
+
+    results, folder = tmp_path / "results", tmp_path / "generated"
+    assert "make validate" in report_page(results, folder)
+    (results / "validation").mkdir(parents=True)
+    (results / "validation" / "mesh.png").write_bytes(b"png")
+    (results / "REPORT.md").write_text("# Report\n\n![mesh](validation/mesh.png)\n\n"
+                                       "[cases](validation/cases.json) and ![gone](validation/gone.png)\n")
+    page = report_page(results, folder)
+    assert page.startswith("## Report") and "![mesh](validation/mesh.png)" in page
+    assert (folder / "validation" / "mesh.png").read_bytes() == b"png"
+    assert "cases (`results/validation/cases.json`)" in page and "gone (`validation/gone.png`, not found)" in page
