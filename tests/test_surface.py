@@ -102,7 +102,7 @@ def test_the_validity_radius_refusal_names_the_build_command(tmp_path, capsys):
     scene = start_scene(tmp_path)
     assert main(["simulate", str(scene), "--model", "prom", "--xi", "z_tail=-0.1", "--out", str(tmp_path / "run"),
                  "--no-progress"]) == 2
-    assert f"aquarom build {scene} --xi z_tail=-0.1 --out PROM.npz" in capsys.readouterr().err
+    assert f"aquarom build {scene} --level 1 --degree 1 --xi z_tail=-0.1 --out PROM.npz" in capsys.readouterr().err
 
 
 def test_verbose_is_accepted_after_the_subcommand(tmp_path, capsys):

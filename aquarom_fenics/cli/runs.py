@@ -61,12 +61,14 @@ COMPARE_UNITS = {"design": "1 (shape parameters are dimensionless)", "errors": "
 
 @contextmanager
 def build_command_on_refusal(scene, design: dict):
-    """A validity-radius refusal ends with the command that builds a PROM centred on the design."""
+    """A validity-radius refusal ends with the command that builds a PROM centred on the design
+    (on this run's mesh level and degree; other --set options are to be repeated)."""
     try:
         yield
     except InputError as refusal:
         values = " ".join(f"--xi {name}={value:g}" for name, value in design.items())
-        raise InputError(f"{refusal}: run `aquarom build {scene.source} {values} --out PROM.npz` "
+        mesh = f"--level {scene.mesh.level} --degree {scene.mesh.degree}" if not scene.mesh.file else ""
+        raise InputError(f"{refusal}: run `aquarom build {scene.source} {mesh} {values} --out PROM.npz` "
                          f"and pass --prom PROM.npz") from None
 
 
