@@ -3,7 +3,7 @@ PYTHON := .venv/bin/python
 AQUAROM := .venv/bin/aquarom
 OUT ?= results/demo
 
-.PHONY: setup demo test bench validate validate-radius study clean docker-test
+.PHONY: setup demo test docs bench validate validate-radius study clean docker-test
 
 setup:
 	@bash scripts/setup.sh
@@ -34,3 +34,7 @@ clean:
 # Not part of `test`: needs a Docker daemon and a debian:bookworm image (docker/README.md).
 docker-test: setup
 	@$(PYTHON) scripts/docker_test.py
+
+# The manual (Sphinx, warnings are errors) into docs/_build/html.
+docs: setup
+	$(PYTHON) -m sphinx -W --keep-going -b html docs docs/_build/html

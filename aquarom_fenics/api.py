@@ -7,12 +7,18 @@
     prom = build_prom(scene)                                  # ReducedModel at the start values
     reduced = simulate(scene, {"y_thin": 0.03}, model="prom", prom=prom, sensitivities=True)
     result, check = optimize(scene, "results/my-so1")       # OptimizationResult, FomCheck
+    result.optimum_dict, check.start_distance, check.optimal_distance   # names as in summary.json
+
+Every model runs the scene's start values for a shape not given in ``xi`` (as the CLI does).
+Messages: :func:`aquarom_fenics.set_log_level` ("info" for details; warnings only by default).
 """
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import numpy as np
+from mpi4py import MPI
 
 from aquarom_fenics.optimization.cost import CostWeights
 from aquarom_fenics.geometry.fish import Fish, load_fish
@@ -21,10 +27,17 @@ from aquarom_fenics.dynamics.reduced_dynamics import ReducedResult, simulate_red
 from aquarom_fenics.reduction.reductor import build_prom as _build_prom
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.dynamics.simulate import SimulationResult, simulate_fom
+from aquarom_fenics.optimization.optimize import DEFAULT_MAX_TIME, OptimizationResult
 from aquarom_fenics.optimization.study import FomCheck, run_optimization
+from aquarom_fenics.errors import InputError, Interrupted, SolverError
 
-__all__ = ["Scene", "Fish", "load_fish", "simulate", "build_prom", "optimize", "CostWeights", "ReducedModel",
-           "SimulationResult", "ReducedResult"]
+__all__ = ["Scene", "Fish", "load_fish", "simulate", "build_prom", "optimize", "start_design", "CostWeights",
+           "ReducedModel", "SimulationResult", "ReducedResult", "OptimizationResult", "FomCheck"]
+
+
+def start_design(scene: Scene, xi: dict[str, float] | None = None) -> dict[str, float]:
+    """The design a call runs: the scene's start value of every shape, overridden by ``xi``."""
+    return {shape.name: shape.start for shape in scene.shapes} | (xi or {})
 
 
 def build_prom(scene: Scene, xi: dict[str, float] | None = None, fish: Fish | None = None) -> ReducedModel:
@@ -35,8 +48,9 @@ def build_prom(scene: Scene, xi: dict[str, float] | None = None, fish: Fish | No
 
 def simulate(scene: Scene, xi: dict[str, float] | None = None, model: str = "fom", prom: ReducedModel | None = None,
              sensitivities: bool = False, fish: Fish | None = None) -> SimulationResult | ReducedResult:
-    """Simulate a design with the FOM, a ROM built at the design, or a PROM (built if not given)."""
-    xi = xi or {}
+    """Simulate a design (:func:`start_design` of ``xi``) with the FOM, a ROM built at the design, or a
+    PROM (built at the start values if not given)."""
+    xi = start_design(scene, xi)
     if model == "fom":
         return simulate_fom(scene, xi, fish=fish, progress=False)
     if model == "rom":
@@ -49,6 +63,56 @@ def simulate(scene: Scene, xi: dict[str, float] | None = None, model: str = "fom
 
 
 def optimize(scene: Scene, out_dir: str | Path, weights: CostWeights | None = None, fish: Fish | None = None,
-             render: bool = False, resume: bool = False):
-    """Optimise the scene with its method, check with the FOM, write the report to ``out_dir``."""
-    return run_optimization(scene, Path(out_dir), resume=resume, weights=weights, fish=fish, render=render)
+             render: bool = False, resume: bool = False, force: bool = False,
+             max_time: float = DEFAULT_MAX_TIME) -> tuple[OptimizationResult, FomCheck]:
+    """Optimise the scene with its method, check with the FOM, write the report to ``out_dir``.
+
+    The folder is handled as ``aquarom optimize --out`` does: an existing one is refused unless
+    ``force`` (and then only an earlier run's folder is replaced, once this run has finished) or
+    ``resume``; the folder gets its manifest.json. A run that stops keeps its partial outputs.
+    """
+    from aquarom_fenics.io.outputs import claim_folder, discard, list_outputs, publish, write_manifest
+
+    comm = MPI.COMM_WORLD
+    location = _on_rank_zero(comm, lambda: claim_folder(Path(out_dir), force, resume))
+    started = time.perf_counter()
+    arguments = {"out_dir": out_dir, "resume": resume, "force": force, "max_time": max_time,
+                 "weights": weights or CostWeights(), "render": render}
+
+    def settle(finished: bool, keep: bool, timings: dict) -> None:
+        if comm.rank != 0:
+            return
+        if not keep:
+            discard(location)
+            return
+        write_manifest(location.working, "aquarom_fenics.api.optimize", arguments, scene,
+                       {"total": time.perf_counter() - started} | timings)
+        list_outputs(location.working)
+        if finished:
+            publish(location)
+
+    try:
+        result, check = run_optimization(scene, location.working, resume=resume, weights=weights, fish=fish,
+                                         render=render, max_time=max_time)
+    except (SolverError, Interrupted, KeyboardInterrupt):
+        settle(False, location.working.is_dir(), {})
+        raise
+    except BaseException:
+        settle(False, False, {})
+        raise
+    settle(True, True, result.timings | {"fom_check": check.time})
+    return result, check
+
+
+def _on_rank_zero(comm, action):
+    """``action()`` on rank 0, its value on every rank (its InputError raised on every rank)."""
+    outcome = (None, None)
+    if comm.rank == 0:
+        try:
+            outcome = (action(), None)
+        except InputError as error:
+            outcome = (None, str(error))
+    value, problem = comm.bcast(outcome) if comm.size > 1 else outcome
+    if problem:
+        raise InputError(problem)
+    return value

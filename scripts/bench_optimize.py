@@ -120,7 +120,7 @@ def main():
             runs.append({"scene": name, "method": method, "level": base.mesh.level, "degree": base.mesh.degree,
                          "cells": fish.mesh.cells.shape[0],
                          "parameters": len(base.shapes), "optimisation_time": result.timings["total"],
-                         "prom_build_time": result.timings["prom_builds"], "prom_builds": result.builds,
+                         "prom_build_time": result.timings["prom_builds"], "prom_builds": result.prom_builds,
                          "prom_builds_on_an_earlier_basis": result.basis_reuses, "builds": result.build_records,
                          "surrogate_iterations": sum(row["prom"] == "surrogate" for row in result.history),
                          "iterations": result.iterations, "stop_reason": result.stop_reason,
@@ -129,7 +129,7 @@ def main():
                          "active": result.optimality.active,
                          "optimum": result.space.as_dict(result.optimum),
                          "prom_distance_optimal": result.evaluation.distance,
-                         "fom_nominal_distance": check.nominal_distance, "fom_optimal_distance": check.optimal_distance,
+                         "fom_start_distance": check.start_distance, "fom_optimal_distance": check.optimal_distance,
                          "fom_ratio": check.ratio, "fom_check_time": check.time})
             print(runs[-1], flush=True)
             if name == "so1" and method == "paper" and not args.no_corners:

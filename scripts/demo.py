@@ -27,12 +27,12 @@ def run(arguments: list[str]) -> None:
 GALLERY = Path(__file__).resolve().parents[1] / "docs" / "gallery"
 GALLERY_FILES = {"so1-shapes/shapes.png": "so1_shapes.png", "nominal-fom/trajectory.png": "nominal_trajectory.png",
                  "nominal-compare/compare.png": "nominal_rom_vs_fom.png", "so1-optimize/cost.png": "so1_cost.png",
-                 "so1-optimize/nominal_vs_optimal.png": "so1_nominal_vs_optimal.png",
+                 "so1-optimize/start_vs_optimal.png": "so1_start_vs_optimal.png",
                  "so1-optimal-fom/animation.gif": "so1_optimal_swimming.gif"}
 
 
 def refresh_gallery(out: Path) -> None:
-    """Copy the pictures the README's gallery shows from this demo run."""
+    """Copy the pictures the manual's gallery (docs/gallery.md) shows from this demo run."""
     GALLERY.mkdir(parents=True, exist_ok=True)
     for source, name in GALLERY_FILES.items():
         shutil.copyfile(out / source, GALLERY / name)

@@ -21,16 +21,16 @@ def main():
     for stiffness in STIFFNESSES:
         scene = base.replace("actuation", stiffness=stiffness)
         result, check = optimize(scene, args.out / f"k{stiffness:g}", fish=fish)
-        rows.append((stiffness, result.space.as_dict(result.optimum), check, result.builds))
+        rows.append((stiffness, result.optimum_dict, check, result.prom_builds))
     names = list(rows[0][1])
-    print("| k [Pa] | " + " | ".join(names) + " | FOM nominal [cm] | FOM optimal [cm] | ratio | PROM builds |")
+    print("| k [Pa] | " + " | ".join(names) + " | FOM start [cm] | FOM optimal [cm] | ratio | PROM builds |")
     print("|---" * (len(names) + 5) + "|")
     for stiffness, optimum, check, builds in rows:
-        nominal, optimal = (f"{100 * d:.3f}" if d is not None else "stopped"
-                            for d in (check.nominal_distance, check.optimal_distance))
+        start, optimal = (f"{100 * d:.3f}" if d is not None else "stopped"
+                            for d in (check.start_distance, check.optimal_distance))
         ratio = f"{check.ratio:.2f}" if check.ratio is not None else "n/a"
         print(f"| {stiffness:g} | " + " | ".join(f"{optimum[n]:+.3f}" for n in names)
-              + f" | {nominal} | {optimal} | {ratio} | {builds} |")
+              + f" | {start} | {optimal} | {ratio} | {builds} |")
 
 
 if __name__ == "__main__":

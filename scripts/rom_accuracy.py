@@ -1,4 +1,4 @@
-"""ROM accuracy against its own FOM, with and without the basis's response vectors (README "Basis and ROM accuracy").
+"""ROM accuracy against its own FOM, with and without the basis's response vectors (docs/theory/basis.md).
 
 For the nominal fish on the listed meshes: FOM distance and tail amplitude, and the relative errors of
 the ROM built at the design with SPEC §7's items 1–5 only (`response_vectors = false`) and with the

@@ -2,7 +2,7 @@
 
 Writes every run under results/studies/ and results/studies/summary.md (case, mesh, parameters,
 cells, PROM dofs, builds, wall times, time per build, optimum, bounds active there, how the
-optimiser stopped, FOM distance nominal/optimal, ratio). SO2 runs from 3 starts (its source
+optimiser stopped, FOM distance start/optimal, ratio). SO2 runs from 3 starts (its source
 reports two local optima); its row is the best FOM-verified one. Each case keeps its rows in
 <case>/study_rows.md, and summary.md gathers the rows of every case in the output folder, so
 cases run one invocation at a time (`--cases so7 so8`) land in the same table.
@@ -24,7 +24,7 @@ STARTS = {"so2": 3}      # [optimizer] starts per case (1 when not listed)
 ROWS = "study_rows.md"   # a case's table rows, inside its output folder
 HEADER = ["| case | mesh | parameters | cells | PROM dofs | builds (reused from the cache) | optimisation [s] | "
           "FOM check [s] | case wall time [s] | time per build [s] | optimum | active | stop (iterations) | starts | "
-          "FOM nominal [cm] | FOM optimal [cm] | ratio |", "|---" * 17 + "|"]
+          "FOM start [cm] | FOM optimal [cm] | ratio |", "|---" * 17 + "|"]
 
 
 def main():
@@ -60,7 +60,7 @@ def summary_lines(out: Path) -> list[str]:
     folders = sorted((path.parent for path in out.glob(f"*/{ROWS}")), key=lambda path: (path.name == "co", path.name))
     lines = ["# Optimisation studies", "", *HEADER]
     lines += [row for folder in folders for row in (folder / ROWS).read_text().splitlines()]
-    lines += ["", "Optimisation and FOM check (nominal and optimal design) are those of the reported run (of the "
+    lines += ["", "Optimisation and FOM check (start and optimal design) are those of the reported run (of the "
               "best start of a multi-start case); the case wall time is the whole case (mesh, every start or "
               "weight). PROMs and FOM distances taken from the cache count as reused; `make bench` times every "
               "build from scratch."]
@@ -87,7 +87,7 @@ def _row(case, scene, fish, summary, case_time: float | None) -> str:
             f"{'' if case_time is None else f'{case_time:.1f}'} | {summary['time_per_build']:.2f} | {optimum} | "
             f"{', '.join(summary['bounds_active']) or 'none'} | "
             f"{'optimal' if summary['converged'] else summary['stop_reason']} ({summary['iterations']}) | "
-            f"{_starts(summary)} | {_centimetres(check['nominal_distance'])} | {_centimetres(check['optimal_distance'])} | {ratio} |")
+            f"{_starts(summary)} | {_centimetres(check['start_distance'])} | {_centimetres(check['optimal_distance'])} | {ratio} |")
 
 
 def _starts(summary) -> str:

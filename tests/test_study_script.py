@@ -18,7 +18,7 @@ def summary(optimal_distance):
     return {"optimum": {"z_tail": -0.5, "y_thin": 0.15}, "prom_size": 17, "prom_builds": 4,
             "prom_builds_reused_from_cache": 1, "timings": {"total": 60.04, "fom_check": 95.5},
             "time_per_build": 3.25, "bounds_active": ["z_tail ≥ -0.5"], "converged": True, "iterations": 12,
-            "fom_check": {"nominal_distance": 0.045, "optimal_distance": optimal_distance,
+            "fom_check": {"start_distance": 0.045, "optimal_distance": optimal_distance,
                           "ratio": None if optimal_distance is None else optimal_distance / 0.045}}
 
 

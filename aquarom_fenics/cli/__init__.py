@@ -13,6 +13,7 @@ import traceback
 
 from mpi4py import MPI
 
+from aquarom_fenics import set_log_level
 from aquarom_fenics.cli.commands import COMMANDS, run_dry
 from aquarom_fenics.cli.outputs import os_error_text, settle_output
 from aquarom_fenics.cli.parser import build_parser
@@ -26,11 +27,8 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     comm = MPI.COMM_WORLD
     agreement = comm.Dup() if comm.size > 1 else None
-    console = logging.StreamHandler()          # details (INFO) only with --verbose
-    console.setFormatter(logging.Formatter("%(message)s"))
-    console.setLevel(logging.INFO if args.verbose else logging.WARNING)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, handlers=[console])
-    logging.getLogger("aquarom").setLevel(logging.INFO if comm.rank == 0 else logging.ERROR)
+    set_log_level("info" if args.verbose else "warning")      # the console shows details only with --verbose
+    logging.getLogger("aquarom").setLevel(logging.INFO if comm.rank == 0 else logging.ERROR)  # records for any handler
     started = time.perf_counter()
     line = None
     try:

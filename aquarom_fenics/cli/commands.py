@@ -62,6 +62,7 @@ def run_shapes(args) -> int:
 
 
 def run_optimize(args) -> int:
+    from aquarom_fenics.cli.parser import DEFAULT_WEIGHT
     from aquarom_fenics.optimization.cost import CostWeights
     from aquarom_fenics.optimization.optimize import DEFAULT_MAX_TIME
     from aquarom_fenics.optimization.study import run_optimization
@@ -69,7 +70,8 @@ def run_optimize(args) -> int:
     scene, _ = check_inputs(args, load_scene(args))
     weights = CostWeights()
     if scene.cooptimization.enabled:
-        weights = CostWeights(args.weight, 1.0 - args.weight, scene.cooptimization.energy_weight)
+        weight = DEFAULT_WEIGHT if args.weight is None else args.weight
+        weights = CostWeights(weight, 1.0 - weight, scene.cooptimization.energy_weight)
     out = claim_output(args, args.out or Path("results") / "optimize" / scene.name, resume=args.resume)
     result, check = run_optimization(scene, out, resume=args.resume, weights=weights,
                                      max_time=DEFAULT_MAX_TIME if args.max_time is None else args.max_time)
@@ -77,10 +79,10 @@ def run_optimize(args) -> int:
     space = result.space
     say(f"{scene.name} ({scene.optimizer.method}): optimum "
         + ", ".join(f"{n} = {v:.4g}" for n, v in zip(space.names, result.optimum))
-        + f"; {result.builds} PROM builds, {result.timings['total']:.1f} s ({result.stop_reason})")
+        + f"; {result.prom_builds} PROM builds, {result.timings['total']:.1f} s ({result.stop_reason})")
     if check.error:
         raise SolverError(f"FOM check: {check.error}; the optimisation outputs are in {out}/")
-    say(f"FOM check: nominal {100 * check.nominal_distance:.3f} cm, optimal {100 * check.optimal_distance:.3f} cm "
+    say(f"FOM check: start {100 * check.start_distance:.3f} cm, optimal {100 * check.optimal_distance:.3f} cm "
         f"(PROM {100 * check.prom_optimal_distance:.3f} cm), ratio {check.ratio:.2f}; outputs in {shown(args, out)}/")
     return 0
 
@@ -92,8 +94,8 @@ def run_pareto(args) -> int:
     out = claim_output(args, args.out or Path("results") / "pareto" / scene.name)
     points = pareto_sweep(scene, out)
     for point in points:
-        fom = (f"FOM distance {100 * point['distance']:.3f} cm" if point["fom_check"] == "completed"
-               else f"FOM check stopped (infeasible), PROM distance {100 * point['prom_distance']:.3f} cm")
+        fom = (f"FOM distance {100 * point['distance_m']:.3f} cm" if point["fom_check"] == "completed"
+               else f"FOM check stopped (infeasible), PROM distance {100 * point['prom_distance_m']:.3f} cm")
         say(f"w1 = {point['w1']:.2f}: amplitude {point['amplitude']:.3f}, energy {point['energy']:.4f}, {fom}")
     say(f"outputs in {shown(args, out)}/ (pareto.csv, pareto.png, one folder per weight)")
     return 0
@@ -117,7 +119,8 @@ def run_basis(args) -> int:
     out = claim_output(args, args.out or Path("results") / "basis" / scene.name)
     prom = build_prom(scene, xi_center={s.name: s.start for s in scene.shapes}, fish=fish)
     files = render_basis_sheet(prom, fish, out)
-    dropped = f"; dropped as dependent: {', '.join(prom.dropped)}" if prom.dropped else ""
+    dropped = (f"; left out: {', '.join(prom.dropped)} (numerical combinations of the others, "
+               "the basis spans the same motions)" if prom.dropped else "")
     say(f"basis of {scene.name}: m = {prom.size} ({', '.join(prom.labels)}){dropped}; wrote {shown(args, files[0])}")
     return 0
 
@@ -150,8 +153,8 @@ def run_cache(args) -> int:
     from aquarom_fenics.reduction.cache import clear, listing
 
     if args.action == "list":
-        for kind, entries, size in listing():
-            say(f"{kind:15s} {entries:5d} entries {size / 1e6:9.1f} MB")
+        for kind, folder, entries, size in listing():
+            say(f"{kind:15s} {entries:5d} entries {size / 1e6:9.1f} MB  {folder}")
         return 0
     for folder in clear(args.kind or ["prom", "fom"]):
         say(f"removed {folder}")

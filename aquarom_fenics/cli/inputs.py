@@ -7,16 +7,46 @@ from aquarom_fenics.errors import InputError
 
 
 def load_scene(args):
-    """The scene named on the command line, with the --level and --degree overrides applied."""
+    """The scene named on the command line, with the --set, --level and --degree overrides applied."""
     from aquarom_fenics.io.scene import Scene
 
     scene = Scene.load(args.scene)
+    for setting in getattr(args, "settings", None) or []:
+        scene = with_setting(scene, setting)
     if args.level is not None:
         scene = scene.replace("mesh", level=args.level)
     if args.degree is not None:
         scene = scene.replace("mesh", degree=args.degree)
     args.scene_used = scene
     return scene
+
+
+def with_setting(scene, setting: str):
+    """The scene with one ``section.key=value`` (or ``shapes.NAME.key=value``) changed; the value is
+    TOML (a bare word is a string) and the whole scene is validated again as a file would be."""
+    import tomllib
+
+    from aquarom_fenics.io.scene import scene_from_dict
+
+    path, sep, text = setting.partition("=")
+    keys = [key.strip() for key in path.split(".")]
+    if not sep or len(keys) < 2 or not all(keys):
+        raise InputError(f"--set {setting}: expected section.key=value, e.g. --set solver.duration=0.5")
+    try:
+        value = tomllib.loads(f"value = {text.strip()}")["value"]
+    except tomllib.TOMLDecodeError:
+        value = text.strip()
+    data = tomllib.loads(scene.to_toml())
+    table = data
+    for key in keys[:-1]:
+        table = table.setdefault(key, {})
+        if not isinstance(table, dict):
+            raise InputError(f"--set {setting}: {'.'.join(keys[:-1])} is a value, not a table")
+    table[keys[-1]] = value
+    try:
+        return scene_from_dict(data, source=scene.source, base_dir=scene.base_dir)
+    except InputError as error:
+        raise InputError(f"--set {setting}: {error}") from None
 
 
 def check_inputs(args, scene):
@@ -37,7 +67,10 @@ def check_inputs(args, scene):
             scene = scene.replace("optimizer", method=args.method)
         if not scene.shapes:
             raise InputError(f"scene {scene.source} has no [shapes] to optimise")
-        if scene.cooptimization.enabled and not 0.0 <= args.weight <= 1.0:
+        if args.weight is not None and not scene.cooptimization.enabled:
+            raise InputError(f"--weight {args.weight}: scene {scene.source} does not co-optimise the amplitude "
+                             "([cooptimization] enabled = false), so its cost is -d alone; leave --weight out")
+        if args.weight is not None and not 0.0 <= args.weight <= 1.0:
             raise InputError(f"--weight {args.weight}: must be in [0, 1]")
         if args.max_time is not None and not args.max_time > 0:
             raise InputError(f"--max-time {args.max_time}: must be a positive number of seconds")
@@ -48,6 +81,15 @@ def check_inputs(args, scene):
         if scene.optimizer.method == "paper":
             require_interior(space, scene)
     return scene, xi
+
+
+def run_design(scene, xi: dict[str, float]) -> dict[str, float]:
+    """The design a command runs: the scene's start values of every shape, overridden by --xi.
+
+    Every model of a command (FOM, ROM, PROM) runs this same design, so a comparison compares
+    one design and ``simulate`` without --xi runs what ``build`` and ``optimize`` start from.
+    """
+    return {shape.name: shape.start for shape in scene.shapes} | xi
 
 
 def say(text: str) -> None:

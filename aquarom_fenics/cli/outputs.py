@@ -1,9 +1,7 @@
 """Output folders and files of a command: claimed before the work, settled (manifest, swap) after it."""
 from __future__ import annotations
 
-import os
 import sys
-import time
 import zipfile
 from pathlib import Path
 
@@ -91,17 +89,9 @@ def settle_output(args, code: int, wall_time: float) -> None:
 
 def write_manifest(args, wall_time: float) -> None:
     """manifest.json: scene, versions, git commit, command, host cores, timings per phase."""
-    from aquarom_fenics.io.outputs import git_commit, software_versions
-    from aquarom_fenics.io.persistence import write_json_atomic
-    from aquarom_fenics.io.paths import PACKAGE
+    from aquarom_fenics.io.outputs import write_manifest as write_folder_manifest
 
-    scene = getattr(args, "scene_used", None)
-    write_json_atomic(args.output_dir / "manifest.json", {
-        "command": "aquarom " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("aquarom") else args.command,
-        "arguments": {k: str(v) for k, v in vars(args).items() if k not in ("scene_used", "timings", "output_dir")},
-        "scene": None if scene is None else {"name": scene.name, "source": scene.source, "hash": scene.hash,
-                                             "values": scene.to_dict()},
-        "versions": software_versions(), "git_commit": git_commit(PACKAGE.parent),
-        "host_cores": os.cpu_count(), "mpi_ranks": MPI.COMM_WORLD.size,
-        "timings": {"total": wall_time} | getattr(args, "timings", {}),
-        "date": time.strftime("%Y-%m-%d %H:%M:%S")})
+    command = "aquarom " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("aquarom") else args.command
+    arguments = {k: v for k, v in vars(args).items() if k not in ("scene_used", "timings", "output_dir")}
+    write_folder_manifest(args.output_dir, command, arguments, getattr(args, "scene_used", None),
+                          {"total": wall_time} | getattr(args, "timings", {}))

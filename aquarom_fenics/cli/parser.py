@@ -12,7 +12,7 @@ EXAMPLES = {
                 "  mpirun -n 2 aquarom simulate so1 --xi y_thin=0.1 --out results/so1-thin\n"
                 "  aquarom simulate so1 --model prom --prom results/so1-prom.npz --xi y_thin=0.05",
     "build": "aquarom build so1 --out results/so1-prom.npz",
-    "compare": "aquarom compare so1 --xi y_thin=0.05 --level 1 --out results/so1-compare",
+    "compare": "aquarom compare so1 --xi y_thin=0.03 --level 1 --out results/so1-compare",
     "optimize": "aquarom optimize so1 --level 1 --out results/so1-opt\n  aquarom optimize so1 --out results/so1-opt --resume",
     "pareto": "aquarom pareto co --level 1 --out results/co-pareto",
     "animate": "aquarom animate results/nominal-fom --fps 20 --stride 2",
@@ -23,11 +23,22 @@ EXAMPLES = {
 }
 
 
+DEFAULT_WEIGHT = 0.5
+"""w_1 of a co-optimisation when --weight is not given."""
+
+VERBOSE_HELP = "log details (solver set-up, timings)"
+
+
+def verbose_option(parser: argparse.ArgumentParser) -> None:
+    """-v/--verbose on a sub-command too (``aquarom simulate so1 -v``); given nowhere, it stays False."""
+    parser.add_argument("--verbose", "-v", action="store_true", default=argparse.SUPPRESS, help=VERBOSE_HELP)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="aquarom", description="Shape optimisation of soft swimmers with FEniCSx and parametric ROMs.",
         epilog="Scenes: a path to a TOML file, or the name of a shipped scene (nominal, so1 … so9, co).")
-    parser.add_argument("--verbose", "-v", action="store_true", help="log details (solver set-up, timings)")
+    parser.add_argument("--verbose", "-v", action="store_true", help=VERBOSE_HELP)
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     shape_parameter = "shape parameter (repeatable)"
@@ -45,6 +56,10 @@ def build_parser() -> argparse.ArgumentParser:
                          help="override the scene's element degree (1: linear, 2: quadratic tetrahedra)")
         sub.add_argument("--dry-run", action="store_true",
                          help="print what would be built, reused and skipped, and a time estimate; write nothing")
+        sub.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", dest="settings",
+                         help="override one scene value, validated like the file (repeatable), "
+                              "e.g. --set solver.duration=0.5 or --set shapes.z_tail.start=0.1")
+        verbose_option(sub)
         if xi:
             sub.add_argument("--xi", action="append", metavar="NAME=VALUE", help=xi)
         if prom:
@@ -74,8 +89,8 @@ def build_parser() -> argparse.ArgumentParser:
                        out="output directory (default results/optimize/SCENE)")
     optimize.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out")
     optimize.add_argument("--method", choices=["paper", "trust-region"], help="override the scene's method")
-    optimize.add_argument("--weight", type=float, default=0.5,
-                          help="w_1 of L = w_1(-d) + (1-w_1) α A² for co-optimisation scenes (default 0.5)")
+    optimize.add_argument("--weight", type=float,
+                          help=f"w_1 of L = w_1(-d) + (1-w_1) α A², co-optimisation scenes only (default {DEFAULT_WEIGHT})")
     optimize.add_argument("--max-time", type=float, metavar="SECONDS",
                           help="stop the optimiser after this wall time (default 86400 s, one day)")
     command("pareto", "co-optimisation weight sweep: Pareto front of distance against actuation energy",
@@ -86,6 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
     animate = commands.add_parser("animate", help=animate_help, description=animate_help,
                                   epilog=f"example:\n  {EXAMPLES['animate']}",
                                   formatter_class=argparse.RawDescriptionHelpFormatter)
+    verbose_option(animate)
     animate.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="output directory of `aquarom simulate`")
     animate.add_argument("--out", type=Path, help="MP4 file (default RUN_DIR/animation.mp4; the GIF goes next to it)")
     animate.add_argument("--fps", type=int, default=DEFAULT_FPS, help=f"frames per second (default {DEFAULT_FPS})")
@@ -97,6 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
     cache_help = "list or clear the caches of meshes, PROMs and FOM checks (content-addressed, checksummed)"
     cache = commands.add_parser("cache", help=cache_help, description=cache_help,
                                 epilog=f"example:\n  {EXAMPLES['cache']}", formatter_class=argparse.RawDescriptionHelpFormatter)
+    verbose_option(cache)
     cache.add_argument("action", choices=["list", "clear"])
     cache.add_argument("--kind", action="append", choices=["prom", "fom", "mesh"],
                        help="cache to clear (repeatable; default prom and fom)")

@@ -1,25 +1,27 @@
 """Commands that run models at one design: simulate, build, compare."""
 from __future__ import annotations
 
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 from mpi4py import MPI
 
-from aquarom_fenics.cli.inputs import check_inputs, load_scene, say
+from aquarom_fenics.cli.inputs import check_inputs, load_scene, run_design, say
 from aquarom_fenics.cli.outputs import claim_output, claim_output_file, shown
-from aquarom_fenics.errors import SolverError
+from aquarom_fenics.errors import InputError, SolverError
 
 
 def run_simulate(args) -> int:
     from aquarom_fenics.dynamics.simulate import simulate_fom
 
     scene, xi = check_inputs(args, load_scene(args))
+    design = run_design(scene, xi)
     out = claim_output(args, args.out or Path("results") / "simulate" / f"{scene.name}-{args.model}")
     if args.model == "fom":
-        result = simulate_fom(scene, xi=xi, out_dir=out, progress=not args.no_progress)
+        result = simulate_fom(scene, xi=design, out_dir=out, progress=not args.no_progress)
     else:
-        result = run_reduced_model(scene, xi, args.model, args.prom, out)
+        result = run_reduced_model(scene, design, args.model, args.prom, out)
     if not result.completed:
         raise SolverError(f"{result.error}; partial trajectory in {out / 'trajectory.csv'}")
     say(f"{scene.name} ({args.model}): distance {100 * result.distance:.3f} cm, tail amplitude "
@@ -36,16 +38,38 @@ def reduced_model(scene, xi: dict, model: str, prom_file: Path | None):
     from aquarom_fenics.reduction.reductor import build_prom
 
     if prom_file is not None and model == "prom":
-        return ReducedModel.load(prom_file, scene_hash=scene.hash)
+        prom = ReducedModel.load(prom_file, scene_hash=scene.hash)
+        with build_command_on_refusal(scene, xi):
+            prom.delta(np.array([xi.get(name, prom.design_point.get(name, 0.0)) for name in prom.shape_names]))
+        return prom
     fish = load_fish(scene)
     center = {s.name: s.start for s in scene.shapes} | (xi if model == "rom" else {})
     vector = fish.parameter_vector(center)
     if model == "prom":
         # Refuse a design beyond the validity radius before spending time on the build.
-        ReducedModel.refuse_outside_radius(scene.shape_names, fish.parameter_vector(center | xi), vector,
-                                           np.array(scene.validity_radii()))
+        with build_command_on_refusal(scene, xi):
+            ReducedModel.refuse_outside_radius(scene.shape_names, fish.parameter_vector(center | xi), vector,
+                                               np.array(scene.validity_radii()))
     return cached_prom(scene, vector, lambda: build_prom(scene, xi_center=vector, fish=fish,
                                                           parametric=model == "prom"), parametric=model == "prom")
+
+
+COMPARE_UNITS = {"design": "1 (shape parameters are dimensionless)", "errors": "m for absolute errors, "
+                 "1 for *_relative", "fom": "as in a run's summary.json", "speedup": "1 (FOM / reduced wall time)"}
+"""The ``units`` block of compare.json."""
+
+
+@contextmanager
+def build_command_on_refusal(scene, design: dict):
+    """A validity-radius refusal ends with the command that builds a PROM centred on the design
+    (on this run's mesh level and degree; other --set options are to be repeated)."""
+    try:
+        yield
+    except InputError as refusal:
+        values = " ".join(f"--xi {name}={value:g}" for name, value in design.items())
+        mesh = f"--level {scene.mesh.level} --degree {scene.mesh.degree}" if not scene.mesh.file else ""
+        raise InputError(f"{refusal}: run `aquarom build {scene.source} {mesh} {values} --out PROM.npz` "
+                         f"and pass --prom PROM.npz") from None
 
 
 def run_reduced_model(scene, xi: dict, model: str, prom_file: Path | None, out: Path):
@@ -53,6 +77,7 @@ def run_reduced_model(scene, xi: dict, model: str, prom_file: Path | None, out: 
     from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
     from aquarom_fenics.geometry.fish import load_fish
     from aquarom_fenics.io.run_outputs import write_run_outputs
+    from aquarom_fenics.io.xdmf import cell_regions
 
     reduced = reduced_model(scene, xi, model, prom_file)
     xi_vector = np.array([xi.get(name, reduced.design_point.get(name, 0.0)) for name in reduced.shape_names])
@@ -65,7 +90,8 @@ def run_reduced_model(scene, xi: dict, model: str, prom_file: Path | None, out: 
                           np.einsum("ndm,sm->snd", reduced.basis[:vertices], result.states), MPI.COMM_WORLD,
                           extra={"cells": reduced.cells, "dofs": reduced.dofs, "reduced_size": reduced.size,
                                  "basis": reduced.labels, "basis_dropped": reduced.dropped,
-                                 "build_timings": reduced.timings})
+                                 "build_timings": reduced.timings},
+                          regions=cell_regions(fish.tags, fish.mesh.cells.shape[0]))
     return result
 
 
@@ -94,21 +120,24 @@ def run_compare(args) -> int:
     from aquarom_fenics.dynamics.simulate import simulate_fom
 
     scene, xi = check_inputs(args, load_scene(args))
+    design = run_design(scene, xi)
     out = claim_output(args, args.out or Path("results") / "compare" / scene.name)
-    reduced = run_reduced_model(scene, xi, args.model, args.prom, out / args.model)
-    full = simulate_fom(scene, xi=xi, out_dir=out / "fom", progress=not args.no_progress)
+    reduced = run_reduced_model(scene, design, args.model, args.prom, out / args.model)
+    full = simulate_fom(scene, xi=design, out_dir=out / "fom", progress=not args.no_progress)
     for name, result in (("fom", full), (args.model, reduced)):
         if not result.completed:
             raise SolverError(f"{name}: {result.error}")
     errors = model_errors(full, reduced)
     if MPI.COMM_WORLD.rank == 0:
-        write_json_atomic(out / "compare.json", {"xi": xi, "model": args.model, "errors": errors,
+        write_json_atomic(out / "compare.json", {"design": design, "xi_given": xi, "model": args.model, "errors": errors,
                                                  "fom": full.summary(), args.model: reduced.summary(),
-                                                 "speedup": full.wall_time / reduced.wall_time})
+                                                 "speedup": full.wall_time / reduced.wall_time,
+                                                 "units": COMPARE_UNITS})
         plot_comparison(out / "compare.png", {"FOM": full.trajectory.arrays(),
                                               args.model.upper(): reduced.trajectory.arrays()},
                         f"{scene.name}: FOM against {args.model.upper()}")
-    say(f"{scene.name} at {xi or 'the start values'}: distance FOM {100 * full.distance:.3f} cm, "
+    at = ", ".join(f"{name} = {value:g}" for name, value in design.items()) or "the block (no shapes)"
+    say(f"{scene.name} at {at}: distance FOM {100 * full.distance:.3f} cm, "
         f"{args.model.upper()} {100 * reduced.distance:.3f} cm ({100 * errors['distance_relative']:+.2f} %); "
         f"tail amplitude {100 * errors['tail_amplitude_relative']:+.2f} %; outputs in {shown(args, out)}/")
     return 0

@@ -18,6 +18,7 @@ from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.dynamics.integrator import IntegrationStopped, NewtonSettings, StepReport, integrate
 from aquarom_fenics.io.outputs import TrajectoryCSV
 from aquarom_fenics.io.run_outputs import write_run_outputs
+from aquarom_fenics.io.xdmf import cell_regions
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.dynamics.trajectory import DISTANCE_WINDOW, Trajectory, swimming_distance, tail_amplitude
 
@@ -88,7 +89,6 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
              n_steps, scene.solver.time_step, setup_time)
     is_writer = comm.rank == 0 and out_dir is not None
     csv = TrajectoryCSV(Path(out_dir) / "trajectory.csv") if is_writer else None
-    xdmf = _open_xdmf(model, out_dir, comm) if out_dir is not None and scene.output.xdmf else None
     trajectory = Trajectory()
     states = []
     displacements = [] if out_dir is not None else None
@@ -102,8 +102,6 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
         trajectory.append(report.time, values["head_x"], values["tail_y"], values["com_x"], report.iterations)
         if csv:
             csv.write(report.time, values["head_x"], values["tail_y"], values["com_x"], report.iterations)
-        if xdmf:
-            _write_xdmf_sample(model, xdmf, u, report.time)
         if keep_states:
             states.append((u.copy(), v.copy(), a.copy()))
         if displacements is not None:
@@ -133,8 +131,6 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
             bar.close()
         if csv:
             csv.close()
-        if xdmf:
-            xdmf.close()
     arrays = trajectory.arrays()
     completed = error is None
     result = SimulationResult(
@@ -148,7 +144,8 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
     if is_writer:
         vertices = fish.nodes.n_vertices
         write_run_outputs(Path(out_dir), scene, result, "fom", dict(zip(fish.shape_names, fish.parameter_vector(xi))),
-                          model.rest_points[:vertices], fish.mesh.cells, displacements, comm, trajectory_written=True)
+                          model.rest_points[:vertices], fish.mesh.cells, displacements, comm, trajectory_written=True,
+                          regions=cell_regions(fish.tags, fish.mesh.cells.shape[0]))
     if not (keep_states or keep_model):
         model.destroy()
         result.model = None
@@ -182,17 +179,3 @@ def _progress_bar(total: int, label: str, enabled: bool):
     from tqdm import tqdm
 
     return tqdm(total=total, desc=label, unit="step", leave=False, disable=None)
-
-
-def _open_xdmf(model: FullOrderModel, out_dir, comm):
-    from aquarom_fenics.fem.dolfinx_adapter import XDMFTimeSeries
-
-    Path(out_dir).mkdir(parents=True, exist_ok=True)
-    return XDMFTimeSeries(comm, Path(out_dir) / "displacement.xdmf", model.mesh)
-
-
-def _write_xdmf_sample(model: FullOrderModel, xdmf, u, time):
-    from aquarom_fenics.fem.dolfinx_adapter import set_owned_values
-
-    set_owned_values(model.displacement, u)
-    xdmf.write(model.displacement, time)

@@ -49,5 +49,5 @@ def swimming_distance(time, com_x) -> float:
 
 
 def tail_amplitude(time, tail_y) -> float:
-    """max |y_tail| over the last second [m]."""
+    """The tail amplitude: max over the last second of ``|y_tail|`` [m]."""
     return float(np.max(np.abs(np.asarray(tail_y)[window_mask(time, AMPLITUDE_WINDOW)])))

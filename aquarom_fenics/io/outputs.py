@@ -39,11 +39,17 @@ class IncrementalCSV:
         self._stream.close()
 
 
+TRAJECTORY_FILE_COLUMNS = {"time": "time_s", "head_x": "head_x_m", "tail_y": "tail_y_m", "com_x": "com_x_m",
+                           "newton_iterations": "newton_iterations"}
+"""trajectory.csv's header: every column named with its SI unit (time [s], positions [m])."""
+
+
 class TrajectoryCSV(IncrementalCSV):
-    """trajectory.csv, one row per converged step (kept if a later step fails)."""
+    """trajectory.csv, one row per converged step (kept if a later step fails): time_s, head_x_m,
+    tail_y_m, com_x_m (head and centre-of-mass x, tail y, all [m]) and newton_iterations."""
 
     def __init__(self, path: Path):
-        super().__init__(path, list(COLUMNS))
+        super().__init__(path, [TRAJECTORY_FILE_COLUMNS[name] for name in COLUMNS])
 
     def write(self, time, head_x, tail_y, com_x, iterations) -> None:
         self.write_row([f"{time:.10g}", f"{head_x:.17g}", f"{tail_y:.17g}", f"{com_x:.17g}", iterations])
@@ -58,8 +64,12 @@ def write_trajectory_csv(path: Path, arrays: dict[str, np.ndarray]) -> None:
 
 
 def read_trajectory_csv(path: Path) -> dict[str, np.ndarray]:
+    """The arrays of a trajectory.csv by the names of ``Trajectory`` (time [s], head_x, tail_y, com_x [m])."""
     data = np.genfromtxt(path, delimiter=",", names=True, ndmin=1)
-    return {name: np.asarray(data[name]) for name in COLUMNS}
+    missing = [column for column in TRAJECTORY_FILE_COLUMNS.values() if column not in (data.dtype.names or ())]
+    if missing:
+        raise InputError(f"{path}: not a trajectory.csv of this version (missing column(s) {', '.join(missing)})")
+    return {name: np.asarray(data[TRAJECTORY_FILE_COLUMNS[name]]) for name in COLUMNS}
 
 
 def software_versions() -> dict[str, str]:
@@ -267,3 +277,21 @@ def _make_folder(path: Path) -> None:
         for folder in created:
             folder.rmdir()
         raise
+
+
+def write_manifest(folder: Path, command: str, arguments: dict, scene, timings: dict) -> None:
+    """manifest.json of a run's folder: command and arguments, scene (name, source, hash, values),
+    versions, git commit, host cores, MPI ranks, timings per phase [s] and the date."""
+    import time
+
+    from mpi4py import MPI
+
+    from aquarom_fenics.io.paths import PACKAGE
+
+    write_json_atomic(Path(folder) / MANIFEST, {
+        "command": command, "arguments": {key: str(value) for key, value in arguments.items()},
+        "scene": None if scene is None else {"name": scene.name, "source": scene.source, "hash": scene.hash,
+                                             "values": scene.to_dict()},
+        "versions": software_versions(), "git_commit": git_commit(PACKAGE.parent),
+        "host_cores": os.cpu_count(), "mpi_ranks": MPI.COMM_WORLD.size, "timings": timings,
+        "date": time.strftime("%Y-%m-%d %H:%M:%S")})

@@ -4,7 +4,8 @@ Shipped scenes (``scenes/``) and mesh recipes and meshes (``meshes/``) are packa
 through the import system, so an installed wheel works like a checkout. Caches live in the
 checkout (``results/cache``, ``meshes/cache``) when the package runs from a writable source tree,
 otherwise in the user's cache folder ($XDG_CACHE_HOME/aquarom, default ~/.cache/aquarom);
-$AQUAROM_CACHE overrides the results cache in either case.
+$AQUAROM_CACHE moves every cache of the toolkit (PROMs, FOM checks, meshes) in either case;
+FFCx keeps its compiled forms in its own cache ($XDG_CACHE_HOME/fenics, default ~/.cache/fenics).
 """
 from __future__ import annotations
 
@@ -47,9 +48,16 @@ def cache_root() -> Path:
 
 
 def mesh_cache() -> Path:
-    """meshes/cache of the checkout, else the user cache's meshes folder."""
+    """$AQUAROM_CACHE/meshes, else meshes/cache of the checkout, else the user cache's meshes folder."""
+    if os.environ.get("AQUAROM_CACHE"):
+        return Path(os.environ["AQUAROM_CACHE"]) / "meshes"
     root = checkout()
     return root / "meshes" / "cache" if root else user_cache() / "meshes"
+
+
+def forms_cache() -> Path:
+    """FFCx's cache of compiled forms: $XDG_CACHE_HOME/fenics, default ~/.cache/fenics."""
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "fenics"
 
 
 def bench_results() -> Path | None:

@@ -1,6 +1,6 @@
 """What a simulation run leaves in its folder, written by one writer for the FOM and the reduced models.
 
-``trajectory.csv`` (head x, tail y, centre-of-mass x [m] per sample), ``displacement.npz`` (the
+``trajectory.csv`` (time_s, head_x_m, tail_y_m, com_x_m, newton_iterations per sample), ``displacement.npz`` (the
 nodal displacement series the animation reads), ``summary.json`` (distance, tail amplitude,
 stop reason, scene, design, versions) and ``trajectory.png``.
 """
@@ -17,6 +17,10 @@ from aquarom_fenics.errors import InputError
 from aquarom_fenics.io.outputs import plot_trajectory, software_versions, write_trajectory_csv
 from aquarom_fenics.io.persistence import write_json_atomic, write_npz_atomic
 
+
+RUN_SUMMARY_UNITS = {"distance": "m", "tail_amplitude": "m", "wall_time": "s", "timings": "s",
+                     "build_timings": "s", "peak_memory_mb": "MB", "xi": "1 (shape parameters are dimensionless)"}
+"""The ``units`` block of a run's summary.json: every dimensional key and its SI unit."""
 
 DISPLACEMENT_FILE = "displacement.npz"
 """Nodal displacement time series of a run, written next to trajectory.csv."""
@@ -92,14 +96,15 @@ def _shape_problem(series: DisplacementSeries) -> str:
 
 def write_run_outputs(out_dir: Path, scene, result, model_name: str, design: dict[str, float], rest_points,
                       cells, nodal_displacements, comm, extra: dict | None = None,
-                      trajectory_written: bool = False) -> None:
+                      trajectory_written: bool = False, regions: np.ndarray | None = None) -> None:
     """The files of a FOM or reduced run in ``out_dir`` (called on the writing rank).
 
     trajectory.csv from ``result.trajectory`` (unless the run streamed it, ``trajectory_written``),
     displacement.npz of the vertex displacements [m] from ``rest_points`` (the design's vertex
     positions [m]) on ``cells``, summary.json (``result.summary()``, the model, scene, design,
-    MPI ranks, peak memory [MB], versions and ``extra`` model facts) and, with the scene's plots,
-    trajectory.png.
+    MPI ranks, peak memory [MB], versions and ``extra`` model facts), with the scene's plots
+    trajectory.png and, with the scene's ``[output] xdmf``, displacement.xdmf: the design mesh
+    (its cell ``regions``, when given) and the displacement series on it, zero at t = 0.
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -107,11 +112,16 @@ def write_run_outputs(out_dir: Path, scene, result, model_name: str, design: dic
     if not trajectory_written:
         write_trajectory_csv(out_dir / "trajectory.csv", arrays)
     write_displacement_series(out_dir / DISPLACEMENT_FILE, rest_points, cells, arrays["time"], nodal_displacements)
+    if scene.output.xdmf:
+        from aquarom_fenics.io.xdmf import write_design_xdmf
+
+        write_design_xdmf(out_dir / "displacement.xdmf", rest_points, cells, regions, arrays["time"],
+                          nodal_displacements)
     summary = result.summary() | (extra or {}) | {
         "model": model_name, "scene": scene.name, "scene_hash": scene.hash, "scene_values": scene.to_dict(),
         "xi": {name: float(value) for name, value in design.items()}, "mpi_ranks": comm.size,
         "peak_memory_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
-        "versions": software_versions()}
+        "versions": software_versions(), "units": RUN_SUMMARY_UNITS}
     write_json_atomic(out_dir / "summary.json", summary)
     if scene.output.plots and len(result.trajectory) > 1:
         title = f"{scene.name} ({model_name}): distance " + (

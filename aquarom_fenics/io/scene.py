@@ -323,7 +323,8 @@ def parse_xi_assignments(assignments: list[str] | None, scene: Scene) -> dict[st
             raise InputError(f"--xi {text}: {name} is given twice (first {name}={values[name]:g}); give it once")
         shape = next(s for s in scene.shapes if s.name == name)
         if not shape.lower <= value <= shape.upper:
-            logging.getLogger("aquarom").warning("--xi %s is outside the scene's bounds [%g, %g] of %s",
+            logging.getLogger("aquarom").warning("warning: --xi %s is outside the scene's bounds [%g, %g] of %s "
+                                                 "(simulated anyway; optimize starts only inside them)",
                                                  text, shape.lower, shape.upper, name)
         values[name] = value
     return values

@@ -117,7 +117,7 @@ class SolverSection:
     time_step: float = _spec(0.02, _positive, "time step h [s]")
     duration: float = _spec(2.0, lambda v: None if v >= 0.1 else "must be ≥ 0.1 s (the distance averages the last 0.1 s)", "horizon T [s]")
     integrator: str = _spec("generalized-alpha", _one_of("generalized-alpha", "newmark"), "time scheme (SPEC §6)")
-    rho_infinity: float = _spec(0.8, lambda v: None if 0 <= v <= 1 else "must be in [0, 1]", "ρ∞ of generalized-α: spectral radius at h ω → ∞ (README: how it was chosen)")
+    rho_infinity: float = _spec(0.8, lambda v: None if 0 <= v <= 1 else "must be in [0, 1]", "ρ∞ of generalized-α: spectral radius at h ω → ∞ (docs/theory/time-scheme.md: how it was chosen)")
     # SPEC §6 gives α_N = 0.005 for the source's Newmark; with it a high-frequency oscillation of the
     # spine nodes grows under the Lighthill forces on finer meshes (levels 4-5) and on thin optimal
     # designs, and the FOM stops near t = 1.9 s. α_N = 0.02 damps it (nominal distance -2 %).

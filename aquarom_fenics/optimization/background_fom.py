@@ -1,7 +1,7 @@
-"""The nominal design's FOM run in a child process while the optimiser works.
+"""The start design's FOM run in a child process while the optimiser works.
 
-The FOM check after an optimisation needs two FOM runs, the nominal (start) design's and the
-optimum's. The nominal one is known before the optimisation starts: on a single MPI rank with a
+The FOM check after an optimisation needs two FOM runs, the start design's and the
+optimum's. The start design's is known before the optimisation starts: on a single MPI rank with a
 spare core, a child process runs it meanwhile and stores its distance in the FOM cache
 (``study.fom_distance``), where the check finds it. If the child fails or is still running when
 the check has finished the optimum's run and waited as long again, the check runs it itself.
@@ -33,7 +33,7 @@ class BackgroundFom:
     """A child process computing ``fom_distance(scene, fish, design, amplitude)`` into the FOM cache."""
 
     def __init__(self, scene: Scene, design: dict[str, float], amplitude: float | None):
-        self.folder = Path(tempfile.mkdtemp(prefix="aquarom-nominal-fom-"))
+        self.folder = Path(tempfile.mkdtemp(prefix="aquarom-start-fom-"))
         scene_file, design_file = self.folder / "scene.toml", self.folder / "design.json"
         scene_file.write_text(scene.to_toml())
         design_file.write_text(json.dumps({"design": design, "amplitude": amplitude}))
@@ -41,17 +41,17 @@ class BackgroundFom:
         self.process = subprocess.Popen([sys.executable, "-m", __name__, str(scene_file), str(design_file)],
                                          stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                          stderr=subprocess.DEVNULL, env=dict(os.environ, OMP_NUM_THREADS="1"))
-        log.info("FOM check: the nominal design's FOM runs in a background process during the optimisation")
+        log.info("FOM check: the start design's FOM runs in a background process during the optimisation")
 
     def finish(self, patience: float) -> None:
         """Wait for the child at most ``patience`` + GRACE seconds, then stop it; remove its files."""
         try:
             self.process.wait(timeout=patience + GRACE)
             if self.process.returncode != 0:
-                log.warning("FOM check: the background run of the nominal design failed (exit %d); "
+                log.warning("FOM check: the background run of the start design failed (exit %d); "
                             "running it here", self.process.returncode)
         except subprocess.TimeoutExpired:
-            log.warning("FOM check: the background run of the nominal design is still running after %.0f s; "
+            log.warning("FOM check: the background run of the start design is still running after %.0f s; "
                         "stopping it and running it here", time.perf_counter() - self.started)
             self.stop()
         finally:
@@ -78,8 +78,8 @@ class BackgroundFom:
 
 
 def start_if_useful(scene: Scene, design: dict[str, float], amplitude: float | None, cached: bool) -> BackgroundFom | None:
-    """A background run of the nominal FOM, or None: on several MPI ranks (they use the cores), on one
-    core, or when the nominal distance is in the cache already."""
+    """A background run of the start design's FOM, or None: on several MPI ranks (they use the cores), on one
+    core, or when the start distance is in the cache already."""
     if cached or MPI.COMM_WORLD.size > 1 or (os.cpu_count() or 1) < 2:
         return None
     return BackgroundFom(scene, design, amplitude)

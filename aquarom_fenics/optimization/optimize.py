@@ -56,7 +56,7 @@ class OptimizationResult:
     optimum: np.ndarray
     evaluation: Evaluation                    # PROM prediction at the optimum (from a PROM built there)
     history: list[dict]
-    builds: int
+    prom_builds: int                          # PROMs built (or taken from the cache) over the run
     stop_reason: str
     space: DesignSpace
     prom_size: int = 0                        # reduced dofs of the last PROM built
@@ -70,6 +70,21 @@ class OptimizationResult:
     @property
     def iterations(self) -> int:
         return int(self.history[-1]["iteration"])
+
+    @property
+    def prom_builds_reused_from_cache(self) -> int:
+        """``reused`` under its summary.json name."""
+        return self.reused
+
+    @property
+    def prom_builds_on_an_earlier_basis(self) -> int:
+        """``basis_reuses`` under its summary.json name."""
+        return self.basis_reuses
+
+    @property
+    def optimum_dict(self) -> dict[str, float]:
+        """The optimum by name, as summary.json's ``optimum``: {shape name: ξ, ["amplitude": A]}."""
+        return self.space.as_dict(self.optimum)
 
 
 def optimization_space(scene: Scene, fish: Fish) -> DesignSpace:

@@ -32,24 +32,24 @@ log = logging.getLogger("aquarom")
 
 @dataclass
 class FomCheck:
-    """FOM distances [m] of the nominal (start) and optimal designs and their ratio.
+    """FOM distances [m] of the start and optimal designs and their ratio.
 
-    A FOM run that stops leaves its distance None and the reason in ``error``; the PROM's nominal
+    A FOM run that stops leaves its distance None and the reason in ``error``; the PROM's start
     distance is None for a run from another start (multi-start).
     """
 
-    nominal_distance: float | None
+    start_distance: float | None
     optimal_distance: float | None
-    prom_nominal_distance: float | None
+    prom_start_distance: float | None
     prom_optimal_distance: float
     time: float
     error: str | None = None
 
     @property
     def ratio(self) -> float | None:
-        if self.nominal_distance is None or self.optimal_distance is None:
+        if self.start_distance is None or self.optimal_distance is None:
             return None
-        return self.optimal_distance / self.nominal_distance
+        return self.optimal_distance / self.start_distance
 
 
 def fom_cache_path(scene: Scene, design: dict[str, float], amplitude: float | None) -> Path:
@@ -88,9 +88,9 @@ def design_and_amplitude(space, z: np.ndarray) -> tuple[dict[str, float], float 
 
 
 def fom_check(scene: Scene, fish: Fish, result: OptimizationResult,
-              nominal_run: BackgroundFom | None = None) -> FomCheck:
-    """FOM distances of the scene's nominal design (its start point) and of the optimum; the optimum
-    first, while the nominal design's ``nominal_run`` (if any) finishes in the background."""
+              start_run: BackgroundFom | None = None) -> FomCheck:
+    """FOM distances of the scene's start design (its start point) and of the optimum; the optimum
+    first, while the start design's ``start_run`` (if any) finishes in the background."""
     started = time.perf_counter()
     space = result.space
     errors = []
@@ -102,14 +102,14 @@ def fom_check(scene: Scene, fish: Fish, result: OptimizationResult,
             errors.append(str(failure))
             return None
 
-    nominal = design_space(scene).start
+    start = design_space(scene).start
     optimal_distance = distance(result.optimum)
-    if nominal_run is not None:
-        nominal_run.finish(patience=time.perf_counter() - started)
-    nominal_distance = distance(nominal)
+    if start_run is not None:
+        start_run.finish(patience=time.perf_counter() - started)
+    start_distance = distance(start)
     first_built = next(row for row in result.history if row["prom"] == "built")
-    prom_nominal = first_built["distance"] if np.array_equal(space.start, nominal) else None
-    return FomCheck(nominal_distance, optimal_distance, prom_nominal, result.evaluation.distance,
+    prom_start = first_built["distance"] if np.array_equal(space.start, start) else None
+    return FomCheck(start_distance, optimal_distance, prom_start, result.evaluation.distance,
                     time.perf_counter() - started, "; ".join(errors[::-1]) or None)
 
 
@@ -137,16 +137,16 @@ def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights:
         out_dir.mkdir(parents=True, exist_ok=True)
     history_file = out_dir / "history.csv"
     writer = HistoryWriter(history_file, history_columns(space), saved["history"] if saved else []) if is_writer else None
-    nominal = design_and_amplitude(space, space.start)
-    nominal_run = start_if_useful(scene, *nominal, cached=fom_cache_path(scene, *nominal).exists())
+    start_design = design_and_amplitude(space, space.start)
+    start_run = start_if_useful(scene, *start_design, cached=fom_cache_path(scene, *start_design).exists())
     try:
         result = optimize(scene, fish=fish, weights=weights, checkpoint_path=checkpoint, resume=resume,
                           on_iteration=writer.write if writer else None, write_checkpoint=is_writer,
                           max_time=max_time, start=start)
-        check = fom_check(scene, fish, result, nominal_run)
+        check = fom_check(scene, fish, result, start_run)
     except BaseException as stop:
-        if nominal_run is not None:
-            nominal_run.stop()
+        if start_run is not None:
+            start_run.stop()
         if not isinstance(stop, KeyboardInterrupt):
             raise
         rows = writer.rows if writer else 0
@@ -202,7 +202,7 @@ def _local_optimum(k: int, start, result: OptimizationResult, check: FomCheck) -
     return {"start_index": k + 1, "directory": f"start_{k + 1}", "start": space.as_dict(start),
             "optimum": space.as_dict(result.optimum), "prom_distance": result.evaluation.distance,
             "fom_distance": check.optimal_distance, "fom_error": check.error, "stop_reason": result.stop_reason,
-            "converged": result.converged, "iterations": result.iterations, "prom_builds": result.builds,
+            "converged": result.converged, "iterations": result.iterations, "prom_builds": result.prom_builds,
             "active": [row["constraint"] for row in result.optimality.active]}
 
 
@@ -221,13 +221,17 @@ def _distinct_optima(space, optima: list[np.ndarray], tolerance: float) -> list[
     return groups
 
 
+HISTORY_FILE_UNITS = {"distance": "distance_m", "cost": "cost_m", "wall_time": "wall_time_s"}
+"""history.csv's header names of the columns with a unit (ξ, gradients and ratios are dimensionless)."""
+
+
 class HistoryWriter(IncrementalCSV):
     """history.csv, one row per iteration in the columns of :func:`history_columns`; a resumed run
     starts from the checkpoint's rows (a row written after the last checkpoint is made again, not
     duplicated)."""
 
     def __init__(self, path: Path, columns: list[str], checkpoint_rows: list[dict]):
-        super().__init__(path, columns)
+        super().__init__(path, [HISTORY_FILE_UNITS.get(column, column) for column in columns])
         self.header = columns
         for row in checkpoint_rows:
             self.write(row)
@@ -239,6 +243,13 @@ class HistoryWriter(IncrementalCSV):
 def _csv_value(value):
     """An empty cell for a missing value (a JSON null in a resumed row is the same as None)."""
     return "" if value is None else value
+
+
+OPTIMIZATION_SUMMARY_UNITS = {
+    "optimum": "1 (ξ dimensionless; amplitude A as [actuation] amplitude)", "prom_distance_optimal": "m",
+    "fom_check": "m for the distances, 1 for ratio", "timings": "s", "time_per_build": "s",
+    "cost_weights": "1"}
+"""The ``units`` block of an optimisation's summary.json."""
 
 
 def _write_summary(out_dir, scene, result, check, weights, multistart: dict | None = None):
@@ -256,18 +267,18 @@ def _write_summary(out_dir, scene, result, check, weights, multistart: dict | No
                        "active_definition": "slack ≤ active_tolerance · range of the bound or constraint row; "
                                             "multiplier > 0: the constraint holds the optimum",
                        "active": result.optimality.active},
-        "iterations": result.iterations, "prom_builds": result.builds,
+        "iterations": result.iterations, "prom_builds": result.prom_builds,
         "prom_builds_reused_from_cache": result.reused, "prom_builds_on_an_earlier_basis": result.basis_reuses,
         "prom_size": result.prom_size,
         "cost_weights": {"distance": weights.distance, "energy": weights.energy, "alpha": weights.alpha},
         "prom_distance_optimal": result.evaluation.distance,
-        "fom_check": {"nominal_distance": check.nominal_distance, "optimal_distance": check.optimal_distance,
-                      "prom_nominal_distance": check.prom_nominal_distance,
+        "fom_check": {"start_distance": check.start_distance, "optimal_distance": check.optimal_distance,
+                      "prom_start_distance": check.prom_start_distance,
                       "prom_optimal_distance": check.prom_optimal_distance, "ratio": check.ratio,
                       "error": check.error},
         "timings": result.timings | {"fom_check": check.time},
-        "time_per_build": result.timings["prom_builds"] / max(result.builds, 1),
-        "versions": software_versions()}
+        "time_per_build": result.timings["prom_builds"] / max(result.prom_builds, 1),
+        "versions": software_versions(), "units": OPTIMIZATION_SUMMARY_UNITS}
     if multistart is not None:
         summary["multistart"] = multistart
     write_json_atomic(out_dir / "summary.json", summary)
@@ -276,7 +287,7 @@ def _write_summary(out_dir, scene, result, check, weights, multistart: dict | No
 def _write_figures(out_dir, scene, fish, result, render):
     """The history plots and the renders of the optimum. Called on every rank: the optimal design's
     XDMF is written collectively; rank 0 draws."""
-    from aquarom_fenics.viz.report import plot_optimization_history, render_nominal_and_optimal
+    from aquarom_fenics.viz.report import plot_optimization_history, render_start_and_optimal
 
     is_writer = MPI.COMM_WORLD.rank == 0
     space = result.space
@@ -291,9 +302,9 @@ def _write_figures(out_dir, scene, fish, result, render):
 
         render_design(fish, fish.design(optimal), optimal, out_dir / "optimal")
         if is_writer:
-            nominal = dict(zip(space.names[:shapes], map(float, space.start[:shapes])))
-            render_nominal_and_optimal(fish, fish.design(nominal), fish.design(optimal),
-                                       out_dir / "nominal_vs_optimal.png", f"{scene.name}: nominal and optimal design")
+            start = dict(zip(space.names[:shapes], map(float, space.start[:shapes])))
+            render_start_and_optimal(fish, fish.design(start), fish.design(optimal),
+                                       out_dir / "start_vs_optimal.png", f"{scene.name}: start and optimal design")
 
 
 def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None) -> list[dict]:
@@ -310,8 +321,8 @@ def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None) -> list[
         amplitude = float(result.optimum[-1])
         completed = check.optimal_distance is not None
         points.append({"w1": w1, "amplitude": amplitude, "energy": weights.energy_term(amplitude),
-                       "distance": check.optimal_distance if completed else float("nan"),
-                       "prom_distance": result.evaluation.distance,
+                       "distance_m": check.optimal_distance if completed else float("nan"),
+                       "prom_distance_m": result.evaluation.distance,
                        "fom_check": "completed" if completed else "infeasible",
                        "fom_check_reason": "" if completed else (check.error or ""),
                        **{f"xi_{n}": float(v) for n, v in zip(result.space.names[:-1], result.optimum[:-1])}})

@@ -197,7 +197,8 @@ def build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
     vectors, labels, dropped = mass_orthonormalise(fom, list(zip(labels, candidates)), settings.drop_tolerance)
     timings["basis_total"] = time.perf_counter() - started
     if dropped:
-        log.warning("basis: dropped numerically dependent vectors %s", ", ".join(dropped))
+        log.info("basis: %s left out, a numerical combination of the other vectors (the PROM spans the "
+                 "same motions with %d vectors; nothing to do)", ", ".join(dropped), len(labels))
     log.info("basis: %d vectors (%s), first frequency %.3f Hz, %.2f s", len(labels), ", ".join(labels),
              frequencies[0], timings["basis_total"])
     return ReductionBasis(vectors, labels, dropped, frequencies, timings)

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-from aquarom_fenics.io.paths import cache_root, mesh_cache
+from aquarom_fenics.io.paths import cache_root, forms_cache, mesh_cache
 from aquarom_fenics.io.persistence import entry_key, get_or_compute, require_cache_writable
 from aquarom_fenics.io.scene import Scene
 
@@ -44,16 +44,16 @@ def cached_prom(scene: Scene, xi_center: np.ndarray, build, parametric: bool = T
                           comm=comm, label="PROM cache")
 
 
-def listing() -> list[tuple[str, int, int]]:
-    """(kind, entries, bytes) for every cache: PROMs, FOM checks, meshes, compiled forms."""
+def listing() -> list[tuple[str, Path, int, int]]:
+    """(kind, folder, entries, bytes) for every cache: PROMs, FOM checks, meshes, compiled forms."""
     folders = {kind: cache_root() / kind for kind in KINDS}
     folders["mesh"] = mesh_cache()
-    folders["compiled forms"] = Path.home() / ".cache" / "fenics"
+    folders["compiled forms"] = forms_cache()
     rows = []
     for kind, folder in folders.items():
         files = [f for f in folder.rglob("*") if f.is_file() and not f.name.endswith((".sha256", ".lock"))
                  ] if folder.exists() else []
-        rows.append((kind, len(files), sum(f.stat().st_size for f in files)))
+        rows.append((kind, folder, len(files), sum(f.stat().st_size for f in files)))
     return rows
 
 

@@ -203,7 +203,7 @@ def prom_tail_growth(prom: ReducedModel, scene: Scene, fish: Fish, xi=None, stop
 def prom_tail_stability(prom: ReducedModel, scene: Scene, fish: Fish, xi=None,
                         amplitude: float | None = None) -> Stability:
     """Does the thrust destabilise the tail at design ξ (amplitude A)? A screen for the PROM, whose
-    basis has no tail-local modes and whose own Floquet test cannot see them (README, "What stops
+    basis has no tail-local modes and whose own Floquet test cannot see them (docs/studies.md, "What stops
     the A = 0.4 CO designs"):
 
         unstable ⇔ max_t max Re λ(t) > σ_max = ``[optimizer] tail_growth_limit`` [1/s]

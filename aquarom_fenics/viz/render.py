@@ -16,6 +16,7 @@ import numpy as np
 from mpi4py import MPI
 
 from aquarom_fenics.errors import InputError
+from aquarom_fenics.io.xdmf import REGION_TAG_NAMES
 
 PANEL_SIZE = (350, 250)
 """Width and height [px] of one panel of the shape sheet."""
@@ -38,7 +39,7 @@ VIEW_DIRECTION = np.array([-0.4, -1.0, 1.0])
 FRAME_MARGIN = 0.12
 """Free border around the framed fish, as a fraction of the picture's half-size."""
 
-REGION_NAMES = ("passive", "head", "left muscle", "right muscle")
+REGION_NAMES = REGION_TAG_NAMES
 REGION_COLOURS = ("#e6d5ac", "#9a9a9a", "#d1495b", "#2e86c1")
 """Colour of each region, in the order of ``REGION_NAMES``."""
 
@@ -64,21 +65,21 @@ class _Panel:
 
 
 def render_design(fish, design_points: np.ndarray, xi: dict[str, float], out_dir: Path) -> list[Path]:
-    """Write the design mesh (design.xdmf + design.h5) and a picture of it (design.png).
+    """Write the design mesh with its region tags (design.xdmf + design.h5) and a picture of it (design.png).
 
-    ``design_points`` are the checked nodal positions x_0 + U ξ [m] (``fish.design(xi)``). The
-    XDMF write is collective over MPI.COMM_WORLD; rank 0 renders the picture. Returns the
+    ``design_points`` are the checked nodal positions x_0 + U ξ [m] (``fish.design(xi)``). Rank 0
+    writes the XDMF and renders the picture. Returns the
     paths of the three files on every rank, once they are all written.
     """
-    from aquarom_fenics.fem.dolfinx_adapter import create_tet_mesh, write_mesh_xdmf
+    from aquarom_fenics.io.xdmf import write_design_xdmf
 
     comm = MPI.COMM_WORLD
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     xdmf_path, picture_path = out_dir / "design.xdmf", out_dir / "design.png"
     vertices = design_points[:fish.mesh.points.shape[0]]   # a quadratic mesh's edge midpoints follow them
-    write_mesh_xdmf(comm, xdmf_path, create_tet_mesh(comm, vertices, fish.mesh.cells))
     if comm.rank == 0:
+        write_design_xdmf(xdmf_path, vertices, fish.mesh.cells, cell_regions(fish.tags, fish.mesh.cells.shape[0]))
         _render_design_picture(fish, design_points, _design_title(fish, xi), picture_path)
     comm.barrier()
     return [xdmf_path, xdmf_path.with_suffix(".h5"), picture_path]
@@ -192,11 +193,9 @@ def _add_design(plotter, fish, design_points: np.ndarray, legend: bool = False) 
 
 def cell_regions(tags, n_cells: int) -> np.ndarray:
     """Index into REGION_NAMES of every cell: passive, head, left or right muscle."""
-    region = np.zeros(n_cells, dtype=np.int32)
-    region[tags.head_cells] = REGION_NAMES.index("head")
-    region[tags.left_muscle_cells] = REGION_NAMES.index("left muscle")
-    region[tags.right_muscle_cells] = REGION_NAMES.index("right muscle")
-    return region
+    from aquarom_fenics.io.xdmf import cell_regions as regions_of_cells
+
+    return regions_of_cells(tags, n_cells)
 
 
 def tetra_grid(points: np.ndarray, cells: np.ndarray):

@@ -1,4 +1,4 @@
-"""Figures of an optimization (SPEC §10): history, nominal against optimal fish, Pareto front.
+"""Figures of an optimization (SPEC §10): history, start against optimal fish, Pareto front.
 
 Plain data in, PNG files out (matplotlib Agg, dpi 120). Distances are given in metres and drawn in
 centimetres; design parameters ξ are dimensionless. Calling these on one rank only is the
@@ -17,10 +17,10 @@ DPI = 120
 """Resolution [dots per inch] of every figure."""
 
 PROM_MARKERS = {
-    "built": dict(marker="o", markersize=7, color="tab:blue", label="PROM built"),
-    "approximated": dict(marker="^", markersize=6, color="tab:orange", label="approximated (η_c + S Δξ)"),
-    "surrogate": dict(marker="D", markersize=5, color="tab:green", label="surrogate (PROM at centre)"),
-    "rejected": dict(marker="o", markersize=6, color="0.55", markerfacecolor="none", label="rejected step"),
+    "built": dict(marker="o", markersize=7, color="tab:blue", label="new PROM built at the iterate"),
+    "approximated": dict(marker="^", markersize=6, color="tab:orange", label="first-order estimate from the last PROM"),
+    "surrogate": dict(marker="D", markersize=5, color="tab:green", label="last PROM simulated at the iterate"),
+    "rejected": dict(marker="o", markersize=6, color="0.55", markerfacecolor="none", label="step rejected"),
 }
 """Marker of an iteration by how its cost was obtained (the row's ``prom``)."""
 
@@ -41,11 +41,11 @@ LEGEND_HEIGHT = 0.5
 """Height [inch] kept free below the panels of a figure for its legend."""
 
 VIEW_PANEL_SIZE = (720, 300)
-"""Width and height [px] of one pyvista render of the nominal/optimal sheet."""
+"""Width and height [px] of one pyvista render of the start/optimal sheet."""
 
 VIEW_FIGURE_WIDTH = 11.0
 VIEW_FIGURE_FRAME = 1.6
-"""Width [inch] of the nominal/optimal sheet, and the height [inch] of its title, labels and legend."""
+"""Width [inch] of the start/optimal sheet, and the height [inch] of its title, labels and legend."""
 
 VIEW_MARGIN = 0.08
 """Free border around the framed fish on every side, as a fraction of its largest extent."""
@@ -61,7 +61,7 @@ sits on the right flank (-y) like the design pictures of ``render``.
 """
 
 AXIS_NAMES = "xyz"
-OUTLINE_LABEL = "nominal outline"
+OUTLINE_LABEL = "block outline (ξ = 0)"
 
 
 def _pyplot():
@@ -102,7 +102,7 @@ def _plot_cost_history(rows: list[dict], path: Path) -> None:
     figure, (cost_axis, distance_axis) = plt.subplots(2, 1, figsize=(7, 5.5), sharex=True)
     _plot_iterates(cost_axis, rows, [row["cost"] for row in rows])
     _plot_iterates(distance_axis, rows, [100 * row["distance"] for row in rows])
-    cost_axis.set_ylabel("cost L")
+    cost_axis.set_ylabel("cost L [m]")
     distance_axis.set_ylabel("distance d [cm]")
     distance_axis.set_xlabel("iteration")
     _integer_ticks(distance_axis)
@@ -188,20 +188,20 @@ def _integer_ticks(axis) -> None:
     axis.xaxis.set_major_locator(MaxNLocator(integer=True))
 
 
-def render_nominal_and_optimal(fish, nominal_points: np.ndarray, optimal_points: np.ndarray, out_path: Path,
+def render_start_and_optimal(fish, start_points: np.ndarray, optimal_points: np.ndarray, out_path: Path,
                                title: str) -> Path:
-    """Write one PNG: nominal | optimal fish seen from above (y along x) and from the side (z along x).
+    """Write one PNG: start | optimal fish seen from above (y along x) and from the side (z along x).
 
-    ``nominal_points`` and ``optimal_points`` are nodal positions [m] on ``fish.mesh.cells``. All
+    ``start_points`` and ``optimal_points`` are nodal positions [m] on ``fish.mesh.cells``. All
     four renders share one parallel projection scale, so lengths compare across panels; the axes
-    are in centimetres and the optimal panels show the nominal outline in grey.
+    are in centimetres and the optimal panels show the outline of the block (ξ = 0) in grey.
     """
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    framed = np.vstack([nominal_points, optimal_points])
+    framed = np.vstack([start_points, optimal_points])
     low, high = _framed_box(framed)
     scale = _parallel_scale(low, high, VIEW_PANEL_SIZE)
-    designs = (("nominal", nominal_points, False), ("optimal", optimal_points, True))
+    designs = (("start", start_points, False), ("optimal", optimal_points, True))
     images = _render_views(fish, designs, low, high, scale)
     _compose_views(images, [name for name, _, _ in designs], low, high, scale, out_path, title)
     return out_path
@@ -287,16 +287,16 @@ def _compose_views(images: np.ndarray, design_names: list[str], low: np.ndarray,
 def plot_pareto(points: list[dict], out_path: Path) -> Path:
     """Write the distance [cm] against the energy term α A² of co-optimized designs, front joined.
 
-    Each point holds ``w1`` (weight of -d), ``distance`` [m], ``energy`` (α A², the cost's units)
+    Each point holds ``w1`` (weight of -d), ``distance_m`` [m], ``energy`` (α A², the cost's units)
     and ``amplitude`` A. A design is on the front when no other one swims as far or farther for
     as little energy or less (and is better in one of the two). A point without a FOM distance
-    (its FOM check stopped: NaN) is drawn as a cross at its ``prom_distance``, off the front.
+    (its FOM check stopped: NaN) is drawn as a cross at its ``prom_distance_m``, off the front.
     """
     plt = _pyplot()
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
     energy = np.array([point["energy"] for point in points], dtype=float)
-    distance = 100 * np.array([point["distance"] for point in points], dtype=float)
+    distance = 100 * np.array([point["distance_m"] for point in points], dtype=float)
     feasible = np.isfinite(distance)
     on_front = np.zeros(len(points), dtype=bool)
     on_front[feasible] = _non_dominated(energy[feasible], distance[feasible])
@@ -308,7 +308,7 @@ def plot_pareto(points: list[dict], out_path: Path) -> Path:
     axis.plot(energy[dominated], distance[dominated], "o", color="0.55", markerfacecolor="none",
               label="dominated", zorder=3)
     if not feasible.all():
-        distance[~feasible] = [100 * point.get("prom_distance", np.nan) for point, ok in zip(points, feasible) if not ok]
+        distance[~feasible] = [100 * point.get("prom_distance_m", np.nan) for point, ok in zip(points, feasible) if not ok]
         axis.plot(energy[~feasible], distance[~feasible], "x", color="tab:red", zorder=3,
                   label="infeasible: FOM check stops (PROM distance)")
     for x, y, label in _pareto_labels(points, energy, distance):

@@ -49,7 +49,8 @@ def write_scene(directory: Path, duration=0.2, extra="", name="scene.toml", temp
 
 
 def one_line(capsys) -> str:
-    error = capsys.readouterr().err.strip()
+    """The one error line on stderr (a `warning:` line before it, e.g. an --xi outside the bounds, aside)."""
+    error = "\n".join(line for line in capsys.readouterr().err.strip().splitlines() if not line.startswith("warning:"))
     assert len(error.splitlines()) == 1 and "Traceback" not in error, error
     return error
 

@@ -101,7 +101,7 @@ SO8 = {"z_tail": (-0.5, 0.5), "z_head": (-0.5, 0.5), "y_thin": (-0.15, 0.15),
 SO9 = {"z_tail": (-0.5, 0.5), "z_head": (-0.5, 0.5), "z_tail_step": (-0.5, 0.5),
        "z_tail_lin": (-0.5, 0.5), "y_lin_long_tail": (-0.4, 0.4), "y_ellipse": (-0.4, 0.4)}
 
-DEFAULT_MESH = (3, 2)      # (level, degree): the cheapest mesh within 3% of the converged distance (validation)
+DEFAULT_MESH = (3, 2)      # (level, degree): the cheapest mesh within 3% of the converged distance (docs/theory/geometry.md)
 FINE_MESH = (4, 1)         # SO4–SO6: SO1–SO3 on the 16k-cell level (SPEC §11)
 STUDIES = {
     "so1": (SO1, DEFAULT_MESH), "so2": (SO2, DEFAULT_MESH), "so3": (SO3, DEFAULT_MESH),
@@ -178,8 +178,8 @@ def test_defaults_are_the_values_of_spec():
     assert solver.time_step == 0.02
     assert solver.duration == 2.0
     assert solver.integrator == "generalized-alpha"
-    assert solver.rho_infinity == SolverSection().rho_infinity and 0 <= solver.rho_infinity <= 1   # README
-    assert solver.newmark_alpha == 0.02   # SPEC §6: 0.005, raised for stability (README, scene.py)
+    assert solver.rho_infinity == SolverSection().rho_infinity and 0 <= solver.rho_infinity <= 1   # docs/theory/time-scheme.md
+    assert solver.newmark_alpha == 0.02   # SPEC §6: 0.005, raised for stability (docs/theory/time-scheme.md, scene.py)
     assert solver.min_time_step == 1e-3
     assert scene.fluid.spine_force == "source"
     assert solver.tolerance == 1e-6

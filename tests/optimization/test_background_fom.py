@@ -1,4 +1,4 @@
-"""The nominal design's FOM in a child process: its distance lands in the FOM cache, equal to a run here."""
+"""The start design's FOM in a child process: its distance lands in the FOM cache, equal to a run here."""
 import json
 import time
 
@@ -9,7 +9,7 @@ from aquarom_fenics.optimization.background_fom import BackgroundFom
 from aquarom_fenics.optimization.study import fom_cache_path
 
 
-def test_child_stores_the_nominal_distance_a_run_here_computes(make_scene):
+def test_child_stores_the_start_distance_a_run_here_computes(make_scene):
     scene = make_scene(solver={"duration": 0.2}, shapes={"z_tail": {"bounds": [-0.2, 0.2]}})
     design = {"z_tail": 0.05}
     path = fom_cache_path(scene, design, None)

@@ -123,7 +123,7 @@ def test_optimize_command_writes_its_outputs(tmp_path, capsys):
     assert main(["optimize", str(scene), "--out", str(out)]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["fom_check"]["ratio"] > 1.0 and summary["prom_builds"] >= 2
-    for name in ("history.csv", "checkpoint.json", "cost.png", "parameters.png", "nominal_vs_optimal.png",
+    for name in ("history.csv", "checkpoint.json", "cost.png", "parameters.png", "start_vs_optimal.png",
                  "optimal/design.xdmf"):
         assert (out / name).exists(), name
     assert "FOM check" in capsys.readouterr().out
@@ -147,7 +147,7 @@ def test_optimize_under_mpirun_renders_the_optimum_and_ends(tmp_path):
     completed = subprocess.run(["mpirun", "-n", "2", str(aquarom), "optimize", str(scene), "--out", str(out)],
                                capture_output=True, text=True, timeout=600, env=os.environ)
     assert completed.returncode == 0, completed.stderr
-    for name in ("summary.json", "cost.png", "nominal_vs_optimal.png", "optimal/design.xdmf", "optimal/design.png",
+    for name in ("summary.json", "cost.png", "start_vs_optimal.png", "optimal/design.xdmf", "optimal/design.png",
                  "manifest.json"):
         assert (out / name).exists(), name
 

@@ -143,8 +143,10 @@ def test_cli_shapes_with_xi_writes_the_design(scene_file, tmp_path):
 def test_cli_shapes_refuses_an_inverting_design_in_one_line(scene_file, tmp_path, capsys):
     out = tmp_path / "refused"
     assert main(["shapes", scene_file, "--xi", "y_thin=2.0", "--out", str(out)]) == 2
-    error = capsys.readouterr().err
-    assert len(error.strip().splitlines()) == 1
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines[0].startswith("warning: --xi y_thin=2.0 is outside")     # y_thin's bounds are ±0.15
+    error = "\n".join(lines[1:])
+    assert len(error.splitlines()) == 1
     assert "y_thin" in error
     assert not (out / "design.png").exists()
 

@@ -87,7 +87,7 @@ def test_nominal_and_optimal_shows_the_thinner_fish_from_above(tmp_path):
     scene = scene_from_dict({"mesh": {"level": 1}, "shapes": {"y_thin": {"bounds": [-0.15, 0.15]}}})
     fish = load_fish(scene)
     optimal = fish.design({"y_thin": 0.1})
-    path = report.render_nominal_and_optimal(fish, fish.mesh.points, optimal, tmp_path / "fish.png", "y_thin = 0.1")
+    path = report.render_start_and_optimal(fish, fish.mesh.points, optimal, tmp_path / "fish.png", "y_thin = 0.1")
     assert path == tmp_path / "fish.png"
     picture = read_rgb(path)
     assert picture.shape[1] == round(report.VIEW_FIGURE_WIDTH * report.DPI)
@@ -103,7 +103,7 @@ def test_nominal_and_optimal_shows_the_thinner_fish_from_above(tmp_path):
 
 def test_pareto_writes_a_figure(tmp_path):
     weights = (0.2, 0.3, 0.4, 0.5, 0.7, 0.9, 0.98)
-    points = [{"w1": w1, "distance": 0.01 + 0.05 * np.sqrt(w1), "energy": 0.002 + 0.01 * w1 ** 2,
+    points = [{"w1": w1, "distance_m": 0.01 + 0.05 * np.sqrt(w1), "energy": 0.002 + 0.01 * w1 ** 2,
                "amplitude": 0.05 + 0.35 * w1} for w1 in weights]
     path = report.plot_pareto(points, tmp_path / "pareto" / "pareto.png")
     assert path == tmp_path / "pareto" / "pareto.png"
@@ -111,9 +111,9 @@ def test_pareto_writes_a_figure(tmp_path):
 
 
 def test_pareto_leaves_a_point_whose_fom_check_stopped_off_the_front(tmp_path, monkeypatch):
-    points = [{"w1": 0.2, "distance": 0.01, "energy": 0.001, "amplitude": 0.1, "prom_distance": 0.011},
-              {"w1": 0.5, "distance": 0.03, "energy": 0.004, "amplitude": 0.2, "prom_distance": 0.031},
-              {"w1": 0.9, "distance": float("nan"), "energy": 0.016, "amplitude": 0.4, "prom_distance": 0.09}]
+    points = [{"w1": 0.2, "distance_m": 0.01, "energy": 0.001, "amplitude": 0.1, "prom_distance_m": 0.011},
+              {"w1": 0.5, "distance_m": 0.03, "energy": 0.004, "amplitude": 0.2, "prom_distance_m": 0.031},
+              {"w1": 0.9, "distance_m": float("nan"), "energy": 0.016, "amplitude": 0.4, "prom_distance_m": 0.09}]
     drawn = {}
     original = report._non_dominated
 
