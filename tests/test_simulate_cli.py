@@ -69,11 +69,11 @@ def test_diverging_actuation_stops_naming_the_step_and_keeps_the_trajectory(tmp_
     message = capsys.readouterr().err.strip()
     assert len(message.splitlines()) == 1
     # k·A near E: the muscles crush the body after the peak activation (t = 0.25 s), even in cut steps
-    assert "t = 0.26 s (step 13 of 100)" in message and "trajectory.csv" in message
+    assert "t = 0.28 s (step 14 of 100)" in message and "trajectory.csv" in message
     trajectory = read_trajectory_csv(out / "trajectory.csv")
-    np.testing.assert_allclose(trajectory["time"], 0.02 * np.arange(13))
+    np.testing.assert_allclose(trajectory["time"], 0.02 * np.arange(14))
     summary = json.loads((out / "summary.json").read_text())
-    assert not summary["completed"] and "step 13" in summary["error"] and summary["distance"] is None
+    assert not summary["completed"] and "step 14" in summary["error"] and summary["distance"] is None
     assert summary["cut_steps"] > 0         # earlier steps converged only when cut
 
 

@@ -538,7 +538,7 @@ class _ExactNewtonOperator:
 _AVERAGES: dict[tuple[int, int, str], StationAverages] = {}
 
 
-def averages_of(fish: Fish, n_stations: int, tail_station: str = "slab") -> StationAverages:
+def averages_of(fish: Fish, n_stations: int, tail_station: str = "face") -> StationAverages:
     """The station averages of a fish's nominal mesh, computed once per fish, station count and tail
     station ("slab": the half-hat over the last slab; "face": the end face x = -L)."""
     import weakref
