@@ -29,11 +29,12 @@ def claim_output(args, path: Path, resume: bool = False) -> Path:
     return location.working
 
 
-def claim_output_file(args, path: Path) -> Path:
-    """An output file (a PROM): an existing one is replaced only with --force and only if it is a PROM file."""
+def claim_output_file(args, path: Path, written_by_toolkit=None, example: str = "prom.npz") -> Path:
+    """An output file, locked for this run: an existing one is replaced only with --force and only
+    if ``written_by_toolkit(path)`` (default: it is a PROM file)."""
     from aquarom_fenics.io.outputs import claim_file
 
-    return on_rank_zero(lambda: claim_file(path, args.force, is_prom_file))
+    return on_rank_zero(lambda: claim_file(path, args.force, written_by_toolkit or is_prom_file, example))
 
 
 def is_prom_file(path: Path) -> bool:

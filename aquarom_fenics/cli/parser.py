@@ -87,7 +87,10 @@ def build_parser() -> argparse.ArgumentParser:
                                   epilog=f"example:\n  {EXAMPLES['animate']}",
                                   formatter_class=argparse.RawDescriptionHelpFormatter)
     animate.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="output directory of `aquarom simulate`")
-    animate.add_argument("--out", type=Path, help="MP4 file (default RUN_DIR/animation.mp4; the GIF goes next to it)")
+    animate.add_argument("--out", type=Path, help="MP4 file (default RUN_DIR/animation.mp4, with the GIF preview "
+                         "RUN_DIR/animation.gif)")
+    animate.add_argument("--gif", type=Path, help="GIF preview file (default: none when --out is given)")
+    animate.add_argument("--force", action="store_true", help="replace an animation the toolkit wrote earlier")
     animate.add_argument("--fps", type=int, default=DEFAULT_FPS, help=f"frames per second (default {DEFAULT_FPS})")
     animate.add_argument("--stride", type=int, default=1, help="one frame every K stored samples (default 1)")
     command("basis", "build the scene's PROM and draw every basis vector on the fish (basis.png)",

@@ -251,13 +251,13 @@ def record_outputs(folder: Path, paths: list[Path]) -> None:
     write_json_atomic(folder / MANIFEST, data)
 
 
-def claim_file(path: Path, force: bool, written_by_toolkit) -> Path:
+def claim_file(path: Path, force: bool, written_by_toolkit, example: str = "prom.npz") -> Path:
     """An output file that may be written: its lock is taken (one writer per output); an existing
     one is replaced only with ``force`` and only when ``written_by_toolkit(path)``; the parent
     folder must be writable."""
     path = Path(path)
     if path.is_dir():
-        raise InputError(f"output {path} is a folder, not a file; give a file name, e.g. {path / 'prom.npz'}")
+        raise InputError(f"output {path} is a folder, not a file; give a file name, e.g. {path / example}")
     made = _make_parents(path, "file")
     try:
         lock_output(path)
