@@ -15,6 +15,10 @@ def load_scene(args):
         scene = scene.replace("mesh", level=args.level)
     if args.degree is not None:
         scene = scene.replace("mesh", degree=args.degree)
+    if not getattr(args, "allow_large", False):
+        from aquarom_fenics.optimization.plan import check_mesh_bounds
+
+        check_mesh_bounds(scene)
     args.scene_used = scene
     return scene
 
@@ -32,6 +36,10 @@ def check_inputs(args, scene):
         raise InputError(f"--prom {args.prom} is used by --model prom only (this run: --model {args.model})")
     if args.command in ("simulate", "compare", "optimize", "pareto"):
         check_time_grid(scene)
+        if not getattr(args, "allow_large", False):
+            from aquarom_fenics.optimization.plan import check_run_bounds
+
+            check_run_bounds(scene)
     if args.command == "optimize":
         if args.method:
             scene = scene.replace("optimizer", method=args.method)

@@ -45,6 +45,8 @@ def build_parser() -> argparse.ArgumentParser:
                          help="override the scene's element degree (1: linear, 2: quadratic tetrahedra)")
         sub.add_argument("--dry-run", action="store_true",
                          help="print what would be built, reused and skipped, and a time estimate; write nothing")
+        sub.add_argument("--allow-large", action="store_true",
+                         help="run a plan beyond the size limits (mesh far outside its level, steps × dofs)")
         if xi:
             sub.add_argument("--xi", action="append", metavar="NAME=VALUE", help=xi)
         if prom:
