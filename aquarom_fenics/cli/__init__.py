@@ -7,6 +7,7 @@ commands in ``commands.py`` and ``runs.py``, the output folders in ``outputs.py`
 from __future__ import annotations
 
 import logging
+import os
 import sys
 import time
 import traceback
@@ -25,6 +26,7 @@ AGREEMENT_SECONDS = 10.0   # how long a failing rank waits for the others to fai
 
 
 def main(argv=None) -> int:
+    keep_signals_in_python()
     args = build_parser().parse_args(argv)
     comm = MPI.COMM_WORLD
     agreement = comm.Dup() if comm.size > 1 else None
@@ -41,6 +43,15 @@ def main(argv=None) -> int:
     if line is None:
         return code
     return end_in_agreement(agreement, code, f"aquarom {args.command}: {line}")
+
+
+def keep_signals_in_python() -> None:
+    """PETSc (initialised when dolfinx is first imported) must not take over SIGTERM and SIGPIPE:
+    it would abort the run with a dump instead of the handling here (SIGTERM like Ctrl-C; a closed
+    stdout, as in ``aquarom … | head``, only ends the printing)."""
+    options = os.environ.get("PETSC_OPTIONS", "")
+    if "-no_signal_handler" not in options.split():
+        os.environ["PETSC_OPTIONS"] = f"{options} -no_signal_handler".strip()
 
 
 def run_and_settle(args) -> tuple[int, str | None]:
