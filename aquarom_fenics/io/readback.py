@@ -152,8 +152,8 @@ def _nesting(text: str) -> int:
 # ---------------------------------------------------------------------- the file kinds
 def run_summary_schema() -> record:
     """summary.json of a simulation run (what ``aquarom animate`` reads)."""
-    return record({"completed": FLAG, "stop_reason": TEXT},
-                  {"scene": TEXT, "model": TEXT, "xi": record({}), "scene_values": record({}, {"mesh": record({})}),
+    return record({"completed": FLAG},
+                  {"stop_reason": TEXT, "scene": TEXT, "model": TEXT, "xi": record({}), "scene_values": record({}, {"mesh": record({})}),
                    "steps": INTEGER, "distance": optional(NUMBER)})
 
 
