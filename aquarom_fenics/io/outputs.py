@@ -62,8 +62,10 @@ def write_trajectory_csv(path: Path, arrays: dict[str, np.ndarray]) -> None:
 
 
 def read_trajectory_csv(path: Path) -> dict[str, np.ndarray]:
-    data = np.genfromtxt(path, delimiter=",", names=True, ndmin=1)
-    return {name: np.asarray(data[name]) for name in COLUMNS}
+    """trajectory.csv, checked by its loader (:func:`aquarom_fenics.io.readback.load_trajectory`)."""
+    from aquarom_fenics.io.readback import load_trajectory
+
+    return load_trajectory(path)
 
 
 def software_versions() -> dict[str, str]:
@@ -205,13 +207,12 @@ def _refuse_foreign(path: Path, verb: str, kept: str = "") -> None:
 
 def manifest_files(folder: Path) -> list[str] | None:
     """The files a folder's manifest.json lists (None without a readable manifest)."""
+    from aquarom_fenics.io.readback import load_manifest
+
     try:
-        listed = json.loads((Path(folder) / MANIFEST).read_text()).get("files")
-    except (OSError, ValueError, AttributeError):
+        return load_manifest(Path(folder) / MANIFEST).get("files")
+    except InputError:
         return None
-    if not isinstance(listed, list) or not all(isinstance(name, str) for name in listed):
-        return None
-    return listed
 
 
 def files_in(folder: Path) -> list[str]:

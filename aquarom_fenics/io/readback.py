@@ -192,10 +192,12 @@ def load_checkpoint(path: Path, dimension: int, method: str) -> dict:
 
 
 def manifest_schema() -> record:
+    """manifest.json of an output folder: the files the toolkit wrote there, and how."""
     return record({}, {"files": list_of(TEXT), "command": TEXT})
 
 
 def load_manifest(path: Path) -> dict:
+    """manifest.json, checked (``files`` a list of names)."""
     return load_json(path, manifest_schema(), "manifest")
 
 
@@ -256,9 +258,3 @@ def load_trajectory(path: Path) -> dict[str, np.ndarray]:
     if np.any(np.diff(table["time"]) <= 0):
         raise InputError(f"trajectory {path}: the times do not increase; {remedy}")
     return table
-
-
-def load_history(path: Path, names: list[str]) -> dict[str, np.ndarray]:
-    """history.csv of an optimisation over the design variables ``names``."""
-    columns = ["iteration", *(f"xi_{name}" for name in names), "cost", "distance", "prom"]
-    return load_csv_table(path, columns, "history", text_columns=("prom",))
