@@ -110,11 +110,13 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
             displacements.append(model.nodal_displacement(u)[:fish.nodes.n_vertices])
         if bar:
             bar.update(1)
-        if stop_requested():     # Ctrl-C or SIGTERM: end after this complete sample
+        agreed_stop[:] = [_asked_to_stop(stop_requested, comm)]
+        if agreed_stop[0]:     # Ctrl-C or SIGTERM on any rank: end after this complete sample
             raise KeyboardInterrupt
 
     bar = _progress_bar(n_steps, "FOM", progress and comm.rank == 0)
     stop_requested = lambda: None     # noqa: E731  (no stop asked until the time loop listens)
+    agreed_stop = [None]              # the signal every rank agreed to stop by
     velocity = np.zeros(model.n_owned_dofs) if initial_velocity is None else model.owned_from_nodal(initial_velocity)
     zero = np.zeros(model.n_owned_dofs)
     record(StepReport(0, 0.0, 0, 0), zero, velocity, zero)
@@ -127,7 +129,8 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
     except IntegrationStopped as failure:
         error, cut_steps = str(failure), failure.cut_steps
     except KeyboardInterrupt as stop:
-        number = stop_requested() or (signal.SIGTERM if isinstance(stop, Terminated) else signal.SIGINT)
+        number = agreed_stop[0] or stop_requested() or (signal.SIGTERM if isinstance(stop, Terminated)
+                                                        else signal.SIGINT)
         interruption = stop_for(number, f"at t = {trajectory.time[-1]:g} s")
         error = str(interruption)
     finally:
@@ -157,6 +160,15 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
     if interruption:
         raise interruption
     return result
+
+
+def _asked_to_stop(stop_requested, comm) -> int | None:
+    """The signal (SIGTERM over SIGINT) any rank was asked to stop by, so that every rank ends
+    after the same step (a signal may reach the ranks of an MPI run one step apart)."""
+    number = stop_requested() or 0
+    if comm.size > 1:
+        number = comm.allreduce(number, op=MPI.MAX)
+    return number or None
 
 
 def _progress_bar(total: int, label: str, enabled: bool):

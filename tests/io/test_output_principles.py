@@ -415,3 +415,32 @@ def test_a_parameter_left_at_zero_outside_its_bounds_is_warned_about(tmp_path, c
                         "s.toml")
     assert main(["simulate", scene, "--dry-run"]) == 0
     assert "z_tail is not given with --xi: the design takes z_tail = 0, outside" in caplog.text
+
+
+# ---------------------------------------------------------------------- under mpirun
+@pytest.mark.mpi
+def test_under_mpirun_the_lock_refuses_and_sigterm_to_the_ranks_ends_all_alike(scenes, holder, tmp_path):
+    import shutil
+
+    if shutil.which("mpirun") is None:
+        pytest.skip("mpirun not installed")
+    held = tmp_path / "held"
+    pid = holder(held)
+    refused = subprocess.run(["mpirun", "-n", "2", aquarom(), "simulate", scenes["short"], "--out", str(held),
+                              "--no-progress"], capture_output=True, text=True, timeout=120, env=os.environ)
+    assert refused.returncode == 2 and refused.stderr.count(f"(PID {pid})") == 1, refused.stderr
+    out = tmp_path / "run"
+    run = subprocess.Popen(["mpirun", "-n", "2", aquarom(), "simulate", scenes["long"], "--out", str(out),
+                            "--no-progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=os.environ)
+    wait_for(lambda: (out / "trajectory.csv").is_file() and len((out / "trajectory.csv").read_text().splitlines()) > 20)
+    ranks = subprocess.run(["pgrep", "-P", str(run.pid)], capture_output=True, text=True).stdout.split()
+    assert len(ranks) == 2
+    for rank in ranks:                         # as a batch system does: every rank gets SIGTERM
+        os.kill(int(rank), signal.SIGTERM)
+    _, error = run.communicate(timeout=120)
+    assert run.returncode == 143, error
+    assert error.count("aquarom simulate: terminated at t = ") == 1 and "Traceback" not in error
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["stop_reason"].startswith("terminated at t = ")
+    steps = len((out / "trajectory.csv").read_text().splitlines()) - 2
+    assert summary["steps"] == steps and (out / "manifest.json").exists() and not lock_file_of(out).exists()
