@@ -444,3 +444,48 @@ def test_under_mpirun_the_lock_refuses_and_sigterm_to_the_ranks_ends_all_alike(s
     assert summary["stop_reason"].startswith("terminated at t = ")
     steps = len((out / "trajectory.csv").read_text().splitlines()) - 2
     assert summary["steps"] == steps and (out / "manifest.json").exists() and not lock_file_of(out).exists()
+
+
+# ---------------------------------------------------------------------- SIGTERM on every command that writes
+STOP_HOOKS = {                # where each command writes its first file: SIGTERM arrives right after it
+    "simulate prom": "aquarom_fenics.io.persistence.write_bytes_atomic",
+    "build": "aquarom_fenics.io.persistence.write_bytes_atomic",
+    "compare": "aquarom_fenics.io.persistence.write_bytes_atomic",
+    "optimize": "aquarom_fenics.io.persistence.write_bytes_atomic",
+    "pareto": "aquarom_fenics.io.persistence.write_bytes_atomic",
+    "shapes": "aquarom_fenics.viz.render._save",
+    "basis": "aquarom_fenics.viz.animate._save",
+    "animate": "aquarom_fenics.viz.animate._write_movies",
+}
+
+
+@pytest.mark.parametrize("name", sorted(STOP_HOOKS))
+def test_sigterm_during_any_command_exits_143_and_leaves_a_listed_folder(name, scenes, run_dir, tmp_path, capsys,
+                                                                         monkeypatch):
+    import importlib
+
+    argv = writing_commands(scenes, run_dir, tmp_path / "out")[name]
+    module_name, function = STOP_HOOKS[name].rsplit(".", 1)
+    module = importlib.import_module(module_name)
+    original = getattr(module, function)
+    sent = []
+
+    def write_then_terminate(*args, **kwargs):
+        value = original(*args, **kwargs)
+        if not sent:
+            sent.append(1)
+            signal.raise_signal(signal.SIGTERM)       # handled before this returns, as a real one would be
+        return value
+
+    monkeypatch.setattr(module, function, write_then_terminate)
+    handler = signal.getsignal(signal.SIGTERM)
+    assert main(argv) == 143
+    message = one_line(capsys)
+    assert "terminated" in message and "(SIGTERM)" in message
+    target = Path(argv[argv.index("--out") + 1])
+    if target.is_dir():                                 # a folder output: its files are listed
+        assert set(json.loads((target / "manifest.json").read_text())["files"]) == {
+            str(p.relative_to(target)) for p in target.rglob("*") if p.is_file() and p.name != "manifest.json"}
+        assert f"partial results in {target}/" in message
+    assert sorted(p.name for p in tmp_path.iterdir() if ".new-" in p.name or LOCK_SUFFIX in p.name) == []
+    assert signal.getsignal(signal.SIGTERM) is handler           # the caller's handler is back
