@@ -489,3 +489,35 @@ def test_sigterm_during_any_command_exits_143_and_leaves_a_listed_folder(name, s
         assert f"partial results in {target}/" in message
     assert sorted(p.name for p in tmp_path.iterdir() if ".new-" in p.name or LOCK_SUFFIX in p.name) == []
     assert signal.getsignal(signal.SIGTERM) is handler           # the caller's handler is back
+
+
+# ---------------------------------------------------------------------- files added during --force, every folder command
+FOLDER_COMMANDS = ["simulate prom", "compare", "optimize", "pareto", "shapes", "basis"]
+
+
+@pytest.mark.parametrize("name", FOLDER_COMMANDS)
+def test_files_added_during_a_forced_run_of_any_command_are_kept(name, scenes, run_dir, tmp_path, capsys,
+                                                                 monkeypatch):
+    import importlib
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "old.txt").write_text("an earlier run's file")
+    (out / "manifest.json").write_text(json.dumps({"files": ["old.txt"]}))
+    earlier = snapshot(out)
+    module_name, function = STOP_HOOKS[name].rsplit(".", 1)
+    module = importlib.import_module(module_name)
+    original = getattr(module, function)
+
+    def write_then_add_a_user_file(*args, **kwargs):
+        value = original(*args, **kwargs)
+        (out / "notes.txt").write_text("mine")
+        return value
+
+    monkeypatch.setattr(module, function, write_then_add_a_user_file)
+    assert main(writing_commands(scenes, run_dir, out)[name] + ["--force"]) == 2
+    message = one_line(capsys)
+    assert "now holds files the toolkit did not write (notes.txt)" in message
+    assert snapshot(out) == earlier | {"notes.txt": b"mine"}
+    beside = [p for p in tmp_path.iterdir() if p.name.startswith("out.new-")]
+    assert len(beside) == 1 and f"this run's results are in {beside[0]}/" in message
