@@ -13,6 +13,7 @@ between); otherwise try again.
 from __future__ import annotations
 
 import atexit
+import errno
 import fcntl
 import os
 from dataclasses import dataclass
@@ -30,6 +31,7 @@ class OutputLock:
     target: Path
     file: Path
     descriptor: int
+    in_folder: bool = False       # an flock on the folder itself: no lock file to remove
 
 
 _held: list[OutputLock] = []
@@ -56,6 +58,8 @@ def lock_output(target: Path) -> OutputLock:
         try:
             descriptor = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
         except OSError as error:
+            if Path(target).is_dir() and error.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+                return _lock_folder_itself(Path(target))
             raise InputError(f"output {target}: cannot create its lock file {path} ({error.strerror}); "
                              "choose a writable location for --out") from None
         try:
@@ -73,6 +77,35 @@ def lock_output(target: Path) -> OutputLock:
     lock = OutputLock(target, path, descriptor)
     _held.append(lock)
     return lock
+
+
+def _lock_folder_itself(target: Path) -> OutputLock:
+    """The lock of an existing folder whose parent takes no files (``--out .`` in a folder of a
+    read-only parent): an flock on the folder itself, its holder found in /proc/locks."""
+    descriptor = os.open(target, os.O_RDONLY | os.O_CLOEXEC)
+    try:
+        fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = _holder_in_proc_locks(os.fstat(descriptor).st_ino)
+        os.close(descriptor)
+        raise InputError(f"output {target} is being written by another aquarom run ({holder}); "
+                         "wait for it to end or choose another --out") from None
+    lock = OutputLock(target, lock_file_of(target), descriptor, in_folder=True)
+    _held.append(lock)
+    return lock
+
+
+def _holder_in_proc_locks(inode: int) -> str:
+    """'PID n' of the process holding an flock on the file with this inode (Linux /proc/locks)."""
+    try:
+        lines = Path("/proc/locks").read_text().splitlines()
+    except OSError:
+        return "PID unknown"
+    for line in lines:
+        fields = line.split()
+        if len(fields) > 5 and fields[1] == "FLOCK" and fields[5].rsplit(":", 1)[-1] == str(inode):
+            return f"PID {fields[4]}"
+    return "PID unknown"
 
 
 def holds_lock(target: Path) -> bool:
@@ -105,7 +138,7 @@ def release_output_locks() -> None:
     while _held:
         lock = _held.pop()
         try:
-            if _names_the_same_file(lock.file, lock.descriptor):
+            if not lock.in_folder and _names_the_same_file(lock.file, lock.descriptor):
                 lock.file.unlink()
         except OSError:
             pass

@@ -521,3 +521,23 @@ def test_files_added_during_a_forced_run_of_any_command_are_kept(name, scenes, r
     assert snapshot(out) == earlier | {"notes.txt": b"mine"}
     beside = [p for p in tmp_path.iterdir() if p.name.startswith("out.new-")]
     assert len(beside) == 1 and f"this run's results are in {beside[0]}/" in message
+
+
+def test_a_folder_whose_parent_takes_no_files_is_locked_itself(tmp_path):
+    """``--out .`` below a read-only parent: the flock goes on the folder, its holder read from /proc/locks."""
+    from aquarom_fenics.errors import InputError
+    from aquarom_fenics.io import output_lock
+
+    script = ("import sys, time\nfrom pathlib import Path\nfrom aquarom_fenics.io import output_lock\n"
+              "output_lock._lock_folder_itself(Path(sys.argv[1]))\nprint('locked', flush=True)\ntime.sleep(600)")
+    child = subprocess.Popen([sys.executable, "-c", script, str(tmp_path)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout.readline().strip() == "locked"
+        with pytest.raises(InputError, match=f"another aquarom run \\(PID {child.pid}\\)"):
+            output_lock._lock_folder_itself(tmp_path)
+    finally:
+        child.kill()
+        child.wait()
+    output_lock._lock_folder_itself(tmp_path)
+    output_lock.release_output_locks()
+    assert os.listdir(tmp_path) == []
