@@ -4,6 +4,8 @@ from __future__ import annotations
 import textwrap
 from pathlib import Path
 
+from mpi4py import MPI
+
 from aquarom_fenics.cli.inputs import check_inputs, load_scene, say
 from aquarom_fenics.cli.outputs import claim_output, claim_output_file, shown
 from aquarom_fenics.cli.runs import run_build, run_compare, run_simulate
@@ -117,7 +119,8 @@ def run_animate(args) -> int:
             claim_output_file(args, path, is_animation_file, path.with_name("animation" + path.suffix).name)
 
     files = animate_run(args.run_dir, out=mp4, fps=args.fps, stride=args.stride, gif=gif, before_writing=claim)
-    record_outputs(args.run_dir, [path for path in files if path.resolve().parent == args.run_dir.resolve()])
+    if MPI.COMM_WORLD.rank == 0:          # the run folder's manifest lists the animation (what --force may replace)
+        record_outputs(args.run_dir, [path for path in files if path.resolve().parent == args.run_dir.resolve()])
     for path in files:
         say(f"wrote {path}")
     return 0
