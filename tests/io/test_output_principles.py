@@ -287,6 +287,7 @@ def test_sigterm_mid_simulation_keeps_the_partial_run_with_its_summary_and_manif
     listed = json.loads((out / "manifest.json").read_text())["files"]
     assert "trajectory.csv" in listed and "summary.json" in listed
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"], partial
+    assert main(["simulate", scenes["short"], "--out", str(out), "--no-progress", "--force"]) == 0   # the toolkit's own
 
 
 def test_sigterm_mid_optimisation_then_resume(scenes, tmp_path):
