@@ -34,7 +34,11 @@ def claim_output_file(args, path: Path, written_by_toolkit=None, example: str = 
     if ``written_by_toolkit(path)`` (default: it is a PROM file)."""
     from aquarom_fenics.io.outputs import claim_file
 
-    return on_rank_zero(lambda: claim_file(path, args.force, written_by_toolkit or is_prom_file, example))
+    parent = Path(path).absolute().parent
+    made = [folder for folder in (parent, *parent.parents) if not folder.exists()]
+    claimed = on_rank_zero(lambda: claim_file(path, args.force, written_by_toolkit or is_prom_file, example))
+    args.made_for_files = getattr(args, "made_for_files", []) + made   # removed again if the run is refused
+    return claimed
 
 
 def is_prom_file(path: Path) -> bool:
@@ -76,9 +80,12 @@ def settle_output(args, code: int, wall_time: float) -> None:
     place; a stopped one (solver) keeps its partial results and a manifest beside an earlier run
     being replaced; an interrupted one (Ctrl-C, SIGTERM) that wrote something takes the earlier
     run's place (so that --resume continues it); a refused one removes the folders it created."""
-    from aquarom_fenics.io.outputs import discard, list_outputs, publish
+    from aquarom_fenics.io.outputs import remove_if_empty, discard, list_outputs, publish
 
     location = vars(args).pop("output", None)     # settled once; not an argument for the manifest
+    made_for_files = vars(args).pop("made_for_files", [])
+    if MPI.COMM_WORLD.rank == 0 and code not in (0, SolverError.exit_code, *STOP_CODES):
+        remove_if_empty(made_for_files)
     if location is None or MPI.COMM_WORLD.rank != 0:
         return
     written = location.working.is_dir() and any(location.working.iterdir())

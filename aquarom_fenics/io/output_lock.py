@@ -133,10 +133,12 @@ def is_locked_by_another(target: Path) -> str | None:
         os.close(descriptor)
 
 
-def release_output_locks() -> None:
-    """Remove the lock files this process holds and release the locks (at the end of a command)."""
-    while _held:
-        lock = _held.pop()
+def release_output_locks(folder: Path | None = None) -> None:
+    """Remove the lock files this process holds and release the locks (at the end of a command);
+    with ``folder``, only those whose lock file is in it (a refused run removing its folders)."""
+    chosen = [lock for lock in _held if folder is None or lock.file.parent == Path(folder).resolve()]
+    for lock in chosen:
+        _held.remove(lock)
         try:
             if not lock.in_folder and _names_the_same_file(lock.file, lock.descriptor):
                 lock.file.unlink()

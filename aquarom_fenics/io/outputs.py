@@ -16,7 +16,7 @@ import numpy as np
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.dynamics.trajectory import COLUMNS
-from aquarom_fenics.io.output_lock import lock_output
+from aquarom_fenics.io.output_lock import lock_output, release_output_locks
 from aquarom_fenics.io.persistence import require_writable, write_json_atomic
 
 log = logging.getLogger("aquarom")
@@ -178,7 +178,7 @@ def claim_folder(path: Path, force: bool, resume: bool) -> OutputLocation:
     try:
         return _claim_unlocked(path, force, made)
     except BaseException:
-        _remove_if_empty(made)
+        remove_if_empty(made)
         raise
 
 
@@ -269,7 +269,7 @@ def claim_file(path: Path, force: bool, written_by_toolkit, example: str = "prom
                 raise InputError(f"output {path} was not written by the toolkit; --force only replaces its own files")
         require_writable(path.parent)
     except BaseException:
-        _remove_if_empty(made)
+        remove_if_empty(made)
         raise
     return path
 
@@ -322,7 +322,7 @@ def discard(location: OutputLocation) -> None:
     """Remove what a refused run wrote (only folders it created itself)."""
     if location.created and location.working.is_dir():
         shutil.rmtree(location.working)
-    _remove_if_empty(location.made)
+    remove_if_empty(location.made)
 
 
 def _exchange(first: Path, second: Path) -> bool:
@@ -343,17 +343,20 @@ def _make_parents(path: Path, kind: str = "folder") -> list[Path]:
     try:
         parent.mkdir(parents=True, exist_ok=True)
     except (FileExistsError, NotADirectoryError):
-        _remove_if_empty(created)
+        remove_if_empty(created)
         raise InputError(f"output {path}: a parent of this {kind} is a file; choose another --out") from None
     except OSError as error:
-        _remove_if_empty(created)
+        remove_if_empty(created)
         raise InputError(f"output {path}: cannot create its folder {parent} ({error.strerror}); "
                          "choose another --out") from None
     return created
 
 
-def _remove_if_empty(folders: list[Path]) -> None:
+def remove_if_empty(folders: list[Path]) -> None:
+    """Remove the folders that are empty but for this run's lock files (deepest first), leaving
+    the others."""
     for folder in folders:
+        release_output_locks(folder)
         try:
             folder.rmdir()
         except OSError:

@@ -542,3 +542,28 @@ def test_a_folder_whose_parent_takes_no_files_is_locked_itself(tmp_path):
     output_lock._lock_folder_itself(tmp_path)
     output_lock.release_output_locks()
     assert os.listdir(tmp_path) == []
+
+
+def test_a_file_output_refused_after_its_claim_leaves_no_parent_folders(scenes, tmp_path, capsys, monkeypatch):
+    from aquarom_fenics.errors import InputError
+
+    def refuse(*args, **kwargs):
+        raise InputError("refused by the build")
+
+    monkeypatch.setenv("AQUAROM_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr("aquarom_fenics.reduction.reductor.build_prom", refuse)
+    assert main(["build", scenes["short"], "--out", str(tmp_path / "a" / "b" / "p.npz")]) == 2
+    assert "refused by the build" in one_line(capsys)
+    assert not (tmp_path / "a").exists()
+
+
+def test_a_folder_output_refused_after_its_claim_leaves_no_parent_folders(scenes, tmp_path, capsys, monkeypatch):
+    from aquarom_fenics.errors import InputError
+
+    def refuse(*args, **kwargs):
+        raise InputError("refused by the model")
+
+    monkeypatch.setattr("aquarom_fenics.dynamics.simulate.simulate_fom", refuse)
+    assert main(["simulate", scenes["short"], "--out", str(tmp_path / "a" / "b" / "run"), "--no-progress"]) == 2
+    assert "refused by the model" in one_line(capsys)
+    assert os.listdir(tmp_path) == []
