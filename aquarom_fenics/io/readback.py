@@ -175,7 +175,8 @@ def checkpoint_schema(dimension: int, method: str) -> record:
     if method == "paper":
         state = record({"z": vector, "iteration": INTEGER, "scaling": vector, "previous_gradient": optional(vector),
                         "since_build": INTEGER,
-                        "center": optional(record({"z": vector}, {"prom_z": vector}))},
+                        "center": optional(record({"z": vector, "distance": FINITE, "distance_gradient": vector},
+                                                  {"prom_z": vector}))},
                        {"confirm": ANYTHING, "restarted": ANYTHING})
     else:
         state = record({"center": vector, "radius": FINITE, "iteration": INTEGER}, {"cuts": list_of(vector)})

@@ -567,3 +567,27 @@ def test_a_folder_output_refused_after_its_claim_leaves_no_parent_folders(scenes
     assert main(["simulate", scenes["short"], "--out", str(tmp_path / "a" / "b" / "run"), "--no-progress"]) == 2
     assert "refused by the model" in one_line(capsys)
     assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("method", ["paper", "trust-region"])
+def test_sigterm_between_iterations_then_resume_with_either_method(method, tmp_path, capsys, monkeypatch):
+    from aquarom_fenics.optimization import history
+
+    scene = write_scene(tmp_path, OPTIMIZE.format(iterations=4), "o.toml")
+    original = history.Checkpoint.save
+    saves = []
+
+    def save_then_terminate(self, *args):
+        original(self, *args)
+        saves.append(1)
+        if len(saves) == 2:
+            signal.raise_signal(signal.SIGTERM)
+
+    monkeypatch.setattr(history.Checkpoint, "save", save_then_terminate)
+    out = tmp_path / "o"
+    assert main(["optimize", scene, "--method", method, "--out", str(out)]) == 143
+    assert "terminated (SIGTERM)" in one_line(capsys)
+    monkeypatch.setattr(history.Checkpoint, "save", original)
+    assert main(["optimize", scene, "--method", method, "--out", str(out), "--resume"]) == 0
+    iterations = [int(line.split(",")[0]) for line in (out / "history.csv").read_text().splitlines()[1:]]
+    assert iterations == list(range(len(iterations))) and len(iterations) >= 3
