@@ -184,6 +184,7 @@ def claim_folder(path: Path, force: bool, resume: bool) -> OutputLocation:
 
 def _claim_unlocked(path: Path, force: bool, made: list[Path]) -> OutputLocation:
     lock_output(path)
+    _mention_leftovers(path)
     if not path.is_dir() or not any(path.iterdir()):
         created = not path.exists()
         _make_folder(path)
@@ -195,6 +196,17 @@ def _claim_unlocked(path: Path, force: bool, made: list[Path]) -> OutputLocation
     working = absolute.with_name(f"{absolute.name}.new-{os.getpid()}")
     _make_folder(working)
     return OutputLocation(path, working, created=True, replacing=True, made=made)
+
+
+def _mention_leftovers(path: Path) -> None:
+    """Warn about ``NAME.new-PID/`` folders of runs that were killed outright (their process is
+    gone): partial results the toolkit never swapped in, left for the user to look at or remove."""
+    absolute = Path(path).resolve()
+    for folder in sorted(absolute.parent.glob(f"{absolute.name}.new-*")):
+        pid = folder.name.rsplit("-", 1)[-1]
+        if folder.is_dir() and pid.isdigit() and not Path(f"/proc/{pid}").exists():
+            log.warning("output %s: %s/ holds the partial results of a run that was killed (PID %s); "
+                        "remove it when you no longer need it", path, folder, pid)
 
 
 def _refuse_foreign(path: Path, verb: str, kept: str = "") -> None:

@@ -591,3 +591,12 @@ def test_sigterm_between_iterations_then_resume_with_either_method(method, tmp_p
     assert main(["optimize", scene, "--method", method, "--out", str(out), "--resume"]) == 0
     iterations = [int(line.split(",")[0]) for line in (out / "history.csv").read_text().splitlines()[1:]]
     assert iterations == list(range(len(iterations))) and len(iterations) >= 3
+
+
+def test_a_killed_runs_partial_folder_is_mentioned_not_removed(scenes, tmp_path, caplog):
+    leftover = tmp_path / "run.new-999999"
+    leftover.mkdir()
+    (leftover / "trajectory.csv").write_text("time\n0\n")
+    assert main(["simulate", scenes["short"], "--out", str(tmp_path / "run"), "--no-progress"]) == 0
+    assert "run.new-999999/ holds the partial results of a run that was killed (PID 999999)" in caplog.text
+    assert (leftover / "trajectory.csv").read_text() == "time\n0\n"
