@@ -362,12 +362,15 @@ def test_a_damaged_manifest_makes_force_refuse_the_folder(scenes, tmp_path, caps
 
 
 # ---------------------------------------------------------------------- 5. bounded plans
-@pytest.mark.parametrize("command", ["simulate", "compare", "optimize", "mesh", "shapes", "build"])
-@pytest.mark.parametrize("plan, named", [("level = 1\n[solver]\ntime_step = 1e-9", "steps"),
-                                         ("level = 1\nheight = 1e-4", "far outside the level's range")])
+TIME_STEP_1E_9 = ("level = 1\n[solver]\ntime_step = 1e-9", "steps")
+FLAT_BLOCK = ("level = 1\nheight = 1e-4", "far outside the level's range")
+
+
+@pytest.mark.parametrize("command, plan, named", [
+    *((command, *TIME_STEP_1E_9) for command in ("simulate", "compare", "optimize")),
+    *((command, *FLAT_BLOCK) for command in ("simulate", "compare", "optimize", "mesh", "shapes", "build")),
+])
 def test_unbounded_plans_are_refused_before_any_work(command, plan, named, tmp_path, capsys, monkeypatch):
-    if command in ("mesh", "shapes", "build") and "time_step" in plan:
-        pytest.skip("no time integration")
     scene = write_scene(tmp_path, f"[mesh]\n{plan}\n[shapes]\nz_tail = {{ bounds = [-0.2, 0.2] }}\n", "s.toml")
     monkeypatch.setattr("aquarom_fenics.geometry.block._generate_block", lambda *a: pytest.fail("meshed"))
     started = time.perf_counter()
