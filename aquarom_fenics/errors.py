@@ -17,3 +17,9 @@ class Interrupted(KeyboardInterrupt):
     """Ctrl-C, after the partial results and their summary were written: exit code 130."""
 
     exit_code = 130
+
+
+class Terminated(Interrupted):
+    """SIGTERM (a batch system's stop), handled like Ctrl-C: partial results kept, exit code 143 (128 + 15)."""
+
+    exit_code = 143

@@ -7,6 +7,7 @@ commands in ``commands.py`` and ``runs.py``, the output folders in ``outputs.py`
 from __future__ import annotations
 
 import logging
+import os
 import sys
 import time
 import traceback
@@ -18,43 +19,72 @@ from aquarom_fenics.cli.commands import COMMANDS, run_dry
 from aquarom_fenics.cli.outputs import os_error_text, settle_output
 from aquarom_fenics.cli.parser import build_parser
 from aquarom_fenics.errors import InputError, Interrupted, SolverError
+from aquarom_fenics.io.output_lock import release_output_locks
+from aquarom_fenics.io.stop_signals import sigterm_as_interrupt, stop_between_steps, stop_for
 
 
 AGREEMENT_SECONDS = 10.0   # how long a failing rank waits for the others to fail too before aborting all
 
 
 def main(argv=None) -> int:
+    keep_signals_in_python()
     args = build_parser().parse_args(argv)
     comm = MPI.COMM_WORLD
     agreement = comm.Dup() if comm.size > 1 else None
     set_log_level("info" if args.verbose else "warning")      # the console shows details only with --verbose
     logging.getLogger("aquarom").setLevel(logging.INFO if comm.rank == 0 else logging.ERROR)  # records for any handler
+    try:
+        with sigterm_as_interrupt():
+            code, line = run_and_settle(args)
+    finally:
+        release_output_locks()
+    if line is None:
+        return code
+    return end_in_agreement(agreement, code, f"aquarom {args.command}: {line}")
+
+
+def keep_signals_in_python() -> None:
+    """PETSc (initialised when dolfinx is first imported) must not take over SIGTERM and SIGPIPE:
+    it would abort the run with a dump instead of the handling here (SIGTERM like Ctrl-C; a closed
+    stdout, as in ``aquarom … | head``, only ends the printing)."""
+    options = os.environ.get("PETSC_OPTIONS", "")
+    if "-no_signal_handler" not in options.split():
+        os.environ["PETSC_OPTIONS"] = f"{options} -no_signal_handler".strip()
+
+
+def run_and_settle(args) -> tuple[int, str | None]:
+    """Run the command, then finish its outputs (manifest, swap) with Ctrl-C and SIGTERM held
+    back; the exit code and the line for the user (None: nothing to say)."""
     started = time.perf_counter()
     line = None
     try:
         code = run_dry(args) if getattr(args, "dry_run", False) else COMMANDS[args.command](args)
     except (Exception, KeyboardInterrupt) as error:
         code, line = describe_failure(args, error)
-    try:
-        settle_output(args, code, time.perf_counter() - started)
-    except (OSError, InputError) as problem:
-        text = os_error_text(problem) if isinstance(problem, OSError) else str(problem)
-        code, line = InputError.exit_code, f"{line + '; ' if line else ''}error: the outputs could not be finished ({text})"
-    if line is None:
-        return code
-    return end_in_agreement(agreement, code, f"aquarom {args.command}: {line}")
+    with stop_between_steps() as stop_requested:
+        try:
+            settle_output(args, code, time.perf_counter() - started)
+        except (OSError, InputError) as problem:
+            text = os_error_text(problem) if isinstance(problem, OSError) else str(problem)
+            code, line = InputError.exit_code, f"{line + '; ' if line else ''}error: the outputs could not be finished ({text})"
+        stop = stop_requested()
+    if stop is not None and line is None:
+        code = stop_for(stop, "").exit_code
+        line = f"{stop_for(stop, 'after the run had finished')}; its outputs are complete"
+    return code, line
 
 
 def describe_failure(args, error: BaseException) -> tuple[int, str]:
-    """Exit code and the one line for the user: 2 bad input or OS error, 3 solver stop, 130 Ctrl-C.
+    """Exit code and the one line for the user: 2 bad input or OS error, 3 solver stop, 130 Ctrl-C,
+    143 SIGTERM.
 
     Anything else is a bug: its traceback is printed and the exit code is 1.
     """
     if isinstance(error, KeyboardInterrupt):
         location = getattr(args, "output", None)
         written = location is not None and location.working.is_dir() and any(location.working.iterdir())
-        where = f"; partial results in {location.working}/" if written else "; nothing written"
-        return Interrupted.exit_code, f"{str(error) or 'interrupted'}{where}"
+        where = f"; partial results in {location.target}/" if written else "; nothing written"
+        return getattr(error, "exit_code", Interrupted.exit_code), f"{str(error) or 'interrupted (Ctrl-C)'}{where}"
     if isinstance(error, InputError):
         return InputError.exit_code, f"error: {error}"
     if isinstance(error, SolverError):

@@ -4,8 +4,10 @@ from __future__ import annotations
 import textwrap
 from pathlib import Path
 
+from mpi4py import MPI
+
 from aquarom_fenics.cli.inputs import check_inputs, load_scene, say
-from aquarom_fenics.cli.outputs import claim_output, shown
+from aquarom_fenics.cli.outputs import claim_output, claim_output_file, shown
 from aquarom_fenics.cli.runs import run_build, run_compare, run_simulate
 from aquarom_fenics.errors import InputError, SolverError
 
@@ -102,9 +104,26 @@ def run_pareto(args) -> int:
 
 
 def run_animate(args) -> int:
-    from aquarom_fenics.viz.animate import animate_run
+    from aquarom_fenics.io.output_lock import is_locked_by_another
+    from aquarom_fenics.io.outputs import record_outputs
+    from aquarom_fenics.viz.animate import ANIMATION_FILE, animate_run, check_animation_options, is_animation_file
 
-    for path in animate_run(args.run_dir, out=args.out, fps=args.fps, stride=args.stride):
+    mp4 = args.out or args.run_dir / ANIMATION_FILE
+    gif = args.gif or (mp4.with_suffix(".gif") if args.out is None else None)    # only files the user named
+    check_animation_options(mp4, args.fps, args.stride, gif)
+    writer = is_locked_by_another(args.run_dir)
+    if writer:
+        raise InputError(f"run directory {args.run_dir} is being written by another aquarom run ({writer}); "
+                         "animate it when that run has ended")
+
+    def claim(paths):
+        for path in paths:
+            claim_output_file(args, path, is_animation_file, path.with_name("animation" + path.suffix).name)
+
+    files = animate_run(args.run_dir, out=mp4, fps=args.fps, stride=args.stride, gif=gif, before_writing=claim)
+    if MPI.COMM_WORLD.rank == 0:          # the run folder's manifest lists the animation (what --force may replace)
+        record_outputs(args.run_dir, [path for path in files if path.resolve().parent == args.run_dir.resolve()])
+    for path in files:
         say(f"wrote {path}")
     return 0
 
@@ -150,14 +169,20 @@ def run_check(args) -> int:
 
 
 def run_cache(args) -> int:
-    from aquarom_fenics.reduction.cache import clear, listing
+    from aquarom_fenics.io.paths import cache_root, mesh_cache
+    from aquarom_fenics.io.persistence import clear_entries
+    from aquarom_fenics.reduction.cache import listing
 
     if args.action == "list":
         for kind, folder, entries, size in listing():
             say(f"{kind:15s} {entries:5d} entries {size / 1e6:9.1f} MB  {folder}")
         return 0
-    for folder in clear(args.kind or ["prom", "fom"]):
-        say(f"removed {folder}")
+    for kind in dict.fromkeys(args.kind or ["prom", "fom"]):
+        folder = mesh_cache() if kind == "mesh" else cache_root() / kind
+        removed, left = clear_entries(folder)
+        kept = (f"; left {len(left)} file(s) the cache did not write: {', '.join(left[:3])}{', …' if len(left) > 3 else ''}"
+                if left else "")
+        say(f"{kind} cache {folder}: removed {removed} entr{'y' if removed == 1 else 'ies'}{kept}")
     return 0
 
 

@@ -1,6 +1,9 @@
 """The scene a command runs on and the checks it makes before its work."""
 from __future__ import annotations
 
+import os
+import sys
+
 from mpi4py import MPI
 
 from aquarom_fenics.errors import InputError
@@ -17,6 +20,10 @@ def load_scene(args):
         scene = scene.replace("mesh", level=args.level)
     if args.degree is not None:
         scene = scene.replace("mesh", degree=args.degree)
+    if not getattr(args, "allow_large", False):
+        from aquarom_fenics.optimization.plan import check_mesh_bounds
+
+        check_mesh_bounds(scene)
     args.scene_used = scene
     return scene
 
@@ -58,10 +65,16 @@ def check_inputs(args, scene):
     from aquarom_fenics.dynamics.simulate import check_time_grid
 
     xi = parse_xi_assignments(getattr(args, "xi", None), scene)
+    if args.command in ("simulate", "compare", "shapes") and (xi or args.command != "shapes"):
+        warn_about_unnamed_parameters(args, scene, xi)
     if getattr(args, "prom", None) is not None and getattr(args, "model", "prom") != "prom":
         raise InputError(f"--prom {args.prom} is used by --model prom only (this run: --model {args.model})")
     if args.command in ("simulate", "compare", "optimize", "pareto"):
         check_time_grid(scene)
+        if not getattr(args, "allow_large", False):
+            from aquarom_fenics.optimization.plan import check_run_bounds
+
+            check_run_bounds(scene)
     if args.command == "optimize":
         if args.method:
             scene = scene.replace("optimizer", method=args.method)
@@ -93,5 +106,27 @@ def run_design(scene, xi: dict[str, float]) -> dict[str, float]:
 
 
 def say(text: str) -> None:
-    if MPI.COMM_WORLD.rank == 0:
+    """Print a line on rank 0; a closed stdout (``aquarom … | head``) ends the printing, not the run."""
+    if MPI.COMM_WORLD.rank != 0:
+        return
+    try:
         print(text, flush=True)
+    except BrokenPipeError:
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (OSError, ValueError, AttributeError):
+            pass
+
+
+def warn_about_unnamed_parameters(args, scene, xi: dict) -> None:
+    """A shape parameter not given with --xi takes 0 in the full-order design; say so when 0 is
+    outside the scene's bounds (as a value given with --xi outside them is)."""
+    import logging
+
+    if args.command == "simulate" and args.model != "fom":
+        return
+    for shape in scene.shapes:
+        if shape.name not in xi and not shape.lower <= 0.0 <= shape.upper:
+            logging.getLogger("aquarom").warning(
+                "%s is not given with --xi: the design takes %s = 0, outside the scene's bounds [%g, %g]",
+                shape.name, shape.name, shape.lower, shape.upper)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from mpi4py import MPI
 
-from aquarom_fenics.errors import InputError, Interrupted, SolverError
+from aquarom_fenics.errors import InputError, Interrupted, SolverError, Terminated
 
 
 def os_error_text(error: OSError, unnamed: str = "a file") -> str:
@@ -27,11 +27,16 @@ def claim_output(args, path: Path, resume: bool = False) -> Path:
     return location.working
 
 
-def claim_output_file(args, path: Path) -> Path:
-    """An output file (a PROM): an existing one is replaced only with --force and only if it is a PROM file."""
+def claim_output_file(args, path: Path, written_by_toolkit=None, example: str = "prom.npz") -> Path:
+    """An output file, locked for this run: an existing one is replaced only with --force and only
+    if ``written_by_toolkit(path)`` (default: it is a PROM file)."""
     from aquarom_fenics.io.outputs import claim_file
 
-    return on_rank_zero(lambda: claim_file(path, args.force, is_prom_file))
+    parent = Path(path).absolute().parent
+    made = [folder for folder in (parent, *parent.parents) if not folder.exists()]
+    claimed = on_rank_zero(lambda: claim_file(path, args.force, written_by_toolkit or is_prom_file, example))
+    args.made_for_files = getattr(args, "made_for_files", []) + made   # removed again if the run is refused
+    return claimed
 
 
 def is_prom_file(path: Path) -> bool:
@@ -70,21 +75,30 @@ def on_rank_zero(action):
 
 def settle_output(args, code: int, wall_time: float) -> None:
     """Finish the output folder on rank 0: a finished run gets its manifest and is swapped into
-    place; a stopped or interrupted one keeps its partial results and a manifest (an earlier
-    run being replaced stays untouched); a refused one removes the folder it created."""
-    from aquarom_fenics.io.outputs import discard, list_outputs, publish
+    place; a stopped one (solver) keeps its partial results and a manifest beside an earlier run
+    being replaced; an interrupted one (Ctrl-C, SIGTERM) that wrote something takes the earlier
+    run's place (so that --resume continues it); a refused one removes the folders it created."""
+    from aquarom_fenics.io.outputs import remove_if_empty, discard, list_outputs, publish
 
     location = vars(args).pop("output", None)     # settled once; not an argument for the manifest
+    made_for_files = vars(args).pop("made_for_files", [])
+    if MPI.COMM_WORLD.rank == 0 and code not in (0, SolverError.exit_code, *STOP_CODES):
+        remove_if_empty(made_for_files)
     if location is None or MPI.COMM_WORLD.rank != 0:
         return
-    if code in (0, SolverError.exit_code, Interrupted.exit_code):
+    written = location.working.is_dir() and any(location.working.iterdir())
+    if code in (0, SolverError.exit_code) or (code in STOP_CODES and written):
         if location.working.is_dir():
             write_manifest(args, wall_time)
-            list_outputs(location.working)
-        if code == 0:
+            list_outputs(location.working, location.foreign)
+        if code != SolverError.exit_code:
             publish(location)
     else:
         discard(location)
+
+
+STOP_CODES = (Interrupted.exit_code, Terminated.exit_code)
+"""Exit codes of a run stopped by Ctrl-C (130) or SIGTERM (143)."""
 
 
 def write_manifest(args, wall_time: float) -> None:

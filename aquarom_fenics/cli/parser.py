@@ -56,6 +56,8 @@ def build_parser() -> argparse.ArgumentParser:
                          help="override the scene's element degree (1: linear, 2: quadratic tetrahedra)")
         sub.add_argument("--dry-run", action="store_true",
                          help="print what would be built, reused and skipped, and a time estimate; write nothing")
+        sub.add_argument("--allow-large", action="store_true",
+                         help="run a plan beyond the size limits (mesh far outside its level, steps × dofs)")
         sub.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", dest="settings",
                          help="override one scene value, validated like the file (repeatable), "
                               "e.g. --set solver.duration=0.5 or --set shapes.z_tail.start=0.1")
@@ -103,7 +105,10 @@ def build_parser() -> argparse.ArgumentParser:
                                   formatter_class=argparse.RawDescriptionHelpFormatter)
     verbose_option(animate)
     animate.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="output directory of `aquarom simulate`")
-    animate.add_argument("--out", type=Path, help="MP4 file (default RUN_DIR/animation.mp4; the GIF goes next to it)")
+    animate.add_argument("--out", type=Path, help="MP4 file (default RUN_DIR/animation.mp4, with the GIF preview "
+                         "RUN_DIR/animation.gif)")
+    animate.add_argument("--gif", type=Path, help="GIF preview file (default: none when --out is given)")
+    animate.add_argument("--force", action="store_true", help="replace an animation the toolkit wrote earlier")
     animate.add_argument("--fps", type=int, default=DEFAULT_FPS, help=f"frames per second (default {DEFAULT_FPS})")
     animate.add_argument("--stride", type=int, default=1, help="one frame every K stored samples (default 1)")
     command("basis", "build the scene's PROM and draw every basis vector on the fish (basis.png)",

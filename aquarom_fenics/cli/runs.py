@@ -26,7 +26,8 @@ def run_simulate(args) -> int:
         raise SolverError(f"{result.error}; partial trajectory in {out / 'trajectory.csv'}")
     say(f"{scene.name} ({args.model}): distance {100 * result.distance:.3f} cm, tail amplitude "
         f"{100 * result.tail_amplitude:.3f} cm, {result.wall_time:.2f} s on {MPI.COMM_WORLD.size} rank(s)")
-    say(f"outputs in {shown(args, out)}/ (trajectory.csv, summary.json, trajectory.png)")
+    written = sorted(path.name for path in out.iterdir() if path.is_file()) if MPI.COMM_WORLD.rank == 0 else []
+    say(f"outputs in {shown(args, out)}/ ({', '.join(written)})")
     return 0
 
 

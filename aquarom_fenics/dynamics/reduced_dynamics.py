@@ -141,8 +141,8 @@ class ReducedResult:
     def summary(self) -> dict:
         iterations = np.asarray(self.trajectory.newton_iterations[1:])
         return {"distance": self.distance, "tail_amplitude": self.tail_amplitude, "completed": self.completed,
-                "error": self.error, "wall_time": self.wall_time, "steps": len(self.trajectory) - 1,
-                "cut_steps": self.cut_steps,
+                "error": self.error, "stop_reason": self.error or "completed", "wall_time": self.wall_time,
+                "steps": len(self.trajectory) - 1, "cut_steps": self.cut_steps,
                 "mean_newton_iterations": float(iterations.mean()) if iterations.size else None,
                 "distance_gradient": None if self.distance_gradient is None else self.distance_gradient.tolist(),
                 "timings": self.timings}

@@ -4,7 +4,6 @@ from __future__ import annotations
 import logging
 import signal
 import time as clock
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -12,11 +11,12 @@ import numpy as np
 from mpi4py import MPI
 
 from aquarom_fenics.dynamics.diagnostics import newton_failure_hints, scene_warnings
-from aquarom_fenics.errors import InputError, Interrupted
+from aquarom_fenics.errors import InputError, Terminated
 from aquarom_fenics.geometry.fish import Fish, load_fish
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.dynamics.integrator import IntegrationStopped, NewtonSettings, StepReport, integrate
 from aquarom_fenics.io.outputs import TrajectoryCSV
+from aquarom_fenics.io.stop_signals import stop_between_steps, stop_for
 from aquarom_fenics.io.run_outputs import write_run_outputs
 from aquarom_fenics.io.xdmf import cell_regions
 from aquarom_fenics.io.scene import Scene
@@ -108,24 +108,29 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
             displacements.append(model.nodal_displacement(u)[:fish.nodes.n_vertices])
         if bar:
             bar.update(1)
-        if stop_requested():     # Ctrl-C: end after this complete sample
+        agreed_stop[:] = [_asked_to_stop(stop_requested, comm)]
+        if agreed_stop[0]:     # Ctrl-C or SIGTERM on any rank: end after this complete sample
             raise KeyboardInterrupt
 
     bar = _progress_bar(n_steps, "FOM", progress and comm.rank == 0)
-    stop_requested = bool        # () → False until the time loop listens for Ctrl-C
+    stop_requested = lambda: None     # noqa: E731  (no stop asked until the time loop listens)
+    agreed_stop = [None]              # the signal every rank agreed to stop by
     velocity = np.zeros(model.n_owned_dofs) if initial_velocity is None else model.owned_from_nodal(initial_velocity)
     zero = np.zeros(model.n_owned_dofs)
     record(StepReport(0, 0.0, 0, 0), zero, velocity, zero)
     settings = NewtonSettings.from_solver(scene.solver).secant_settings()
     error = interruption = None
     try:
-        with _stop_between_steps() as stop_requested:
+        with stop_between_steps() as stop_requested:
             integrate(model, model.scheme, n_steps, (zero, velocity, zero), settings, record,
                       explain=lambda: "; ".join(newton_failure_hints(scene, model)))
     except IntegrationStopped as failure:
         error, cut_steps = str(failure), failure.cut_steps
-    except KeyboardInterrupt:
-        error = interruption = f"interrupted at t = {trajectory.time[-1]:g} s (Ctrl-C)"
+    except KeyboardInterrupt as stop:
+        number = agreed_stop[0] or stop_requested() or (signal.SIGTERM if isinstance(stop, Terminated)
+                                                        else signal.SIGINT)
+        interruption = stop_for(number, f"at t = {trajectory.time[-1]:g} s")
+        error = str(interruption)
     finally:
         if bar:
             bar.close()
@@ -150,27 +155,17 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
         model.destroy()
         result.model = None
     if interruption:
-        raise Interrupted(interruption)
+        raise interruption
     return result
 
 
-@contextmanager
-def _stop_between_steps():
-    """While the time loop runs, Ctrl-C (SIGINT) only asks it to stop after the current step, so
-    trajectory, displacements and summary stay consistent; yields the "was it asked?" test."""
-    requested = []
-    previous = signal.getsignal(signal.SIGINT)
-    try:
-        if previous is not signal.default_int_handler:      # Ctrl-C ignored or handled by the caller
-            raise ValueError
-        signal.signal(signal.SIGINT, lambda number, frame: requested.append(number))
-    except ValueError:       # or not the main thread: Ctrl-C does not reach this loop
-        yield lambda: False
-        return
-    try:
-        yield lambda: bool(requested)
-    finally:
-        signal.signal(signal.SIGINT, previous)
+def _asked_to_stop(stop_requested, comm) -> int | None:
+    """The signal (SIGTERM over SIGINT) any rank was asked to stop by, so that every rank ends
+    after the same step (a signal may reach the ranks of an MPI run one step apart)."""
+    number = stop_requested() or 0
+    if comm.size > 1:
+        number = comm.allreduce(number, op=MPI.MAX)
+    return number or None
 
 
 def _progress_bar(total: int, label: str, enabled: bool):

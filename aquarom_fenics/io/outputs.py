@@ -8,14 +8,18 @@ import os
 import platform
 import shutil
 import subprocess
-from dataclasses import dataclass
+import logging
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.dynamics.trajectory import COLUMNS
+from aquarom_fenics.io.output_lock import lock_output, release_output_locks
 from aquarom_fenics.io.persistence import require_writable, write_json_atomic
+
+log = logging.getLogger("aquarom")
 
 
 class IncrementalCSV:
@@ -64,12 +68,11 @@ def write_trajectory_csv(path: Path, arrays: dict[str, np.ndarray]) -> None:
 
 
 def read_trajectory_csv(path: Path) -> dict[str, np.ndarray]:
-    """The arrays of a trajectory.csv by the names of ``Trajectory`` (time [s], head_x, tail_y, com_x [m])."""
-    data = np.genfromtxt(path, delimiter=",", names=True, ndmin=1)
-    missing = [column for column in TRAJECTORY_FILE_COLUMNS.values() if column not in (data.dtype.names or ())]
-    if missing:
-        raise InputError(f"{path}: not a trajectory.csv of this version (missing column(s) {', '.join(missing)})")
-    return {name: np.asarray(data[TRAJECTORY_FILE_COLUMNS[name]]) for name in COLUMNS}
+    """The arrays of a trajectory.csv by the names of ``Trajectory`` (time [s], head_x, tail_y, com_x [m]),
+    checked by its loader (:func:`aquarom_fenics.io.readback.load_trajectory`)."""
+    from aquarom_fenics.io.readback import load_trajectory
+
+    return load_trajectory(path)
 
 
 def software_versions() -> dict[str, str]:
@@ -158,13 +161,16 @@ class OutputLocation:
     working: Path
     created: bool          # this run created ``working`` (removed again when the input is refused)
     replacing: bool        # ``target`` holds an earlier run of the toolkit, replaced on success
+    made: list[Path] = field(default_factory=list)      # parent folders this run created (deepest first)
+    foreign: list[str] = field(default_factory=list)    # files in ``working`` at the claim not of the toolkit
 
 
 def claim_folder(path: Path, force: bool, resume: bool) -> OutputLocation:
     """An output folder that may be written, refusing to touch anything the toolkit did not write.
 
-    Without ``force`` an occupied folder is refused; with it, only a folder of an earlier run
-    (its ``manifest.json`` lists every file in it) is accepted, and the new run writes beside it.
+    The run first takes the folder's lock (:mod:`output_lock`: one writer per output). Without
+    ``force`` an occupied folder is refused; with it, only a folder of an earlier run (its
+    ``manifest.json`` lists every file in it) is accepted, and the new run writes beside it.
     """
     path = Path(path)
     if path.exists() and not path.is_dir():
@@ -172,81 +178,170 @@ def claim_folder(path: Path, force: bool, resume: bool) -> OutputLocation:
     if resume:
         if not (path / "checkpoint.json").is_file():
             raise InputError(f"--resume: no checkpoint.json in {path}; run without --resume")
+        lock_output(path)
         require_writable(path)
-        return OutputLocation(path, path, created=False, replacing=False)
+        return OutputLocation(path, path, created=False, replacing=False, foreign=foreign_files(path))
+    made = _make_parents(path)
+    try:
+        return _claim_unlocked(path, force, made)
+    except BaseException:
+        remove_if_empty(made)
+        raise
+
+
+def _claim_unlocked(path: Path, force: bool, made: list[Path]) -> OutputLocation:
+    lock_output(path)
+    _mention_leftovers(path)
     if not path.is_dir() or not any(path.iterdir()):
         created = not path.exists()
         _make_folder(path)
-        return OutputLocation(path, path, created=created, replacing=False)
+        return OutputLocation(path, path, created=created, replacing=False, made=made)
     if not force:
         raise InputError(f"output {path} exists; pass --force to replace it or choose another --out")
-    foreign = foreign_files(path)
-    if foreign:
-        raise InputError(f"output {path} holds files the toolkit did not write ({', '.join(foreign[:3])}"
-                         f"{', …' if len(foreign) > 3 else ''}); --force only replaces an earlier run's folder: "
-                         "move them or choose another --out")
+    _refuse_foreign(path, "holds")
     absolute = path.resolve()
     working = absolute.with_name(f"{absolute.name}.new-{os.getpid()}")
     _make_folder(working)
-    return OutputLocation(path, working, created=True, replacing=True)
+    return OutputLocation(path, working, created=True, replacing=True, made=made)
+
+
+def _mention_leftovers(path: Path) -> None:
+    """Warn about ``NAME.new-PID/`` folders of runs that were killed outright (their process is
+    gone): partial results the toolkit never swapped in, left for the user to look at or remove."""
+    absolute = Path(path).resolve()
+    for folder in sorted(absolute.parent.glob(f"{absolute.name}.new-*")):
+        pid = folder.name.rsplit("-", 1)[-1]
+        if folder.is_dir() and pid.isdigit() and not Path(f"/proc/{pid}").exists():
+            log.warning("output %s: %s/ holds the partial results of a run that was killed (PID %s); "
+                        "remove it when you no longer need it", path, folder, pid)
+
+
+def _refuse_foreign(path: Path, verb: str, kept: str = "") -> None:
+    foreign = foreign_files(path)
+    if foreign:
+        raise InputError(f"output {path} {verb} files the toolkit did not write ({', '.join(foreign[:3])}"
+                         f"{', …' if len(foreign) > 3 else ''}); --force only replaces an earlier run's folder: "
+                         f"{kept or 'move them or choose another --out'}")
+
+
+def manifest_files(folder: Path) -> list[str] | None:
+    """The files a folder's manifest.json lists (None without a readable manifest)."""
+    from aquarom_fenics.io.readback import load_manifest
+
+    try:
+        return load_manifest(Path(folder) / MANIFEST).get("files")
+    except InputError:
+        return None
+
+
+def files_in(folder: Path) -> list[str]:
+    """Every file below ``folder`` (relative names, sorted)."""
+    return sorted(str(p.relative_to(folder)) for p in Path(folder).rglob("*") if not p.is_dir())
 
 
 def foreign_files(folder: Path) -> list[str]:
     """Files in ``folder`` that its manifest does not list (everything, when there is no manifest)."""
-    manifest = folder / MANIFEST
-    try:
-        listed = set(json.loads(manifest.read_text()).get("files", []))
-    except (OSError, ValueError, AttributeError):
-        listed = None
-    present = sorted(str(p.relative_to(folder)) for p in folder.rglob("*") if not p.is_dir())
+    listed = manifest_files(folder)
+    present = files_in(folder)
     if listed is None:
         return present
+    listed = set(listed)
     return [name for name in present if name != MANIFEST and name not in listed]
 
 
-def list_outputs(folder: Path) -> None:
-    """Add the list of files of a finished run to its manifest.json (what --force may replace)."""
+def list_outputs(folder: Path, foreign: list[str] = ()) -> None:
+    """Add the list of files of a run to its manifest.json (what --force may replace): every file
+    in the folder except ``foreign`` (files that were there, not the toolkit's, when the run began)."""
     manifest = Path(folder) / MANIFEST
     data = json.loads(manifest.read_text())
-    data["files"] = sorted(str(p.relative_to(folder)) for p in Path(folder).rglob("*")
-                           if not p.is_dir() and p.name != MANIFEST)
+    excluded = set(foreign) | {MANIFEST}
+    data["files"] = [name for name in files_in(folder) if name not in excluded]
     write_json_atomic(manifest, data)
 
 
-def claim_file(path: Path, force: bool, written_by_toolkit) -> Path:
-    """An output file that may be written: an existing one is replaced only with ``force`` and
-    only when ``written_by_toolkit(path)``; the parent folder must be writable."""
+def record_outputs(folder: Path, paths: list[Path]) -> None:
+    """Add files the toolkit wrote into an earlier run's folder (an animation) to its manifest."""
+    folder = Path(folder)
+    listed = manifest_files(folder)
+    if listed is None:
+        return
+    data = json.loads((folder / MANIFEST).read_text())
+    names = {str(Path(p).resolve().relative_to(folder.resolve())) for p in paths}
+    data["files"] = sorted(set(listed) | names)
+    write_json_atomic(folder / MANIFEST, data)
+
+
+def claim_file(path: Path, force: bool, written_by_toolkit, example: str = "prom.npz") -> Path:
+    """An output file that may be written: its lock is taken (one writer per output); an existing
+    one is replaced only with ``force`` and only when ``written_by_toolkit(path)``; the parent
+    folder must be writable."""
     path = Path(path)
     if path.is_dir():
-        raise InputError(f"output {path} is a folder, not a file; give a file name, e.g. {path / 'prom.npz'}")
-    if path.exists():
-        if not force:
-            raise InputError(f"output {path} exists; pass --force to replace it or choose another --out")
-        if not written_by_toolkit(path):
-            raise InputError(f"output {path} was not written by the toolkit; --force only replaces its own files")
-    _make_folder(path.parent)
+        raise InputError(f"output {path} is a folder, not a file; give a file name, e.g. {path / example}")
+    made = _make_parents(path, "file")
+    try:
+        lock_output(path)
+        if path.exists():
+            if not force:
+                raise InputError(f"output {path} exists; pass --force to replace it or choose another --out")
+            if not written_by_toolkit(path):
+                raise InputError(f"output {path} was not written by the toolkit; --force only replaces its own files")
+        require_writable(path.parent)
+    except BaseException:
+        remove_if_empty(made)
+        raise
     return path
 
 
 def publish(location: OutputLocation) -> Path:
-    """Swap a finished replacement run into its target (the earlier run is removed after the swap)."""
+    """Swap a finished replacement run into its target, deciding at that moment: files added to
+    the target during the run keep the earlier run in place (InputError naming them). After the
+    swap only the files the earlier run's manifest lists are removed."""
     if not location.replacing:
         return location.target
     target = location.target.resolve()
+    _refuse_foreign(location.target, "now holds",
+                    f"the earlier results are kept; this run's results are in {location.working}/")
     if not _exchange(location.working, target):
         previous = target.with_name(f"{target.name}.old-{os.getpid()}")
         os.rename(target, previous)
         os.rename(location.working, target)
         location.working = previous
-    shutil.rmtree(location.working)
+    left = remove_run_folder(location.working)
+    if left:
+        log.warning("output %s: files added during the swap were kept in %s/ (%s)", location.target,
+                    location.working, ", ".join(left[:3]))
     location.working = location.target
     return location.target
 
 
+def remove_run_folder(folder: Path) -> list[str]:
+    """Remove the files a run folder's manifest lists, the manifest and the emptied folders; return
+    the files left (not the toolkit's: the folder then stays)."""
+    folder = Path(folder)
+    for name in (manifest_files(folder) or []) + [MANIFEST]:
+        victim = folder / name
+        if victim.is_file() or victim.is_symlink():
+            victim.unlink()
+    for sub in sorted((p for p in folder.rglob("*") if p.is_dir()), key=lambda p: len(p.parts), reverse=True):
+        try:
+            sub.rmdir()
+        except OSError:
+            pass
+    left = files_in(folder)
+    if not left:
+        try:
+            folder.rmdir()
+        except OSError:
+            pass
+    return left
+
+
 def discard(location: OutputLocation) -> None:
-    """Remove what a refused run wrote (only a folder it created itself)."""
+    """Remove what a refused run wrote (only folders it created itself)."""
     if location.created and location.working.is_dir():
         shutil.rmtree(location.working)
+    remove_if_empty(location.made)
 
 
 def _exchange(first: Path, second: Path) -> bool:
@@ -258,6 +353,33 @@ def _exchange(first: Path, second: Path) -> bool:
         return False
     at_fdcwd, rename_exchange = -100, 2
     return renameat2(at_fdcwd, os.fsencode(first), at_fdcwd, os.fsencode(second), rename_exchange) == 0
+
+
+def _make_parents(path: Path, kind: str = "folder") -> list[Path]:
+    """Create the parent folders of ``path``; return those created (deepest first)."""
+    parent = Path(path).absolute().parent
+    created = [folder for folder in (parent, *parent.parents) if not folder.exists()]
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        remove_if_empty(created)
+        raise InputError(f"output {path}: a parent of this {kind} is a file; choose another --out") from None
+    except OSError as error:
+        remove_if_empty(created)
+        raise InputError(f"output {path}: cannot create its folder {parent} ({error.strerror}); "
+                         "choose another --out") from None
+    return created
+
+
+def remove_if_empty(folders: list[Path]) -> None:
+    """Remove the folders that are empty but for this run's lock files (deepest first), leaving
+    the others."""
+    for folder in folders:
+        release_output_locks(folder)
+        try:
+            folder.rmdir()
+        except OSError:
+            pass
 
 
 def _make_folder(path: Path) -> None:

@@ -258,3 +258,30 @@ def _on_writer(comm, is_writer: bool, action: Callable[[], None], on_store_error
             on_store_error(error)
     if comm is not None:
         comm.barrier()
+
+
+def clear_entries(folder: Path) -> tuple[int, list[str]]:
+    """Remove the cache entries in ``folder`` (files with a checksum sidecar, each under its lock,
+    with the sidecar and the lock file) and the folders left empty; return the number removed and
+    the files left (not written by the cache: a user's files are never removed)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return 0, []
+    removed = 0
+    for sidecar in sorted(folder.rglob("*.sha256")):
+        entry = sidecar.with_name(sidecar.name[:-len(".sha256")])
+        discard_entry(entry)
+        entry.with_name(entry.name + ".lock").unlink(missing_ok=True)
+        removed += 1
+    for sub in sorted((p for p in folder.rglob("*") if p.is_dir()), key=lambda p: len(p.parts), reverse=True):
+        try:
+            sub.rmdir()
+        except OSError:
+            pass
+    left = sorted(str(p.relative_to(folder)) for p in folder.rglob("*") if not p.is_dir())
+    if not left:
+        try:
+            folder.rmdir()
+        except OSError:
+            pass
+    return removed, left

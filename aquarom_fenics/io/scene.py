@@ -55,9 +55,15 @@ class Scene:
         """Read and validate a scene file; a bare name like ``so1`` means ``scenes/so1.toml``."""
         path = resolve_scene_path(path)
         try:
-            data = tomllib.loads(path.read_text())
+            text = path.read_text(encoding="utf-8").removeprefix("\ufeff")    # a byte-order mark is no statement
+            if _nesting_depth(text) > MAX_NESTING:
+                raise InputError(f"scene {path}: arrays or tables nested deeper than {MAX_NESTING} levels; "
+                                 "a scene needs at most 3")
+            data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as error:
             raise InputError(f"scene {path}: malformed TOML ({error})") from None
+        except RecursionError:
+            raise InputError(f"scene {path}: nested too deeply to read; a scene needs at most 3 levels") from None
         except UnicodeDecodeError:
             raise InputError(f"scene {path}: not a UTF-8 text file") from None
         except OSError as error:
@@ -154,14 +160,56 @@ def _toml_value(value) -> str:
     raise TypeError(f"no TOML literal for {value!r}")
 
 
+MAX_NESTING = 32
+"""Deepest nesting of arrays and inline tables read from a scene file (a scene needs 3)."""
+
+
 def resolve_scene_path(path: str | Path) -> Path:
+    """The scene file of a path or a shipped scene's name (a folder of that name does not hide
+    the shipped scene: a folder is no scene file)."""
     candidate = Path(path)
-    if not candidate.exists() and candidate.suffix == "" and (SCENES_DIR / f"{candidate}.toml").exists():
-        candidate = SCENES_DIR / f"{candidate}.toml"
-    if not candidate.is_file():
-        shipped = ", ".join(sorted(p.stem for p in SCENES_DIR.glob("*.toml")))
-        raise InputError(f"scene {path}: file not found (give a path to a .toml file or one of: {shipped})")
-    return candidate
+    shipped_file = SCENES_DIR / f"{candidate}.toml"
+    if candidate.suffix == "" and len(candidate.parts) == 1 and shipped_file.exists() and not candidate.is_file():
+        return shipped_file
+    if candidate.is_file():
+        return candidate
+    shipped = ", ".join(sorted(p.stem for p in SCENES_DIR.glob("*.toml")))
+    hint = f"give a path to a .toml file or one of: {shipped}"
+    if candidate.is_dir():
+        raise InputError(f"scene {path}: a folder, not a scene file ({hint})")
+    if candidate.is_symlink():
+        raise InputError(f"scene {path}: a symbolic link that leads to no file (a loop or a missing target); {hint}")
+    if candidate.exists():
+        raise InputError(f"scene {path}: not a regular file ({hint})")
+    raise InputError(f"scene {path}: file not found ({hint})")
+
+
+def _nesting_depth(text: str) -> int:
+    """Upper bound of how deeply arrays and inline tables nest in TOML text (brackets and braces
+    counted outside quoted strings and comments)."""
+    depth = deepest = 0
+    quote = None
+    comment = escaped = False
+    for character in text:
+        if comment:
+            comment = character != "\n"
+        elif quote:
+            if escaped:
+                escaped = False
+            elif character == "\\" and quote == '"':
+                escaped = True
+            elif character == quote:
+                quote = None
+        elif character in "\"'":
+            quote = character
+        elif character == "#":
+            comment = True
+        elif character in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif character in "]}":
+            depth = max(depth - 1, 0)
+    return deepest
 
 
 def scene_from_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str = ".") -> Scene:

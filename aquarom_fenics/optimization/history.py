@@ -1,7 +1,6 @@
 """What an optimiser leaves after every iteration: the history row, the checkpoint, its safeguards."""
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,6 +47,7 @@ class Checkpoint:
 
     def __init__(self, path: Path | None, scene: Scene, method: str, write: bool = True):
         self.path, self.scene_hash, self.method, self.write = path, scene.hash, method, write
+        self.scene = scene
 
     def save(self, state: dict, history: list[dict], builder: PromBuilder) -> None:
         if self.path is None or not self.write:
@@ -60,18 +60,17 @@ class Checkpoint:
                                       else builder.basis_center.tolist()})
 
     def load(self) -> dict | None:
+        """The saved state, checked against the checkpoint schema (:mod:`aquarom_fenics.io.readback`)
+        and against this scene and method; InputError before anything is written otherwise."""
+        from aquarom_fenics.io.readback import load_checkpoint
+        from aquarom_fenics.optimization.cost import design_space
+
         if self.path is None or not self.path.exists():
             return None
-        try:
-            data = json.loads(self.path.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError) as error:
-            raise InputError(f"checkpoint {self.path}: unreadable ({error}); start without --resume") from None
-        if not isinstance(data, dict) or any(key not in data for key in self.KEYS):
-            raise InputError(f"checkpoint {self.path}: incomplete (needs {', '.join(self.KEYS)}); "
-                             "start without --resume")
-        if data.get("scene_hash") != self.scene_hash or data.get("method") != self.method:
-            raise InputError(f"checkpoint {self.path}: written for scene hash {data.get('scene_hash')} with "
-                             f"method {data.get('method')}, not this scene ({self.scene_hash}, {self.method}); "
+        data = load_checkpoint(self.path, len(design_space(self.scene).names), self.method)
+        if data["scene_hash"] != self.scene_hash or data["method"] != self.method:
+            raise InputError(f"checkpoint {self.path}: written for scene hash {data['scene_hash']} with "
+                             f"method {data['method']}, not this scene ({self.scene_hash}, {self.method}); "
                              "start without --resume")
         return data
 

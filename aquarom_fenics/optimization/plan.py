@@ -6,8 +6,11 @@ power laws in the number of cells), otherwise from the reference figures measure
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
+
+from aquarom_fenics.errors import InputError
 
 from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS, block_cache_path
 from aquarom_fenics.io.paths import bench_results
@@ -143,3 +146,76 @@ def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
         prom_part = prom_build_seconds(cells, len(scene.shapes), degree) if reduced else 0
         lines.append(f"estimate: ~{fom_part + prom_part:.0f} s")
     return lines
+
+
+# ---------------------------------------------------------------------- bounded plans
+MAX_CELLS_FACTOR = 4.0
+"""A generated block may have at most this many times its level's advertised number of cells."""
+MIN_BLOCK_ASPECT = 0.01
+"""Thinnest side over longest side of a generated block below which its cells are too flat."""
+MAX_DOF_STEPS = 2e9
+"""Largest number of time steps × degrees of freedom of one FOM run (level 5, degree 2 with the
+default horizon is 1.4e7)."""
+MAX_STORED_BYTES = 1e9
+"""Largest stored displacement series of one run [bytes] (samples × vertices × 3 × 8 B)."""
+VERTICES_PER_CELL = 0.3
+NODES_PER_CELL = {1: 0.3, 2: 1.8}
+"""Nodes per cell of the block meshes (level 1: 1232 cells, 362 vertices, 2239 quadratic nodes)."""
+OVERRIDE = "--allow-large"
+
+
+def estimated_block_cells(level: int, length: float, width: float, height: float) -> float:
+    """Cells gmsh makes of a block: the level's count times the ratio of element-size cubes that
+    fill the box (each side at least one element thick) to those of the reference box."""
+    from aquarom_fenics.geometry.block import LEVEL_MESH_SIZE, REFERENCE_BOX, block_mesh_size
+
+    sides = np.array([length, width, height], dtype=np.float64)
+    with np.errstate(all="ignore"):      # sides of 1e-300 or 1e300 m: an infinite estimate, refused
+        size = np.float64(block_mesh_size(level, *sides))
+        cubes = np.prod(np.maximum(sides, size) / size)
+        reference = np.prod(np.array(REFERENCE_BOX) / LEVEL_MESH_SIZE[level])
+        cells = LEVEL_TARGET_CELLS[level] * cubes / reference
+    return float(cells) if np.isfinite(cells) else math.inf
+
+
+def estimated_cells(scene: Scene) -> float:
+    """Cells of the scene's mesh (an external mesh counts as the reference mesh)."""
+    if scene.mesh.file:
+        return REFERENCE_CELLS
+    mesh = scene.mesh
+    return estimated_block_cells(mesh.level, mesh.length, mesh.width, mesh.height)
+
+
+def check_mesh_bounds(scene: Scene) -> None:
+    """Refuse (InputError naming --allow-large) a generated block far outside its level's range:
+    flat or thin boxes, or several times the level's cells."""
+    if scene.mesh.file:
+        return
+    mesh = scene.mesh
+    sides = (mesh.length, mesh.width, mesh.height)
+    target = LEVEL_TARGET_CELLS[mesh.level]
+    cells = estimated_cells(scene)
+    aspect = min(sides) / max(sides)
+    box = " × ".join(f"{side:g}" for side in sides)
+    if not aspect >= MIN_BLOCK_ASPECT or not cells <= MAX_CELLS_FACTOR * target:
+        raise InputError(f"scene {scene.source}: [mesh] block {box} m at level {mesh.level} is far outside the "
+                         f"level's range (about {cells:,.0f} cells against ~{target:,}, thinnest/longest side "
+                         f"{aspect:.2g}, at least {MIN_BLOCK_ASPECT:g}); change the block or pass {OVERRIDE}")
+
+
+def check_run_bounds(scene: Scene) -> None:
+    """Refuse (InputError naming --allow-large) a run whose steps × dofs or stored series is too large."""
+    steps = scene.n_steps
+    cells = estimated_cells(scene)
+    dofs = 3 * NODES_PER_CELL[scene.mesh.degree] * cells
+    stored = (steps + 1) * VERTICES_PER_CELL * cells * 3 * 8
+    solver = scene.solver
+    if steps * dofs > MAX_DOF_STEPS:
+        raise InputError(f"scene {scene.source}: [solver] duration = {solver.duration:g} s with time_step = "
+                         f"{solver.time_step:g} s is {steps:,} steps × ~{dofs:,.0f} dofs = {steps * dofs:.1e}, beyond "
+                         f"the limit {MAX_DOF_STEPS:.0e} (about {fom_seconds(cells, steps, scene.mesh.degree):.1e} s); "
+                         f"use a larger time_step or pass {OVERRIDE}")
+    if stored > MAX_STORED_BYTES:
+        raise InputError(f"scene {scene.source}: [solver] {steps:,} steps would store a displacement series of "
+                         f"~{stored / 1e9:.1f} GB (limit {MAX_STORED_BYTES / 1e9:g} GB); use a larger time_step "
+                         f"or pass {OVERRIDE}")

@@ -157,7 +157,8 @@ def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights:
                 "scene": scene.name, "scene_hash": scene.hash, "method": scene.optimizer.method, "completed": False,
                 "stop_reason": f"{reason} after {rows} history row(s)", "history": history_file.name,
                 "resume": f"aquarom optimize {scene.source} --out {out_dir} --resume"})
-        raise Interrupted(f"{reason} after {rows} history row(s); continue with --resume") from None
+        kind = type(stop) if isinstance(stop, Interrupted) else Interrupted
+        raise kind(f"{reason} after {rows} history row(s); continue with --resume") from None
     if is_writer:
         writer.close()
         _write_summary(out_dir, scene, result, check, weights or CostWeights())

@@ -9,7 +9,6 @@ the fish. Lengths are in metres unless a name says cm, times in seconds, sizes i
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -82,29 +81,50 @@ VIEWS = (_View("from above; grey outline at t = 0", (0.0, 0.0, 1.0), (0.0, 1.0, 
 
 
 # ---------------------------------------------------------------------------------- animation
-def animate_run(run_dir: Path, out: Path | None = None, fps: int = DEFAULT_FPS, stride: int = 1) -> list[Path]:
-    """Write the animation of a simulation run (MP4) and its GIF preview (same stem, half size).
+ANIMATION_MARK = "written by aquarom animate"
+"""Comment stored in every MP4 and GIF the toolkit writes (how --force knows its own files)."""
+
+
+def animate_run(run_dir: Path, out: Path | None = None, fps: int = DEFAULT_FPS, stride: int = 1,
+                gif: Path | None | bool = True, before_writing=None) -> list[Path]:
+    """Write the animation of a simulation run (MP4) and its GIF preview (half size).
 
     One frame per ``stride``-th stored sample, played at ``fps`` frames per second. ``out``
-    defaults to RUN_DIR/animation.mp4. Rank 0 renders; returns [mp4, gif] on every rank.
+    defaults to RUN_DIR/animation.mp4; ``gif`` is the preview's path (True: the MP4's with .gif,
+    None or False: no preview). ``before_writing(paths)`` is called once the run is read and
+    before anything is written (the command line claims its outputs there). Rank 0 renders;
+    returns the files written on every rank.
     """
     run_dir = Path(run_dir)
     mp4_path = Path(out) if out is not None else run_dir / ANIMATION_FILE
-    _check_animation_options(mp4_path, fps, stride)
+    check_animation_options(mp4_path, fps, stride)
     series, com_x, title = _load_run(run_dir)
-    gif_path = mp4_path.with_suffix(".gif")
+    gif_path = mp4_path.with_suffix(".gif") if gif is True else (Path(gif) if gif else None)
+    if before_writing is not None:
+        before_writing([mp4_path] + ([gif_path] if gif_path else []))
     comm = MPI.COMM_WORLD
     if comm.rank == 0:
         samples = range(0, series.time.size, stride)
         frames = _render_frames(series, samples, com_x, title)
         _write_movies(frames, mp4_path, gif_path, fps)
     comm.barrier()
-    return [mp4_path, gif_path]
+    return [mp4_path] + ([gif_path] if gif_path else [])
 
 
-def _check_animation_options(mp4_path: Path, fps: int, stride: int) -> None:
+def is_animation_file(path: Path) -> bool:
+    """An MP4 or GIF written by :func:`animate_run` (it carries :data:`ANIMATION_MARK`)."""
+    try:
+        return ANIMATION_MARK.encode() in Path(path).read_bytes()
+    except OSError:
+        return False
+
+
+def check_animation_options(mp4_path: Path, fps: int, stride: int, gif_path: Path | None = None) -> None:
+    """Refuse an output name that is not .mp4 (.gif for the preview), fps < 1 or stride < 1."""
     if mp4_path.suffix.lower() != ".mp4":
         raise InputError(f"--out {mp4_path}: the animation is written as MP4, give a file name ending in .mp4")
+    if gif_path is not None and Path(gif_path).suffix.lower() != ".gif":
+        raise InputError(f"--gif {gif_path}: the preview is written as GIF, give a file name ending in .gif")
     if fps < 1:
         raise InputError(f"--fps {fps}: must be a whole number of frames per second >= 1")
     if stride < 1:
@@ -113,7 +133,7 @@ def _check_animation_options(mp4_path: Path, fps: int, stride: int) -> None:
 
 def _load_run(run_dir: Path) -> tuple[DisplacementSeries, np.ndarray, str]:
     """The run's displacement series, centre-of-mass x [m] at its samples, and a title."""
-    from aquarom_fenics.io.outputs import read_trajectory_csv
+    from aquarom_fenics.io.readback import load_run_summary, load_trajectory
 
     if not run_dir.is_dir():
         raise InputError(f"run directory {run_dir} does not exist (give the --out directory of `aquarom simulate`)")
@@ -125,38 +145,45 @@ def _load_run(run_dir: Path) -> tuple[DisplacementSeries, np.ndarray, str]:
         raise InputError(f"{displacement_path} is missing: the run did not store nodal displacements; "
                          f"rerun `aquarom simulate SCENE --out {run_dir}` to write it")
     series = read_displacement_series(displacement_path)
-    trajectory = read_trajectory_csv(run_dir / "trajectory.csv")
-    com_x = np.interp(series.time, np.atleast_1d(trajectory["time"]), np.atleast_1d(trajectory["com_x"]))
-    summary = json.loads((run_dir / "summary.json").read_text())
+    trajectory = load_trajectory(run_dir / "trajectory.csv")
+    com_x = np.interp(series.time, trajectory["time"], trajectory["com_x"])
+    summary = load_run_summary(run_dir / "summary.json")
     return series, com_x, _run_title(summary)
 
 
 def _run_title(summary: dict) -> str:
     """``scene (MODEL), mesh, design`` of a run's summary.json."""
     mesh = summary.get("scene_values", {}).get("mesh", {})
-    mesh_text = f"mesh {Path(mesh['file']).name}" if mesh.get("file") else f"level {mesh.get('level', '?')}"
+    mesh_text = f"mesh {Path(str(mesh['file'])).name}" if mesh.get("file") else f"level {mesh.get('level', '?')}"
     xi = {name: value for name, value in summary.get("xi", {}).items() if value != 0.0}
     design = ", ".join(f"{name} = {value:g}" for name, value in xi.items()) or "nominal design"
     return f"{summary.get('scene', '?')} ({str(summary.get('model', '?')).upper()}), {mesh_text}, {design}"
 
 
-def _write_movies(frames, mp4_path: Path, gif_path: Path, fps: int) -> None:
-    """Stream RGB frames into the MP4 and collect the downscaled GIF preview."""
+def _write_movies(frames, mp4_path: Path, gif_path: Path | None, fps: int) -> None:
+    """Stream RGB frames into the MP4 and collect the downscaled GIF preview (both marked with
+    :data:`ANIMATION_MARK`)."""
     import imageio.v2 as imageio
     from PIL import Image
 
     mp4_path.parent.mkdir(parents=True, exist_ok=True)
     previews = []
     with imageio.get_writer(mp4_path, format="FFMPEG", fps=fps, codec="libx264", pixelformat="yuv420p",
-                            quality=8, macro_block_size=16) as writer:
+                            quality=8, macro_block_size=16,
+                            output_params=["-metadata", f"comment={ANIMATION_MARK}"]) as writer:
         for frame in frames:
             writer.append_data(frame)
+            if gif_path is None:
+                continue
             height, width = frame.shape[:2]
             size = (width // GIF_DOWNSCALE, height // GIF_DOWNSCALE)
             previews.append(Image.fromarray(frame).resize(size, Image.Resampling.LANCZOS))
+    if gif_path is None:
+        return
     palette = _shared_palette(previews)
     indexed = [preview.quantize(palette=palette, dither=Image.Dither.NONE) for preview in previews]
-    indexed[0].save(gif_path, save_all=True, append_images=indexed[1:], duration=round(1000 / fps), loop=0)
+    indexed[0].save(gif_path, save_all=True, append_images=indexed[1:], duration=round(1000 / fps), loop=0,
+                    comment=ANIMATION_MARK.encode())
 
 
 def _shared_palette(images):

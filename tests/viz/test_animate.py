@@ -78,7 +78,7 @@ def test_inconsistent_series_are_refused(tmp_path):
 
 def test_animate_writes_an_mp4_and_a_gif_with_one_frame_per_sample(run_dir, tmp_path, capsys):
     movie = tmp_path / "swim.mp4"
-    assert main(["animate", str(run_dir), "--out", str(movie), "--fps", "10"]) == 0
+    assert main(["animate", str(run_dir), "--out", str(movie), "--gif", str(movie.with_suffix(".gif")), "--fps", "10"]) == 0
     assert f"wrote {movie}" in capsys.readouterr().out
     reader = imageio.get_reader(movie)
     frames = [frame for frame in reader]

@@ -1,0 +1,263 @@
+"""Files the toolkit reads back, each through one loader with a schema and one-line errors.
+
+A damaged file (unreadable, not JSON, a key missing or of the wrong type, a CSV with other
+columns or text where numbers belong) is an :class:`InputError` naming the file, the key and
+what would be valid, never a ``KeyError`` or ``IndexError`` later on.
+
+A schema is a small tree of checkers: :data:`NUMBER`, :data:`INTEGER`, :data:`TEXT`,
+:data:`FLAG`, :data:`ANYTHING`, :func:`optional`, :func:`list_of` and :func:`record` (a JSON
+object with required and optional keys; other keys are allowed).
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from aquarom_fenics.errors import InputError
+
+MAX_JSON_BYTES = 256 * 1024 * 1024
+"""Largest JSON file read back [bytes] (a checkpoint of a long optimisation is a few MB)."""
+MAX_JSON_DEPTH = 64
+"""Deepest nesting of arrays and objects accepted in a JSON file read back."""
+
+
+class SchemaError(ValueError):
+    """A value that does not fit its schema: ``where`` (a dotted key) and what was expected."""
+
+    def __init__(self, where: str, expected: str, value):
+        shown = repr(value)
+        super().__init__(f"{where or 'the file'} must be {expected}, got {shown[:60]}{'…' if len(shown) > 60 else ''}")
+
+
+Check = Callable[[object, str], None]
+
+
+def _scalar(expected: str, test) -> Check:
+    def check(value, where):
+        if not test(value):
+            raise SchemaError(where, expected, value)
+    return check
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+NUMBER = _scalar("a number", lambda v: _is_number(v))
+FINITE = _scalar("a finite number", lambda v: _is_number(v) and math.isfinite(v))
+INTEGER = _scalar("a whole number >= 0", lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 0)
+TEXT = _scalar("a string", lambda v: isinstance(v, str))
+FLAG = _scalar("true or false", lambda v: isinstance(v, bool))
+ANYTHING = _scalar("anything", lambda v: True)
+
+
+def optional(check: Check) -> Check:
+    """``check``, or null."""
+    def optional_check(value, where):
+        if value is not None:
+            check(value, where)
+    return optional_check
+
+
+def list_of(check: Check, length: int | None = None) -> Check:
+    """A JSON array (of ``length`` items, when given) whose items pass ``check``."""
+    def list_check(value, where):
+        if not isinstance(value, list) or (length is not None and len(value) != length):
+            raise SchemaError(where, "a list" + (f" of {length} items" if length is not None else ""), value)
+        for index, item in enumerate(value):
+            check(item, f"{where}[{index}]")
+    return list_check
+
+
+@dataclass
+class record:
+    """A JSON object with ``required`` keys and ``optional`` ones, each with its check."""
+
+    required: dict[str, Check]
+    optional: dict[str, Check] = field(default_factory=dict)
+
+    def __call__(self, value, where):
+        if not isinstance(value, dict):
+            raise SchemaError(where, "an object {…}", value)
+        for key, check in self.required.items():
+            if key not in value:
+                raise SchemaError(f"{where}.{key}".lstrip("."), "present", "nothing")
+            check(value[key], f"{where}.{key}".lstrip("."))
+        for key, check in self.optional.items():
+            if key in value:
+                check(value[key], f"{where}.{key}".lstrip("."))
+
+
+def load_json(path: Path, schema: Check, kind: str, remedy: str = "") -> dict:
+    """The JSON file ``path`` checked against ``schema``; InputError "KIND PATH: what; remedy"."""
+    path = Path(path)
+    remedy = f"; {remedy}" if remedy else ""
+    data = _read_json(path, kind, remedy)
+    try:
+        schema(data, "")
+    except SchemaError as error:
+        raise InputError(f"{kind} {path}: {error}{remedy}") from None
+    return data
+
+
+def _read_json(path: Path, kind: str, remedy: str):
+    try:
+        if path.stat().st_size > MAX_JSON_BYTES:
+            raise InputError(f"{kind} {path}: larger than {MAX_JSON_BYTES // 2**20} MB{remedy}")
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(f"{kind} {path}: missing{remedy}") from None
+    except IsADirectoryError:
+        raise InputError(f"{kind} {path}: a folder, not a file{remedy}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{kind} {path}: not UTF-8 text{remedy}") from None
+    except OSError as error:
+        raise InputError(f"{kind} {path}: cannot be read ({error.strerror}){remedy}") from None
+    if _nesting(text) > MAX_JSON_DEPTH:
+        raise InputError(f"{kind} {path}: nested deeper than {MAX_JSON_DEPTH} levels{remedy}")
+    try:
+        return json.loads(text)
+    except ValueError as error:
+        raise InputError(f"{kind} {path}: not valid JSON ({error}){remedy}") from None
+
+
+def _nesting(text: str) -> int:
+    """Upper bound of the nesting depth of JSON text (brackets counted outside strings)."""
+    depth = deepest = 0
+    in_string = escaped = False
+    for character in text:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif character == "\\":
+                escaped = True
+            elif character == '"':
+                in_string = False
+        elif character == '"':
+            in_string = True
+        elif character in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif character in "]}":
+            depth -= 1
+    return deepest
+
+
+# ---------------------------------------------------------------------- the file kinds
+def run_summary_schema() -> record:
+    """summary.json of a simulation run (what ``aquarom animate`` reads)."""
+    return record({"completed": FLAG},
+                  {"stop_reason": TEXT, "scene": TEXT, "model": TEXT, "xi": record({}), "scene_values": record({}, {"mesh": record({})}),
+                   "steps": INTEGER, "distance": optional(NUMBER)})
+
+
+def load_run_summary(path: Path) -> dict:
+    """summary.json of a simulation run, checked (xi values must be numbers)."""
+    data = load_json(path, run_summary_schema(), "run summary",
+                     "rerun `aquarom simulate` into this folder with --force")
+    for name, value in data.get("xi", {}).items():
+        try:
+            NUMBER(value, f"xi.{name}")
+        except SchemaError as error:
+            raise InputError(f"run summary {path}: {error}") from None
+    return data
+
+
+def checkpoint_schema(dimension: int, method: str) -> record:
+    """checkpoint.json of an optimisation with ``dimension`` design variables."""
+    vector = list_of(FINITE, dimension)
+    if method == "paper":
+        state = record({"z": vector, "iteration": INTEGER, "scaling": vector, "previous_gradient": optional(vector),
+                        "since_build": INTEGER,
+                        "center": optional(record({"z": vector, "distance": FINITE, "distance_gradient": vector},
+                                                  {"prom_z": vector}))},
+                       {"confirm": ANYTHING, "restarted": ANYTHING})
+    else:
+        state = record({"center": vector, "radius": FINITE, "iteration": INTEGER}, {"cuts": list_of(vector)})
+    row = record({"iteration": INTEGER, "wall_time": FINITE})
+    return record({"scene_hash": TEXT, "method": TEXT, "state": state, "history": list_of(row),
+                   "builds": INTEGER, "build_time": FINITE, "solve_time": FINITE},
+                  {"reused": INTEGER, "basis_reuses": INTEGER, "build_records": list_of(ANYTHING),
+                   "basis_center": optional(vector)})
+
+
+def load_checkpoint(path: Path, dimension: int, method: str) -> dict:
+    """checkpoint.json, checked against :func:`checkpoint_schema` (nothing is written before)."""
+    return load_json(path, checkpoint_schema(dimension, method), "checkpoint", "start without --resume")
+
+
+def manifest_schema() -> record:
+    """manifest.json of an output folder: the files the toolkit wrote there, and how."""
+    return record({}, {"files": list_of(TEXT), "command": TEXT})
+
+
+def load_manifest(path: Path) -> dict:
+    """manifest.json, checked (``files`` a list of names)."""
+    return load_json(path, manifest_schema(), "manifest")
+
+
+def load_csv_table(path: Path, columns: tuple[str, ...] | list[str], kind: str, remedy: str = "",
+                   text_columns: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
+    """A CSV file with a header holding ``columns`` (others allowed) and at least one row; numbers
+    in every column but ``text_columns`` (an empty cell is NaN)."""
+    path = Path(path)
+    remedy = f"; {remedy}" if remedy else ""
+    try:
+        with open(path, newline="", encoding="utf-8") as stream:
+            rows = list(csv.reader(stream))
+    except FileNotFoundError:
+        raise InputError(f"{kind} {path}: missing{remedy}") from None
+    except (UnicodeDecodeError, csv.Error) as error:
+        raise InputError(f"{kind} {path}: not a CSV text file ({error}){remedy}") from None
+    except OSError as error:
+        raise InputError(f"{kind} {path}: cannot be read ({error.strerror}){remedy}") from None
+    if not rows:
+        raise InputError(f"{kind} {path}: empty (no header {','.join(columns)}){remedy}")
+    header = rows[0]
+    missing = [name for name in columns if name not in header]
+    if missing:
+        raise InputError(f"{kind} {path}: the header lacks {', '.join(missing)} (needs {','.join(columns)}){remedy}")
+    body = [row for row in rows[1:] if row]
+    if not body:
+        raise InputError(f"{kind} {path}: no rows after the header{remedy}")
+    table = {}
+    for name in columns:
+        index = header.index(name)
+        values = []
+        for number, row in enumerate(body, start=2):
+            cell = row[index] if index < len(row) else None
+            if cell is None:
+                raise InputError(f"{kind} {path}: line {number} has {len(row)} cells, not {len(header)}{remedy}")
+            if name in text_columns:
+                values.append(cell)
+                continue
+            try:
+                values.append(float(cell) if cell != "" else math.nan)
+            except ValueError:
+                raise InputError(f"{kind} {path}: line {number}, column {name}: {cell[:30]!r} is not a number"
+                                 f"{remedy}") from None
+        table[name] = np.array(values, dtype=object if name in text_columns else float)
+    return table
+
+
+def load_trajectory(path: Path) -> dict[str, np.ndarray]:
+    """trajectory.csv of a run: time [s], head x, tail y, centre-of-mass x [m], Newton iterations;
+    finite values, times increasing."""
+    from aquarom_fenics.dynamics.trajectory import COLUMNS
+    from aquarom_fenics.io.outputs import TRAJECTORY_FILE_COLUMNS
+
+    remedy = "rerun `aquarom simulate` into this folder with --force"
+    file_columns = [TRAJECTORY_FILE_COLUMNS[name] for name in COLUMNS]
+    table = load_csv_table(path, file_columns, "trajectory", remedy)
+    for name, values in table.items():
+        if not np.all(np.isfinite(values)):
+            raise InputError(f"trajectory {path}: column {name} holds empty or non-finite values; {remedy}")
+    if np.any(np.diff(table[TRAJECTORY_FILE_COLUMNS["time"]]) <= 0):
+        raise InputError(f"trajectory {path}: the times do not increase; {remedy}")
+    return {name: table[TRAJECTORY_FILE_COLUMNS[name]] for name in COLUMNS}
