@@ -31,13 +31,17 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     comm = MPI.COMM_WORLD
     agreement = comm.Dup() if comm.size > 1 else None
-    set_log_level("info" if args.verbose else "warning")      # the console shows details only with --verbose
-    logging.getLogger("aquarom").setLevel(logging.INFO if comm.rank == 0 else logging.ERROR)  # records for any handler
+    logger = set_log_level("info" if args.verbose else "warning")   # the console shows details only with --verbose
+    if comm.rank != 0:
+        logger.setLevel(logging.ERROR)
+    # the toolkit's console handler is the one that prints: dolfinx installs a handler on the root logger
+    propagates, logger.propagate = logger.propagate, False
     try:
         with sigterm_as_interrupt():
             code, line = run_and_settle(args)
     finally:
         release_output_locks()
+        logger.propagate = propagates
     if line is None:
         return code
     return end_in_agreement(agreement, code, f"aquarom {args.command}: {line}")

@@ -65,8 +65,8 @@ def check_inputs(args, scene):
     from aquarom_fenics.dynamics.simulate import check_time_grid
 
     xi = parse_xi_assignments(getattr(args, "xi", None), scene)
-    if args.command in ("simulate", "compare", "shapes") and (xi or args.command != "shapes"):
-        warn_about_unnamed_parameters(args, scene, xi)
+    if args.command == "shapes" and xi:
+        warn_about_unnamed_parameters(scene, xi)
     if getattr(args, "prom", None) is not None and getattr(args, "model", "prom") != "prom":
         raise InputError(f"--prom {args.prom} is used by --model prom only (this run: --model {args.model})")
     if args.command in ("simulate", "compare", "optimize", "pareto"):
@@ -118,13 +118,11 @@ def say(text: str) -> None:
             pass
 
 
-def warn_about_unnamed_parameters(args, scene, xi: dict) -> None:
-    """A shape parameter not given with --xi takes 0 in the full-order design; say so when 0 is
-    outside the scene's bounds (as a value given with --xi outside them is)."""
+def warn_about_unnamed_parameters(scene, xi: dict) -> None:
+    """``shapes --xi`` draws the design of the given values, the other parameters at 0 (a run takes
+    their start values, see :func:`run_design`); say so when 0 is outside the scene's bounds."""
     import logging
 
-    if args.command == "simulate" and args.model != "fom":
-        return
     for shape in scene.shapes:
         if shape.name not in xi and not shape.lower <= 0.0 <= shape.upper:
             logging.getLogger("aquarom").warning(

@@ -180,11 +180,18 @@ def entry_lock(path: Path, shared: bool = False):
 
 
 def store(path: Path, save: Callable[[Path], None]) -> None:
-    """``save(path)`` (an atomic replacement) and the checksum sidecar, as one step under the entry's lock."""
+    """``save(path)`` (an atomic replacement) and the checksum sidecar, as one step under the entry's lock;
+    a store cut short (an error, Ctrl-C or SIGTERM between the two) leaves no unsealed entry behind."""
     path.parent.mkdir(parents=True, exist_ok=True)
     with entry_lock(path):
-        save(path)
-        seal(path)
+        try:
+            save(path)
+            seal(path)
+        except BaseException:
+            if not is_intact(path):
+                for victim in (path, _sidecar(path)):
+                    victim.unlink(missing_ok=True)
+            raise
 
 
 def discard_entry(path: Path) -> None:

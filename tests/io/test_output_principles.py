@@ -334,9 +334,9 @@ def test_a_damaged_checkpoint_is_refused_before_the_history_is_touched(scenes, t
     ("summary.json", '{"completed": true, "stop_reason": 3}', "stop_reason must be a string"),
     ("summary.json", '{"completed": true, "stop_reason": "", "xi": {"a": "b"}}', "xi.a must be a number"),
     ("trajectory.csv", "time,head_x\n0,0\n", "the header lacks"),
-    ("trajectory.csv", "time,head_x,tail_y,com_x,newton_iterations\n", "no rows"),
-    ("trajectory.csv", "time,head_x,tail_y,com_x,newton_iterations\n0,0,0,x,0\n", "column com_x"),
-    ("trajectory.csv", "time,head_x,tail_y,com_x,newton_iterations\n0,0\n", "line 2 has 2 cells"),
+    ("trajectory.csv", "time_s,head_x_m,tail_y_m,com_x_m,newton_iterations\n", "no rows"),
+    ("trajectory.csv", "time_s,head_x_m,tail_y_m,com_x_m,newton_iterations\n0,0,0,x,0\n", "column com_x_m"),
+    ("trajectory.csv", "time_s,head_x_m,tail_y_m,com_x_m,newton_iterations\n0,0\n", "line 2 has 2 cells"),
     ("displacement.npz", "text", "not a displacement series"),
 ])
 def test_animate_refuses_a_damaged_run_in_one_line(run_dir, tmp_path, capsys, name, damage, named):
@@ -413,11 +413,14 @@ def test_simulate_lists_the_files_it_wrote(tmp_path, capsys):
     assert "trajectory.csv" in said and "trajectory.png" not in said
 
 
-def test_a_parameter_left_at_zero_outside_its_bounds_is_warned_about(tmp_path, caplog):
-    scene = write_scene(tmp_path, "[mesh]\nlevel = 1\n[shapes]\nz_tail = { bounds = [0.05, 0.2], start = 0.1 }\n",
-                        "s.toml")
+def test_a_parameter_left_at_zero_outside_its_bounds_is_warned_about(tmp_path, capsys):
+    """``shapes --xi`` draws the other parameters at 0; a run (simulate, compare) takes their start values."""
+    scene = write_scene(tmp_path, "[mesh]\nlevel = 1\n[shapes]\nz_tail = { bounds = [0.05, 0.2], start = 0.1 }\n"
+                        "y_thin = { bounds = [-0.1, 0.1] }\n", "s.toml")
+    assert main(["shapes", scene, "--xi", "y_thin=0.05", "--dry-run"]) == 0
+    assert "z_tail is not given with --xi: the design takes z_tail = 0, outside" in capsys.readouterr().err
     assert main(["simulate", scene, "--dry-run"]) == 0
-    assert "z_tail is not given with --xi: the design takes z_tail = 0, outside" in caplog.text
+    assert "not given with --xi" not in capsys.readouterr().err
 
 
 # ---------------------------------------------------------------------- under mpirun
@@ -595,10 +598,11 @@ def test_sigterm_between_iterations_then_resume_with_either_method(method, tmp_p
     assert iterations == list(range(len(iterations))) and len(iterations) >= 3
 
 
-def test_a_killed_runs_partial_folder_is_mentioned_not_removed(scenes, tmp_path, caplog):
+def test_a_killed_runs_partial_folder_is_mentioned_not_removed(scenes, tmp_path, capsys):
     leftover = tmp_path / "run.new-999999"
     leftover.mkdir()
     (leftover / "trajectory.csv").write_text("time\n0\n")
     assert main(["simulate", scenes["short"], "--out", str(tmp_path / "run"), "--no-progress"]) == 0
-    assert "run.new-999999/ holds the partial results of a run that was killed (PID 999999)" in caplog.text
+    assert ("run.new-999999/ holds the partial results of a run that was killed (PID 999999)"
+            in capsys.readouterr().err)
     assert (leftover / "trajectory.csv").read_text() == "time\n0\n"
