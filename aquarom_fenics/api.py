@@ -71,10 +71,10 @@ def optimize(scene: Scene, out_dir: str | Path, weights: CostWeights | None = No
     ``force`` (and then only an earlier run's folder is replaced, once this run has finished) or
     ``resume``; the folder gets its manifest.json. A run that stops keeps its partial outputs.
     """
-    from aquarom_fenics.io.outputs import claim_folder, discard, list_outputs, publish, write_manifest
+    from aquarom_fenics.io.outputs import claim_folder, discard, list_outputs, on_rank_zero, publish, write_manifest
 
     comm = MPI.COMM_WORLD
-    location = _on_rank_zero(comm, lambda: claim_folder(Path(out_dir), force, resume))
+    location = on_rank_zero(comm, lambda: claim_folder(Path(out_dir), force, resume))
     started = time.perf_counter()
     arguments = {"out_dir": out_dir, "resume": resume, "force": force, "max_time": max_time,
                  "weights": weights or CostWeights(), "render": render}
@@ -104,15 +104,3 @@ def optimize(scene: Scene, out_dir: str | Path, weights: CostWeights | None = No
     return result, check
 
 
-def _on_rank_zero(comm, action):
-    """``action()`` on rank 0, its value on every rank (its InputError raised on every rank)."""
-    outcome = (None, None)
-    if comm.rank == 0:
-        try:
-            outcome = (action(), None)
-        except InputError as error:
-            outcome = (None, str(error))
-    value, problem = comm.bcast(outcome) if comm.size > 1 else outcome
-    if problem:
-        raise InputError(problem)
-    return value

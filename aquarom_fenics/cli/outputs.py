@@ -8,6 +8,7 @@ from pathlib import Path
 from mpi4py import MPI
 
 from aquarom_fenics.errors import InputError, Interrupted, SolverError, Terminated
+from aquarom_fenics.io import outputs as io_outputs
 
 
 def os_error_text(error: OSError, unnamed: str = "a file") -> str:
@@ -58,19 +59,7 @@ def shown(args, path: Path) -> Path:
 
 def on_rank_zero(action):
     """``action()`` on rank 0 (file-system work); its value, or its error as the same InputError on every rank."""
-    comm = MPI.COMM_WORLD
-    outcome = (None, None)
-    if comm.rank == 0:
-        try:
-            outcome = (action(), None)
-        except InputError as error:
-            outcome = (None, str(error))
-        except OSError as error:
-            outcome = (None, os_error_text(error))
-    value, problem = comm.bcast(outcome) if comm.size > 1 else outcome
-    if problem:
-        raise InputError(problem)
-    return value
+    return io_outputs.on_rank_zero(MPI.COMM_WORLD, action, os_error_text)
 
 
 def settle_output(args, code: int, wall_time: float) -> None:

@@ -417,3 +417,22 @@ def write_manifest(folder: Path, command: str, arguments: dict, scene, timings: 
         "versions": software_versions(), "git_commit": git_commit(PACKAGE.parent),
         "host_cores": os.cpu_count(), "mpi_ranks": MPI.COMM_WORLD.size, "timings": timings,
         "date": time.strftime("%Y-%m-%d %H:%M:%S")})
+
+
+def on_rank_zero(comm, action, describe_os_error=None):
+    """``action()`` on rank 0 of ``comm`` (file-system work); its value on every rank, or its error as the
+    same InputError on every rank (an OSError too when ``describe_os_error`` turns it into text)."""
+    outcome = (None, None)
+    if comm.rank == 0:
+        try:
+            outcome = (action(), None)
+        except InputError as error:
+            outcome = (None, str(error))
+        except OSError as error:
+            if describe_os_error is None:
+                raise
+            outcome = (None, describe_os_error(error))
+    value, problem = comm.bcast(outcome) if comm.size > 1 else outcome
+    if problem:
+        raise InputError(problem)
+    return value

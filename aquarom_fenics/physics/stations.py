@@ -49,17 +49,22 @@ def hat_functions(x: np.ndarray, stations: np.ndarray) -> np.ndarray:
     return values
 
 
-def lagrange_basis(reference_points: np.ndarray, degree: int) -> np.ndarray:
-    """(n_q, 4 or 10) values of the Lagrange basis at reference points, in the node order of
-    ``LagrangeNodes.cell_nodes`` (vertices, then the edges of ``TETRAHEDRON_EDGES``)."""
+def simplex_lagrange_basis(reference_points: np.ndarray, edges: np.ndarray, degree: int) -> np.ndarray:
+    """(n_q, n_vertices [+ n_edges]) Lagrange basis of degree 1 or 2 on a reference simplex at
+    ``reference_points`` (n_q, dimension): the vertices, then the ``edges`` (pairs of local vertices)."""
     reference_points = np.asarray(reference_points, dtype=float)
     barycentric = np.column_stack([1.0 - reference_points.sum(axis=1), reference_points])
     if degree == 1:
         return barycentric
     # vertex a: λ_a (2 λ_a - 1); edge (a, b): 4 λ_a λ_b
     vertices = barycentric * (2.0 * barycentric - 1.0)
-    edges = 4.0 * barycentric[:, TETRAHEDRON_EDGES[:, 0]] * barycentric[:, TETRAHEDRON_EDGES[:, 1]]
-    return np.hstack([vertices, edges])
+    return np.hstack([vertices, 4.0 * barycentric[:, edges[:, 0]] * barycentric[:, edges[:, 1]]])
+
+
+def lagrange_basis(reference_points: np.ndarray, degree: int) -> np.ndarray:
+    """(n_q, 4 or 10) values of the Lagrange basis at reference points, in the node order of
+    ``LagrangeNodes.cell_nodes`` (vertices, then the edges of ``TETRAHEDRON_EDGES``)."""
+    return simplex_lagrange_basis(reference_points, TETRAHEDRON_EDGES, degree)
 
 
 def weighted_node_integrals(points: np.ndarray, cells: np.ndarray, nodes: LagrangeNodes, weight) -> np.ndarray:
@@ -108,12 +113,7 @@ TRIANGLE_EDGES = np.array([[0, 1], [1, 2], [0, 2]])
 
 def triangle_basis(reference_points: np.ndarray, degree: int) -> np.ndarray:
     """(n_q, 3 or 6) Lagrange basis on the reference triangle: vertices, then the edges of TRIANGLE_EDGES."""
-    barycentric = np.column_stack([1.0 - reference_points.sum(axis=1), reference_points])
-    if degree == 1:
-        return barycentric
-    vertices = barycentric * (2.0 * barycentric - 1.0)
-    edges = 4.0 * barycentric[:, TRIANGLE_EDGES[:, 0]] * barycentric[:, TRIANGLE_EDGES[:, 1]]
-    return np.hstack([vertices, edges])
+    return simplex_lagrange_basis(reference_points, TRIANGLE_EDGES, degree)
 
 
 def face_average_weights(mesh_points: np.ndarray, facets: np.ndarray, nodes: LagrangeNodes) -> np.ndarray:
