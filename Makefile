@@ -1,4 +1,5 @@
 # Every target installs what is missing first (scripts/setup.sh is idempotent).
+# `make validate SCHEDULER=tcp://host:8786` (or SCHEDULER_FILE=FILE) computes on a Dask cluster.
 PYTHON := .venv/bin/python
 AQUAROM := .venv/bin/aquarom
 OUT ?= results/demo
@@ -23,7 +24,7 @@ study: setup
 	$(PYTHON) scripts/study.py
 
 validate: setup
-	$(PYTHON) scripts/validate.py --jobs 2
+	$(PYTHON) scripts/validate.py --jobs 2 $(if $(SCHEDULER),--scheduler $(SCHEDULER)) $(if $(SCHEDULER_FILE),--scheduler-file $(SCHEDULER_FILE))
 
 validate-radius: setup
 	$(PYTHON) scripts/validate_prom_radius.py
