@@ -181,6 +181,19 @@ class LocalProcesses:
         pool.shutdown(wait=True, cancel_futures=cancel)
 
 
+class MainThreadImports:
+    """A Dask worker plugin: imports that must run on a worker's main thread, done when the worker
+    starts (and restarts). Dask runs tasks in a thread pool, and importing gmsh installs a signal
+    handler, which Python allows on the main thread only."""
+
+    name = "aquarom-main-thread-imports"
+
+    def setup(self, worker) -> None:
+        from aquarom_fenics.geometry.gmsh_session import import_gmsh
+
+        import_gmsh()
+
+
 class DaskCluster:
     """The workers of a Dask distributed scheduler, through ``Client.get_executor``."""
 
@@ -189,6 +202,7 @@ class DaskCluster:
     def __init__(self, settings: ClusterSettings):
         self.settings = settings
         self.client = connect(settings)
+        self.client.register_worker_plugin(MainThreadImports(), name=MainThreadImports.name)
         self._executor = self.client.get_executor(pure=False)
 
     @property

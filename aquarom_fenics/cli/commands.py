@@ -7,12 +7,15 @@ from pathlib import Path
 from aquarom_fenics.cli.inputs import check_inputs, load_scene, say
 from aquarom_fenics.cli.outputs import claim_output, shown
 from aquarom_fenics.cli.runs import run_build, run_compare, run_simulate
+from aquarom_fenics.cli.sweep import run_sweep
 from aquarom_fenics.errors import InputError, SolverError
 
 
 def run_dry(args) -> int:
     from aquarom_fenics.optimization.plan import plan
 
+    if args.command == "sweep":          # its plan needs the designs: the command makes it
+        return run_sweep(args)
     scene, _ = check_inputs(args, load_scene(args))
     say(f"plan for `aquarom {args.command}` (dry run, nothing is written):")
     for line in plan(args.command, scene, getattr(args, "model", None)):
@@ -160,4 +163,4 @@ def run_cache(args) -> int:
 
 COMMANDS = {"mesh": run_mesh, "shapes": run_shapes, "simulate": run_simulate, "build": run_build,
             "compare": run_compare, "optimize": run_optimize, "pareto": run_pareto, "cache": run_cache, "animate": run_animate,
-            "basis": run_basis, "check": run_check}
+            "basis": run_basis, "check": run_check, "sweep": run_sweep}

@@ -30,7 +30,7 @@ def check_inputs(args, scene):
     xi = parse_xi_assignments(getattr(args, "xi", None), scene)
     if getattr(args, "prom", None) is not None and getattr(args, "model", "prom") != "prom":
         raise InputError(f"--prom {args.prom} is used by --model prom only (this run: --model {args.model})")
-    if args.command in ("simulate", "compare", "optimize", "pareto"):
+    if args.command in ("simulate", "compare", "optimize", "pareto", "sweep"):
         check_time_grid(scene)
     if args.command == "optimize":
         if args.method:

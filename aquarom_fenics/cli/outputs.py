@@ -18,12 +18,12 @@ def os_error_text(error: OSError, unnamed: str = "a file") -> str:
     return f"{where}: {error.strerror or error}"
 
 
-def claim_output(args, path: Path, resume: bool = False) -> Path:
+def claim_output(args, path: Path, resume: bool = False, resume_file: str = "checkpoint.json") -> Path:
     """The folder this run writes to (see :func:`aquarom_fenics.io.outputs.claim_folder`): the output
     folder itself, or a folder beside it when --force replaces an earlier run's results."""
     from aquarom_fenics.io.outputs import claim_folder
 
-    location = on_rank_zero(lambda: claim_folder(path, getattr(args, "force", False), resume))
+    location = on_rank_zero(lambda: claim_folder(path, getattr(args, "force", False), resume, resume_file))
     args.output = location
     args.output_dir = location.working
     return location.working
@@ -90,7 +90,8 @@ def settle_output(args, code: int, wall_time: float) -> None:
 
 
 def write_manifest(args, wall_time: float) -> None:
-    """manifest.json: scene, versions, git commit, command, host cores, timings per phase."""
+    """manifest.json: scene, versions, git commit, command, host cores, timings per phase, and what
+    a command adds in ``args.manifest_extra`` (a sweep's backend and counts)."""
     from aquarom_fenics.io.outputs import git_commit, software_versions
     from aquarom_fenics.io.persistence import write_json_atomic
     from aquarom_fenics.io.paths import PACKAGE
@@ -98,10 +99,11 @@ def write_manifest(args, wall_time: float) -> None:
     scene = getattr(args, "scene_used", None)
     write_json_atomic(args.output_dir / "manifest.json", {
         "command": "aquarom " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("aquarom") else args.command,
-        "arguments": {k: str(v) for k, v in vars(args).items() if k not in ("scene_used", "timings", "output_dir")},
+        "arguments": {k: str(v) for k, v in vars(args).items()
+                      if k not in ("scene_used", "timings", "output_dir", "manifest_extra")},
         "scene": None if scene is None else {"name": scene.name, "source": scene.source, "hash": scene.hash,
                                              "values": scene.to_dict()},
         "versions": software_versions(), "git_commit": git_commit(PACKAGE.parent),
         "host_cores": os.cpu_count(), "mpi_ranks": MPI.COMM_WORLD.size,
         "timings": {"total": wall_time} | getattr(args, "timings", {}),
-        "date": time.strftime("%Y-%m-%d %H:%M:%S")})
+        "date": time.strftime("%Y-%m-%d %H:%M:%S")} | getattr(args, "manifest_extra", {}))

@@ -150,18 +150,19 @@ class OutputLocation:
     replacing: bool        # ``target`` holds an earlier run of the toolkit, replaced on success
 
 
-def claim_folder(path: Path, force: bool, resume: bool) -> OutputLocation:
+def claim_folder(path: Path, force: bool, resume: bool, resume_file: str = "checkpoint.json") -> OutputLocation:
     """An output folder that may be written, refusing to touch anything the toolkit did not write.
 
     Without ``force`` an occupied folder is refused; with it, only a folder of an earlier run
     (its ``manifest.json`` lists every file in it) is accepted, and the new run writes beside it.
+    ``resume``: the folder of an earlier run, which must hold ``resume_file``, is continued in place.
     """
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise InputError(f"output {path} is a file, not a folder; choose another --out")
     if resume:
-        if not (path / "checkpoint.json").is_file():
-            raise InputError(f"--resume: no checkpoint.json in {path}; run without --resume")
+        if not (path / resume_file).is_file():
+            raise InputError(f"--resume: no {resume_file} in {path}; run without --resume")
         require_writable(path)
         return OutputLocation(path, path, created=False, replacing=False)
     if not path.is_dir() or not any(path.iterdir()):
