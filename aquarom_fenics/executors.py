@@ -105,6 +105,22 @@ def run_task(cache: str, function: Callable, args: tuple):
     return function(*args)
 
 
+def in_worker() -> bool:
+    """True inside a task of a worker (a daemonic local worker process, or a Dask worker), where
+    starting more worker processes is not allowed or would compete for the worker's core."""
+    import multiprocessing
+
+    if multiprocessing.current_process().daemon:
+        return True
+    try:
+        from distributed import get_worker
+
+        get_worker()
+        return True
+    except (ImportError, ValueError):
+        return False
+
+
 def worker_name() -> str:
     """Who ran a task: the Dask worker's address, else host:pid."""
     try:

@@ -92,14 +92,41 @@ def run_pareto(args) -> int:
     from aquarom_fenics.optimization.study import pareto_sweep
 
     scene, _ = check_inputs(args, load_scene(args))
-    out = claim_output(args, args.out or Path("results") / "pareto" / scene.name)
-    points = pareto_sweep(scene, out)
+    pool = open_work_pool(args, scene, len(scene.cooptimization.weights), default_workers=1)
+    try:
+        out = claim_output(args, args.out or Path("results") / "pareto" / scene.name)
+        points = pareto_sweep(scene, out, pool=pool)
+    except BaseException:
+        if pool is not None:
+            pool.shutdown(cancel=True)
+        raise
+    if pool is not None:
+        pool.shutdown()
     for point in points:
         fom = (f"FOM distance {100 * point['distance']:.3f} cm" if point["fom_check"] == "completed"
                else f"FOM check stopped (infeasible), PROM distance {100 * point['prom_distance']:.3f} cm")
         say(f"w1 = {point['w1']:.2f}: amplitude {point['amplitude']:.3f}, energy {point['energy']:.4f}, {fom}")
     say(f"outputs in {shown(args, out)}/ (pareto.csv, pareto.png, one folder per weight)")
     return 0
+
+
+def open_work_pool(args, scene, tasks: int, default_workers: int):
+    """The backend of --workers / --scheduler / --scheduler-file / [cluster] for ``tasks`` tasks, or
+    None to run them one after the other here; an unreachable scheduler is refused (InputError)."""
+    from mpi4py import MPI
+
+    from aquarom_fenics.executors import choose_cluster, open_pool
+
+    cluster = choose_cluster(args.scheduler, args.scheduler_file, scene.cluster, args.connect_timeout)
+    workers = default_workers if args.workers is None else args.workers
+    if workers < 1:
+        raise InputError(f"--workers {workers}: must be at least 1")
+    if not cluster.distributed and min(workers, tasks) <= 1:
+        return None
+    if MPI.COMM_WORLD.size > 1:
+        raise InputError(f"aquarom {args.command} under mpirun runs its tasks one after the other; "
+                         "drop --workers / --scheduler (or [cluster]) or run it without mpirun")
+    return open_pool(min(workers, tasks), cluster)
 
 
 def run_animate(args) -> int:

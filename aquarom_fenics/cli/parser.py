@@ -14,7 +14,8 @@ EXAMPLES = {
     "build": "aquarom build so1 --out results/so1-prom.npz",
     "compare": "aquarom compare so1 --xi y_thin=0.05 --level 1 --out results/so1-compare",
     "optimize": "aquarom optimize so1 --level 1 --out results/so1-opt\n  aquarom optimize so1 --out results/so1-opt --resume",
-    "pareto": "aquarom pareto co --level 1 --out results/co-pareto",
+    "pareto": "aquarom pareto co --level 1 --out results/co-pareto\n"
+              "  aquarom pareto co --scheduler-file ~/dask-scheduler.json --out results/co-pareto",
     "animate": "aquarom animate results/nominal-fom --fps 20 --stride 2",
     "basis": "aquarom basis so1 --level 1 --out results/so1-basis",
     "check": "aquarom check so1 --level 1\n  aquarom check so1 --level 1 --degree 2\n"
@@ -81,8 +82,10 @@ def build_parser() -> argparse.ArgumentParser:
                           help="w_1 of L = w_1(-d) + (1-w_1) α A² for co-optimisation scenes (default 0.5)")
     optimize.add_argument("--max-time", type=float, metavar="SECONDS",
                           help="stop the optimiser after this wall time (default 86400 s, one day)")
-    command("pareto", "co-optimisation weight sweep: Pareto front of distance against actuation energy",
-            out="output directory (default results/pareto/SCENE)")
+    pareto = command("pareto", "co-optimisation weight sweep: Pareto front of distance against actuation energy",
+                     out="output directory (default results/pareto/SCENE)")
+    add_cluster_options(pareto, "the weights", "local worker processes, one weight each "
+                                               "(default 1: the weights one after the other in this process)")
     add_sweep(command("sweep", "run a model at every design of a CSV file, a grid or a Latin hypercube (sweep.csv, "
                             "sweep.png); on local worker processes or a Dask cluster",
                       out="output directory (default results/sweep/SCENE-MODEL)"))
@@ -123,9 +126,15 @@ def add_sweep(sweep: argparse.ArgumentParser) -> None:
                        help="full-order model, a ROM per design, or the scene's PROM (default fom)")
     sweep.add_argument("--resume", action="store_true",
                        help="keep the rows of sweep.csv in --out and run only the designs it lacks")
-    where = sweep.add_argument_group("where the designs run (default: local worker processes)")
-    where.add_argument("--workers", type=int, metavar="N",
-                       help="local worker processes (default: the number of cores; 1 runs in this process)")
+    add_cluster_options(sweep, "the designs", "local worker processes (default: the number of cores; "
+                                              "1 runs in this process)")
+
+
+def add_cluster_options(command: argparse.ArgumentParser, what: str, workers_help: str) -> None:
+    """--workers, --scheduler, --scheduler-file, --connect-timeout: where ``what`` runs."""
+    where = command.add_argument_group(f"where {what} run (default: local; a scene's [cluster] table also names a "
+                                       "Dask scheduler)")
+    where.add_argument("--workers", type=int, metavar="N", help=workers_help)
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="run on the workers of this Dask scheduler, e.g. tcp://head-node:8786")
     where.add_argument("--scheduler-file", type=Path, metavar="FILE",

@@ -70,8 +70,10 @@ def run_sweep(args) -> int:
             f"on {backend}" + (f", {len(kept)} kept from sweep.csv" if kept else ""))
         rows = sweep.run_sweep(scene, designs, args.model, out, pool, resume=args.resume,
                                on_row=progress_line(len(designs), len(kept), scene.shape_names))
-    finally:
+    except BaseException:                 # Ctrl-C or a refused output: stop the workers at once
         pool.shutdown(cancel=True)
+        raise
+    pool.shutdown()
     result = sweep.summary(rows)
     args.timings = {"sweep": time.perf_counter() - started}
     args.manifest_extra = {"sweep": {"designs": len(designs), "source": source, "model": args.model,

@@ -17,7 +17,7 @@ import time
 
 from mpi4py import MPI
 
-from aquarom_fenics.executors import LocalProcesses
+from aquarom_fenics.executors import LocalProcesses, in_worker
 from aquarom_fenics.io.scene import Scene
 
 log = logging.getLogger("aquarom")
@@ -63,16 +63,18 @@ class BackgroundFom:
         self.stop()
 
     def stop(self) -> None:
-        """End the run (optimisation interrupted or failed, or finished): cancel the task and end
-        an own worker process (SIGTERM) at once."""
+        """End the run (optimisation interrupted or failed, or finished): cancel the task; an own
+        worker process still running it is ended at once (SIGTERM), an idle one closed."""
+        running = not self.future.done()
         self.future.cancel()
         if self.own_pool:
-            self.pool.shutdown(cancel=True)
+            self.pool.shutdown(cancel=running)
 
 
 def start_if_useful(scene: Scene, design: dict[str, float], amplitude: float | None, cached: bool) -> BackgroundFom | None:
     """A background run of the nominal FOM, or None: on several MPI ranks (they use the cores), on one
-    core, or when the nominal distance is in the cache already."""
-    if cached or MPI.COMM_WORLD.size > 1 or (os.cpu_count() or 1) < 2:
+    core, inside a worker of a parallel sweep (the other workers use the cores), or when the nominal
+    distance is in the cache already."""
+    if cached or MPI.COMM_WORLD.size > 1 or (os.cpu_count() or 1) < 2 or in_worker():
         return None
     return BackgroundFom(scene, design, amplitude)

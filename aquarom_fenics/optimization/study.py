@@ -7,6 +7,7 @@ import json
 import logging
 import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -296,25 +297,27 @@ def _write_figures(out_dir, scene, fish, result, render):
                                        out_dir / "nominal_vs_optimal.png", f"{scene.name}: nominal and optimal design")
 
 
-def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None) -> list[dict]:
+def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None, pool=None) -> list[dict]:
     """Co-optimisation over the scene's weights w_1 (w_2 = 1 - w_1): pareto.csv and pareto.png.
 
     A point whose FOM check does not complete is no optimum of the model: it is marked
-    ``fom_check = infeasible`` with the FOM's stop reason, and left off the front."""
-    fish = fish or load_fish(scene)
-    co = scene.cooptimization
-    points = []
-    for w1 in co.weights:
-        weights = CostWeights(distance=w1, energy=1.0 - w1, alpha=co.energy_weight)
-        result, check = run_optimization(scene, Path(out_dir) / f"w1_{w1:g}", weights=weights, fish=fish, render=False)
-        amplitude = float(result.optimum[-1])
-        completed = check.optimal_distance is not None
-        points.append({"w1": w1, "amplitude": amplitude, "energy": weights.energy_term(amplitude),
-                       "distance": check.optimal_distance if completed else float("nan"),
-                       "prom_distance": result.evaluation.distance,
-                       "fom_check": "completed" if completed else "infeasible",
-                       "fom_check_reason": "" if completed else (check.error or ""),
-                       **{f"xi_{n}": float(v) for n, v in zip(result.space.names[:-1], result.optimum[:-1])}})
+    ``fom_check = infeasible`` with the FOM's stop reason, and left off the front.
+    ``pool``: a backend of :mod:`aquarom_fenics.executors` (local worker processes or a Dask
+    cluster) running one weight per task; None runs them one after the other here (under MPI too).
+    """
+    if pool is None:
+        fish = fish or load_fish(scene)
+        points = [pareto_point(scene, out_dir, w1, fish) for w1 in scene.cooptimization.weights]
+    else:
+        from aquarom_fenics.executors import run_all
+
+        found = {}
+        for w1, point, error in run_all(pool, partial(pareto_point, scene, str(Path(out_dir).resolve())),
+                                        scene.cooptimization.weights):
+            if error is not None:
+                raise error
+            found[w1] = point
+        points = [found[w1] for w1 in scene.cooptimization.weights]
     if MPI.COMM_WORLD.rank == 0:
         table = io.StringIO()
         writer = csv.DictWriter(table, fieldnames=list(points[0]), lineterminator="\n")
@@ -325,3 +328,19 @@ def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None) -> list[
 
         plot_pareto(points, Path(out_dir) / "pareto.png")
     return points
+
+
+def pareto_point(scene: Scene, out_dir: Path, w1: float, fish: Fish | None = None) -> dict:
+    """The co-optimisation at weight w_1 (in ``out_dir/w1_<w1>``) and its row of pareto.csv."""
+    co = scene.cooptimization
+    weights = CostWeights(distance=w1, energy=1.0 - w1, alpha=co.energy_weight)
+    result, check = run_optimization(scene, Path(out_dir) / f"w1_{w1:g}", weights=weights,
+                                     fish=fish or load_fish(scene), render=False)
+    amplitude = float(result.optimum[-1])
+    completed = check.optimal_distance is not None
+    return {"w1": w1, "amplitude": amplitude, "energy": weights.energy_term(amplitude),
+            "distance": check.optimal_distance if completed else float("nan"),
+            "prom_distance": result.evaluation.distance,
+            "fom_check": "completed" if completed else "infeasible",
+            "fom_check_reason": "" if completed else (check.error or ""),
+            **{f"xi_{n}": float(v) for n, v in zip(result.space.names[:-1], result.optimum[:-1])}}

@@ -1,7 +1,6 @@
 """`aquarom sweep`: design sources, refused input, rows, cache and resume, and the Dask backend on a
 real ``distributed.LocalCluster`` (TCP scheduler, 2 worker processes of one thread each)."""
 import csv
-import logging
 import os
 import signal
 import tomllib
@@ -154,13 +153,9 @@ def test_resume_keeps_the_rows_written_and_runs_only_the_missing_designs(tmp_pat
 
 
 # ---------------------------------------------------------------------- Dask distributed
-@pytest.fixture(scope="module")
-def cluster():
-    from distributed import LocalCluster
-
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, protocol="tcp://", dashboard_address=None,
-                      silence_logs=logging.ERROR) as local:
-        yield local
+@pytest.fixture
+def cluster(dask_cluster):
+    return dask_cluster
 
 
 def test_unreachable_scheduler_is_refused_before_any_work(tmp_path, capsys):
