@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 import os
 import socket
+import time
 from concurrent.futures import Future, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
@@ -237,15 +238,16 @@ class DaskCluster:
 
 def connect(settings: ClusterSettings):
     """A ``dask.distributed.Client`` of the scheduler; InputError (one line) when it cannot be
-    reached within ``settings.connect_timeout`` seconds or its scheduler file is missing."""
+    reached within ``settings.connect_timeout`` seconds, or its scheduler file does not appear
+    within that time."""
     try:
         from distributed import Client
     except ImportError:
         raise InputError("Dask distributed is not installed (Debian package python3-distributed; "
                          "`make setup` installs it)") from None
-    if settings.scheduler_file and not Path(settings.scheduler_file).is_file():
-        raise InputError(f"scheduler file {settings.scheduler_file}: not found (written by "
-                         "`dask scheduler --scheduler-file FILE` when the scheduler starts)")
+    if settings.scheduler_file and not _appears(Path(settings.scheduler_file), settings.connect_timeout):
+        raise InputError(f"scheduler file {settings.scheduler_file}: not found within {settings.connect_timeout:g} s "
+                         "(written by `dask scheduler --scheduler-file FILE` when the scheduler starts)")
     timeout = f"{settings.connect_timeout:g}s"
     try:
         if settings.scheduler_file:
@@ -256,6 +258,17 @@ def connect(settings: ClusterSettings):
         reason = str(error).splitlines()[0] if str(error) else type(error).__name__
         raise InputError(f"Dask scheduler {where}: not reachable within {settings.connect_timeout:g} s "
                          f"({reason}); start it or check the address") from None
+
+
+def _appears(path: Path, seconds: float) -> bool:
+    """Whether ``path`` exists now or within ``seconds`` (a scheduler started in the same job
+    script writes its file a moment later)."""
+    deadline = time.monotonic() + seconds
+    while not path.is_file():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.2)
+    return True
 
 
 def open_pool(workers: int = 1, cluster: ClusterSettings | None = None):
