@@ -19,6 +19,7 @@ bench: setup
 	$(PYTHON) scripts/bench_fom.py
 	$(PYTHON) scripts/bench_prom.py
 	$(PYTHON) scripts/bench_optimize.py
+	$(PYTHON) scripts/bench_sweep.py
 
 study: setup
 	$(PYTHON) scripts/study.py
