@@ -231,3 +231,26 @@ def test_a_local_worker_killed_mid_sweep_loses_no_design(tmp_path, monkeypatch):
     assert killed and [row["design"] for row in rows] == list(range(4))
     assert all(row["status"] == "completed" for row in rows), [row["reason"] for row in rows]
     assert sorted(int(row["design"]) for row in read_csv(tmp_path / "out" / "sweep.csv")) == list(range(4))
+
+
+def test_a_prom_sweep_refuses_designs_beyond_the_validity_radius_as_rows(tmp_path, capsys):
+    scene = str(write_scene(tmp_path))
+    out = tmp_path / "out"
+    assert main(["sweep", scene, "--grid", "z_tail=-0.2:0.2:3", "--model", "prom", "--workers", "1",
+                 "--out", str(out)]) == 0
+    rows = read_csv(out / "sweep.csv")
+    assert [row["status"] for row in rows] == ["refused", "completed", "refused"]
+    assert all("outside the PROM's validity radius" in rows[k]["reason"] for k in (0, 2))
+    assert float(rows[1]["tail_amplitude_m"]) > 0
+
+
+@pytest.mark.parametrize("names", [["z_tail"], ["z_tail", "y_thin"], ["z_tail", "y_thin", "z_head"]])
+def test_the_sweep_figure_for_one_two_and_more_parameters(tmp_path, names):
+    from aquarom_fenics.viz.sweep_plot import plot_sweep, varying
+
+    generator = np.random.default_rng(0)
+    rows = [{"design": k, **{name: float(generator.uniform(-0.3, 0.3)) for name in names},
+             "distance_m": None if k == 3 else float(generator.uniform(0.01, 0.02))} for k in range(9)]
+    assert varying(rows, names) == names
+    path = plot_sweep(rows, names, tmp_path / "sweep.png", "test")
+    assert path.stat().st_size > 10_000
