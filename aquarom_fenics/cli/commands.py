@@ -73,9 +73,17 @@ def run_optimize(args) -> int:
     weights = CostWeights()
     if scene.cooptimization.enabled:
         weights = CostWeights(args.weight, 1.0 - args.weight, scene.cooptimization.energy_weight)
-    out = claim_output(args, args.out or Path("results") / "optimize" / scene.name, resume=args.resume)
-    result, check = run_optimization(scene, out, resume=args.resume, weights=weights,
-                                     max_time=DEFAULT_MAX_TIME if args.max_time is None else args.max_time)
+    pool = open_work_pool(args, scene, scene.optimizer.starts, default_workers=1)
+    try:
+        out = claim_output(args, args.out or Path("results") / "optimize" / scene.name, resume=args.resume)
+        result, check = run_optimization(scene, out, resume=args.resume, weights=weights, pool=pool,
+                                         max_time=DEFAULT_MAX_TIME if args.max_time is None else args.max_time)
+    except BaseException:
+        if pool is not None:
+            pool.shutdown(cancel=True)
+        raise
+    if pool is not None:
+        pool.shutdown()
     args.timings = result.timings | {"fom_check": check.time}
     space = result.space
     say(f"{scene.name} ({scene.optimizer.method}): optimum "
@@ -112,11 +120,14 @@ def run_pareto(args) -> int:
 
 def open_work_pool(args, scene, tasks: int, default_workers: int):
     """The backend of --workers / --scheduler / --scheduler-file / [cluster] for ``tasks`` tasks, or
-    None to run them one after the other here; an unreachable scheduler is refused (InputError)."""
+    None to run them one after the other here (also for a single task); an unreachable scheduler is
+    refused (InputError)."""
     from mpi4py import MPI
 
     from aquarom_fenics.executors import choose_cluster, open_pool
 
+    if tasks <= 1:
+        return None
     cluster = choose_cluster(args.scheduler, args.scheduler_file, scene.cluster, args.connect_timeout)
     workers = default_workers if args.workers is None else args.workers
     if workers < 1:

@@ -82,6 +82,8 @@ def build_parser() -> argparse.ArgumentParser:
                           help="w_1 of L = w_1(-d) + (1-w_1) α A² for co-optimisation scenes (default 0.5)")
     optimize.add_argument("--max-time", type=float, metavar="SECONDS",
                           help="stop the optimiser after this wall time (default 86400 s, one day)")
+    add_cluster_options(optimize, "the starts of a multi-start ([optimizer] starts > 1)",
+                        "local worker processes, one start each (default 1: one after the other here)")
     pareto = command("pareto", "co-optimisation weight sweep: Pareto front of distance against actuation energy",
                      out="output directory (default results/pareto/SCENE)")
     add_cluster_options(pareto, "the weights", "local worker processes, one weight each "

@@ -116,15 +116,15 @@ def fom_check(scene: Scene, fish: Fish, result: OptimizationResult,
 
 def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights: CostWeights | None = None,
                      fish: Fish | None = None, render: bool = True, max_time: float = DEFAULT_MAX_TIME,
-                     start: np.ndarray | None = None) -> tuple[OptimizationResult, FomCheck]:
+                     start: np.ndarray | None = None, pool=None) -> tuple[OptimizationResult, FomCheck]:
     """Optimise, check with the FOM and write history.csv, summary.json, plots, renders, XDMF.
 
-    From ``start`` when given; otherwise ``[optimizer] starts`` > 1 runs :func:`run_multistart`.
-    A checkpoint to resume from is validated before anything is written; Ctrl-C leaves the
-    history, a valid checkpoint and a summary.json with the stop reason.
+    From ``start`` when given; otherwise ``[optimizer] starts`` > 1 runs :func:`run_multistart`
+    (its starts on ``pool`` when given). A checkpoint to resume from is validated before anything
+    is written; Ctrl-C leaves the history, a valid checkpoint and a summary.json with the stop reason.
     """
     if start is None and scene.optimizer.starts > 1:
-        return run_multistart(scene, out_dir, resume, weights, fish, render, max_time)
+        return run_multistart(scene, out_dir, resume, weights, fish, render, max_time, pool=pool)
     out_dir = Path(out_dir)
     is_writer = MPI.COMM_WORLD.rank == 0
     space = design_space(scene)
@@ -168,17 +168,31 @@ def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights:
 
 def run_multistart(scene: Scene, out_dir: Path, resume: bool = False, weights: CostWeights | None = None,
                    fish: Fish | None = None, render: bool = True,
-                   max_time: float = DEFAULT_MAX_TIME) -> tuple[OptimizationResult, FomCheck]:
+                   max_time: float = DEFAULT_MAX_TIME, pool=None) -> tuple[OptimizationResult, FomCheck]:
     """One optimisation per start of :func:`start_points` (in ``start_<k>/``, sharing the PROM
     cache), each FOM-checked; summary.json lists every local optimum and is the summary of the
-    best FOM-verified one (the best PROM distance when no FOM check finished)."""
+    best FOM-verified one (the best PROM distance when no FOM check finished).
+
+    ``pool``: a backend of :mod:`aquarom_fenics.executors` running one start per task; None runs
+    them one after the other here."""
     out_dir = Path(out_dir)
     fish = fish or load_fish(scene)
     space = optimization_space(scene, fish)
     settings = scene.optimizer
     starts = start_points(space, settings.starts, settings.seed, PromBuilder(scene, fish, space).meshes)
-    runs = [run_optimization(scene, out_dir / f"start_{k + 1}", resume, weights, fish, render=False,
-                             max_time=max_time, start=z) for k, z in enumerate(starts)]
+    if pool is None:
+        runs = [run_optimization(scene, out_dir / f"start_{k + 1}", resume, weights, fish, render=False,
+                                 max_time=max_time, start=z) for k, z in enumerate(starts)]
+    else:
+        from aquarom_fenics.executors import run_all
+
+        task = partial(start_run, scene, str(out_dir.resolve()), resume, weights, max_time)
+        found = {}
+        for (k, _), run, error in run_all(pool, task, list(enumerate(starts)), key=lambda item: item[0]):
+            if error is not None:
+                raise error
+            found[k] = run
+        runs = [found[k] for k in range(len(starts))]
     best = max(range(len(runs)), key=lambda k: _verified_distance(*runs[k]))
     result, check = runs[best]
     if MPI.COMM_WORLD.rank == 0:
@@ -190,6 +204,14 @@ def run_multistart(scene: Scene, out_dir: Path, resume: bool = False, weights: C
                         "local_optima": optima})
     _write_figures(out_dir, scene, fish, result, render)
     return result, check
+
+
+def start_run(scene: Scene, out_dir: str, resume: bool, weights: CostWeights | None, max_time: float,
+              item: tuple[int, np.ndarray]) -> tuple[OptimizationResult, FomCheck]:
+    """The optimisation of multi-start ``item`` = (k, z_start), in ``out_dir/start_<k+1>`` (a worker's task)."""
+    k, z = item
+    return run_optimization(scene, Path(out_dir) / f"start_{k + 1}", resume, weights, render=False, max_time=max_time,
+                            start=z)
 
 
 def _verified_distance(result: OptimizationResult, check: FomCheck) -> tuple[bool, float]:

@@ -29,25 +29,3 @@ def test_a_point_whose_fom_check_stops_is_marked_infeasible_with_the_reason(tmp_
     assert rows[0]["fom_check_reason"] == "" and "did not converge at t = 1.42 s" in rows[1]["fom_check_reason"]
     assert (tmp_path / "pareto.png").stat().st_size > 10_000
 
-
-CO_SMALL = {"mesh": {"level": 1}, "solver": {"duration": 0.2}, "shapes": {"z_tail": {"bounds": [-0.5, 0.5]}},
-            "cooptimization": {"enabled": True, "weights": [0.3, 0.9]}, "optimizer": {"max_iterations": 2}}
-
-
-def test_pareto_through_dask_equals_the_weights_run_here(tmp_path, monkeypatch, dask_cluster):
-    """One weight per task on a LocalCluster (fresh caches): the same pareto.csv, every float alike."""
-    import tomllib
-
-    from aquarom_fenics.cli import main
-    from aquarom_fenics.io.scene import scene_from_dict
-
-    scene_file = tmp_path / "co-small.toml"
-    scene_file.write_text(scene_from_dict(CO_SMALL, source="<test>").to_toml())
-    assert tomllib.loads(scene_file.read_text())["cooptimization"]["weights"] == [0.3, 0.9]
-    tables = {}
-    for backend, options in (("here", []), ("dask", ["--scheduler", dask_cluster.scheduler_address])):
-        monkeypatch.setenv("AQUAROM_CACHE", str(tmp_path / f"cache-{backend}"))
-        assert main(["pareto", str(scene_file), "--out", str(tmp_path / backend), *options]) == 0
-        tables[backend] = (tmp_path / backend / "pareto.csv").read_text()
-    assert tables["dask"] == tables["here"]
-    assert len(tables["here"].splitlines()) == 3
