@@ -1,5 +1,5 @@
 # Every target installs what is missing first (scripts/setup.sh is idempotent).
-# `make validate SCHEDULER=tcp://host:8786` (or SCHEDULER_FILE=FILE) computes on a Dask cluster.
+# `make validate SCHEDULER=tcp://host:8786` (or SCHEDULER_FILE=FILE) computes on a Dask cluster; so does `make study`.
 PYTHON := .venv/bin/python
 AQUAROM := .venv/bin/aquarom
 OUT ?= results/demo
@@ -22,7 +22,7 @@ bench: setup
 	$(PYTHON) scripts/bench_sweep.py
 
 study: setup
-	$(PYTHON) scripts/study.py
+	$(PYTHON) scripts/study.py $(if $(SCHEDULER),--scheduler $(SCHEDULER)) $(if $(SCHEDULER_FILE),--scheduler-file $(SCHEDULER_FILE))
 
 validate: setup
 	$(PYTHON) scripts/validate.py --jobs 2 $(if $(SCHEDULER),--scheduler $(SCHEDULER)) $(if $(SCHEDULER_FILE),--scheduler-file $(SCHEDULER_FILE))
