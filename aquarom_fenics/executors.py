@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 import os
 import socket
+import sys
 import time
 from concurrent.futures import Future, as_completed
 from concurrent.futures.process import BrokenProcessPool
@@ -113,23 +114,25 @@ def in_worker() -> bool:
 
     if multiprocessing.current_process().daemon:
         return True
-    try:
-        from distributed import get_worker
+    return _dask_worker() is not None
 
-        get_worker()
-        return True
-    except (ImportError, ValueError):
-        return False
+
+def _dask_worker():
+    """The Dask worker running this task, else None (without importing Dask where it is not loaded)."""
+    if "distributed" not in sys.modules:
+        return None
+    from distributed import get_worker
+
+    try:
+        return get_worker()
+    except ValueError:
+        return None
 
 
 def worker_name() -> str:
     """Who ran a task: the Dask worker's address, else host:pid."""
-    try:
-        from distributed import get_worker
-
-        return get_worker().address
-    except (ImportError, ValueError):
-        return f"{socket.gethostname()}:{os.getpid()}"
+    worker = _dask_worker()
+    return worker.address if worker is not None else f"{socket.gethostname()}:{os.getpid()}"
 
 
 def _cache_root() -> str:

@@ -43,7 +43,7 @@ def earlier_rows(args, scene, designs, target: Path) -> dict:
 
 
 def run_sweep(args) -> int:
-    from aquarom_fenics.executors import DaskCluster, choose_cluster, open_pool
+    from aquarom_fenics.executors import choose_cluster, open_pool
     from aquarom_fenics.optimization import sweep
 
     if MPI.COMM_WORLD.size > 1:
@@ -64,10 +64,9 @@ def run_sweep(args) -> int:
     started = time.perf_counter()
     try:
         out = claim_output(args, target, resume=args.resume, resume_file="sweep.csv")
-        backend = (f"{pool.workers} Dask worker(s) of {cluster.describe().removeprefix('Dask ')}"
-                   if isinstance(pool, DaskCluster) else f"{pool.workers} {pool.name} worker(s)")
+        backend = describe_backend(pool, cluster)
         say(f"sweep of {scene.name}: {len(designs)} designs ({source}), model {args.model}, {missing} to run "
-            f"on {backend}" + (f", {len(kept)} kept from sweep.csv" if kept else ""))
+            f"{backend}" + (f", {len(kept)} kept from sweep.csv" if kept else ""))
         rows = sweep.run_sweep(scene, designs, args.model, out, pool, resume=args.resume,
                                on_row=progress_line(len(designs), len(kept), scene.shape_names))
     except BaseException:                 # Ctrl-C or a refused output: stop the workers at once
@@ -87,6 +86,16 @@ def run_sweep(args) -> int:
         say("farthest: " + ", ".join(f"{n} = {best[n]:.4g}" for n in scene.shape_names)
             + f" ({100 * best['distance_m']:.3f} cm)")
     return 0
+
+
+def describe_backend(pool, cluster) -> str:
+    from aquarom_fenics.executors import DaskCluster, InProcess
+
+    if isinstance(pool, DaskCluster):
+        return f"on {pool.workers} Dask worker(s) of the {cluster.describe().removeprefix('Dask ')}"
+    if isinstance(pool, InProcess):
+        return "in this process"
+    return f"on {pool.workers} local worker processes"
 
 
 def progress_line(total: int, done: int, names: list[str]):
