@@ -48,7 +48,8 @@ def plot_sweep(rows: list[dict], names: list[str], path: Path, title: str) -> Pa
     else:
         figure = _scatter_matrix(plt, values, distance, axes_names)
     figure.suptitle(title)
-    figure.tight_layout()
+    if not figure.get_constrained_layout():
+        figure.tight_layout()
     figure.savefig(path, dpi=DPI)
     plt.close(figure)
     return Path(path)
@@ -105,21 +106,21 @@ def _edges(centres: np.ndarray) -> np.ndarray:
 
 def _scatter_matrix(plt, values: np.ndarray, distance: np.ndarray, names: list[str]):
     n = len(names)
-    figure, axes = plt.subplots(n, n, figsize=(2.4 * n + 1.2, 2.4 * n), squeeze=False)
+    figure, axes = plt.subplots(n, n, figsize=(2.4 * n + 1.2, 2.4 * n), squeeze=False, constrained_layout=True)
     ok = np.isfinite(distance)
     limits = (np.nanmin(distance), np.nanmax(distance)) if ok.any() else (0.0, 1.0)
     image = None
     for i in range(n):
         for j in range(n):
             axis = axes[i, j]
-            if i == j:
+            if i == j:       # the diagonal: distance over the parameter
                 axis.plot(values[ok, j], distance[ok], "o", color="tab:blue", markersize=4)
-                axis.set_ylabel("distance [cm]" if j == 0 else "")
+                axis.set_title("distance [cm]", fontsize=8)
             else:
                 image = axis.scatter(values[ok, j], values[ok, i], c=distance[ok], cmap="viridis", s=18,
                                      vmin=limits[0], vmax=limits[1])
                 axis.plot(values[~ok, j], values[~ok, i], marker="x", color="tab:red", linestyle="none")
-                axis.set_ylabel(f"ξ {names[i]}" if j == 0 else "")
+                axis.set_ylabel(f"ξ {names[i]}" if j == (1 if i == 0 else 0) else "")
             axis.set_xlabel(f"ξ {names[j]}" if i == n - 1 else "")
             axis.tick_params(labelsize=7)
     if image is not None:
