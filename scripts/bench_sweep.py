@@ -29,7 +29,7 @@ REPOSITORY = Path(__file__).resolve().parents[1]
 SCENE = {"name": "bench-sweep", "mesh": {"level": 1}, "solver": {"duration": 2.0},
          "shapes": {"z_tail": {"bounds": [-0.3, 0.3]}, "y_thin": {"bounds": [0.0, 0.1]}}, "output": {"plots": False}}
 GRID = ["z_tail=-0.3:0.3:4", "y_thin=0:0.1:4"]
-"""4 × 4 = 16 designs."""
+"""4 × 4 = 16 designs (--per-axis changes the 4)."""
 
 
 def timed_sweep(scene, designs, pool, folder: Path) -> dict:
@@ -56,9 +56,12 @@ def summary(name: str, workers: int, run: dict, serial_wall: float | None) -> di
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "bench" / "sweep.json")
+    parser.add_argument("--per-axis", type=int, default=4, help="grid values per shape (default 4: 16 designs)")
+    parser.add_argument("--duration", type=float, default=2.0, help="horizon of each FOM run [s] (default 2)")
     args = parser.parse_args()
     for variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[variable] = "1"
+    logging.getLogger("distributed").setLevel(logging.WARNING)
     from distributed import LocalCluster
 
     from aquarom_fenics.dynamics.simulate import simulate_fom
@@ -69,8 +72,9 @@ def main() -> int:
     from aquarom_fenics.optimization.sweep import grid_designs
     from aquarom_fenics.verification.validation.suite import machine
 
-    scene = scene_from_dict(SCENE, source="bench_sweep.py")
-    designs = grid_designs(GRID, scene)
+    scene = scene_from_dict(SCENE, source="bench_sweep.py").replace("solver", duration=args.duration)
+    grid = [spec.rsplit(":", 1)[0] + f":{args.per_axis}" for spec in GRID]
+    designs = grid_designs(grid, scene)
     simulate_fom(scene.replace("solver", duration=0.1), progress=False)    # compiled forms and mesh, warmed
     runs = []
     with tempfile.TemporaryDirectory(prefix="bench-sweep-") as scratch:
@@ -98,7 +102,7 @@ def main() -> int:
         print(f"dask, 2 workers: {dask['wall_time']:.1f} s (cluster start {cluster_start:.1f} s)", flush=True)
         distances = [[row["distance_m"] for row in run["rows"]] for run in (serial, result, dask)]
     report = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "machine": machine(), "versions": software_versions(),
-              "load_average_at_end": os.getloadavg(), "scene": SCENE, "grid": GRID, "designs": len(designs),
+              "load_average_at_end": os.getloadavg(), "scene": SCENE | {"solver": {"duration": args.duration}}, "grid": grid, "designs": len(designs),
               "steps_per_design": scene.n_steps, "runs": runs,
               "identical_distances": distances[0] == distances[1] == distances[2],
               "definition": "overhead_per_task = (wall_time * workers - task_time_sum) / designs"}
