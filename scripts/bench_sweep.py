@@ -9,7 +9,9 @@ run, and the scheduling overhead per task,
     overhead = (wall time × workers − Σ task time) / tasks,
 
 the worker time per design not spent running a model (process start, imports, hand-out of tasks,
-idle time at the end). The distances of the three runs are compared bit for bit.
+idle time at the end). A fresh worker's first task also imports dolfinx and loads the mesh and
+compiled forms (the serial run has them warm): ``first_tasks_extra`` = Σ task time − designs ×
+median task time estimates that start-up. The distances of the three runs are compared bit for bit.
 The Dask cluster is started before the clock starts (a running cluster is what --scheduler uses);
 its start-up time is reported apart. Writes results/bench/sweep.json.
 
@@ -45,8 +47,10 @@ def timed_sweep(scene, designs, pool, folder: Path) -> dict:
 def summary(name: str, workers: int, run: dict, serial_wall: float | None) -> dict:
     rows = run["rows"]
     task_time = sum(row["wall_time_s"] for row in rows)
+    median = sorted(row["wall_time_s"] for row in rows)[len(rows) // 2]
     return {"backend": name, "workers": workers, "designs": len(rows), "wall_time": run["wall_time"],
             "task_time_sum": task_time, "mean_task_time": task_time / len(rows),
+            "median_task_time": median, "first_tasks_extra": task_time - median * len(rows),
             "speedup": None if serial_wall is None else serial_wall / run["wall_time"],
             "overhead_per_task": (run["wall_time"] * workers - task_time) / len(rows),
             "completed": sum(row["status"] == "completed" for row in rows),
@@ -61,7 +65,7 @@ def main() -> int:
     args = parser.parse_args()
     for variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[variable] = "1"
-    logging.getLogger("distributed").setLevel(logging.WARNING)
+    os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "error")     # Dask's configuration, read by the workers too
     from distributed import LocalCluster
 
     from aquarom_fenics.dynamics.simulate import simulate_fom
@@ -71,6 +75,7 @@ def main() -> int:
     from aquarom_fenics.io.scene import scene_from_dict
     from aquarom_fenics.optimization.sweep import grid_designs
     from aquarom_fenics.verification.validation.suite import machine
+
 
     scene = scene_from_dict(SCENE, source="bench_sweep.py").replace("solver", duration=args.duration)
     grid = [spec.rsplit(":", 1)[0] + f":{args.per_axis}" for spec in GRID]
