@@ -202,9 +202,11 @@ class LocalProcesses:
 
 
 class MainThreadImports:
-    """A Dask worker plugin: imports that must run on a worker's main thread, done when the worker
-    starts (and restarts). Dask runs tasks in a thread pool, and importing gmsh installs a signal
-    handler, which Python allows on the main thread only."""
+    """A Dask worker plugin: imports done when a worker starts (and restarts), on its main thread.
+
+    Dask runs tasks in a thread pool, and importing gmsh installs a signal handler, which Python
+    allows on the main thread only. dolfinx and the FOM are imported too, so that a long-lived
+    worker's first task does not pay for them."""
 
     name = "aquarom-main-thread-imports"
 
@@ -212,6 +214,7 @@ class MainThreadImports:
         from aquarom_fenics.geometry.gmsh_session import import_gmsh
 
         import_gmsh()
+        import aquarom_fenics.dynamics.simulate  # noqa: F401 — dolfinx, petsc4py, the FOM
 
 
 class DaskCluster:
