@@ -28,4 +28,3 @@ def test_a_point_whose_fom_check_stops_is_marked_infeasible_with_the_reason(tmp_
     assert [row["fom_check"] for row in rows] == ["completed", "infeasible"]
     assert rows[0]["fom_check_reason"] == "" and "did not converge at t = 1.42 s" in rows[1]["fom_check_reason"]
     assert (tmp_path / "pareto.png").stat().st_size > 10_000
-
