@@ -132,7 +132,7 @@ def dry_run(args, scene, designs, source, kept, cluster, workers) -> int:
     where = cluster.describe() if cluster.distributed else (f"{workers} local worker process(es)" if workers > 1
                                                             else "this process (one worker)")
     say(f"  runs on: {where}")
-    seconds = estimate(scene, len(designs), missing, args.model, 1 if cluster.distributed else workers)
+    seconds = estimate(scene, missing, args.model, 1 if cluster.distributed else workers)
     say(f"  estimate: ~{seconds:.0f} s" + (" on one worker (divided by the number of the cluster's workers)"
                                           if cluster.distributed else ""))
     return 0

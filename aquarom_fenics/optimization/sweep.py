@@ -16,7 +16,6 @@ from __future__ import annotations
 import csv
 import itertools
 import json
-import logging
 import math
 import time
 from dataclasses import dataclass
@@ -29,7 +28,6 @@ from aquarom_fenics.errors import InputError
 from aquarom_fenics.executors import run_all, worker_name
 from aquarom_fenics.io.scene import Scene
 
-log = logging.getLogger("aquarom")
 
 MODELS = ("fom", "rom", "prom")
 STATUSES = ("completed", "refused", "stopped", "error")
@@ -361,7 +359,7 @@ def summary(rows: list[dict]) -> dict:
             "cached": sum(bool(row.get("cached")) for row in rows)}
 
 
-def estimate(scene: Scene, designs: int, missing: int, model: str, workers: int) -> float:
+def estimate(scene: Scene, missing: int, model: str, workers: int) -> float:
     """Estimated wall time [s] of the missing designs on ``workers`` workers (plan.py's cost figures)."""
     from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS
     from aquarom_fenics.optimization.plan import REFERENCE_CELLS, fom_seconds, prom_build_seconds
