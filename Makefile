@@ -1,4 +1,5 @@
 # Every target installs what is missing first (scripts/setup.sh is idempotent).
+# `make validate SCHEDULER=tcp://host:8786` (or SCHEDULER_FILE=FILE) computes on a Dask cluster; so does `make study`.
 PYTHON := .venv/bin/python
 AQUAROM := .venv/bin/aquarom
 OUT ?= results/demo
@@ -18,12 +19,13 @@ bench: setup
 	$(PYTHON) scripts/bench_fom.py
 	$(PYTHON) scripts/bench_prom.py
 	$(PYTHON) scripts/bench_optimize.py
+	$(PYTHON) scripts/bench_sweep.py
 
 study: setup
-	$(PYTHON) scripts/study.py
+	$(PYTHON) scripts/study.py $(if $(SCHEDULER),--scheduler $(SCHEDULER)) $(if $(SCHEDULER_FILE),--scheduler-file $(SCHEDULER_FILE))
 
 validate: setup
-	$(PYTHON) scripts/validate.py --jobs 2
+	$(PYTHON) scripts/validate.py --jobs 2 $(if $(SCHEDULER),--scheduler $(SCHEDULER)) $(if $(SCHEDULER_FILE),--scheduler-file $(SCHEDULER_FILE))
 
 validate-radius: setup
 	$(PYTHON) scripts/validate_prom_radius.py

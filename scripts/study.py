@@ -6,11 +6,20 @@ optimiser stopped, FOM distance start/optimal, ratio). SO2 runs from 3 starts (i
 reports two local optima); its row is the best FOM-verified one. Each case keeps its rows in
 <case>/study_rows.md, and summary.md gathers the rows of every case in the output folder, so
 cases run one invocation at a time (`--cases so7 so8`) land in the same table.
+
+The cases run one after the other; within a case the Pareto weights and the starts of a
+multi-start run on --workers local processes or on a Dask cluster (--scheduler ADDRESS,
+--scheduler-file FILE; results/studies must then be on a file system the workers share).
+Wall times in the table are then those of the parallel run.
 """
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
+
+from aquarom_fenics.errors import InputError
+from aquarom_fenics.executors import choose_cluster, open_pool
 
 from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.io.outputs import software_versions
@@ -33,7 +42,26 @@ def main():
     parser.add_argument("--degree", type=int, choices=(1, 2), help="element degree for every case (default: each scene's own)")
     parser.add_argument("--cases", nargs="+", default=["so1", "so2", "so3", "co"])
     parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "studies")
+    parser.add_argument("--workers", type=int, default=1,
+                        help="local worker processes for a case's weights or starts (default 1: one after the other)")
+    parser.add_argument("--scheduler", metavar="ADDRESS", help="run weights and starts on this Dask scheduler")
+    parser.add_argument("--scheduler-file", type=Path, metavar="FILE", help="as --scheduler, from a scheduler file")
     args = parser.parse_args()
+    try:
+        cluster = choose_cluster(args.scheduler, args.scheduler_file)
+        pool = open_pool(args.workers, cluster) if cluster.distributed or args.workers > 1 else None
+    except InputError as error:
+        print(f"study: error: {error}", file=sys.stderr)
+        return InputError.exit_code
+    try:
+        run_cases(args, pool)
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    return 0
+
+
+def run_cases(args, pool) -> None:
     for case in args.cases:
         scene = Scene.load(case)
         mesh = {name: value for name, value in (("level", args.level), ("degree", args.degree)) if value is not None}
@@ -41,11 +69,11 @@ def main():
         started = time.perf_counter()
         fish = load_fish(scene)
         if scene.cooptimization.enabled:
-            points = pareto_sweep(scene, args.out / case, fish=fish)
+            points = pareto_sweep(scene, args.out / case, fish=fish, pool=pool)
             summaries = [(f"{case} w1={point['w1']:g}", args.out / case / f"w1_{point['w1']:g}" / "summary.json")
                          for point in points]
         else:
-            run_optimization(scene, args.out / case, fish=fish)
+            run_optimization(scene, args.out / case, fish=fish, pool=pool)
             summaries = [(case, args.out / case / "summary.json")]
         case_time = time.perf_counter() - started
         rows = [_row(name, scene, fish, json.loads(path.read_text()), case_time if k == 0 else None)
@@ -100,4 +128,4 @@ def _starts(summary) -> str:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

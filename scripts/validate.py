@@ -33,6 +33,7 @@ report from what is cached).
     .venv/bin/python scripts/validate.py --quick         # levels 1–2, 0.4 s horizon (≈ 1–2 min)
     .venv/bin/python scripts/validate.py --only a,b      # selected studies
     .venv/bin/python scripts/validate.py --report-only   # figures and REPORT.md from the cache
+    .venv/bin/python scripts/validate.py --scheduler tcp://host:8786   # missing cases on a Dask cluster
 """
 from __future__ import annotations
 
@@ -40,6 +41,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from aquarom_fenics.errors import InputError
+from aquarom_fenics.executors import choose_cluster
 from aquarom_fenics.verification.validation.figures import make_figures
 from aquarom_fenics.verification.validation.report import write_report
 from aquarom_fenics.verification.validation.settings import FULL, QUICK
@@ -61,6 +64,11 @@ def main(argv=None) -> int:
     parser.add_argument("--jobs", type=int, default=1,
                         help="compute the missing cases in this many worker processes first (the MPI study e "
                              "always runs alone afterwards); timings are then taken with that many cases at once")
+    parser.add_argument("--scheduler", metavar="ADDRESS",
+                        help="compute the missing cases on the workers of this Dask scheduler (tcp://host:8786); "
+                             "the results folder must be on a file system the workers share")
+    parser.add_argument("--scheduler-file", type=Path, metavar="FILE",
+                        help="as --scheduler, the address read from `dask scheduler --scheduler-file FILE`")
     args = parser.parse_args(argv)
     settings = QUICK if args.quick else FULL
     out = args.out or REPOSITORY / "results" / ("validation-quick" if args.quick else "validation")
@@ -78,7 +86,13 @@ def main(argv=None) -> int:
             parser.error(f"--only: unknown studies {', '.join(unknown)}; valid: {', '.join(STUDIES)}")
     if args.jobs < 1:
         parser.error("--jobs must be at least 1")
-    run(settings, out, report_path, studies, args.recompute_failed, args.time_limit, jobs=args.jobs)
+    try:
+        cluster = choose_cluster(args.scheduler, args.scheduler_file)
+        run(settings, out, report_path, studies, args.recompute_failed, args.time_limit, jobs=args.jobs,
+            cluster=cluster)
+    except InputError as error:
+        print(f"validate: error: {error}", file=sys.stderr)
+        return InputError.exit_code
     return 0
 
 

@@ -26,3 +26,16 @@ def coarse_scene(**sections):
 @pytest.fixture
 def make_scene():
     return coarse_scene
+
+
+@pytest.fixture(scope="session")
+def dask_cluster():
+    """A real Dask distributed cluster on this machine: TCP scheduler, 2 worker processes of one
+    thread each (made once, for the tests that ask for it)."""
+    import logging
+
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, protocol="tcp://", dashboard_address=None,
+                      silence_logs=logging.ERROR) as cluster:
+        yield cluster

@@ -9,12 +9,15 @@ from mpi4py import MPI
 from aquarom_fenics.cli.inputs import check_inputs, load_scene, say
 from aquarom_fenics.cli.outputs import claim_output, claim_output_file, shown
 from aquarom_fenics.cli.runs import run_build, run_compare, run_simulate
+from aquarom_fenics.cli.sweep import run_sweep
 from aquarom_fenics.errors import InputError, SolverError
 
 
 def run_dry(args) -> int:
     from aquarom_fenics.optimization.plan import plan
 
+    if args.command == "sweep":          # its plan needs the designs: the command makes it
+        return run_sweep(args)
     scene, _ = check_inputs(args, load_scene(args))
     say(f"plan for `aquarom {args.command}` (dry run, nothing is written):")
     for line in plan(args.command, scene, getattr(args, "model", None)):
@@ -74,9 +77,17 @@ def run_optimize(args) -> int:
     if scene.cooptimization.enabled:
         weight = DEFAULT_WEIGHT if args.weight is None else args.weight
         weights = CostWeights(weight, 1.0 - weight, scene.cooptimization.energy_weight)
-    out = claim_output(args, args.out or Path("results") / "optimize" / scene.name, resume=args.resume)
-    result, check = run_optimization(scene, out, resume=args.resume, weights=weights,
-                                     max_time=DEFAULT_MAX_TIME if args.max_time is None else args.max_time)
+    pool = open_work_pool(args, scene, scene.optimizer.starts, default_workers=1)
+    try:
+        out = claim_output(args, args.out or Path("results") / "optimize" / scene.name, resume=args.resume)
+        result, check = run_optimization(scene, out, resume=args.resume, weights=weights, pool=pool,
+                                         max_time=DEFAULT_MAX_TIME if args.max_time is None else args.max_time)
+    except BaseException:
+        if pool is not None:
+            pool.shutdown(cancel=True)
+        raise
+    if pool is not None:
+        pool.shutdown()
     args.timings = result.timings | {"fom_check": check.time}
     space = result.space
     say(f"{scene.name} ({scene.optimizer.method}): optimum "
@@ -93,14 +104,44 @@ def run_pareto(args) -> int:
     from aquarom_fenics.optimization.study import pareto_sweep
 
     scene, _ = check_inputs(args, load_scene(args))
-    out = claim_output(args, args.out or Path("results") / "pareto" / scene.name)
-    points = pareto_sweep(scene, out)
+    pool = open_work_pool(args, scene, len(scene.cooptimization.weights), default_workers=1)
+    try:
+        out = claim_output(args, args.out or Path("results") / "pareto" / scene.name)
+        points = pareto_sweep(scene, out, pool=pool)
+    except BaseException:
+        if pool is not None:
+            pool.shutdown(cancel=True)
+        raise
+    if pool is not None:
+        pool.shutdown()
     for point in points:
         fom = (f"FOM distance {100 * point['distance_m']:.3f} cm" if point["fom_check"] == "completed"
                else f"FOM check stopped (infeasible), PROM distance {100 * point['prom_distance_m']:.3f} cm")
         say(f"w1 = {point['w1']:.2f}: amplitude {point['amplitude']:.3f}, energy {point['energy']:.4f}, {fom}")
     say(f"outputs in {shown(args, out)}/ (pareto.csv, pareto.png, one folder per weight)")
     return 0
+
+
+def open_work_pool(args, scene, tasks: int, default_workers: int):
+    """The backend of --workers / --scheduler / --scheduler-file / [cluster] for ``tasks`` tasks, or
+    None to run them one after the other here (also for a single task); an unreachable scheduler is
+    refused (InputError)."""
+    from mpi4py import MPI
+
+    from aquarom_fenics.executors import choose_cluster, open_pool
+
+    if tasks <= 1:
+        return None
+    cluster = choose_cluster(args.scheduler, args.scheduler_file, scene.cluster, args.connect_timeout)
+    workers = default_workers if args.workers is None else args.workers
+    if workers < 1:
+        raise InputError(f"--workers {workers}: must be at least 1")
+    if not cluster.distributed and min(workers, tasks) <= 1:
+        return None
+    if MPI.COMM_WORLD.size > 1:
+        raise InputError(f"aquarom {args.command} under mpirun runs its tasks one after the other; "
+                         "drop --workers / --scheduler (or [cluster]) or run it without mpirun")
+    return open_pool(min(workers, tasks), cluster)
 
 
 def run_animate(args) -> int:
@@ -188,4 +229,4 @@ def run_cache(args) -> int:
 
 COMMANDS = {"mesh": run_mesh, "shapes": run_shapes, "simulate": run_simulate, "build": run_build,
             "compare": run_compare, "optimize": run_optimize, "pareto": run_pareto, "cache": run_cache, "animate": run_animate,
-            "basis": run_basis, "check": run_check}
+            "basis": run_basis, "check": run_check, "sweep": run_sweep}

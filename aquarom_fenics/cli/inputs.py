@@ -69,7 +69,7 @@ def check_inputs(args, scene):
         warn_about_unnamed_parameters(scene, xi)
     if getattr(args, "prom", None) is not None and getattr(args, "model", "prom") != "prom":
         raise InputError(f"--prom {args.prom} is used by --model prom only (this run: --model {args.model})")
-    if args.command in ("simulate", "compare", "optimize", "pareto"):
+    if args.command in ("simulate", "compare", "optimize", "pareto", "sweep"):
         check_time_grid(scene)
         if not getattr(args, "allow_large", False):
             from aquarom_fenics.optimization.plan import check_run_bounds

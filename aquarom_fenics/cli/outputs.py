@@ -17,12 +17,12 @@ def os_error_text(error: OSError, unnamed: str = "a file") -> str:
     return f"{where}: {error.strerror or error}"
 
 
-def claim_output(args, path: Path, resume: bool = False) -> Path:
+def claim_output(args, path: Path, resume: bool = False, resume_file: str = "checkpoint.json") -> Path:
     """The folder this run writes to (see :func:`aquarom_fenics.io.outputs.claim_folder`): the output
     folder itself, or a folder beside it when --force replaces an earlier run's results."""
     from aquarom_fenics.io.outputs import claim_folder
 
-    location = on_rank_zero(lambda: claim_folder(path, getattr(args, "force", False), resume))
+    location = on_rank_zero(lambda: claim_folder(path, getattr(args, "force", False), resume, resume_file))
     args.output = location
     args.output_dir = location.working
     return location.working
@@ -91,10 +91,12 @@ STOP_CODES = (Interrupted.exit_code, Terminated.exit_code)
 
 
 def write_manifest(args, wall_time: float) -> None:
-    """manifest.json: scene, versions, git commit, command, host cores, timings per phase."""
+    """manifest.json: scene, versions, git commit, command, host cores, timings per phase, and what
+    a command adds in ``args.manifest_extra`` (a sweep's backend and counts)."""
     from aquarom_fenics.io.outputs import write_manifest as write_folder_manifest
 
     command = "aquarom " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("aquarom") else args.command
-    arguments = {k: v for k, v in vars(args).items() if k not in ("scene_used", "timings", "output_dir")}
+    arguments = {k: v for k, v in vars(args).items()
+                 if k not in ("scene_used", "timings", "output_dir", "manifest_extra")}
     write_folder_manifest(args.output_dir, command, arguments, getattr(args, "scene_used", None),
-                          {"total": wall_time} | getattr(args, "timings", {}))
+                          {"total": wall_time} | getattr(args, "timings", {}), getattr(args, "manifest_extra", {}))

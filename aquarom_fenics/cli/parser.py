@@ -14,12 +14,16 @@ EXAMPLES = {
     "build": "aquarom build so1 --out results/so1-prom.npz",
     "compare": "aquarom compare so1 --xi y_thin=0.03 --level 1 --out results/so1-compare",
     "optimize": "aquarom optimize so1 --level 1 --out results/so1-opt\n  aquarom optimize so1 --out results/so1-opt --resume",
-    "pareto": "aquarom pareto co --level 1 --out results/co-pareto",
+    "pareto": "aquarom pareto co --level 1 --out results/co-pareto\n"
+              "  aquarom pareto co --scheduler-file ~/dask-scheduler.json --out results/co-pareto",
     "animate": "aquarom animate results/nominal-fom --fps 20 --stride 2",
     "basis": "aquarom basis so1 --level 1 --out results/so1-basis",
     "check": "aquarom check so1 --level 1\n  aquarom check so1 --level 1 --degree 2\n"
              "  aquarom check so1 --prom results/so1-prom.npz",
     "cache": "aquarom cache list\n  aquarom cache clear --kind prom",
+    "sweep": "aquarom sweep so1 --grid z_tail=-0.3:0.3:5 --grid y_thin=0:0.1:3 --level 1 --out results/so1-sweep\n"
+             "  aquarom sweep so1 --samples 200 --seed 1 --scheduler tcp://head-node:8786 --out results/so1-lhs\n"
+             "  aquarom sweep so1 --designs designs.csv --model prom --dry-run",
 }
 
 
@@ -95,8 +99,15 @@ def build_parser() -> argparse.ArgumentParser:
                           help=f"w_1 of L = w_1(-d) + (1-w_1) α A², co-optimisation scenes only (default {DEFAULT_WEIGHT})")
     optimize.add_argument("--max-time", type=float, metavar="SECONDS",
                           help="stop the optimiser after this wall time (default 86400 s, one day)")
-    command("pareto", "co-optimisation weight sweep: Pareto front of distance against actuation energy",
-            out="output directory (default results/pareto/SCENE)")
+    add_cluster_options(optimize, "the starts of a multi-start ([optimizer] starts > 1)",
+                        "local worker processes, one start each (default 1: one after the other here)")
+    pareto = command("pareto", "co-optimisation weight sweep: Pareto front of distance against actuation energy",
+                     out="output directory (default results/pareto/SCENE)")
+    add_cluster_options(pareto, "the weights", "local worker processes, one weight each "
+                                               "(default 1: the weights one after the other in this process)")
+    add_sweep(command("sweep", "run a model at every design of a CSV file, a grid or a Latin hypercube (sweep.csv, "
+                            "sweep.png); on local worker processes or a Dask cluster",
+                      out="output directory (default results/sweep/SCENE-MODEL)"))
     from aquarom_fenics.viz.animate import DEFAULT_FPS
 
     animate_help = "animate a simulation run (MP4 and GIF preview): the fish from above and from the side"
@@ -123,3 +134,34 @@ def build_parser() -> argparse.ArgumentParser:
     cache.add_argument("--kind", action="append", choices=["prom", "fom", "mesh"],
                        help="cache to clear (repeatable; default prom and fom)")
     return parser
+
+
+def add_sweep(sweep: argparse.ArgumentParser) -> None:
+    """The options of ``aquarom sweep``: where the designs come from, the model, where it runs."""
+    designs = sweep.add_argument_group("designs (give one source; shapes not set keep their start values)")
+    designs.add_argument("--designs", type=Path, metavar="FILE.csv",
+                         help="CSV file with a header of shape names and one design per row")
+    designs.add_argument("--grid", action="append", metavar="NAME=LO:HI:N",
+                         help="N evenly spaced values of a shape from LO to HI (repeatable: the grid is the product)")
+    designs.add_argument("--samples", type=int, metavar="N",
+                         help="N designs of a Latin hypercube over the scene's bounds")
+    designs.add_argument("--seed", type=int, default=0, help="seed of --samples (default 0)")
+    sweep.add_argument("--model", choices=["fom", "rom", "prom"], default="fom",
+                       help="full-order model, a ROM per design, or the scene's PROM (default fom)")
+    sweep.add_argument("--resume", action="store_true",
+                       help="keep the rows of sweep.csv in --out and run only the designs it lacks")
+    add_cluster_options(sweep, "the designs", "local worker processes (default: the number of cores; "
+                                              "1 runs in this process)")
+
+
+def add_cluster_options(command: argparse.ArgumentParser, what: str, workers_help: str) -> None:
+    """--workers, --scheduler, --scheduler-file, --connect-timeout: where ``what`` runs."""
+    where = command.add_argument_group(f"where {what} run (default: local; a scene's [cluster] table also names a "
+                                       "Dask scheduler)")
+    where.add_argument("--workers", type=int, metavar="N", help=workers_help)
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run on the workers of this Dask scheduler, e.g. tcp://head-node:8786")
+    where.add_argument("--scheduler-file", type=Path, metavar="FILE",
+                       help="run on the Dask scheduler of this file (`dask scheduler --scheduler-file FILE`)")
+    where.add_argument("--connect-timeout", type=float, metavar="SECONDS",
+                       help="how long to wait for the scheduler before giving up (default 10, or [cluster])")

@@ -165,19 +165,20 @@ class OutputLocation:
     foreign: list[str] = field(default_factory=list)    # files in ``working`` at the claim not of the toolkit
 
 
-def claim_folder(path: Path, force: bool, resume: bool) -> OutputLocation:
+def claim_folder(path: Path, force: bool, resume: bool, resume_file: str = "checkpoint.json") -> OutputLocation:
     """An output folder that may be written, refusing to touch anything the toolkit did not write.
 
     The run first takes the folder's lock (:mod:`output_lock`: one writer per output). Without
     ``force`` an occupied folder is refused; with it, only a folder of an earlier run (its
     ``manifest.json`` lists every file in it) is accepted, and the new run writes beside it.
+    ``resume``: the folder of an earlier run, which must hold ``resume_file``, is continued in place.
     """
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise InputError(f"output {path} is a file, not a folder; choose another --out")
     if resume:
-        if not (path / "checkpoint.json").is_file():
-            raise InputError(f"--resume: no checkpoint.json in {path}; run without --resume")
+        if not (path / resume_file).is_file():
+            raise InputError(f"--resume: no {resume_file} in {path}; run without --resume")
         lock_output(path)
         require_writable(path)
         return OutputLocation(path, path, created=False, replacing=False, foreign=foreign_files(path))
@@ -401,9 +402,9 @@ def _make_folder(path: Path) -> None:
         raise
 
 
-def write_manifest(folder: Path, command: str, arguments: dict, scene, timings: dict) -> None:
+def write_manifest(folder: Path, command: str, arguments: dict, scene, timings: dict, extra: dict | None = None) -> None:
     """manifest.json of a run's folder: command and arguments, scene (name, source, hash, values),
-    versions, git commit, host cores, MPI ranks, timings per phase [s] and the date."""
+    versions, git commit, host cores, MPI ranks, timings per phase [s], the date and ``extra``."""
     import time
 
     from mpi4py import MPI
@@ -416,7 +417,7 @@ def write_manifest(folder: Path, command: str, arguments: dict, scene, timings: 
                                              "values": scene.to_dict()},
         "versions": software_versions(), "git_commit": git_commit(PACKAGE.parent),
         "host_cores": os.cpu_count(), "mpi_ranks": MPI.COMM_WORLD.size, "timings": timings,
-        "date": time.strftime("%Y-%m-%d %H:%M:%S")})
+        "date": time.strftime("%Y-%m-%d %H:%M:%S")} | (extra or {}))
 
 
 def on_rank_zero(comm, action, describe_os_error=None):

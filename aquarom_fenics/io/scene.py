@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from aquarom_fenics.errors import InputError
+from aquarom_fenics.executors import ClusterSettings, cluster_from_table
 from aquarom_fenics.io.paths import shipped_scenes
 from aquarom_fenics.io.scene_sections import (SECTIONS, ActuationSection, CooptimizationSection, FluidSection,
                                               LinearConstraint, MaterialSection, MeshSection, OptimizerSection,
@@ -49,6 +50,9 @@ class Scene:
     optimizer: OptimizerSection = OptimizerSection()
     cooptimization: CooptimizationSection = CooptimizationSection()
     output: OutputSection = OutputSection()
+    cluster: ClusterSettings = ClusterSettings()
+    """Where many-run commands (``aquarom sweep``) send their work; not part of the study (the
+    hashes and ``to_dict`` leave it out)."""
 
     @classmethod
     def load(cls, path: str | Path) -> "Scene":
@@ -95,6 +99,7 @@ class Scene:
         data = dataclasses.asdict(self)
         data.pop("source")
         data.pop("base_dir")
+        data.pop("cluster")
         if self.mesh_file is not None:
             data["mesh"]["file"] = str(self.mesh_file)
         return data
@@ -138,6 +143,10 @@ class Scene:
                                                           for name, value in constraint.coefficients) + " }")
             lines += [f"{bound} = {_toml_value(getattr(constraint, bound))}" for bound in ("lower", "upper")
                       if math.isfinite(getattr(constraint, bound))]
+        if self.cluster != ClusterSettings():
+            lines.append("\n[cluster]")
+            lines += [f"{key} = {_toml_value(value)}" for key, value in dataclasses.asdict(self.cluster).items()
+                      if value != getattr(ClusterSettings(), key)]
         return "\n".join(lines) + "\n"
 
     def replace(self, section: str, **values) -> "Scene":
@@ -214,7 +223,7 @@ def _nesting_depth(text: str) -> int:
 
 def scene_from_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str = ".") -> Scene:
     where = f"scene {source}"
-    known = {"name", "description", "shapes", "constraints", *SECTIONS}
+    known = {"name", "description", "shapes", "constraints", "cluster", *SECTIONS}
     for key in data:
         if key not in known:
             raise InputError(f"{where}: unknown key '{key}'; valid top-level keys: {', '.join(sorted(known))}")
@@ -229,8 +238,9 @@ def scene_from_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str 
     sections = {key: _section_from_dict(cls, _table(data, key, where), where, key) for key, cls in SECTIONS.items()}
     shapes = _shapes_from_dict(_table(data, "shapes", where), where)
     constraints = _constraints_from_list(data.get("constraints", []), shapes, where)
+    cluster = cluster_from_table(data.get("cluster", {}), where, base_dir)
     return Scene(name=name, description=description, source=source, base_dir=base_dir,
-                 shapes=shapes, constraints=constraints, **sections)
+                 shapes=shapes, constraints=constraints, cluster=cluster, **sections)
 
 
 def _plain_file_name(name: str) -> bool:

@@ -7,6 +7,7 @@ import json
 import logging
 import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -115,15 +116,15 @@ def fom_check(scene: Scene, fish: Fish, result: OptimizationResult,
 
 def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights: CostWeights | None = None,
                      fish: Fish | None = None, render: bool = True, max_time: float = DEFAULT_MAX_TIME,
-                     start: np.ndarray | None = None) -> tuple[OptimizationResult, FomCheck]:
+                     start: np.ndarray | None = None, pool=None) -> tuple[OptimizationResult, FomCheck]:
     """Optimise, check with the FOM and write history.csv, summary.json, plots, renders, XDMF.
 
-    From ``start`` when given; otherwise ``[optimizer] starts`` > 1 runs :func:`run_multistart`.
-    A checkpoint to resume from is validated before anything is written; Ctrl-C leaves the
-    history, a valid checkpoint and a summary.json with the stop reason.
+    From ``start`` when given; otherwise ``[optimizer] starts`` > 1 runs :func:`run_multistart`
+    (its starts on ``pool`` when given). A checkpoint to resume from is validated before anything
+    is written; Ctrl-C leaves the history, a valid checkpoint and a summary.json with the stop reason.
     """
     if start is None and scene.optimizer.starts > 1:
-        return run_multistart(scene, out_dir, resume, weights, fish, render, max_time)
+        return run_multistart(scene, out_dir, resume, weights, fish, render, max_time, pool=pool)
     out_dir = Path(out_dir)
     is_writer = MPI.COMM_WORLD.rank == 0
     space = design_space(scene)
@@ -168,17 +169,31 @@ def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights:
 
 def run_multistart(scene: Scene, out_dir: Path, resume: bool = False, weights: CostWeights | None = None,
                    fish: Fish | None = None, render: bool = True,
-                   max_time: float = DEFAULT_MAX_TIME) -> tuple[OptimizationResult, FomCheck]:
+                   max_time: float = DEFAULT_MAX_TIME, pool=None) -> tuple[OptimizationResult, FomCheck]:
     """One optimisation per start of :func:`start_points` (in ``start_<k>/``, sharing the PROM
     cache), each FOM-checked; summary.json lists every local optimum and is the summary of the
-    best FOM-verified one (the best PROM distance when no FOM check finished)."""
+    best FOM-verified one (the best PROM distance when no FOM check finished).
+
+    ``pool``: a backend of :mod:`aquarom_fenics.executors` running one start per task; None runs
+    them one after the other here."""
     out_dir = Path(out_dir)
     fish = fish or load_fish(scene)
     space = optimization_space(scene, fish)
     settings = scene.optimizer
     starts = start_points(space, settings.starts, settings.seed, PromBuilder(scene, fish, space).meshes)
-    runs = [run_optimization(scene, out_dir / f"start_{k + 1}", resume, weights, fish, render=False,
-                             max_time=max_time, start=z) for k, z in enumerate(starts)]
+    if pool is None:
+        runs = [run_optimization(scene, out_dir / f"start_{k + 1}", resume, weights, fish, render=False,
+                                 max_time=max_time, start=z) for k, z in enumerate(starts)]
+    else:
+        from aquarom_fenics.executors import run_all
+
+        task = partial(start_run, scene, str(out_dir.resolve()), resume, weights, max_time)
+        found = {}
+        for (k, _), run, error in run_all(pool, task, list(enumerate(starts)), key=lambda item: item[0]):
+            if error is not None:
+                raise error
+            found[k] = run
+        runs = [found[k] for k in range(len(starts))]
     best = max(range(len(runs)), key=lambda k: _verified_distance(*runs[k]))
     result, check = runs[best]
     if MPI.COMM_WORLD.rank == 0:
@@ -190,6 +205,14 @@ def run_multistart(scene: Scene, out_dir: Path, resume: bool = False, weights: C
                         "local_optima": optima})
     _write_figures(out_dir, scene, fish, result, render)
     return result, check
+
+
+def start_run(scene: Scene, out_dir: str, resume: bool, weights: CostWeights | None, max_time: float,
+              item: tuple[int, np.ndarray]) -> tuple[OptimizationResult, FomCheck]:
+    """The optimisation of multi-start ``item`` = (k, z_start), in ``out_dir/start_<k+1>`` (a worker's task)."""
+    k, z = item
+    return run_optimization(scene, Path(out_dir) / f"start_{k + 1}", resume, weights, render=False, max_time=max_time,
+                            start=z)
 
 
 def _verified_distance(result: OptimizationResult, check: FomCheck) -> tuple[bool, float]:
@@ -308,25 +331,27 @@ def _write_figures(out_dir, scene, fish, result, render):
                                        out_dir / "start_vs_optimal.png", f"{scene.name}: start and optimal design")
 
 
-def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None) -> list[dict]:
+def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None, pool=None) -> list[dict]:
     """Co-optimisation over the scene's weights w_1 (w_2 = 1 - w_1): pareto.csv and pareto.png.
 
     A point whose FOM check does not complete is no optimum of the model: it is marked
-    ``fom_check = infeasible`` with the FOM's stop reason, and left off the front."""
-    fish = fish or load_fish(scene)
-    co = scene.cooptimization
-    points = []
-    for w1 in co.weights:
-        weights = CostWeights(distance=w1, energy=1.0 - w1, alpha=co.energy_weight)
-        result, check = run_optimization(scene, Path(out_dir) / f"w1_{w1:g}", weights=weights, fish=fish, render=False)
-        amplitude = float(result.optimum[-1])
-        completed = check.optimal_distance is not None
-        points.append({"w1": w1, "amplitude": amplitude, "energy": weights.energy_term(amplitude),
-                       "distance_m": check.optimal_distance if completed else float("nan"),
-                       "prom_distance_m": result.evaluation.distance,
-                       "fom_check": "completed" if completed else "infeasible",
-                       "fom_check_reason": "" if completed else (check.error or ""),
-                       **{f"xi_{n}": float(v) for n, v in zip(result.space.names[:-1], result.optimum[:-1])}})
+    ``fom_check = infeasible`` with the FOM's stop reason, and left off the front.
+    ``pool``: a backend of :mod:`aquarom_fenics.executors` (local worker processes or a Dask
+    cluster) running one weight per task; None runs them one after the other here (under MPI too).
+    """
+    if pool is None:
+        fish = fish or load_fish(scene)
+        points = [pareto_point(scene, out_dir, w1, fish) for w1 in scene.cooptimization.weights]
+    else:
+        from aquarom_fenics.executors import run_all
+
+        found = {}
+        for w1, point, error in run_all(pool, partial(pareto_point, scene, str(Path(out_dir).resolve())),
+                                        scene.cooptimization.weights):
+            if error is not None:
+                raise error
+            found[w1] = point
+        points = [found[w1] for w1 in scene.cooptimization.weights]
     if MPI.COMM_WORLD.rank == 0:
         table = io.StringIO()
         writer = csv.DictWriter(table, fieldnames=list(points[0]), lineterminator="\n")
@@ -337,3 +362,19 @@ def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None) -> list[
 
         plot_pareto(points, Path(out_dir) / "pareto.png")
     return points
+
+
+def pareto_point(scene: Scene, out_dir: Path, w1: float, fish: Fish | None = None) -> dict:
+    """The co-optimisation at weight w_1 (in ``out_dir/w1_<w1>``) and its row of pareto.csv."""
+    co = scene.cooptimization
+    weights = CostWeights(distance=w1, energy=1.0 - w1, alpha=co.energy_weight)
+    result, check = run_optimization(scene, Path(out_dir) / f"w1_{w1:g}", weights=weights,
+                                     fish=fish or load_fish(scene), render=False)
+    amplitude = float(result.optimum[-1])
+    completed = check.optimal_distance is not None
+    return {"w1": w1, "amplitude": amplitude, "energy": weights.energy_term(amplitude),
+            "distance_m": check.optimal_distance if completed else float("nan"),
+            "prom_distance_m": result.evaluation.distance,
+            "fom_check": "completed" if completed else "infeasible",
+            "fom_check_reason": "" if completed else (check.error or ""),
+            **{f"xi_{n}": float(v) for n, v in zip(result.space.names[:-1], result.optimum[:-1])}}

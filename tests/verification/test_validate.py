@@ -134,6 +134,29 @@ def test_missing_cases_computed_in_parallel_workers(tmp_path):
     assert runner.counts == {"cached": 0, "computed": 2, "not cached (time limit or crash)": 0}
 
 
+def test_cases_computed_on_dask_equal_those_of_local_workers(tmp_path, dask_cluster):
+    """`make validate --scheduler`: the missing cases on a LocalCluster's workers, the same records."""
+    from aquarom_fenics.executors import ClusterSettings, DaskCluster
+
+    scene = stress_scene("reference").replace("solver", duration=0.2)
+    cases = [reduced_case("ROM", scene, parametric=False),
+             reduced_case("ROM k=30 kPa", scene.replace("actuation", stiffness=3e4), parametric=False)]
+    records = {}
+    for backend in ("local", "dask"):
+        runner = Runner(tmp_path / backend, time_limit=TIME_LIMIT, stream=open("/dev/null", "w"))
+        pool = DaskCluster(ClusterSettings(scheduler=dask_cluster.scheduler_address)) if backend == "dask" else None
+        try:
+            assert compute_in_parallel(runner, cases, jobs=2, pool=pool) == 2
+        finally:
+            if pool is not None:
+                pool.shutdown()
+        assert runner.computed_elsewhere == {case.key for case in cases}
+        records[backend] = runner.run("t", cases)
+    for local, dask in zip(records["local"], records["dask"], strict=True):
+        assert local["status"] == dask["status"] == "completed" and local["distance"] is not None
+        assert (local["distance"], local["tail_amplitude"]) == (dask["distance"], dask["tail_amplitude"])
+
+
 def test_power_law_fit():
     cells = np.array([1e3, 4e3, 8e3, 16e3])
     fit = power_law_fit(cells, 2e-3 * cells ** 1.1)

@@ -1,4 +1,5 @@
-"""Running validation cases once: cache, progress lines, a time limit per case, parallel workers."""
+"""Running validation cases once: cache, progress lines, a time limit per case, parallel workers
+(local processes or a Dask cluster, :mod:`aquarom_fenics.executors`)."""
 from __future__ import annotations
 
 import json
@@ -7,11 +8,14 @@ import os
 import resource
 import signal
 import sys
+import threading
 import time
 import traceback
+from functools import partial
 from pathlib import Path
 
 from aquarom_fenics import __version__
+from aquarom_fenics.executors import DaskCluster, LocalProcesses, run_all
 from aquarom_fenics.io.persistence import get_or_compute, read_intact, write_json_atomic
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.verification.validation.cases import CACHED_STATUSES, Case, describe, read_record
@@ -186,6 +190,8 @@ class Runner:
 LEVEL_CELLS = {1: 1232, 2: 4176, 3: 7944, 4: 15392, 5: 25312}
 
 _WORKER: Runner | None = None
+"""The Runner of a worker process, made by its first case and kept for the cases after it (the
+mesh and the warmed-up forms are reused)."""
 
 
 def estimated_cost(case: Case) -> float:
@@ -200,25 +206,25 @@ def estimated_cost(case: Case) -> float:
     return 1e-4 * cells * (1 + p) * (4 if order == 2 else 1) + 0.05 * steps / 100.0
 
 
-def _start_worker(out, time_limit, recompute_failed, jobs):
+def compute_case(settings: tuple, case: Case) -> tuple[dict, float]:
+    """A worker's ``compute_and_store(case)``; ``settings`` = (out, time_limit, recompute_failed, jobs)."""
     global _WORKER
-    _WORKER = Runner(out, time_limit, recompute_failed, stream=open(os.devnull, "w"), concurrent_jobs=jobs)
-
-
-def _work(case: Case):
+    out, time_limit, recompute_failed, jobs = settings
+    if _WORKER is None or (_WORKER.out, _WORKER.time_limit, _WORKER.recompute_failed,
+                           _WORKER.concurrent_jobs) != (Path(out), float(time_limit), recompute_failed, jobs):
+        _WORKER = Runner(out, time_limit, recompute_failed, stream=open(os.devnull, "w"), concurrent_jobs=jobs)
     return _WORKER.compute_and_store(case)
 
 
-def compute_in_parallel(runner: Runner, cases: list[Case], jobs: int) -> int:
-    """Compute the missing (non-MPI) cases in ``jobs`` worker processes, longest first.
+def compute_in_parallel(runner: Runner, cases: list[Case], jobs: int, pool=None) -> int:
+    """Compute the missing (non-MPI) cases on ``jobs`` local worker processes, or on ``pool`` (an
+    open backend of :mod:`aquarom_fenics.executors`, e.g. a Dask cluster; left open), longest first.
 
-    Workers are fresh interpreters (spawn), each with one BLAS thread; their records are written
-    to the cache as usual, and the uncached outcomes (time limit, crash) are handed to ``runner``
-    so that the studies do not retry them in the same run. Returns the number of cases computed.
+    Local workers are fresh interpreters (spawn), each with one BLAS thread; their records are
+    written to the cache as usual (on a cluster ``runner.out`` must be on a shared file system),
+    and the uncached outcomes (time limit, crash) are handed to ``runner`` so that the studies do
+    not retry them in the same run. Returns the number of cases computed.
     """
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
     pending = {}
     for case in cases:
         if case.kind != "mpi" and case.key not in pending and runner.cached(case) is None:
@@ -226,35 +232,43 @@ def compute_in_parallel(runner: Runner, cases: list[Case], jobs: int) -> int:
     if not pending:
         return 0
     order = sorted(pending.values(), key=estimated_cost, reverse=True)
-    print(f"== computing {len(order)} missing cases with {jobs} parallel workers (longest first) ==",
-          file=runner.stream, flush=True)
-    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[name] = "1"
+    own_pool = pool is None
+    pool = LocalProcesses(jobs) if own_pool else pool
+    where = (f"on {pool.workers} workers of the {pool.settings.describe()}" if isinstance(pool, DaskCluster)
+             else f"with {pool.workers} parallel workers")
+    print(f"== computing {len(order)} missing cases {where} (longest first) ==", file=runner.stream, flush=True)
     width = len(str(len(order)))
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=_start_worker,
-                             initargs=(runner.out, runner.time_limit, runner.recompute_failed, jobs)) as pool:
-        futures = {pool.submit(_work, case): case for case in order}
-        for number, future in enumerate(as_completed(futures), start=1):
-            case = futures[future]
+    settings = (str(runner.out.resolve()), runner.time_limit, runner.recompute_failed, jobs)
+    try:
+        finished = run_all(pool, partial(compute_case, settings), order, key=lambda case: case.key)
+        for number, (case, outcome, error) in enumerate(finished, start=1):
             prefix = f"[parallel {number:>{width}}/{len(order)}] {case.label}"
-            try:
-                record, elapsed = future.result()
-            except Exception as error:  # noqa: BLE001 — a dead worker: the studies compute the case again
+            if error is not None:   # a dead worker: the studies compute the case again
                 print(f"{prefix}: worker failed ({type(error).__name__}: {error}); computed again below",
                       file=runner.stream, flush=True)
                 continue
+            record, elapsed = outcome
             if record["status"] in CACHED_STATUSES:
                 runner.computed_elsewhere.add(case.key)
             else:
                 runner.this_run[case.key] = record
                 runner.outcomes[case.key] = "not cached (time limit or crash)"
             print(f"{prefix}: {elapsed:.1f} s — {describe(record)}", file=runner.stream, flush=True)
+    finally:
+        if own_pool:
+            pool.shutdown()
     return len(order)
 
 
 def with_time_limit(seconds: float, function):
-    """``function()`` under a SIGALRM time limit (raises CaseTimeLimit); main thread only."""
+    """``function()`` under a SIGALRM time limit (raises CaseTimeLimit).
+
+    Signals reach the main thread only: in another thread (a Dask worker runs its tasks in a
+    thread pool) ``function()`` runs without the limit.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return function()
+
     def on_alarm(signum, frame):
         raise CaseTimeLimit(f"time limit of {seconds:g} s")
 

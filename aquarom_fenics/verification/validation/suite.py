@@ -13,6 +13,7 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
+from aquarom_fenics.executors import ClusterSettings, DaskCluster
 from aquarom_fenics.io.outputs import software_versions
 
 from aquarom_fenics.io.persistence import write_json_atomic
@@ -32,20 +33,29 @@ STUDY_FUNCTIONS = {"a": study_a, "b": study_b, "c": study_c, "d": study_d, "e": 
 
 
 def run(settings: Settings, out: Path, report_path: Path, studies=STUDIES, recompute_failed=False,
-        time_limit: float | None = None, stream=None, jobs: int = 1) -> dict:
-    """Every selected study (missing cases first in ``jobs`` workers when jobs > 1), figures, report."""
+        time_limit: float | None = None, stream=None, jobs: int = 1, cluster: ClusterSettings | None = None) -> dict:
+    """Every selected study (missing cases first in ``jobs`` local workers when jobs > 1, or on the
+    workers of the Dask scheduler ``cluster`` names), figures, report.
+
+    The scheduler is reached first: an unreachable one is refused (InputError) before any case runs.
+    """
     started = time.perf_counter()
     time_limit = time_limit or settings.time_limit
-    runner = Runner(out, time_limit, recompute_failed=recompute_failed, stream=stream, concurrent_jobs=1)
-    parallel = 0
-    if jobs > 1:
-        collector = Runner(out, time_limit, recompute_failed=recompute_failed, stream=stream, collect=True)
-        for study in studies:
-            try:
-                STUDY_FUNCTIONS[study](collector, settings)
-            except CasesCollected:
-                pass
-        parallel = compute_in_parallel(runner, collector.collected, jobs)
+    pool = DaskCluster(cluster) if cluster is not None and cluster.distributed else None
+    try:
+        runner = Runner(out, time_limit, recompute_failed=recompute_failed, stream=stream, concurrent_jobs=1)
+        parallel = 0
+        if jobs > 1 or pool is not None:
+            collector = Runner(out, time_limit, recompute_failed=recompute_failed, stream=stream, collect=True)
+            for study in studies:
+                try:
+                    STUDY_FUNCTIONS[study](collector, settings)
+                except CasesCollected:
+                    pass
+            parallel = compute_in_parallel(runner, collector.collected, jobs, pool=pool)
+    finally:
+        if pool is not None:
+            pool.shutdown()
     for study in studies:
         study_started = time.perf_counter()
         print(f"== study {study} ==", file=runner.stream, flush=True)
@@ -58,6 +68,7 @@ def run(settings: Settings, out: Path, report_path: Path, studies=STUDIES, recom
             write_json_atomic(out / "time_convergence.json", time_convergence_summary(result))
     info = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "versions": software_versions(), "machine": machine(),
             "quick": settings.quick, "studies": list(studies), "cases": dict(runner.counts), "jobs": jobs,
+            "cluster": cluster.describe() if cluster is not None else "local worker processes",
             "computed_in_parallel": parallel, "compute_time": runner.compute_time, "command": " ".join(sys.argv)}
     figures = make_figures(out)
     info["wall_time"] = time.perf_counter() - started

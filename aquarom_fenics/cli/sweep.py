@@ -1,0 +1,138 @@
+"""``aquarom sweep``: one model run per design, on local worker processes or a Dask cluster."""
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+from mpi4py import MPI
+
+from aquarom_fenics.cli.inputs import check_inputs, load_scene, say
+from aquarom_fenics.cli.outputs import claim_output, shown
+from aquarom_fenics.errors import InputError
+
+
+def sweep_designs(args, scene) -> tuple[list[dict], str]:
+    """The designs of --designs, --grid or --samples (exactly one of them) and a description."""
+    from aquarom_fenics.optimization import sweep
+
+    given = [name for name, value in (("--designs", args.designs), ("--grid", args.grid),
+                                      ("--samples", args.samples)) if value is not None]
+    if len(given) != 1:
+        raise InputError("give the designs with one of --designs FILE.csv, --grid NAME=LO:HI:N (repeatable) "
+                         f"or --samples N{f' (got {chr(32).join(given)})' if given else ''}")
+    if args.designs is not None:
+        return sweep.csv_designs(args.designs, scene), f"{args.designs}"
+    if args.grid is not None:
+        designs = sweep.grid_designs(args.grid, scene)
+        return designs, "grid " + " × ".join(spec.partition("=")[0] + "(" + spec.rsplit(":", 1)[-1] + ")"
+                                             for spec in args.grid)
+    return sweep.latin_hypercube(scene, args.samples, args.seed), f"Latin hypercube, seed {args.seed}"
+
+
+def earlier_rows(args, scene, designs, target: Path) -> dict:
+    """The rows --resume keeps (none without it)."""
+    from aquarom_fenics.optimization.sweep import resumed_rows
+
+    if not args.resume:
+        return {}
+    path = target / "sweep.csv"
+    if not path.is_file():
+        raise InputError(f"--resume: no sweep.csv in {target}; run without --resume")
+    return resumed_rows(path, scene, designs)
+
+
+def run_sweep(args) -> int:
+    from aquarom_fenics.executors import choose_cluster, open_pool
+    from aquarom_fenics.optimization import sweep
+
+    if MPI.COMM_WORLD.size > 1:
+        raise InputError("aquarom sweep spreads its designs over workers itself; run it without mpirun "
+                         "(--workers N, or --scheduler for a Dask cluster)")
+    if args.workers is not None and args.workers < 1:
+        raise InputError(f"--workers {args.workers}: must be at least 1")
+    scene, _ = check_inputs(args, load_scene(args))
+    designs, source = sweep_designs(args, scene)
+    cluster = choose_cluster(args.scheduler, args.scheduler_file, scene.cluster, args.connect_timeout)
+    target = args.out or Path("results") / "sweep" / f"{scene.name}-{args.model}"
+    kept = earlier_rows(args, scene, designs, target)
+    missing = len(designs) - len(kept)
+    workers = min(args.workers or os.cpu_count() or 1, max(missing, 1))
+    if args.dry_run:
+        return dry_run(args, scene, designs, source, kept, cluster, workers)
+    pool = open_pool(workers, cluster)          # an unreachable scheduler is refused before any output
+    started = time.perf_counter()
+    try:
+        out = claim_output(args, target, resume=args.resume, resume_file="sweep.csv")
+        backend = describe_backend(pool, cluster)
+        say(f"sweep of {scene.name}: {len(designs)} designs ({source}), model {args.model}, {missing} to run "
+            f"{backend}" + (f", {len(kept)} kept from sweep.csv" if kept else ""))
+        rows = sweep.run_sweep(scene, designs, args.model, out, pool, resume=args.resume,
+                               on_row=progress_line(len(designs), len(kept), scene.shape_names))
+    except BaseException:                 # Ctrl-C or a refused output: stop the workers at once
+        pool.shutdown(cancel=True)
+        raise
+    pool.shutdown()
+    result = sweep.summary(rows)
+    args.timings = {"sweep": time.perf_counter() - started}
+    args.manifest_extra = {"sweep": {"designs": len(designs), "source": source, "model": args.model,
+                                     "backend": backend, "kept_from_resume": len(kept), "counts": result["counts"],
+                                     "answered_from_cache": result["cached"]}}
+    counts = ", ".join(f"{n} {status}" for status, n in result["counts"].items() if n)
+    say(f"{len(rows)} designs: {counts}; outputs in {shown(args, out)}/ (sweep.csv, manifest.json"
+        + (", sweep.png)" if scene.output.plots else ")"))
+    if result["best"] is not None:
+        best = result["best"]
+        say("farthest: " + ", ".join(f"{n} = {best[n]:.4g}" for n in scene.shape_names)
+            + f" ({100 * best['distance_m']:.3f} cm)")
+    return 0
+
+
+def describe_backend(pool, cluster) -> str:
+    from aquarom_fenics.executors import DaskCluster, InProcess
+
+    if isinstance(pool, DaskCluster):
+        return f"on {pool.workers} Dask worker(s) of the {cluster.describe().removeprefix('Dask ')}"
+    if isinstance(pool, InProcess):
+        return "in this process"
+    return f"on {pool.workers} local worker processes"
+
+
+def progress_line(total: int, done: int, names: list[str]):
+    width = len(str(total))
+    count = [done]
+
+    def show(row: dict) -> None:
+        count[0] += 1
+        design = ", ".join(f"{n}={row[n]:.4g}" for n in names)
+        outcome = (f"distance {100 * row['distance_m']:.3f} cm" + (" (cached)" if row.get("cached") else "")
+                   if row["status"] == "completed" else f"{row['status']}: {row['reason']}")
+        took = f", {row['wall_time_s']:.1f} s on {row['worker']}" if row.get("wall_time_s") is not None else ""
+        say(f"[{count[0]:>{width}}/{total}] design {row['design']} ({design}): {outcome}{took}")
+
+    return show
+
+
+def dry_run(args, scene, designs, source, kept, cluster, workers) -> int:
+    from aquarom_fenics.optimization.plan import plan
+    from aquarom_fenics.optimization.sweep import cached_designs, estimate
+
+    todo = [design for k, design in enumerate(designs) if k not in kept]
+    cached = cached_designs(scene, todo, args.model)
+    missing = len(todo) - cached
+    say("plan for `aquarom sweep` (dry run, nothing is written):")
+    for line in plan("sweep", scene, args.model)[:3]:
+        say(f"  {line}")
+    say(f"  designs: {len(designs)} ({source}) of {', '.join(scene.shape_names)}; model {args.model}")
+    if kept:
+        say(f"  resume: {len(kept)} rows kept from sweep.csv")
+    if args.model == "fom":
+        say(f"  FOM cache: {cached} of the {len(todo)} designs answered already; {missing} to compute "
+            f"({scene.n_steps} steps of {scene.solver.time_step:g} s each)")
+    where = cluster.describe() if cluster.distributed else (f"{workers} local worker process(es)" if workers > 1
+                                                            else "this process (one worker)")
+    say(f"  runs on: {where}")
+    seconds = estimate(scene, missing, args.model, 1 if cluster.distributed else workers)
+    say(f"  estimate: ~{seconds:.0f} s" + (" on one worker (divided by the number of the cluster's workers)"
+                                          if cluster.distributed else ""))
+    return 0

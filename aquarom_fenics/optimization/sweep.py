@@ -1,0 +1,390 @@
+"""Design sweeps: one model run per design of a list, grid or Latin hypercube, on the executor layer.
+
+Designs come from a CSV file (one column per shape name), a grid (``name=lo:hi:n`` per shape) or
+a seeded Latin hypercube over the scene's bounds; a shape a source does not set keeps its start
+value. Each design is one task (:func:`evaluate`) on a backend of :mod:`aquarom_fenics.executors`;
+its row is written to ``sweep.csv`` as it finishes. The FOM's answer at a design is cached in the
+FOM cache (:func:`aquarom_fenics.optimization.study.fom_cache_path`, shared with the optimiser's
+FOM checks), so a re-run computes only what is missing; ``--resume`` keeps the rows already in
+``sweep.csv`` and runs the designs it lacks.
+
+A design the design check refuses, a PROM outside its validity radius, a FOM that stops or a task
+that fails is a row with its status and reason, never the end of the sweep.
+"""
+from __future__ import annotations
+
+import csv
+import itertools
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from aquarom_fenics.errors import InputError
+from aquarom_fenics.executors import run_all, worker_name
+from aquarom_fenics.io.scene import Scene
+
+
+MODELS = ("fom", "rom", "prom")
+STATUSES = ("completed", "refused", "stopped", "error")
+"""completed: the model ran to the horizon; refused: the design check (or the PROM's validity
+radius) refused the design; stopped: the solver stopped early; error: the task failed otherwise."""
+
+
+# ---------------------------------------------------------------------- designs
+def _require_shapes(scene: Scene) -> None:
+    if not scene.shapes:
+        raise InputError(f"scene {scene.source} has no [shapes]: there is no design space to sweep")
+
+
+def _complete(scene: Scene, values: dict[str, float]) -> dict[str, float]:
+    """Every shape of the scene, in its order: the given values, else the start values."""
+    return {shape.name: float(values.get(shape.name, shape.start)) for shape in scene.shapes}
+
+
+def _number(text: str, where: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise InputError(f"{where}: '{text}' is not a number") from None
+    if not math.isfinite(value):
+        raise InputError(f"{where}: '{text}' is not a finite number")
+    return value
+
+
+def grid_designs(specs: list[str], scene: Scene) -> list[dict[str, float]]:
+    """The Cartesian product of ``name=lo:hi:n`` axes (n evenly spaced values from lo to hi)."""
+    _require_shapes(scene)
+    axes = {}
+    for spec in specs:
+        where = f"--grid {spec}"
+        name, sep, interval = spec.partition("=")
+        parts = interval.split(":")
+        if not sep or len(parts) != 3:
+            raise InputError(f"{where}: expected name=lo:hi:n, e.g. --grid z_tail=-0.5:0.5:5")
+        name = name.strip()
+        if name not in scene.shape_names:
+            raise InputError(f"{where}: '{name}' is not a shape variation of scene {scene.name} "
+                             f"(valid: {', '.join(scene.shape_names)})")
+        if name in axes:
+            raise InputError(f"{where}: {name} is given twice; give each shape one --grid")
+        low, high = _number(parts[0], where), _number(parts[1], where)
+        try:
+            count = int(parts[2])
+        except ValueError:
+            raise InputError(f"{where}: n = '{parts[2]}' must be a whole number of values ≥ 1") from None
+        if count < 1:
+            raise InputError(f"{where}: n = {count} must be ≥ 1")
+        if count == 1 and low != high:
+            raise InputError(f"{where}: one value (n = 1) needs lo = hi")
+        axes[name] = np.linspace(low, high, count).tolist()
+    names = list(axes)
+    return [_complete(scene, dict(zip(names, values))) for values in itertools.product(*axes.values())]
+
+
+def csv_designs(path: Path, scene: Scene) -> list[dict[str, float]]:
+    """The rows of a CSV file whose header names shapes of the scene (each at most once)."""
+    _require_shapes(scene)
+    try:
+        with open(path, newline="") as stream:
+            rows = list(csv.reader(stream))
+    except UnicodeDecodeError:
+        raise InputError(f"--designs {path}: not a UTF-8 text file") from None
+    except OSError as error:
+        raise InputError(f"--designs {path}: cannot be read ({error.strerror})") from None
+    rows = [row for row in rows if any(cell.strip() for cell in row)]
+    if len(rows) < 2:
+        raise InputError(f"--designs {path}: needs a header of shape names and at least one row of values")
+    header = [cell.strip() for cell in rows[0]]
+    for name in header:
+        if name not in scene.shape_names:
+            raise InputError(f"--designs {path}: column '{name}' is not a shape variation of scene {scene.name} "
+                             f"(valid: {', '.join(scene.shape_names)})")
+        if header.count(name) > 1:
+            raise InputError(f"--designs {path}: column '{name}' appears twice")
+    designs = []
+    for number, row in enumerate(rows[1:], start=2):
+        if len(row) != len(header):
+            raise InputError(f"--designs {path}: line {number} has {len(row)} values for {len(header)} columns")
+        designs.append(_complete(scene, {name: _number(cell.strip(), f"--designs {path} line {number} column {name}")
+                                         for name, cell in zip(header, row)}))
+    return designs
+
+
+def latin_hypercube(scene: Scene, samples: int, seed: int) -> list[dict[str, float]]:
+    """``samples`` designs of a Latin hypercube over the scene's bounds: in every shape's range each
+    of the ``samples`` equal strata holds one design (uniform inside its stratum); numpy's PCG64
+    generator seeded with ``seed``."""
+    _require_shapes(scene)
+    if samples < 1:
+        raise InputError(f"--samples {samples}: must be ≥ 1")
+    if seed < 0:
+        raise InputError(f"--seed {seed}: must be ≥ 0")
+    generator = np.random.default_rng(seed)
+    columns = []
+    for shape in scene.shapes:
+        strata = generator.permutation(samples)
+        unit = (strata + generator.random(samples)) / samples
+        columns.append(shape.lower + unit * (shape.upper - shape.lower))
+    return [_complete(scene, {shape.name: float(column[k]) for shape, column in zip(scene.shapes, columns)})
+            for k in range(samples)]
+
+
+# ---------------------------------------------------------------------- one design
+@dataclass(frozen=True)
+class SweepTask:
+    """One design of a sweep: its number in the sweep (0-based), shape values and model."""
+
+    index: int
+    design: dict
+    model: str
+    scene: Scene
+
+
+_FISH: dict = {}
+
+
+def _fish(scene: Scene):
+    """load_fish, kept per worker process for the designs after the first."""
+    from aquarom_fenics.geometry.fish import load_fish
+
+    key = json.dumps([scene.to_dict()["mesh"], scene.to_dict()["regions"], scene.shape_names], sort_keys=True)
+    if key not in _FISH:
+        _FISH[key] = load_fish(scene)
+    return _FISH[key]
+
+
+class _Stopped(Exception):
+    """A model run that stopped before the horizon (not cached: a run is retried next time)."""
+
+
+def evaluate(task: SweepTask) -> dict:
+    """The row of one design: status, distance [m], tail amplitude [m], wall time [s], worker.
+
+    Never raises for the model's own outcomes (a refused design, a solver stop)."""
+    started = time.perf_counter()
+    row = {"design": task.index, **task.design, "status": "completed", "distance_m": None,
+           "tail_amplitude_m": None, "cached": False, "reason": ""}
+    try:
+        run = {"fom": _fom_answer, "rom": _reduced_answer, "prom": _reduced_answer}[task.model]
+        row.update(run(task))
+    except InputError as refused:
+        row.update(status="refused", reason=str(refused))
+    except _Stopped as stop:
+        row.update(status="stopped", reason=str(stop))
+    row["wall_time_s"] = time.perf_counter() - started
+    row["worker"] = worker_name()
+    return row
+
+
+def _fom_answer(task: SweepTask) -> dict:
+    """The FOM's distance and tail amplitude at the design, through the FOM cache."""
+    from aquarom_fenics.dynamics.simulate import simulate_fom
+    from aquarom_fenics.io.persistence import get_or_compute, write_json_atomic
+    from aquarom_fenics.optimization.study import fom_cache_path
+
+    scene, design = task.scene, task.design
+    computed = []
+
+    def simulate() -> dict:
+        result = simulate_fom(scene, design, fish=_fish(scene), progress=False)
+        if not result.completed:
+            raise _Stopped(result.error)
+        computed.append(True)
+        return {"design": design, "scene_hash": scene.hash, "fom_hash": scene.fom_hash, "distance": result.distance,
+                "tail_amplitude": result.tail_amplitude, "wall_time": result.wall_time, "cells": result.n_cells,
+                "steps": len(result.trajectory) - 1}
+
+    answer = get_or_compute(fom_cache_path(scene, design, None), simulate,
+                            save=lambda value, path: write_json_atomic(path, value), load=_sweep_entry,
+                            label=f"FOM at {design}")
+    return {"distance_m": answer["distance"], "tail_amplitude_m": answer["tail_amplitude"], "cached": not computed}
+
+
+def _sweep_entry(path: Path) -> dict:
+    """A FOM cache entry with the tail amplitude too (an optimiser's FOM check stores the distance only)."""
+    entry = json.loads(path.read_text())
+    if entry.get("tail_amplitude") is None or entry.get("distance") is None:
+        raise ValueError("an entry without the tail amplitude")
+    return entry
+
+
+def reduced_model(scene: Scene, design: dict, model: str):
+    """The ROM built at the design, or the scene's PROM at its start values (both through the PROM cache).
+
+    InputError for a design beyond the PROM's validity radius."""
+    from aquarom_fenics.reduction.cache import cached_prom
+    from aquarom_fenics.reduction.prom import ReducedModel
+    from aquarom_fenics.reduction.reductor import build_prom
+
+    fish = _fish(scene)
+    parametric = model == "prom"
+    center = fish.parameter_vector({s.name: s.start for s in scene.shapes} if parametric else design)
+    if parametric:
+        ReducedModel.refuse_outside_radius(scene.shape_names, fish.parameter_vector(design), center,
+                                           np.array(scene.validity_radii()))
+    return cached_prom(scene, center, lambda: build_prom(scene, xi_center=center, fish=fish, parametric=parametric),
+                       parametric=parametric)
+
+
+def _reduced_answer(task: SweepTask) -> dict:
+    from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
+
+    reduced = reduced_model(task.scene, task.design, task.model)
+    result = simulate_reduced(reduced, task.scene, np.array([task.design[name] for name in reduced.shape_names]))
+    if not result.completed:
+        raise _Stopped(result.error)
+    return {"distance_m": result.distance, "tail_amplitude_m": result.tail_amplitude}
+
+
+# ---------------------------------------------------------------------- the sweep
+def columns(scene: Scene) -> list[str]:
+    return ["design", *scene.shape_names, "status", "distance_m", "tail_amplitude_m", "wall_time_s", "cached",
+            "worker", "reason"]
+
+
+def _cell(value) -> str:
+    """A CSV cell; floats in full precision (repr round-trips), None empty."""
+    if value is None:
+        return ""
+    if isinstance(value, float):
+        return repr(value)
+    return str(value)
+
+
+def read_rows(path: Path, scene: Scene) -> list[dict]:
+    """The rows of a sweep.csv (numbers as floats, empty cells None)."""
+    with open(path, newline="") as stream:
+        reader = csv.DictReader(stream)
+        if reader.fieldnames != columns(scene):
+            raise InputError(f"--resume: {path} has the columns {reader.fieldnames}, not those of scene "
+                             f"{scene.name}'s sweep; run without --resume")
+        rows = []
+        for row in reader:
+            parsed = dict(row)
+            parsed["design"] = int(row["design"])
+            for name in (*scene.shape_names, "distance_m", "tail_amplitude_m", "wall_time_s"):
+                parsed[name] = float(row[name]) if row[name] != "" else None
+            parsed["cached"] = row["cached"] == "True"
+            rows.append(parsed)
+    return rows
+
+
+def resumed_rows(path: Path, scene: Scene, designs: list[dict]) -> dict[int, dict]:
+    """The rows of an earlier run of the same designs, by design number; InputError when the file
+    was made for other designs."""
+    kept = {}
+    for row in read_rows(path, scene):
+        index = row["design"]
+        if not 0 <= index < len(designs) or any(row[n] != designs[index][n] for n in scene.shape_names):
+            raise InputError(f"--resume: {path} row of design {index} does not match this sweep's designs "
+                             "(other --designs, --grid or --samples/--seed?); run without --resume")
+        if index in kept:
+            raise InputError(f"--resume: {path} holds design {index} twice; run without --resume")
+        kept[index] = row
+    return kept
+
+
+class SweepCSV:
+    """sweep.csv, one row per design as it finishes (flushed at once, so an interrupted sweep keeps
+    its rows for --resume)."""
+
+    def __init__(self, path: Path, scene: Scene, earlier: list[dict]):
+        from aquarom_fenics.io.outputs import IncrementalCSV
+
+        self.header = columns(scene)
+        self.table = IncrementalCSV(path, self.header)
+        for row in earlier:
+            self.write(row)
+
+    def write(self, row: dict) -> None:
+        self.table.write_row([_cell(row.get(name)) for name in self.header])
+
+    def close(self) -> None:
+        self.table.close()
+
+
+def prepare(scene: Scene, model: str) -> None:
+    """What every worker would otherwise do at once: refuse an unwritable cache, build the PROM
+    (model prom) here once, so that the workers read it from the PROM cache."""
+    from aquarom_fenics.io.persistence import require_cache_writable
+
+    require_cache_writable("fom" if model == "fom" else "prom")
+    if model == "prom":
+        start = {s.name: s.start for s in scene.shapes}
+        reduced_model(scene, start, "prom")
+
+
+def run_sweep(scene: Scene, designs: list[dict], model: str, out: Path, pool, resume: bool = False,
+              on_row: Callable[[dict], None] | None = None) -> list[dict]:
+    """Every design on ``pool``: sweep.csv (rows as they finish), sweep.png; the rows by design number.
+
+    ``on_row(row)`` is called after each new row is written (progress lines)."""
+    out = Path(out)
+    path = out / "sweep.csv"
+    earlier = resumed_rows(path, scene, designs) if resume and path.exists() else {}
+    tasks = [SweepTask(k, design, model, scene) for k, design in enumerate(designs) if k not in earlier]
+    prepare(scene, model)
+    table = SweepCSV(path, scene, list(earlier.values()))
+    rows = dict(earlier)
+    try:
+        for task, row, error in run_all(pool, evaluate, tasks, key=lambda task: task.index):
+            if error is not None:
+                row = {"design": task.index, **task.design, "status": "error", "cached": False, "worker": "",
+                       "reason": f"{type(error).__name__}: {error}".splitlines()[0]}
+            rows[task.index] = row
+            table.write(row)
+            if on_row is not None:
+                on_row(row)
+    finally:
+        table.close()
+    ordered = [rows[k] for k in sorted(rows)]
+    if scene.output.plots:
+        from aquarom_fenics.viz.sweep_plot import plot_sweep
+
+        plot_sweep(ordered, scene.shape_names, out / "sweep.png", f"{scene.name}: {model.upper()} design sweep")
+    return ordered
+
+
+def summary(rows: list[dict]) -> dict:
+    """Counts per status and the best completed design."""
+    counts = {status: sum(row["status"] == status for row in rows) for status in STATUSES}
+    completed = [row for row in rows if row["status"] == "completed"]
+    best = max(completed, key=lambda row: row["distance_m"]) if completed else None
+    return {"designs": len(rows), "counts": counts, "best": best,
+            "cached": sum(bool(row.get("cached")) for row in rows)}
+
+
+def estimate(scene: Scene, missing: int, model: str, workers: int) -> float:
+    """Estimated wall time [s] of the missing designs on ``workers`` workers (plan.py's cost figures)."""
+    from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS
+    from aquarom_fenics.optimization.plan import REFERENCE_CELLS, fom_seconds, prom_build_seconds
+
+    cells = LEVEL_TARGET_CELLS.get(scene.mesh.level, REFERENCE_CELLS) if not scene.mesh.file else REFERENCE_CELLS
+    degree = scene.mesh.degree
+    start_up = 5.0 * min(workers, max(missing, 1)) / max(workers, 1)   # a worker's imports and first mesh
+    if model == "fom":
+        per_design = fom_seconds(cells, scene.n_steps, degree)
+        return start_up + math.ceil(missing / workers) * per_design
+    if model == "rom":
+        return start_up + math.ceil(missing / workers) * (prom_build_seconds(cells, 0, degree) + 0.2)
+    return prom_build_seconds(cells, len(scene.shapes), degree) + start_up + math.ceil(missing / workers) * 0.2
+
+
+def cached_designs(scene: Scene, designs: list[dict], model: str) -> int:
+    """How many designs the FOM cache answers already (model fom; 0 for the reduced models)."""
+    if model != "fom":
+        return 0
+    from aquarom_fenics.optimization.study import fom_cache_path
+
+    def answered(design) -> bool:
+        try:
+            return bool(_sweep_entry(fom_cache_path(scene, design, None)))
+        except (OSError, ValueError):
+            return False
+
+    return sum(answered(design) for design in designs)
