@@ -31,17 +31,23 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     comm = MPI.COMM_WORLD
     agreement = comm.Dup() if comm.size > 1 else None
-    logger = set_log_level("info" if args.verbose else "warning")   # the console shows details only with --verbose
-    if comm.rank != 0:
-        logger.setLevel(logging.ERROR)
-    # the toolkit's console handler is the one that prints: dolfinx installs a handler on the root logger
-    propagates, logger.propagate = logger.propagate, False
+    set_log_level("info" if args.verbose else "warning")      # the console shows details only with --verbose
+    logging.getLogger("aquarom").setLevel(logging.INFO if comm.rank == 0 else logging.ERROR)  # records for any handler
+    # the toolkit's console handler is the one that prints: importing dolfinx puts a plain stderr
+    # handler on the root logger, which would print every record again ("INFO:aquarom:…")
+    import dolfinx  # noqa: F401  (its import adds that handler: silence it before any command imports it)
+
+    silenced = [(handler, handler.level) for handler in logging.getLogger().handlers
+                if type(handler) is logging.StreamHandler and handler.stream is sys.stderr]
+    for handler, _ in silenced:
+        handler.setLevel(logging.CRITICAL + 1)
     try:
         with sigterm_as_interrupt():
             code, line = run_and_settle(args)
     finally:
         release_output_locks()
-        logger.propagate = propagates
+        for handler, level in silenced:
+            handler.setLevel(level)
     if line is None:
         return code
     return end_in_agreement(agreement, code, f"aquarom {args.command}: {line}")

@@ -83,7 +83,13 @@ def gmsh_model(name: str, options: dict[str, float]):
     finally:
         if started_here:
             with _keeping_sigint():
-                gmsh.finalize()
+                try:
+                    gmsh.finalize()
+                except ValueError:
+                    # gmsh.finalize() restores its import-time SIGINT handler after finalizing; off
+                    # the main thread (a Dask worker's task) Python refuses signal handlers
+                    if threading.current_thread() is threading.main_thread():
+                        raise
         else:
             if gmsh.model.getCurrent() == name:
                 gmsh.model.remove()

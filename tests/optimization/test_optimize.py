@@ -1,4 +1,5 @@
 """Shape optimisation (SPEC §10) on the coarsest mesh with a short horizon."""
+import re
 import json
 from pathlib import Path
 
@@ -226,7 +227,8 @@ def test_fom_check_that_stops_is_reported_and_the_outputs_are_kept(tmp_path, cap
     out = tmp_path / "run"
     assert main(["optimize", str(scene), "--out", str(out)]) == 3
     message = capsys.readouterr().err.strip()
-    assert len(message.splitlines()) == 1 and "FOM check" in message and "step 13" in message
+    assert len(message.splitlines()) == 1 and "FOM check" in message
+    assert re.search(r"at t = [\d.]+ s \(step \d+ of 50\)", message), message     # says when it stopped
     summary = json.loads((out / "summary.json").read_text())
     assert summary["fom_check"]["ratio"] is None and "stopped" in summary["fom_check"]["error"]
     assert (out / "history.csv").exists()
