@@ -1,7 +1,9 @@
-"""Lighthill thrust on the spine nodes and its exact Jacobians (SPEC §5, "Thrust").
+"""Lighthill thrust on a row of points and its exact Jacobians (SPEC §5, "Thrust").
 
-Large-amplitude elongated-body theory in the x-y plane. The spine nodes are sorted tail -> head
-(node 0 is the tail node); segment i joins its rear node r = i and its front node f = i + 1.
+Large-amplitude elongated-body theory in the x-y plane. The points are the stations (averages of
+the body's motion, ``stations.py``) or, for the source's model, the spine nodes; below they are
+called nodes, sorted tail -> head (node 0 at the tail); segment i joins its rear node r = i and
+its front node f = i + 1.
 For a segment with rest length ℓ_0 [m] and virtual mass per length m̃ [kg/m]:
 
     t = (x_f - x_r) / ℓ_0        (not normalised)
