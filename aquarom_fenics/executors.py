@@ -23,6 +23,7 @@ import socket
 import sys
 import time
 from concurrent.futures import Future, as_completed
+from contextlib import contextmanager
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
@@ -326,3 +327,17 @@ def run_all(pool, function: Callable, items: Iterable, key: Callable = repr) -> 
             yield item, result, None
         if broken and isinstance(pool, LocalProcesses):
             pool.restart()
+
+
+@contextmanager
+def shutting_down(pool):
+    """``pool`` (a backend, or None to run here) for the block, shut down afterwards: its unfinished
+    tasks cancelled when the block fails or is interrupted (Ctrl-C, SIGTERM), awaited otherwise."""
+    try:
+        yield pool
+    except BaseException:
+        if pool is not None:
+            pool.shutdown(cancel=True)
+        raise
+    if pool is not None:
+        pool.shutdown()

@@ -11,6 +11,7 @@ from aquarom_fenics.cli.outputs import claim_output, claim_output_file, shown
 from aquarom_fenics.cli.runs import run_build, run_compare, run_simulate
 from aquarom_fenics.cli.sweep import run_sweep
 from aquarom_fenics.errors import InputError, SolverError
+from aquarom_fenics.executors import shutting_down
 
 
 def run_dry(args) -> int:
@@ -77,17 +78,10 @@ def run_optimize(args) -> int:
     if scene.cooptimization.enabled:
         weight = DEFAULT_WEIGHT if args.weight is None else args.weight
         weights = CostWeights(weight, 1.0 - weight, scene.cooptimization.energy_weight)
-    pool = open_work_pool(args, scene, scene.optimizer.starts, default_workers=1)
-    try:
+    with shutting_down(open_work_pool(args, scene, scene.optimizer.starts, default_workers=1)) as pool:
         out = claim_output(args, args.out or Path("results") / "optimize" / scene.name, resume=args.resume)
         result, check = run_optimization(scene, out, resume=args.resume, weights=weights, pool=pool,
                                          max_time=DEFAULT_MAX_TIME if args.max_time is None else args.max_time)
-    except BaseException:
-        if pool is not None:
-            pool.shutdown(cancel=True)
-        raise
-    if pool is not None:
-        pool.shutdown()
     args.timings = result.timings | {"fom_check": check.time}
     space = result.space
     say(f"{scene.name} ({scene.optimizer.method}): optimum "
@@ -104,16 +98,9 @@ def run_pareto(args) -> int:
     from aquarom_fenics.optimization.study import pareto_sweep
 
     scene, _ = check_inputs(args, load_scene(args))
-    pool = open_work_pool(args, scene, len(scene.cooptimization.weights), default_workers=1)
-    try:
+    with shutting_down(open_work_pool(args, scene, len(scene.cooptimization.weights), default_workers=1)) as pool:
         out = claim_output(args, args.out or Path("results") / "pareto" / scene.name)
         points = pareto_sweep(scene, out, pool=pool)
-    except BaseException:
-        if pool is not None:
-            pool.shutdown(cancel=True)
-        raise
-    if pool is not None:
-        pool.shutdown()
     for point in points:
         fom = (f"FOM distance {100 * point['distance_m']:.3f} cm" if point["fom_check"] == "completed"
                else f"FOM check stopped (infeasible), PROM distance {100 * point['prom_distance_m']:.3f} cm")

@@ -43,7 +43,7 @@ def earlier_rows(args, scene, designs, target: Path) -> dict:
 
 
 def run_sweep(args) -> int:
-    from aquarom_fenics.executors import choose_cluster, open_pool
+    from aquarom_fenics.executors import choose_cluster, open_pool, shutting_down
     from aquarom_fenics.optimization import sweep
 
     if MPI.COMM_WORLD.size > 1:
@@ -60,19 +60,15 @@ def run_sweep(args) -> int:
     workers = min(args.workers or os.cpu_count() or 1, max(missing, 1))
     if args.dry_run:
         return dry_run(args, scene, designs, source, kept, cluster, workers)
-    pool = open_pool(workers, cluster)          # an unreachable scheduler is refused before any output
     started = time.perf_counter()
-    try:
+    # an unreachable scheduler is refused before any output; Ctrl-C or a refused output stops the workers at once
+    with shutting_down(open_pool(workers, cluster)) as pool:
         out = claim_output(args, target, resume=args.resume, resume_file="sweep.csv")
         backend = describe_backend(pool, cluster)
         say(f"sweep of {scene.name}: {len(designs)} designs ({source}), model {args.model}, {missing} to run "
             f"{backend}" + (f", {len(kept)} kept from sweep.csv" if kept else ""))
         rows = sweep.run_sweep(scene, designs, args.model, out, pool, resume=args.resume,
                                on_row=progress_line(len(designs), len(kept), scene.shape_names))
-    except BaseException:                 # Ctrl-C or a refused output: stop the workers at once
-        pool.shutdown(cancel=True)
-        raise
-    pool.shutdown()
     result = sweep.summary(rows)
     args.timings = {"sweep": time.perf_counter() - started}
     args.manifest_extra = {"sweep": {"designs": len(designs), "source": source, "model": args.model,
