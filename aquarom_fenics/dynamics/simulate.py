@@ -144,7 +144,8 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
         tail_amplitude=tail_amplitude(arrays["time"], arrays["tail_y"]) if completed else None,
         completed=completed, wall_time=clock.perf_counter() - started, n_cells=model.n_cells,
         n_dofs=model.n_global_dofs, error=error, cut_steps=cut_steps, factorizations=factorizations,
-        timings={"setup": setup_time, "time_integration": clock.perf_counter() - started - setup_time},
+        timings={"setup": setup_time, "time_integration": clock.perf_counter() - started - setup_time,
+                 "newton": model.profile.as_dict()},
         states=states, model=model)
     if is_writer:
         vertices = fish.nodes.n_vertices

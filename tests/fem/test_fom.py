@@ -98,6 +98,33 @@ def test_the_stations_coupling_stays_out_of_the_matrix(stations):
         assert relative_error(assembled, exact) > 1e-6
 
 
+@pytest.mark.parametrize("stations", [40, "nodes"])
+def test_the_symmetric_newton_matrix_is_factorised_by_ldlt(stations):
+    """With stations S is symmetric at any state (K_t, M, C and the lumped added mass, for a shaped
+    design and the muscles on), so the model factorises its upper triangle with LDLᵀ and solves as LU
+    does; the nodal model's S (thrust and drag Jacobians) is not symmetric and keeps LU."""
+    from petsc4py import PETSc
+    from aquarom_fenics.fem.fom import direct_solver
+
+    scene = coarse_scene(fluid={"stations": stations}, shapes=SHAPES)
+    model = FullOrderModel(scene, load_fish(scene), DESIGN)
+    free = free_dofs_mask(model)
+    rng = np.random.default_rng(4)
+    u, v, a = (scale * rng.standard_normal(model.n_owned_dofs) * free for scale in (1e-3, 1e-1, 1.0))
+    matrix = model.assemble_newton_matrix(0.3, u, v, a)
+    scalar_rows = matrix.convert("aij", PETSc.Mat())
+    assert scalar_rows.isSymmetric(1e-10) == (stations != "nodes") == model.newton_matrix_is_symmetric
+    rhs = rng.standard_normal(model.n_owned_dofs)
+    model.factorize(0.3, u, v, a)
+    lu = direct_solver(model.comm)
+    lu.setOperators(model.assemble_newton_matrix(0.3, u, v, a))
+    assert model._solver.getPC().getType() == ("cholesky" if stations != "nodes" else "lu")
+    assert relative_error(model.solve(rhs), model.solve_with(lu, rhs)) < 1e-9
+    lu.destroy()
+    scalar_rows.destroy()
+    model.destroy()
+
+
 
 def test_a_new_time_step_frees_the_matrices_of_the_previous_one(shaped_model):
     """Step cuts and the tangent extraction change h many times per run: the Newton blocks of the old
