@@ -1,4 +1,4 @@
-"""Sweep benchmark: a 16-design FOM sweep at mesh level 1 in this process (serial), on 2 local worker
+"""Sweep benchmark: a 16-design FOM sweep at mesh level 1 (degree 2 unless --degree 1) in this process (serial), on 2 local worker
 processes and on a Dask LocalCluster of 2 worker processes (TCP, one thread each).
 
 Every backend starts from an empty result cache (each computes all 16 designs; the compiled forms
@@ -15,7 +15,7 @@ median task time estimates that start-up. The distances of the three runs are co
 The Dask cluster is started before the clock starts (a running cluster is what --scheduler uses);
 its start-up time is reported apart. Writes results/bench/sweep.json.
 
-    .venv/bin/python scripts/bench_sweep.py            # ~2 min on 2 cores
+    .venv/bin/python scripts/bench_sweep.py            # ~5 min on 2 cores (--degree 1: ~1 min)
 """
 from __future__ import annotations
 
@@ -62,6 +62,9 @@ def main() -> int:
     parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "bench" / "sweep.json")
     parser.add_argument("--per-axis", type=int, default=4, help="grid values per shape (default 4: 16 designs)")
     parser.add_argument("--duration", type=float, default=2.0, help="horizon of each FOM run [s] (default 2)")
+    parser.add_argument("--degree", type=int, default=2, choices=(1, 2),
+                        help="element degree (default 2, the shipped scenes'; a degree-1, level-1 run takes "
+                             "about 1 s, less than a worker's start-up)")
     args = parser.parse_args()
     for variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[variable] = "1"
@@ -77,7 +80,8 @@ def main() -> int:
     from aquarom_fenics.verification.validation.suite import machine
 
 
-    scene = scene_from_dict(SCENE, source="bench_sweep.py").replace("solver", duration=args.duration)
+    scene = (scene_from_dict(SCENE, source="bench_sweep.py").replace("solver", duration=args.duration)
+             .replace("mesh", degree=args.degree))
     grid = [spec.rsplit(":", 1)[0] + f":{args.per_axis}" for spec in GRID]
     designs = grid_designs(grid, scene)
     simulate_fom(scene.replace("solver", duration=0.1), progress=False)    # compiled forms and mesh, warmed
@@ -107,7 +111,7 @@ def main() -> int:
         print(f"dask, 2 workers: {dask['wall_time']:.1f} s (cluster start {cluster_start:.1f} s)", flush=True)
         distances = [[row["distance_m"] for row in run["rows"]] for run in (serial, result, dask)]
     report = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "machine": machine(), "versions": software_versions(),
-              "load_average_at_end": os.getloadavg(), "scene": SCENE | {"solver": {"duration": args.duration}}, "grid": grid, "designs": len(designs),
+              "load_average_at_end": os.getloadavg(), "scene": SCENE | {"solver": {"duration": args.duration}, "mesh": {"level": 1, "degree": args.degree}}, "grid": grid, "designs": len(designs),
               "steps_per_design": scene.n_steps, "runs": runs,
               "identical_distances": distances[0] == distances[1] == distances[2],
               "definition": "overhead_per_task = (wall_time * workers - task_time_sum) / designs"}
