@@ -357,6 +357,17 @@ def _constraints_from_list(items, shapes, where) -> tuple[LinearConstraint, ...]
     return tuple(constraints)
 
 
+def parse_number(text: str, where: str) -> float:
+    """A finite float from a command-line or file value; InputError naming ``where`` otherwise."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise InputError(f"{where}: '{text.strip()}' is not a number") from None
+    if not math.isfinite(value):
+        raise InputError(f"{where}: '{text.strip()}' is not a finite number")
+    return value
+
+
 def parse_xi_assignments(assignments: list[str] | None, scene: Scene) -> dict[str, float]:
     """``["z_tail=0.1", …]`` → ``{"z_tail": 0.1}``; names must be shapes of the scene, each given once.
 
@@ -371,12 +382,7 @@ def parse_xi_assignments(assignments: list[str] | None, scene: Scene) -> dict[st
         if name not in scene.shape_names:
             valid = ", ".join(scene.shape_names) or "none: the scene has no [shapes]"
             raise InputError(f"--xi {text}: '{name}' is not a shape variation of scene {scene.name} (valid: {valid})")
-        try:
-            value = float(number)
-        except ValueError:
-            raise InputError(f"--xi {text}: '{number}' is not a number") from None
-        if not math.isfinite(value):
-            raise InputError(f"--xi {text}: '{number.strip()}' is not a finite number")
+        value = parse_number(number, f"--xi {text}")
         if name in values:
             raise InputError(f"--xi {text}: {name} is given twice (first {name}={values[name]:g}); give it once")
         shape = next(s for s in scene.shapes if s.name == name)

@@ -26,7 +26,7 @@ import numpy as np
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.executors import run_all, worker_name
-from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.io.scene import Scene, parse_number
 
 
 MODELS = ("fom", "rom", "prom")
@@ -46,16 +46,6 @@ def _complete(scene: Scene, values: dict[str, float]) -> dict[str, float]:
     return {shape.name: float(values.get(shape.name, shape.start)) for shape in scene.shapes}
 
 
-def _number(text: str, where: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise InputError(f"{where}: '{text}' is not a number") from None
-    if not math.isfinite(value):
-        raise InputError(f"{where}: '{text}' is not a finite number")
-    return value
-
-
 def grid_designs(specs: list[str], scene: Scene) -> list[dict[str, float]]:
     """The Cartesian product of ``name=lo:hi:n`` axes (n evenly spaced values from lo to hi)."""
     _require_shapes(scene)
@@ -72,7 +62,7 @@ def grid_designs(specs: list[str], scene: Scene) -> list[dict[str, float]]:
                              f"(valid: {', '.join(scene.shape_names)})")
         if name in axes:
             raise InputError(f"{where}: {name} is given twice; give each shape one --grid")
-        low, high = _number(parts[0], where), _number(parts[1], where)
+        low, high = parse_number(parts[0], where), parse_number(parts[1], where)
         try:
             count = int(parts[2])
         except ValueError:
@@ -110,7 +100,7 @@ def csv_designs(path: Path, scene: Scene) -> list[dict[str, float]]:
     for number, row in enumerate(rows[1:], start=2):
         if len(row) != len(header):
             raise InputError(f"--designs {path}: line {number} has {len(row)} values for {len(header)} columns")
-        designs.append(_complete(scene, {name: _number(cell.strip(), f"--designs {path} line {number} column {name}")
+        designs.append(_complete(scene, {name: parse_number(cell.strip(), f"--designs {path} line {number} column {name}")
                                          for name, cell in zip(header, row)}))
     return designs
 
