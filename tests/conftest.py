@@ -15,6 +15,20 @@ def isolated_cache(tmp_path_factory):
     os.environ["AQUAROM_CACHE"] = str(tmp_path_factory.mktemp("cache"))
 
 
+
+SHORT_SCENE = """
+[mesh]
+level = 1
+[solver]
+duration = {duration}
+[shapes]
+z_tail = {{ bounds = [-0.2, 0.2] }}
+y_thin = {{ bounds = [-0.1, 0.1] }}
+{extra}
+"""
+"""A scene file on level 1 with two shapes: format with ``duration`` [s] and ``extra`` TOML."""
+
+
 def coarse_scene(**sections):
     """A scene on mesh level 1; keyword arguments are TOML tables, e.g. solver={"duration": 0.2}."""
     data = {"mesh": {"level": 1}}

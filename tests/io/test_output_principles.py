@@ -16,16 +16,7 @@ from aquarom_fenics.cli import main
 from aquarom_fenics.io import outputs as outputs_module
 from aquarom_fenics.io.output_lock import LOCK_SUFFIX, lock_file_of
 
-SHORT = """
-[mesh]
-level = 1
-[solver]
-duration = {duration}
-[shapes]
-z_tail = {{ bounds = [-0.2, 0.2] }}
-y_thin = {{ bounds = [-0.1, 0.1] }}
-{extra}
-"""
+from conftest import SHORT_SCENE as SHORT
 
 OPTIMIZE = """
 [mesh]
