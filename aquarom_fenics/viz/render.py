@@ -6,7 +6,10 @@ panels of one sheet share a scale. Lengths are in metres, picture sizes in pixel
 """
 from __future__ import annotations
 
+import atexit
 import os
+import select
+import subprocess
 import textwrap
 import time
 from dataclasses import dataclass
@@ -242,19 +245,60 @@ def _plotter(shape: tuple[int, int], panel_size: tuple[int, int] = PANEL_SIZE):
 
 
 def _ensure_display() -> None:
-    """Start a virtual X server (Xvfb) once when the process has no display."""
-    import pyvista
+    """Start a virtual X server (Xvfb) once when the process has no display; it stops when the process exits.
 
+    The server gets none of this process's open files: an inherited pipe (MPI's singleton daemon
+    holds the process's stdout until every holder of its watch pipe is gone) would keep a caller
+    reading our output waiting for as long as the server lives. It picks a free display number
+    itself (``-displayfd``), so concurrent processes do not share or fight over one."""
     if os.environ.get("DISPLAY"):
         return
-    pyvista.start_xvfb(wait=0)
-    socket = Path("/tmp/.X11-unix") / f"X{os.environ['DISPLAY'].lstrip(':')}"
-    deadline = time.monotonic() + XVFB_START_TIMEOUT
-    while not socket.exists():
-        if time.monotonic() > deadline:
-            raise RuntimeError(f"no display: Xvfb did not open {socket} within {XVFB_START_TIMEOUT:g} s "
-                               "(set DISPLAY, or install xvfb)")
-        time.sleep(0.05)
+    read_end, write_end = os.pipe()
+    try:
+        server = subprocess.Popen(["Xvfb", "-displayfd", str(write_end), "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
+                                  stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                  pass_fds=(write_end,), start_new_session=True)
+    except FileNotFoundError:
+        raise RuntimeError("no display: DISPLAY is not set and Xvfb is not installed (install xvfb)") from None
+    finally:
+        os.close(write_end)
+    try:
+        number = _read_display_number(read_end, XVFB_START_TIMEOUT)
+    finally:
+        os.close(read_end)
+    if number is None:
+        _stop_server(server)
+        raise RuntimeError(f"no display: Xvfb did not report a display within {XVFB_START_TIMEOUT:g} s "
+                           "(set DISPLAY, or install xvfb)")
+    atexit.register(_stop_server, server)
+    os.environ["DISPLAY"] = f":{number}"
+
+
+def _read_display_number(read_end: int, timeout: float) -> int | None:
+    """The display number Xvfb writes on ``read_end`` when it accepts connections, or None."""
+    deadline = time.monotonic() + timeout
+    text = b""
+    while not text.endswith(b"\n"):
+        remaining = deadline - time.monotonic()
+        if remaining <= 0 or not select.select([read_end], [], [], remaining)[0]:
+            return None
+        chunk = os.read(read_end, 16)
+        if not chunk:            # the server exited before it was ready
+            return None
+        text += chunk
+    return int(text)
+
+
+def _stop_server(server: subprocess.Popen) -> None:
+    """SIGTERM (the server removes its socket), SIGKILL after 5 s."""
+    if server.poll() is not None:
+        return
+    server.terminate()
+    try:
+        server.wait(timeout=5.0)
+    except subprocess.TimeoutExpired:
+        server.kill()
+        server.wait()
 
 
 def _save(plotter, path: Path) -> None:

@@ -156,3 +156,28 @@ def test_cli_shapes_refuses_an_unknown_parameter(scene_file, tmp_path, capsys):
     error = capsys.readouterr().err
     assert len(error.strip().splitlines()) == 1
     assert "bogus" in error
+
+
+@pytest.mark.skipif(shutil.which("Xvfb") is None, reason="needs Xvfb")
+def test_the_virtual_display_holds_no_pipe_of_its_caller_and_stops_with_the_process(tmp_path):
+    """A process without DISPLAY starts its own Xvfb; whoever reads the process's output sees it end
+    when the process ends (the server inherits no pipe: MPI's singleton daemon otherwise holds the
+    output open while the server lives), and the server does not outlive the process."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    child = textwrap.dedent("""\
+        import os
+        from mpi4py import MPI
+        from aquarom_fenics.viz.render import _ensure_display
+        _ensure_display()
+        print(os.environ["DISPLAY"])
+        """)
+    environment = {key: value for key, value in os.environ.items() if key != "DISPLAY"}
+    finished = subprocess.run([sys.executable, "-c", child], env=environment, capture_output=True, text=True,
+                              timeout=60, cwd=tmp_path)
+    assert finished.returncode == 0, finished.stderr
+    display = finished.stdout.strip()
+    assert display.startswith(":")
+    assert not (Path("/tmp/.X11-unix") / f"X{display[1:]}").exists()
