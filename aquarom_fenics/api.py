@@ -5,7 +5,7 @@
     scene = Scene.load("so1").replace("mesh", level=1)
     fom = simulate(scene, {"y_thin": 0.1})                   # SimulationResult (FOM)
     prom = build_prom(scene)                                  # ReducedModel at the start values
-    reduced = simulate(scene, {"y_thin": 0.03}, model="prom", prom=prom, sensitivities=True)
+    reduced = simulate(scene, {"y_thin": 0.02}, model="prom", prom=prom, sensitivities=True)
     result, check = optimize(scene, "results/my-so1")       # OptimizationResult, FomCheck
     result.optimum_dict, check.start_distance, check.optimal_distance   # names as in summary.json
 

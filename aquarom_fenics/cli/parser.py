@@ -10,9 +10,9 @@ EXAMPLES = {
     "shapes": "aquarom shapes so1 --xi y_thin=0.1 --xi z_tail=-0.3 --out results/shapes",
     "simulate": "aquarom simulate nominal --model fom --level 1 --out results/nominal-fom\n"
                 "  mpirun -n 2 aquarom simulate so1 --xi y_thin=0.1 --out results/so1-thin\n"
-                "  aquarom simulate so1 --model prom --prom results/so1-prom.npz --xi y_thin=0.05",
+                "  aquarom simulate so1 --model prom --prom results/so1-prom.npz --xi y_thin=0.02",
     "build": "aquarom build so1 --out results/so1-prom.npz",
-    "compare": "aquarom compare so1 --xi y_thin=0.03 --level 1 --out results/so1-compare",
+    "compare": "aquarom compare so1 --xi y_thin=0.02 --level 1 --out results/so1-compare",
     "optimize": "aquarom optimize so1 --level 1 --out results/so1-opt\n  aquarom optimize so1 --out results/so1-opt --resume",
     "pareto": "aquarom pareto co --level 1 --out results/co-pareto\n"
               "  aquarom pareto co --scheduler-file ~/dask-scheduler.json --out results/co-pareto",
