@@ -2,7 +2,7 @@
 
 Studies (SPEC §11 "Validation studies", the validation issue):
   a       FOM vs ROM (default and the source's basis) vs PROM(3, 5, 8 parameters) on the mesh levels
-          × actuation stiffnesses: errors of distance and tail amplitude, build and solve times;
+          × actuation stiffnesses at the shipped degree (2; levels 1–3): errors of distance and tail amplitude, build and solve times;
           heat maps of the distance error over (cells, tail amplitude).
   b       cost against size: build (basis / tensors / rest) and solve time against cells, fitted
           power-law exponents (over every case of a; solve times are the minimum of 3 repeats).
@@ -12,7 +12,8 @@ Studies (SPEC §11 "Validation studies", the validation issue):
           tail y (FOM, ROM) and of the PROM sensitivities at h = 0.02 … 0.0025, for the default
           scheme and Newmark; the default scheme continued to 0.00125 (FOM) and 0.0003125 (ROM,
           PROM); also written as <out>/time_convergence.json.
-  e       MPI: the FOM with mpirun -n 1 and -n 2 on the 16k and 25k levels: speed-up, agreement.
+  e       MPI: the FOM with mpirun -n 1 and -n 2 at the shipped degree on levels 2 and 3 (21k, 40k dofs):
+          speed-up, agreement.
   stress  numerical stability: 2×–5× actuation stiffness, h up to 0.1 s, Newmark α_N = 0, E/5, the PROM
           on the finest mesh; Newton iterations and the energy balance per case.
   mesh_convergence

@@ -12,13 +12,13 @@ from aquarom_fenics.verification.validation.settings import (PROM_SCENES, REFERE
 
 def accuracy_models(settings: Settings, level: int, stiffness: float) -> list[tuple[str, str, object]]:
     """(model id, label, case) of the reduced models of study a at one (level, k)."""
-    nominal = base_scene(settings, level=level, stiffness=stiffness)
+    nominal = base_scene(settings, level=level, stiffness=stiffness, degree=settings.study_degree)
     models = [("rom", "ROM", reduced_case(f"ROM L{level} k={kpa(stiffness)}", nominal, parametric=False)),
               ("rom-paper", "ROM, source's basis",
                reduced_case(f"ROM (source's basis) L{level} k={kpa(stiffness)}",
                             nominal.replace("reduction", basis="paper"), parametric=False))]
     for p, name in PROM_SCENES.items():
-        scene = base_scene(settings, name, level=level, stiffness=stiffness)
+        scene = base_scene(settings, name, level=level, stiffness=stiffness, degree=settings.study_degree)
         models.append((f"prom{p}", f"PROM, p = {p}",
                        reduced_case(f"PROM p={p} L{level} k={kpa(stiffness)}", scene, parametric=True,
                                     sensitivities=True)))
@@ -30,7 +30,8 @@ def study_a(runner: Runner, settings: Settings, stiffnesses=None, study="a") -> 
     grid, cases = [], []
     for level in settings.levels:
         for stiffness in stiffnesses:
-            fom = fom_case(f"FOM L{level} k={kpa(stiffness)}", base_scene(settings, level=level, stiffness=stiffness))
+            fom = fom_case(f"FOM L{level} k={kpa(stiffness)}",
+                           base_scene(settings, level=level, stiffness=stiffness, degree=settings.study_degree))
             models = accuracy_models(settings, level, stiffness)
             grid.append((level, stiffness, fom, models))
             cases += [fom] + [case for _, _, case in models]
@@ -50,7 +51,7 @@ def study_a(runner: Runner, settings: Settings, stiffnesses=None, study="a") -> 
     for row in rows:
         if row["cells"]:
             cells[str(row["level"])] = row["cells"]
-    return {"study": study, "levels": list(settings.levels), "stiffnesses": list(stiffnesses), "cells": cells,
+    return {"study": study, "degree": settings.study_degree, "levels": list(settings.levels), "stiffnesses": list(stiffnesses), "cells": cells,
             "reference_level": settings.reference_level, "reference_stiffness": REFERENCE_STIFFNESS,
             "duration": settings.duration, "models": model_labels, "rows": rows}
 
@@ -107,7 +108,7 @@ def study_b(runner: Runner, settings: Settings) -> dict:
                               ("solve", "solve_time"), ("solve with sensitivities", "solve_time_sensitivities")):
             if any(row["models"][model_id].get(key) for row in rows):
                 add(model_id, quantity, value(key))
-    return {"study": "b", "stiffnesses": accuracy["stiffnesses"], "models": {"FOM": "FOM"} | accuracy["models"],
+    return {"study": "b", "degree": accuracy["degree"], "stiffnesses": accuracy["stiffnesses"], "models": {"FOM": "FOM"} | accuracy["models"],
             "series": series, "fits": fits}
 
 

@@ -17,7 +17,7 @@ def section_a(lines, study, out, report):
     failed = [row for row in rows if row["fom"].get("status") != "completed"]
     amplitudes = [row["fom"]["tail_amplitude"] for row in completed]
     lines += [title, "",
-              f"{len(rows)} cases: levels {', '.join(map(str, study['levels']))} × k = "
+              f"{len(rows)} cases: degree {study.get('degree', 1)}, levels {', '.join(map(str, study['levels']))} × k = "
               f"{', '.join(f'{k / 1e3:g}' for k in study['stiffnesses'])} kPa, horizon {study['duration']:g} s; "
               f"FOM tail amplitudes {fmt(min(amplitudes, default=None), '.2f', 100)}–"
               f"{fmt(max(amplitudes, default=None), '.2f', 100)} cm; {len(failed)} FOM run(s) stopped. "
@@ -109,7 +109,7 @@ def section_b(lines, study, out, report):
     models = study["models"]
     solve = [f for f in study["fits"] if f["quantity"] == "solve" and f["model"] != "FOM" and f.get("exponent") is not None]
     build = [f for f in study["fits"] if f["quantity"] == "build" and f["model"] != "FOM" and f.get("exponent") is not None]
-    sentence = ("Build and solve wall time of every model against the number of cells (every case of study a: small "
+    sentence = (f"Degree {study.get('degree', 1)}. Build and solve wall time of every model against the number of cells (every case of study a: small "
                 "markers; per-level median: lines), log-log, with the least-squares exponents in the legends. ")
     if solve and build:
         sentence += (f"Reduced solve exponents range {min(f['exponent'] for f in solve):.2f}–"
@@ -243,7 +243,7 @@ def section_e(lines, study):
         return not_run(lines, title)
     speedups = [c for c in study["comparisons"] if c.get("speedup")]
     lines += [title, "",
-              "Wall time of `aquarom simulate` (the simulation, without interpreter start) and agreement of the two "
+              f"Degree {study.get('degree', 1)}. Wall time of `aquarom simulate` (the simulation, without interpreter start) and agreement of the two "
               "runs; " + (", ".join(f"level {c['level']}: speed-up {c['speedup']:.2f}, distance difference "
                                     f"{fmt(c.get('distance_relative_difference'), '.1e')}" for c in speedups) or
                           "no pair of completed runs yet") + ".", ""]

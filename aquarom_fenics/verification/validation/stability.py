@@ -9,7 +9,8 @@ from aquarom_fenics.verification.validation.settings import PROM_SCENES, REFEREN
 
 
 def study_e(runner: Runner, settings: Settings) -> dict:
-    cases = [(level, ranks, mpi_case(f"mpirun -n {ranks} FOM L{level}", base_scene(settings, level=level), ranks))
+    cases = [(level, ranks, mpi_case(f"mpirun -n {ranks} FOM L{level}",
+                                     base_scene(settings, level=level, degree=settings.study_degree), ranks))
              for level in settings.mpi_levels for ranks in (1, 2)]
     records = runner.run("e", [case for _, _, case in cases])
     runs = []
@@ -37,7 +38,7 @@ def study_e(runner: Runner, settings: Settings) -> dict:
         comparisons.append(entry)
     for run in runs:
         run.pop("trajectory", None)
-    return {"study": "e", "levels": list(settings.mpi_levels), "runs": runs, "comparisons": comparisons}
+    return {"study": "e", "degree": settings.study_degree, "levels": list(settings.mpi_levels), "runs": runs, "comparisons": comparisons}
 
 
 def stress_scenes(settings: Settings, level: int | None = None, duration: float | None = None) -> list[tuple]:
