@@ -30,6 +30,8 @@ order (x0, y0, x1, y1, ...).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 
@@ -77,10 +79,10 @@ class SpineGeometry:
     def n_nodes(self) -> int:
         return self.rest_xy.shape[0]
 
-    @property
+    @cached_property
     def rest_length(self) -> np.ndarray:
-        """(n_segments,) ℓ_0 = |x_f - x_r| at rest [m]."""
-        return np.linalg.norm(np.diff(self.rest_xy, axis=0), axis=1)
+        """(n_segments,) ℓ_0 = |x_f - x_r| at rest [m] (computed once: the geometry is frozen)."""
+        return np.linalg.norm(segment_difference(self.rest_xy), axis=1)
 
 
 def virtual_mass(dorsal_z, fluid_density: float) -> np.ndarray:
@@ -101,6 +103,11 @@ def virtual_mass_gradient(dorsal_z, dorsal_z_gradient, fluid_density: float) -> 
     return 2 * np.pi * fluid_density * np.asarray(dorsal_z, dtype=float)[:, None] * dorsal_z_gradient
 
 
+def segment_difference(nodal: np.ndarray) -> np.ndarray:
+    """x_f - x_r of every segment (rear r = i, front f = i + 1) of a nodal array, (n_segments, ...)."""
+    return nodal[1:] - nodal[:-1]
+
+
 def segment_frame(geometry: SpineGeometry, displacement: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Tangent t and normal n of every segment, each (n_segments, 2) [dimensionless].
 
@@ -108,15 +115,14 @@ def segment_frame(geometry: SpineGeometry, displacement: np.ndarray) -> tuple[np
     """
     positions = geometry.rest_xy + displacement
     # t = (x_f - x_r) / ℓ_0
-    tangent = np.diff(positions, axis=0) / geometry.rest_length[:, None]
+    tangent = segment_difference(positions) / geometry.rest_length[:, None]
     # n = R t  (row vectors: n = t Rᵀ)
     normal = tangent @ ROTATION_90.T
     return tangent, normal
 
 
-@dataclass(frozen=True)
-class _SegmentState:
-    """Per-segment quantities entering the Lighthill forces, (n_segments, ...) arrays."""
+class SegmentState(NamedTuple):
+    """Per-segment quantities entering the Lighthill forces and their Jacobians, (n_segments, ...) arrays."""
 
     rest_length: np.ndarray
     tangent: np.ndarray
@@ -124,21 +130,29 @@ class _SegmentState:
     normal_rate: np.ndarray
     rear_velocity: np.ndarray
     rear_acceleration: np.ndarray
+    a_dot_n: np.ndarray          # a·n
+    v_dot_ndot: np.ndarray       # v·ṅ
+    v_dot_n: np.ndarray          # v·n
 
 
-def _segment_state(geometry, displacement, velocity, acceleration) -> _SegmentState:
+def segment_state(geometry: SpineGeometry, displacement, velocity, acceleration) -> SegmentState:
+    """The segments' frames, rates and rear kinematics of the (n_nodes, 2) x-y nodal fields, tail -> head."""
     displacement, velocity, acceleration = _check_nodal(geometry, displacement, velocity, acceleration)
     rest_length = geometry.rest_length
     tangent, normal = segment_frame(geometry, displacement)
     # ṅ = R (u̇_f - u̇_r) / ℓ_0
-    normal_rate = (np.diff(velocity, axis=0) / rest_length[:, None]) @ ROTATION_90.T
-    return _SegmentState(
+    normal_rate = (segment_difference(velocity) / rest_length[:, None]) @ ROTATION_90.T
+    rear_velocity, rear_acceleration = velocity[:-1], acceleration[:-1]
+    return SegmentState(
         rest_length=rest_length,
         tangent=tangent,
         normal=normal,
         normal_rate=normal_rate,
-        rear_velocity=velocity[:-1],
-        rear_acceleration=acceleration[:-1],
+        rear_velocity=rear_velocity,
+        rear_acceleration=rear_acceleration,
+        a_dot_n=_row_dot(rear_acceleration, normal),
+        v_dot_ndot=_row_dot(rear_velocity, normal_rate),
+        v_dot_n=_row_dot(rear_velocity, normal),
     )
 
 
@@ -159,28 +173,48 @@ def _outer(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[:, :, None] * b[:, None, :]
 
 
-def _tail_force_per_mass(state: _SegmentState) -> np.ndarray:
+def _tail_force_per_mass(state: SegmentState) -> np.ndarray:
     """f_tail / m̃_0 = ½ (v·n)² t with segment 0's t, n and the tail node's v, (2,) [m²/s²]."""
     normal_velocity = state.rear_velocity[0] @ state.normal[0]
     # f_tail / m̃ = ½ (v·n)² t
     return 0.5 * normal_velocity**2 * state.tangent[0]
 
 
-def _spine_force_per_mass(state: _SegmentState) -> np.ndarray:
+def _spine_force_per_mass(state: SegmentState) -> np.ndarray:
     """f_spine / m̃ = -ℓ_0 [(a·n) n + (v·ṅ) n + (v·n) ṅ] per segment, (n_segments, 2) [m²/s²]."""
-    a_dot_n = _row_dot(state.rear_acceleration, state.normal)
-    v_dot_ndot = _row_dot(state.rear_velocity, state.normal_rate)
-    v_dot_n = _row_dot(state.rear_velocity, state.normal)
     # f_spine / m̃ = -ℓ_0 [ (a·n + v·ṅ) n + (v·n) ṅ ]
-    bracket = (a_dot_n + v_dot_ndot)[:, None] * state.normal + v_dot_n[:, None] * state.normal_rate
+    bracket = (state.a_dot_n + state.v_dot_ndot)[:, None] * state.normal + state.v_dot_n[:, None] * state.normal_rate
     return -state.rest_length[:, None] * bracket
 
 
-def _position_force_per_mass(state: _SegmentState) -> np.ndarray:
+def _position_force_per_mass(state: SegmentState) -> np.ndarray:
     """g / m̃ = (v·n) Rᵀ v per segment (∂T_a/∂x_f / m̃, = -∂T_a/∂x_r / m̃), (n_segments, 2) [m²/s²]."""
-    v_dot_n = _row_dot(state.rear_velocity, state.normal)
     # Rᵀ v as row vectors: v R
-    return v_dot_n[:, None] * (state.rear_velocity @ ROTATION_90)
+    return state.v_dot_n[:, None] * (state.rear_velocity @ ROTATION_90)
+
+
+def segment_weighted_force(geometry: SpineGeometry, state: SegmentState, spine_weight: np.ndarray,
+                           tail_weight, position_weight: np.ndarray | None = None) -> np.ndarray:
+    """Σ_i w_i f_i/m̃_i on the nodes, (..., n_nodes, 2): the per-mass forces of every segment i weighted by
+    ``spine_weight`` (..., n_segments) at its rear node, f_tail/m̃_0 by ``tail_weight`` (...) at node 0 and,
+    for the lagrangian form, ±g_i/m̃_i by ``position_weight`` (default ``spine_weight``) at nodes i + 1, i.
+
+    With w = m̃ this is the thrust f; f is linear in m̃, so with w = ∂m̃/∂ξ_k it is ∂f/∂ξ_k through the virtual
+    masses (leading axis k).
+    """
+    spine_weight = np.asarray(spine_weight)
+    force = np.zeros(spine_weight.shape[:-1] + (geometry.n_nodes, 2))
+    # f_r += w f_spine/m̃ at each segment's rear node r
+    force[..., :-1, :] = spine_weight[..., :, None] * _spine_force_per_mass(state)
+    # f_0 += w_0 f_tail/m̃_0
+    force[..., 0, :] += np.asarray(tail_weight)[..., None] * _tail_force_per_mass(state)
+    if geometry.lagrangian:
+        # f_f += g, f_r -= g with g = w (v·n) Rᵀ v
+        weight = spine_weight if position_weight is None else np.asarray(position_weight)
+        position_force = weight[..., :, None] * _position_force_per_mass(state)
+        force[..., 1:, :] += position_force
+        force[..., :-1, :] -= position_force
+    return force
 
 
 def thrust_force(geometry: SpineGeometry, displacement, velocity, acceleration) -> np.ndarray:
@@ -189,19 +223,13 @@ def thrust_force(geometry: SpineGeometry, displacement, velocity, acceleration) 
     displacement [m], velocity [m/s], acceleration [m/s²]: (n_nodes, 2) x-y fields of the spine
     nodes, tail -> head. The head node (the last one) is never a rear node and receives nothing.
     """
-    state = _segment_state(geometry, displacement, velocity, acceleration)
+    return thrust_force_of_state(geometry, segment_state(geometry, displacement, velocity, acceleration))
+
+
+def thrust_force_of_state(geometry: SpineGeometry, state: SegmentState) -> np.ndarray:
+    """``thrust_force`` from the segment state."""
     mass = geometry.virtual_mass
-    force = np.zeros((geometry.n_nodes, 2))
-    # f_r += m̃ f_spine/m̃ at each segment's rear node r
-    force[:-1] = mass[:, None] * _spine_force_per_mass(state)
-    # f_0 += m̃_0 f_tail/m̃_0
-    force[0] += mass[0] * _tail_force_per_mass(state)
-    if geometry.lagrangian:
-        # f_f += g, f_r -= g with g = m̃ (v·n) Rᵀ v
-        position_force = mass[:, None] * _position_force_per_mass(state)
-        force[1:] += position_force
-        force[:-1] -= position_force
-    return force
+    return segment_weighted_force(geometry, state, mass, mass[0])
 
 
 def thrust_force_per_virtual_mass(
@@ -213,7 +241,7 @@ def thrust_force_per_virtual_mass(
     i, plus f_tail / m̃_0 at node 0 for i = 0, and for the lagrangian form ±g_i / m̃_i at nodes
     i + 1 and i.
     """
-    state = _segment_state(geometry, displacement, velocity, acceleration)
+    state = segment_state(geometry, displacement, velocity, acceleration)
     n_segments = geometry.n_nodes - 1
     segments = np.arange(n_segments)
     per_mass = np.zeros((n_segments, geometry.n_nodes, 2))
@@ -229,13 +257,20 @@ def thrust_force_per_virtual_mass(
     return per_mass
 
 
+def thrust_force_mass_derivative(geometry: SpineGeometry, state: SegmentState, mass_gradient: np.ndarray) -> np.ndarray:
+    """Σ_i (∂f/∂m̃_i) ∂m̃_i/∂ξ_k for ``mass_gradient`` ∂m̃/∂ξ (n_segments, p), (p, n_nodes, 2) [N]: f with
+    m̃ replaced by ∂m̃/∂ξ_k (f is linear in m̃)."""
+    weight = mass_gradient.T
+    return segment_weighted_force(geometry, state, weight, weight[:, 0])
+
+
 def thrust_force_per_rest_length(geometry: SpineGeometry, displacement, velocity, acceleration) -> np.ndarray:
     """∂f/∂ℓ_0,i of the thrust at fixed positions, (n_segments, n_nodes, 2) [N/m].
 
     With t, n and ṅ each ∝ 1/ℓ_0: f_tail = ½ m̃ (v·n)² t ∝ ℓ_0⁻³, f_spine = -m̃ ℓ_0 [...] ∝ ℓ_0⁻¹ and
     g = m̃ (v·n) Rᵀ v ∝ ℓ_0⁻¹, so ∂f/∂ℓ_0 = -(3 f_tail + f_spine ± g)/ℓ_0 per segment.
     """
-    state = _segment_state(geometry, displacement, velocity, acceleration)
+    state = segment_state(geometry, displacement, velocity, acceleration)
     n_segments = geometry.n_nodes - 1
     segments = np.arange(n_segments)
     mass = geometry.virtual_mass[:, None]
@@ -249,6 +284,23 @@ def thrust_force_per_rest_length(geometry: SpineGeometry, displacement, velocity
     return per_length
 
 
+def thrust_force_length_derivative(geometry: SpineGeometry, state: SegmentState, length_gradient: np.ndarray) -> np.ndarray:
+    """Σ_s (∂f/∂ℓ_0,s) ∂ℓ_0,s/∂ξ_k at fixed positions for ``length_gradient`` (n_segments, p), (p, n_nodes, 2)
+    [N]: ``segment_weighted_force`` with w = -m̃ ∂ℓ_0/∂ξ_k / ℓ_0 (f_spine, g ∝ ℓ_0⁻¹) and 3 w_0 on f_tail (∝ ℓ_0⁻³)."""
+    weight = -(geometry.virtual_mass / state.rest_length) * length_gradient.T
+    return segment_weighted_force(geometry, state, weight, 3.0 * weight[:, 0])
+
+
+class SegmentBlocks(NamedTuple):
+    """A matrix on the nodes (dof order x0, y0, x1, y1, ...) as per-segment 2x2 blocks (n_segments, 2, 2),
+    None where zero: ∂f_r/∂x_r, ∂f_r/∂x_f, ∂f_f/∂x_r, ∂f_f/∂x_f of segment i (rear r = i, front f = i + 1)."""
+
+    rear_rear: np.ndarray | None = None
+    rear_front: np.ndarray | None = None
+    front_rear: np.ndarray | None = None
+    front_front: np.ndarray | None = None
+
+
 def thrust_jacobians(
     geometry: SpineGeometry, displacement, velocity, acceleration
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -260,19 +312,29 @@ def thrust_jacobians(
     lagrangian term adds the lower blocks. ∂f/∂ü is the added-mass block, non-zero on the block
     diagonal only: -m̃ ℓ_0 n nᵀ.
     """
-    state = _segment_state(geometry, displacement, velocity, acceleration)
+    state = segment_state(geometry, displacement, velocity, acceleration)
+    jacobians = []
+    for parts in thrust_jacobian_blocks(geometry, state):
+        jacobian = _assemble_segment_blocks(geometry.n_nodes, *parts[0])
+        for part in parts[1:]:
+            jacobian += _assemble_segment_blocks(geometry.n_nodes, *part)
+        jacobians.append(jacobian)
+    return tuple(jacobians)
+
+
+def thrust_jacobian_blocks(geometry: SpineGeometry, state: SegmentState) -> tuple[list[SegmentBlocks], ...]:
+    """The Jacobians of `thrust_jacobians` as segment blocks: for each of (∂f/∂u, ∂f/∂u̇, ∂f/∂ü) the list of
+    parts whose sum it is (the source's form, then the lagrangian term's)."""
     mass = geometry.virtual_mass[:, None, None]
     length = state.rest_length[:, None, None]
     n, n_rate = state.normal, state.normal_rate
     v, a = state.rear_velocity, state.rear_acceleration
-    a_dot_n = _row_dot(a, n)
-    v_dot_ndot = _row_dot(v, n_rate)
-    v_dot_n = _row_dot(v, n)
+    v_dot_n = state.v_dot_n
 
     # Spine force, B = (a·n) n + (v·ṅ) n + (v·n) ṅ, f_spine = -m̃ ℓ_0 B.
     # ∂B/∂n = (a·n + v·ṅ) I + n aᵀ + ṅ vᵀ;  ∂n/∂u_f = -∂n/∂u_r = R/ℓ_0
     # => ∂f_spine/∂u_f = -m̃ (∂B/∂n) R,  ∂f_spine/∂u_r = +m̃ (∂B/∂n) R
-    db_dn = (a_dot_n + v_dot_ndot)[:, None, None] * _IDENTITY_2 + _outer(n, a) + _outer(n_rate, v)
+    db_dn = (state.a_dot_n + state.v_dot_ndot)[:, None, None] * _IDENTITY_2 + _outer(n, a) + _outer(n_rate, v)
     stiffness_front = -mass * (db_dn @ ROTATION_90)
     stiffness_rear = -stiffness_front
 
@@ -299,19 +361,16 @@ def thrust_jacobians(
     stiffness_rear[0] -= tail_stiffness_front
     damping_rear[0] += tail_mass * tail_v_dot_n * np.outer(tail_t, tail_n)
 
-    n_nodes = geometry.n_nodes
-    jacobians = (
-        _assemble_segment_blocks(n_nodes, rear_rear=stiffness_rear, rear_front=stiffness_front),
-        _assemble_segment_blocks(n_nodes, rear_rear=damping_rear, rear_front=damping_front),
-        _assemble_segment_blocks(n_nodes, rear_rear=added_mass_rear),
-    )
+    blocks = ([SegmentBlocks(rear_rear=stiffness_rear, rear_front=stiffness_front)],
+              [SegmentBlocks(rear_rear=damping_rear, rear_front=damping_front)],
+              [SegmentBlocks(rear_rear=added_mass_rear)])
     if geometry.lagrangian:
-        jacobians[0][...] += _position_force_stiffness(geometry, state)
-        jacobians[1][...] += _position_force_damping(geometry, state)
-    return jacobians
+        blocks[0].append(_position_force_stiffness(geometry, state))
+        blocks[1].append(_position_force_damping(geometry, state))
+    return blocks
 
 
-def _position_force_stiffness(geometry: SpineGeometry, state: _SegmentState) -> np.ndarray:
+def _position_force_stiffness(geometry: SpineGeometry, state: SegmentState) -> SegmentBlocks:
     """∂(±g)/∂u of the lagrangian term g = m̃ (v·n) Rᵀ v (front +g, rear -g).
 
     ∂g/∂n = m̃ Rᵀ v vᵀ, ∂n/∂u_f = -∂n/∂u_r = R/ℓ_0  =>  ∂g/∂u_f = -∂g/∂u_r = (m̃/ℓ_0) Rᵀ v vᵀ R.
@@ -320,16 +379,15 @@ def _position_force_stiffness(geometry: SpineGeometry, state: _SegmentState) -> 
     rotated = v @ ROTATION_90                      # rows Rᵀ v
     block = (geometry.virtual_mass / state.rest_length)[:, None, None] * _outer(rotated, rotated)
     # vᵀ R = (Rᵀ v)ᵀ, so Rᵀ v vᵀ R = (Rᵀ v)(Rᵀ v)ᵀ
-    return _assemble_segment_blocks(geometry.n_nodes, rear_rear=block, rear_front=-block,
-                                    front_rear=-block, front_front=block)
+    return SegmentBlocks(rear_rear=block, rear_front=-block, front_rear=-block, front_front=block)
 
 
-def _position_force_damping(geometry: SpineGeometry, state: _SegmentState) -> np.ndarray:
+def _position_force_damping(geometry: SpineGeometry, state: SegmentState) -> SegmentBlocks:
     """∂(±g)/∂u̇_r of g = m̃ (v·n) Rᵀ v: ∂g/∂v = m̃ [Rᵀ v nᵀ + (v·n) Rᵀ]."""
     v, n = state.rear_velocity, state.normal
     mass = geometry.virtual_mass[:, None, None]
-    block = mass * (_outer(v @ ROTATION_90, n) + _row_dot(v, n)[:, None, None] * ROTATION_90.T)
-    return _assemble_segment_blocks(geometry.n_nodes, rear_rear=-block, front_rear=block)
+    block = mass * (_outer(v @ ROTATION_90, n) + state.v_dot_n[:, None, None] * ROTATION_90.T)
+    return SegmentBlocks(rear_rear=-block, front_rear=block)
 
 
 def _assemble_segment_blocks(n_nodes: int, rear_rear=None, rear_front=None, front_rear=None,

@@ -19,8 +19,10 @@ from mpi4py import MPI
 
 from aquarom_fenics.geometry.shapes import shape_displacement
 from aquarom_fenics.physics.stations import dorsal_profile
-from aquarom_fenics.physics.thrust import (SpineGeometry, thrust_force, thrust_force_per_rest_length,
-                                           thrust_force_per_virtual_mass, thrust_jacobians, virtual_mass,
+from aquarom_fenics.physics.thrust import (SegmentBlocks, SegmentState, SpineGeometry, segment_difference,
+                                           segment_state, thrust_force, thrust_force_length_derivative,
+                                           thrust_force_mass_derivative, thrust_force_of_state,
+                                           thrust_jacobian_blocks, thrust_jacobians, virtual_mass,
                                            virtual_mass_gradient)
 
 
@@ -256,7 +258,11 @@ class ThrustData:
 
 
 class ReducedThrust:
-    """The reduced thrust at one design ξ (a :class:`ReducedTerm`)."""
+    """The reduced thrust at one design ξ (a :class:`ReducedTerm`).
+
+    The Newton iterations evaluate the residual, the tangents and the ξ-derivative repeatedly at the same
+    point: the segment state of the last point and its Jacobian blocks are kept for the next call.
+    """
 
     def __init__(self, data: ThrustData, delta: np.ndarray, spine_force: str):
         self.data = data
@@ -266,33 +272,72 @@ class ReducedThrust:
         rest_xy = data.rest_xy + data.rest_xy_gradient @ delta if moves else data.rest_xy
         self.spine = SpineGeometry(rest_xy, virtual_mass(self.dorsal_z, data.fluid_density), spine_force)
         self.rows = data.rows.reshape(-1, data.rows.shape[-1])      # (2 n_points, m)
+        rear, front = data.rows[:-1], data.rows[1:]                  # (n_segments, 2, m): W_r, W_f
+        self.block_products = SegmentBlocks(*(segment_products(left, right) for left, right in
+                                              ((rear, rear), (rear, front), (front, rear), (front, front))))
+        self.mass_gradient = virtual_mass_gradient(self.dorsal_z, data.dorsal_z_gradient, data.fluid_density)
+        if self.moving_rest:
+            gradient = data.rest_xy_gradient                                 # (n, 2, p): B U
+            self.rest_products = SegmentBlocks(*(segment_products(left, right) for left, right in
+                                                 ((rear, gradient[:-1]), (rear, gradient[1:]),
+                                                  (front, gradient[:-1]), (front, gradient[1:]))))
+            chord = segment_difference(self.spine.rest_xy) / self.spine.rest_length[:, None]
+            self.length_gradient = np.einsum("sc,sck->sk", chord, segment_difference(gradient))
+        self._point, self._state, self._blocks = None, None, None
 
-    def _spine_states(self, eta, eta_dot, eta_ddot):
-        return [(self.rows @ x).reshape(-1, 2) for x in (eta, eta_dot, eta_ddot)]
+    def _segment_state(self, eta, eta_dot, eta_ddot) -> SegmentState:
+        """The segment state of the reduced kinematics (W η, W η̇, W η̈), kept for the same point."""
+        point = (eta.tobytes(), eta_dot.tobytes(), eta_ddot.tobytes())
+        if point != self._point:
+            self._state = segment_state(self.spine, *((self.rows @ x).reshape(-1, 2) for x in (eta, eta_dot, eta_ddot)))
+            self._point, self._blocks = point, None
+        return self._state
+
+    def _jacobian_blocks(self, eta, eta_dot, eta_ddot) -> tuple[list[SegmentBlocks], ...]:
+        """The Jacobians' segment blocks at the point, kept with its segment state."""
+        state = self._segment_state(eta, eta_dot, eta_ddot)
+        if self._blocks is None:
+            self._blocks = thrust_jacobian_blocks(self.spine, state)
+        return self._blocks
 
     def force(self, eta, eta_dot, eta_ddot) -> np.ndarray:
-        return self.rows.T @ thrust_force(self.spine, *self._spine_states(eta, eta_dot, eta_ddot)).ravel()
+        """Wᵀ f(W η, W η̇, W η̈)."""
+        return self.rows.T @ thrust_force_of_state(self.spine, self._segment_state(eta, eta_dot, eta_ddot)).ravel()
 
     def tangents(self, time, eta, eta_dot, eta_ddot):
-        """-Wᵀ (∂f/∂u, ∂f/∂u̇, ∂f/∂ü) W."""
-        jacobians = thrust_jacobians(self.spine, *self._spine_states(eta, eta_dot, eta_ddot))
-        return tuple(-(self.rows.T @ jacobian @ self.rows) for jacobian in jacobians)
+        """-Wᵀ (∂f/∂u, ∂f/∂u̇, ∂f/∂ü) W, from the Jacobians' segment blocks."""
+        m = self.rows.shape[1]
+        return tuple(-project_blocks(parts, self.block_products).reshape(m, m)
+                     for parts in self._jacobian_blocks(eta, eta_dot, eta_ddot))
 
     def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
         """-Wᵀ ∂f/∂ξ_k, shape (p, m): through the virtual masses, Σ_i (∂f/∂m̃_i) ∂m̃_i/∂ξ_k, and, where the
         shape moves the rest points (x̄_rest = B(X + U ξ)), through the positions and rest lengths:
         (∂f/∂u) B U_k + Σ_s (∂f/∂ℓ_0,s) ê_s·(B U_k,f - B U_k,r)."""
-        states = self._spine_states(eta, eta_dot, eta_ddot)
-        per_mass = thrust_force_per_virtual_mass(self.spine, *states)
-        mass_gradient = virtual_mass_gradient(self.dorsal_z, self.data.dorsal_z_gradient, self.data.fluid_density)
-        thrust_k = np.einsum("snc,sk->knc", per_mass, mass_gradient)
+        state = self._segment_state(eta, eta_dot, eta_ddot)
+        p = self.mass_gradient.shape[1]
+        thrust_k = thrust_force_mass_derivative(self.spine, state, self.mass_gradient)
         if self.moving_rest:
-            gradient = self.data.rest_xy_gradient                             # (n, 2, p)
-            p = gradient.shape[-1]
-            stiffness = thrust_jacobians(self.spine, *states)[0]
-            thrust_k = thrust_k + (stiffness @ gradient.reshape(-1, p)).T.reshape(p, -1, 2)
-            chord = np.diff(self.spine.rest_xy, axis=0) / self.spine.rest_length[:, None]
-            length_gradient = np.einsum("sc,sck->sk", chord, np.diff(gradient, axis=0))
-            per_length = thrust_force_per_rest_length(self.spine, *states)
-            thrust_k = thrust_k + np.einsum("snc,sk->knc", per_length, length_gradient)
-        return -(thrust_k.reshape(mass_gradient.shape[1], -1) @ self.rows)
+            thrust_k = thrust_k + thrust_force_length_derivative(self.spine, state, self.length_gradient)
+        derivative = -(thrust_k.reshape(p, -1) @ self.rows)
+        if self.moving_rest:
+            stiffness = self._jacobian_blocks(eta, eta_dot, eta_ddot)[0]
+            derivative -= project_blocks(stiffness, self.rest_products).reshape(-1, p).T
+        return derivative
+
+
+def segment_products(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """(4 n_segments, k l) products L_sa,i R_sb,j of two (n_segments, 2, k) and (n_segments, 2, l) row sets, rows
+    (s, a, b), columns (i, j): Σ_s L_sᵀ B_s R_s = (blocks B as a (4 n_segments,) vector) @ products."""
+    return np.einsum("sai,sbj->sabij", left, right).reshape(4 * left.shape[0], -1)
+
+
+def project_blocks(parts: list[SegmentBlocks], products: SegmentBlocks) -> np.ndarray:
+    """Lᵀ J R flattened, (k l,), of the matrix J = Σ parts given as segment blocks, with the ``products`` of
+    the rows L and R for each kind of block: Σ_s L_rᵀ J_rr R_r + L_rᵀ J_rf R_f + L_fᵀ J_fr R_r + L_fᵀ J_ff R_f."""
+    total = 0.0
+    for part in parts:
+        for blocks, product in zip(part, products):
+            if blocks is not None:
+                total = total + blocks.reshape(-1) @ product
+    return total
