@@ -7,6 +7,7 @@ S = (1 - α_f) K_t + (1 - α_f)(γ/(βh)) C_t + ((1 - α_m)/(βh²)) M_t of that
 from __future__ import annotations
 
 import functools
+import math
 import time as clock
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -95,7 +96,8 @@ class ReducedSystem:
         return scipy.linalg.lu_solve(self._factors, rhs)
 
     def norm(self, vector):
-        return float(np.linalg.norm(vector))
+        """‖x‖ = √(x·x) (what np.linalg.norm computes, without its dispatch)."""
+        return math.sqrt(vector.dot(vector))
 
     def dot(self, left, right):
         return float(left @ right)

@@ -106,6 +106,7 @@ class ReducedDrag:
     def __init__(self, tensors: DragTensors, delta: np.ndarray, head_x_row: np.ndarray):
         self.tensors, self.delta, self.head_x_row = tensors, delta, head_x_row
         self.direction = tensors.direction.at(delta)
+        self.direction_gradient = tensors.direction.gradient(delta)            # ∂g_r/∂ξ_k, (p, m)
 
     def force(self, eta_dot: np.ndarray) -> np.ndarray:
         return drag_force(self.direction, self.head_x_row @ eta_dot)
@@ -116,4 +117,4 @@ class ReducedDrag:
         return None, -np.outer(column, self.head_x_row), None
 
     def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
-        return -drag_force(self.tensors.direction.gradient(self.delta), self.head_x_row @ eta_dot)
+        return -drag_force(self.direction_gradient, self.head_x_row @ eta_dot)

@@ -257,13 +257,6 @@ def thrust_force_per_virtual_mass(
     return per_mass
 
 
-def thrust_force_mass_derivative(geometry: SpineGeometry, state: SegmentState, mass_gradient: np.ndarray) -> np.ndarray:
-    """Σ_i (∂f/∂m̃_i) ∂m̃_i/∂ξ_k for ``mass_gradient`` ∂m̃/∂ξ (n_segments, p), (p, n_nodes, 2) [N]: f with
-    m̃ replaced by ∂m̃/∂ξ_k (f is linear in m̃)."""
-    weight = mass_gradient.T
-    return segment_weighted_force(geometry, state, weight, weight[:, 0])
-
-
 def thrust_force_per_rest_length(geometry: SpineGeometry, displacement, velocity, acceleration) -> np.ndarray:
     """∂f/∂ℓ_0,i of the thrust at fixed positions, (n_segments, n_nodes, 2) [N/m].
 
@@ -284,11 +277,22 @@ def thrust_force_per_rest_length(geometry: SpineGeometry, displacement, velocity
     return per_length
 
 
-def thrust_force_length_derivative(geometry: SpineGeometry, state: SegmentState, length_gradient: np.ndarray) -> np.ndarray:
-    """Σ_s (∂f/∂ℓ_0,s) ∂ℓ_0,s/∂ξ_k at fixed positions for ``length_gradient`` (n_segments, p), (p, n_nodes, 2)
-    [N]: ``segment_weighted_force`` with w = -m̃ ∂ℓ_0/∂ξ_k / ℓ_0 (f_spine, g ∝ ℓ_0⁻¹) and 3 w_0 on f_tail (∝ ℓ_0⁻³)."""
-    weight = -(geometry.virtual_mass / state.rest_length) * length_gradient.T
-    return segment_weighted_force(geometry, state, weight, 3.0 * weight[:, 0])
+def derivative_weights(geometry: SpineGeometry, mass_gradient: np.ndarray,
+                       length_gradient: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(spine weights (p, n_segments), tail weights (p,)) for which ``segment_weighted_force`` is ∂f/∂ξ_k at
+    fixed positions through the virtual masses, ∂m̃/∂ξ = ``mass_gradient`` (n_segments, p), and the rest
+    lengths, ∂ℓ_0/∂ξ = ``length_gradient`` (n_segments, p; None: fixed).
+
+    f is linear in m̃: w = ∂m̃/∂ξ_k (Σ_i (∂f/∂m̃_i) ∂m̃_i/∂ξ_k). With t, n and ṅ each ∝ 1/ℓ_0, f_spine and g are
+    ∝ ℓ_0⁻¹ and f_tail ∝ ℓ_0⁻³: w = -m̃ (∂ℓ_0/∂ξ_k)/ℓ_0 more, three times that on f_tail (``thrust_force_per_rest_length``).
+    """
+    spine_weight = mass_gradient.T
+    tail_weight = spine_weight[:, 0]
+    if length_gradient is not None:
+        length_weight = -(geometry.virtual_mass / geometry.rest_length) * length_gradient.T
+        spine_weight = spine_weight + length_weight
+        tail_weight = tail_weight + 3.0 * length_weight[:, 0]
+    return spine_weight, tail_weight
 
 
 class SegmentBlocks(NamedTuple):

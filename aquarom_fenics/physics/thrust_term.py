@@ -19,11 +19,10 @@ from mpi4py import MPI
 
 from aquarom_fenics.geometry.shapes import shape_displacement
 from aquarom_fenics.physics.stations import dorsal_profile
-from aquarom_fenics.physics.thrust import (SegmentBlocks, SegmentState, SpineGeometry, segment_difference,
-                                           segment_state, thrust_force, thrust_force_length_derivative,
-                                           thrust_force_mass_derivative, thrust_force_of_state,
-                                           thrust_jacobian_blocks, thrust_jacobians, virtual_mass,
-                                           virtual_mass_gradient)
+from aquarom_fenics.physics.thrust import (SegmentBlocks, SegmentState, SpineGeometry, derivative_weights,
+                                           segment_difference, segment_state, segment_weighted_force, thrust_force,
+                                           thrust_force_of_state, thrust_jacobian_blocks, thrust_jacobians,
+                                           virtual_mass, virtual_mass_gradient)
 
 
 def shape_rows(fish) -> np.ndarray:
@@ -275,14 +274,16 @@ class ReducedThrust:
         rear, front = data.rows[:-1], data.rows[1:]                  # (n_segments, 2, m): W_r, W_f
         self.block_products = SegmentBlocks(*(segment_products(left, right) for left, right in
                                               ((rear, rear), (rear, front), (front, rear), (front, front))))
-        self.mass_gradient = virtual_mass_gradient(self.dorsal_z, data.dorsal_z_gradient, data.fluid_density)
+        mass_gradient = virtual_mass_gradient(self.dorsal_z, data.dorsal_z_gradient, data.fluid_density)
+        length_gradient = None
         if self.moving_rest:
             gradient = data.rest_xy_gradient                                 # (n, 2, p): B U
             self.rest_products = SegmentBlocks(*(segment_products(left, right) for left, right in
                                                  ((rear, gradient[:-1]), (rear, gradient[1:]),
                                                   (front, gradient[:-1]), (front, gradient[1:]))))
             chord = segment_difference(self.spine.rest_xy) / self.spine.rest_length[:, None]
-            self.length_gradient = np.einsum("sc,sck->sk", chord, segment_difference(gradient))
+            length_gradient = np.einsum("sc,sck->sk", chord, segment_difference(gradient))
+        self.derivative_weights = derivative_weights(self.spine, mass_gradient, length_gradient)
         self._point, self._state, self._blocks = None, None, None
 
     def _segment_state(self, eta, eta_dot, eta_ddot) -> SegmentState:
@@ -315,14 +316,11 @@ class ReducedThrust:
         shape moves the rest points (x̄_rest = B(X + U ξ)), through the positions and rest lengths:
         (∂f/∂u) B U_k + Σ_s (∂f/∂ℓ_0,s) ê_s·(B U_k,f - B U_k,r)."""
         state = self._segment_state(eta, eta_dot, eta_ddot)
-        p = self.mass_gradient.shape[1]
-        thrust_k = thrust_force_mass_derivative(self.spine, state, self.mass_gradient)
-        if self.moving_rest:
-            thrust_k = thrust_k + thrust_force_length_derivative(self.spine, state, self.length_gradient)
-        derivative = -(thrust_k.reshape(p, -1) @ self.rows)
+        thrust_k = segment_weighted_force(self.spine, state, *self.derivative_weights)      # (p, n, 2)
+        derivative = -(thrust_k.reshape(thrust_k.shape[0], -1) @ self.rows)
         if self.moving_rest:
             stiffness = self._jacobian_blocks(eta, eta_dot, eta_ddot)[0]
-            derivative -= project_blocks(stiffness, self.rest_products).reshape(-1, p).T
+            derivative -= project_blocks(stiffness, self.rest_products).reshape(-1, thrust_k.shape[0]).T
         return derivative
 
 
