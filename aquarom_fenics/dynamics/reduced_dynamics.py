@@ -93,7 +93,9 @@ class ReducedSystem:
         self._factors = scipy.linalg.lu_factor(self.newton_matrix(time, eta, eta_dot, eta_ddot))
 
     def solve(self, rhs):
-        return scipy.linalg.lu_solve(self._factors, rhs)
+        """S⁻¹ rhs; the factors come from a checked ``lu_factor`` and the integrator has checked the
+        residual ``rhs`` to be finite, so ``lu_solve`` checks nothing again."""
+        return scipy.linalg.lu_solve(self._factors, rhs, check_finite=False)
 
     def norm(self, vector):
         """‖x‖ = √(x·x) (what np.linalg.norm computes, without its dispatch)."""

@@ -40,6 +40,18 @@ ROTATION_90 = np.array([[0.0, -1.0], [1.0, 0.0]])
 
 _IDENTITY_2 = np.eye(2)
 
+_ROTATE_SIGNS = np.array([-1.0, 1.0])
+
+
+def rotate(rows: np.ndarray) -> np.ndarray:
+    """R x of row vectors x (..., 2): (-x_y, x_x), the product x Rᵀ without a matrix product."""
+    return rows[..., ::-1] * _ROTATE_SIGNS
+
+
+def rotate_back(rows: np.ndarray) -> np.ndarray:
+    """Rᵀ x of row vectors x (..., 2): (x_y, -x_x), the product x R without a matrix product."""
+    return rows[..., ::-1] * -_ROTATE_SIGNS
+
 
 @dataclass(frozen=True)
 class SpineGeometry:
@@ -116,8 +128,8 @@ def segment_frame(geometry: SpineGeometry, displacement: np.ndarray) -> tuple[np
     positions = geometry.rest_xy + displacement
     # t = (x_f - x_r) / ℓ_0
     tangent = segment_difference(positions) / geometry.rest_length[:, None]
-    # n = R t  (row vectors: n = t Rᵀ)
-    normal = tangent @ ROTATION_90.T
+    # n = R t
+    normal = rotate(tangent)
     return tangent, normal
 
 
@@ -141,7 +153,7 @@ def segment_state(geometry: SpineGeometry, displacement, velocity, acceleration)
     rest_length = geometry.rest_length
     tangent, normal = segment_frame(geometry, displacement)
     # ṅ = R (u̇_f - u̇_r) / ℓ_0
-    normal_rate = (segment_difference(velocity) / rest_length[:, None]) @ ROTATION_90.T
+    normal_rate = rotate(segment_difference(velocity) / rest_length[:, None])
     rear_velocity, rear_acceleration = velocity[:-1], acceleration[:-1]
     return SegmentState(
         rest_length=rest_length,
@@ -166,11 +178,18 @@ def _check_nodal(geometry, *nodal_fields):
 
 
 def _row_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.einsum("ij,ij->i", a, b)
+    """a_i·b_i of (n, 2) rows."""
+    return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]
 
 
 def _outer(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a_i b_iᵀ of (n, 2) rows, (n, 2, 2)."""
     return a[:, :, None] * b[:, None, :]
+
+
+def _outer_2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a bᵀ of two 2-vectors (np.outer without its reshaping)."""
+    return a[:, None] * b
 
 
 def _tail_force_per_mass(state: SegmentState) -> np.ndarray:
@@ -189,8 +208,7 @@ def _spine_force_per_mass(state: SegmentState) -> np.ndarray:
 
 def _position_force_per_mass(state: SegmentState) -> np.ndarray:
     """g / m̃ = (v·n) Rᵀ v per segment (∂T_a/∂x_f / m̃, = -∂T_a/∂x_r / m̃), (n_segments, 2) [m²/s²]."""
-    # Rᵀ v as row vectors: v R
-    return state.v_dot_n[:, None] * (state.rear_velocity @ ROTATION_90)
+    return state.v_dot_n[:, None] * rotate_back(state.rear_velocity)
 
 
 def segment_weighted_force(geometry: SpineGeometry, state: SegmentState, spine_weight: np.ndarray,
@@ -329,8 +347,8 @@ def thrust_jacobians(
 def thrust_jacobian_blocks(geometry: SpineGeometry, state: SegmentState) -> tuple[list[SegmentBlocks], ...]:
     """The Jacobians of `thrust_jacobians` as segment blocks: for each of (∂f/∂u, ∂f/∂u̇, ∂f/∂ü) the list of
     parts whose sum it is (the source's form, then the lagrangian term's)."""
-    mass = geometry.virtual_mass[:, None, None]
-    length = state.rest_length[:, None, None]
+    negative_mass = -geometry.virtual_mass[:, None, None]
+    negative_mass_length = negative_mass * state.rest_length[:, None, None]
     n, n_rate = state.normal, state.normal_rate
     v, a = state.rear_velocity, state.rear_acceleration
     v_dot_n = state.v_dot_n
@@ -339,18 +357,18 @@ def thrust_jacobian_blocks(geometry: SpineGeometry, state: SegmentState) -> tupl
     # ∂B/∂n = (a·n + v·ṅ) I + n aᵀ + ṅ vᵀ;  ∂n/∂u_f = -∂n/∂u_r = R/ℓ_0
     # => ∂f_spine/∂u_f = -m̃ (∂B/∂n) R,  ∂f_spine/∂u_r = +m̃ (∂B/∂n) R
     db_dn = (state.a_dot_n + state.v_dot_ndot)[:, None, None] * _IDENTITY_2 + _outer(n, a) + _outer(n_rate, v)
-    stiffness_front = -mass * (db_dn @ ROTATION_90)
+    stiffness_front = negative_mass * rotate_back(db_dn)             # (∂B/∂n) R: rows of ∂B/∂n times R
     stiffness_rear = -stiffness_front
 
     # ∂B/∂ṅ = n vᵀ + (v·n) I;  ∂ṅ/∂u̇_f = -∂ṅ/∂u̇_r = R/ℓ_0;  ∂B/∂v (explicit) = n ṅᵀ + ṅ nᵀ
     # => ∂f_spine/∂u̇_f = -m̃ (∂B/∂ṅ) R
     #    ∂f_spine/∂u̇_r = -m̃ ℓ_0 (n ṅᵀ + ṅ nᵀ) + m̃ (∂B/∂ṅ) R
     db_dndot = _outer(n, v) + v_dot_n[:, None, None] * _IDENTITY_2
-    damping_front = -mass * (db_dndot @ ROTATION_90)
-    damping_rear = -mass * length * (_outer(n, n_rate) + _outer(n_rate, n)) - damping_front
+    damping_front = negative_mass * rotate_back(db_dndot)
+    damping_rear = negative_mass_length * (_outer(n, n_rate) + _outer(n_rate, n)) - damping_front
 
     # ∂f_spine/∂ü_r = -m̃ ℓ_0 n nᵀ  (added mass)
-    added_mass_rear = -mass * length * _outer(n, n)
+    added_mass_rear = negative_mass_length * _outer(n, n)
 
     # Tail force, f_tail = ½ m̃ (v·n)² t, segment 0, v = u̇_0; ∂t/∂u_1 = -∂t/∂u_0 = I/ℓ_0,
     # ∂(v·n)/∂t = Rᵀ v
@@ -359,11 +377,11 @@ def thrust_jacobian_blocks(geometry: SpineGeometry, state: SegmentState) -> tupl
     tail_mass, tail_length = geometry.virtual_mass[0], state.rest_length[0]
     tail_t, tail_n, tail_v, tail_v_dot_n = state.tangent[0], n[0], v[0], v_dot_n[0]
     tail_stiffness_front = (tail_mass / tail_length) * (
-        tail_v_dot_n * np.outer(tail_t, ROTATION_90.T @ tail_v) + 0.5 * tail_v_dot_n**2 * _IDENTITY_2
+        tail_v_dot_n * _outer_2(tail_t, rotate_back(tail_v)) + 0.5 * tail_v_dot_n**2 * _IDENTITY_2
     )
     stiffness_front[0] += tail_stiffness_front
     stiffness_rear[0] -= tail_stiffness_front
-    damping_rear[0] += tail_mass * tail_v_dot_n * np.outer(tail_t, tail_n)
+    damping_rear[0] += tail_mass * tail_v_dot_n * _outer_2(tail_t, tail_n)
 
     blocks = ([SegmentBlocks(rear_rear=stiffness_rear, rear_front=stiffness_front)],
               [SegmentBlocks(rear_rear=damping_rear, rear_front=damping_front)],
@@ -380,7 +398,7 @@ def _position_force_stiffness(geometry: SpineGeometry, state: SegmentState) -> S
     ∂g/∂n = m̃ Rᵀ v vᵀ, ∂n/∂u_f = -∂n/∂u_r = R/ℓ_0  =>  ∂g/∂u_f = -∂g/∂u_r = (m̃/ℓ_0) Rᵀ v vᵀ R.
     """
     v = state.rear_velocity
-    rotated = v @ ROTATION_90                      # rows Rᵀ v
+    rotated = rotate_back(v)                       # rows Rᵀ v
     block = (geometry.virtual_mass / state.rest_length)[:, None, None] * _outer(rotated, rotated)
     # vᵀ R = (Rᵀ v)ᵀ, so Rᵀ v vᵀ R = (Rᵀ v)(Rᵀ v)ᵀ
     return SegmentBlocks(rear_rear=block, rear_front=-block, front_rear=-block, front_front=block)
@@ -390,7 +408,7 @@ def _position_force_damping(geometry: SpineGeometry, state: SegmentState) -> Seg
     """∂(±g)/∂u̇_r of g = m̃ (v·n) Rᵀ v: ∂g/∂v = m̃ [Rᵀ v nᵀ + (v·n) Rᵀ]."""
     v, n = state.rear_velocity, state.normal
     mass = geometry.virtual_mass[:, None, None]
-    block = mass * (_outer(v @ ROTATION_90, n) + state.v_dot_n[:, None, None] * ROTATION_90.T)
+    block = mass * (_outer(rotate_back(v), n) + state.v_dot_n[:, None, None] * ROTATION_90.T)
     return SegmentBlocks(rear_rear=-block, front_rear=block)
 
 

@@ -272,15 +272,12 @@ class ReducedThrust:
         self.spine = SpineGeometry(rest_xy, virtual_mass(self.dorsal_z, data.fluid_density), spine_force)
         self.rows = data.rows.reshape(-1, data.rows.shape[-1])      # (2 n_points, m)
         rear, front = data.rows[:-1], data.rows[1:]                  # (n_segments, 2, m): W_r, W_f
-        self.block_products = SegmentBlocks(*(segment_products(left, right) for left, right in
-                                              ((rear, rear), (rear, front), (front, rear), (front, front))))
+        self.block_products = block_products(rear, front, rear, front)
         mass_gradient = virtual_mass_gradient(self.dorsal_z, data.dorsal_z_gradient, data.fluid_density)
         length_gradient = None
         if self.moving_rest:
             gradient = data.rest_xy_gradient                                 # (n, 2, p): B U
-            self.rest_products = SegmentBlocks(*(segment_products(left, right) for left, right in
-                                                 ((rear, gradient[:-1]), (rear, gradient[1:]),
-                                                  (front, gradient[:-1]), (front, gradient[1:]))))
+            self.rest_products = block_products(rear, front, gradient[:-1], gradient[1:])
             chord = segment_difference(self.spine.rest_xy) / self.spine.rest_length[:, None]
             length_gradient = np.einsum("sc,sck->sk", chord, segment_difference(gradient))
         self.derivative_weights = derivative_weights(self.spine, mass_gradient, length_gradient)
@@ -308,8 +305,8 @@ class ReducedThrust:
     def tangents(self, time, eta, eta_dot, eta_ddot):
         """-Wᵀ (∂f/∂u, ∂f/∂u̇, ∂f/∂ü) W, from the Jacobians' segment blocks."""
         m = self.rows.shape[1]
-        return tuple(-project_blocks(parts, self.block_products).reshape(m, m)
-                     for parts in self._jacobian_blocks(eta, eta_dot, eta_ddot))
+        projected = project_jacobians(self._jacobian_blocks(eta, eta_dot, eta_ddot), self.block_products)
+        return tuple(-jacobian.reshape(m, m) for jacobian in projected)
 
     def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
         """-Wᵀ ∂f/∂ξ_k, shape (p, m): through the virtual masses, Σ_i (∂f/∂m̃_i) ∂m̃_i/∂ξ_k, and, where the
@@ -320,22 +317,28 @@ class ReducedThrust:
         derivative = -(thrust_k.reshape(thrust_k.shape[0], -1) @ self.rows)
         if self.moving_rest:
             stiffness = self._jacobian_blocks(eta, eta_dot, eta_ddot)[0]
-            derivative -= project_blocks(stiffness, self.rest_products).reshape(-1, thrust_k.shape[0]).T
+            derivative -= project_jacobians((stiffness,), self.rest_products)[0].reshape(-1, thrust_k.shape[0]).T
         return derivative
 
 
-def segment_products(left: np.ndarray, right: np.ndarray) -> np.ndarray:
-    """(4 n_segments, k l) products L_sa,i R_sb,j of two (n_segments, 2, k) and (n_segments, 2, l) row sets, rows
-    (s, a, b), columns (i, j): Σ_s L_sᵀ B_s R_s = (blocks B as a (4 n_segments,) vector) @ products."""
-    return np.einsum("sai,sbj->sabij", left, right).reshape(4 * left.shape[0], -1)
+def block_products(left_rear: np.ndarray, left_front: np.ndarray, right_rear: np.ndarray,
+                   right_front: np.ndarray) -> np.ndarray:
+    """(4 · 4 n_segments, k l) products L_sa,i R_sb,j of the rows L (n_segments, 2, k) and R (n_segments, 2, l) at
+    the segments' rear and front points, for the block kinds rear_rear, rear_front, front_rear, front_front
+    in turn (rows (kind, s, a, b), columns (i, j)): Lᵀ J R = (J's blocks as one vector) @ products."""
+    pairs = ((left_rear, right_rear), (left_rear, right_front), (left_front, right_rear), (left_front, right_front))
+    return np.vstack([np.einsum("sai,sbj->sabij", left, right).reshape(4 * left.shape[0], -1)
+                      for left, right in pairs])
 
 
-def project_blocks(parts: list[SegmentBlocks], products: SegmentBlocks) -> np.ndarray:
-    """Lᵀ J R flattened, (k l,), of the matrix J = Σ parts given as segment blocks, with the ``products`` of
-    the rows L and R for each kind of block: Σ_s L_rᵀ J_rr R_r + L_rᵀ J_rf R_f + L_fᵀ J_fr R_r + L_fᵀ J_ff R_f."""
-    total = 0.0
-    for part in parts:
-        for blocks, product in zip(part, products):
-            if blocks is not None:
-                total = total + blocks.reshape(-1) @ product
-    return total
+def project_jacobians(jacobians, products: np.ndarray) -> np.ndarray:
+    """Lᵀ J R flattened, (n_jacobians, k l), of each Jacobian J = Σ parts (a list of ``SegmentBlocks``) in
+    ``jacobians``: Σ_s L_rᵀ J_rr R_r + L_rᵀ J_rf R_f + L_fᵀ J_fr R_r + L_fᵀ J_ff R_f with the ``products`` of
+    :func:`block_products`, one matrix product for all of them."""
+    values = np.zeros((len(jacobians), 4, products.shape[0] // 4))
+    for jacobian_values, parts in zip(values, jacobians):
+        for part in parts:
+            for kind_values, blocks in zip(jacobian_values, part):
+                if blocks is not None:
+                    kind_values += blocks.reshape(-1)
+    return values.reshape(len(jacobians), -1) @ products
