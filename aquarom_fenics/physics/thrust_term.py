@@ -272,12 +272,13 @@ class ReducedThrust:
         self.spine = SpineGeometry(rest_xy, virtual_mass(self.dorsal_z, data.fluid_density), spine_force)
         self.rows = data.rows.reshape(-1, data.rows.shape[-1])      # (2 n_points, m)
         rear, front = data.rows[:-1], data.rows[1:]                  # (n_segments, 2, m): W_r, W_f
-        self.block_products = block_products(rear, front, rear, front)
+        self.block_kinds = block_kinds(self.spine)
+        self.block_products = block_products(rear, front, rear, front, self.block_kinds)
         mass_gradient = virtual_mass_gradient(self.dorsal_z, data.dorsal_z_gradient, data.fluid_density)
         length_gradient = None
         if self.moving_rest:
             gradient = data.rest_xy_gradient                                 # (n, 2, p): B U
-            self.rest_products = block_products(rear, front, gradient[:-1], gradient[1:])
+            self.rest_products = block_products(rear, front, gradient[:-1], gradient[1:], self.block_kinds)
             chord = segment_difference(self.spine.rest_xy) / self.spine.rest_length[:, None]
             length_gradient = np.einsum("sc,sck->sk", chord, segment_difference(gradient))
         self.derivative_weights = derivative_weights(self.spine, mass_gradient, length_gradient)
@@ -305,7 +306,8 @@ class ReducedThrust:
     def tangents(self, time, eta, eta_dot, eta_ddot):
         """-Wᵀ (∂f/∂u, ∂f/∂u̇, ∂f/∂ü) W, from the Jacobians' segment blocks."""
         m = self.rows.shape[1]
-        projected = project_jacobians(self._jacobian_blocks(eta, eta_dot, eta_ddot), self.block_products)
+        projected = project_jacobians(self._jacobian_blocks(eta, eta_dot, eta_ddot), self.block_products,
+                                      self.block_kinds)
         return tuple(-jacobian.reshape(m, m) for jacobian in projected)
 
     def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
@@ -317,28 +319,36 @@ class ReducedThrust:
         derivative = -(thrust_k.reshape(thrust_k.shape[0], -1) @ self.rows)
         if self.moving_rest:
             stiffness = self._jacobian_blocks(eta, eta_dot, eta_ddot)[0]
-            derivative -= project_jacobians((stiffness,), self.rest_products)[0].reshape(-1, thrust_k.shape[0]).T
+            derivative -= project_jacobians((stiffness,), self.rest_products, self.block_kinds)[0].reshape(-1, thrust_k.shape[0]).T
         return derivative
 
 
 def block_products(left_rear: np.ndarray, left_front: np.ndarray, right_rear: np.ndarray,
-                   right_front: np.ndarray) -> np.ndarray:
-    """(4 · 4 n_segments, k l) products L_sa,i R_sb,j of the rows L (n_segments, 2, k) and R (n_segments, 2, l) at
-    the segments' rear and front points, for the block kinds rear_rear, rear_front, front_rear, front_front
-    in turn (rows (kind, s, a, b), columns (i, j)): Lᵀ J R = (J's blocks as one vector) @ products."""
+                   right_front: np.ndarray, kinds) -> np.ndarray:
+    """(n_kinds · 4 n_segments, k l) products L_sa,i R_sb,j of the rows L (n_segments, 2, k) and R (n_segments, 2, l)
+    at the segments' rear and front points, for the block ``kinds`` (indices into ``SegmentBlocks``: rear_rear,
+    rear_front, front_rear, front_front) in turn, rows (kind, s, a, b), columns (i, j):
+    Lᵀ J R = (J's blocks of those kinds as one vector) @ products."""
     pairs = ((left_rear, right_rear), (left_rear, right_front), (left_front, right_rear), (left_front, right_front))
-    return np.vstack([np.einsum("sai,sbj->sabij", left, right).reshape(4 * left.shape[0], -1)
-                      for left, right in pairs])
+    return np.vstack([np.einsum("sai,sbj->sabij", *pairs[kind]).reshape(4 * left_rear.shape[0], -1) for kind in kinds])
 
 
-def project_jacobians(jacobians, products: np.ndarray) -> np.ndarray:
-    """Lᵀ J R flattened, (n_jacobians, k l), of each Jacobian J = Σ parts (a list of ``SegmentBlocks``) in
-    ``jacobians``: Σ_s L_rᵀ J_rr R_r + L_rᵀ J_rf R_f + L_fᵀ J_fr R_r + L_fᵀ J_ff R_f with the ``products`` of
-    :func:`block_products`, one matrix product for all of them."""
-    values = np.zeros((len(jacobians), 4, products.shape[0] // 4))
+def project_jacobians(jacobians, products: np.ndarray, kinds) -> np.ndarray:
+    """Lᵀ J R flattened, (n_jacobians, k l), of each Jacobian J = Σ parts (a list of ``SegmentBlocks`` with blocks
+    of the given ``kinds`` only) in ``jacobians``: Σ_s L_rᵀ J_rr R_r + L_rᵀ J_rf R_f + L_fᵀ J_fr R_r + L_fᵀ J_ff R_f,
+    one matrix product with the ``products`` of :func:`block_products` for those kinds."""
+    values = np.zeros((len(jacobians), len(kinds), products.shape[0] // len(kinds)))
     for jacobian_values, parts in zip(values, jacobians):
         for part in parts:
-            for kind_values, blocks in zip(jacobian_values, part):
-                if blocks is not None:
-                    kind_values += blocks.reshape(-1)
+            for kind_values, kind in zip(jacobian_values, kinds):
+                if part[kind] is not None:
+                    kind_values += part[kind].reshape(-1)
     return values.reshape(len(jacobians), -1) @ products
+
+
+def block_kinds(spine: SpineGeometry) -> tuple[int, ...]:
+    """The kinds of segment blocks (indices into ``SegmentBlocks``) the thrust's Jacobians have on this spine:
+    rear rows only for the source's form, all four with the lagrangian term."""
+    at_rest = segment_state(spine, *np.zeros((3, spine.n_nodes, 2)))
+    return tuple(kind for kind in range(4) if any(part[kind] is not None for parts in
+                                                   thrust_jacobian_blocks(spine, at_rest) for part in parts))
