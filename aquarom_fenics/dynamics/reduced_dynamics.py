@@ -74,13 +74,10 @@ class ReducedSystem:
         return residual, max(self.norm(internal), self.norm(external), self.norm(inertia))
 
     def tangents(self, time, eta, eta_dot, eta_ddot):
-        """(K_t, C_t, M_t) = ∂r/∂(η, η̇, η̈), the sums of the terms' parts."""
-        totals = [np.zeros((eta.size, eta.size)) for _ in range(3)]
-        for term in self.terms:
-            for total, part in zip(totals, term.tangents(time, eta, eta_dot, eta_ddot)):
-                if part is not None:
-                    total += part
-        return tuple(totals)
+        """(K_t, C_t, M_t) = ∂r/∂(η, η̇, η̈), the sums of the terms' parts (new arrays)."""
+        parts = [term.tangents(time, eta, eta_dot, eta_ddot) for term in self.terms]
+        return tuple(sum_of_matrices([part[slot] for part in parts if part[slot] is not None], eta.size)
+                     for slot in range(3))
 
     def set_time_step(self, scheme: TimeScheme) -> None:
         self.scheme = scheme
@@ -222,6 +219,16 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
         result.distance_gradient = distance_gradient(system, arrays["time"], result.states, result.sensitivities,
                                                      weights_gradient)
     return result
+
+
+def sum_of_matrices(matrices: list[np.ndarray], size: int) -> np.ndarray:
+    """Σ matrices as a new (size, size) array, zero for none."""
+    if not matrices:
+        return np.zeros((size, size))
+    total = matrices[0] + matrices[1] if len(matrices) > 1 else matrices[0].copy()
+    for matrix in matrices[2:]:
+        total += matrix
+    return total
 
 
 def newton_matrix(scheme: TimeScheme, stiffness, damping, mass) -> np.ndarray:

@@ -150,11 +150,16 @@ class SegmentState(NamedTuple):
 def segment_state(geometry: SpineGeometry, displacement, velocity, acceleration) -> SegmentState:
     """The segments' frames, rates and rear kinematics of the (n_nodes, 2) x-y nodal fields, tail -> head."""
     displacement, velocity, acceleration = _check_nodal(geometry, displacement, velocity, acceleration)
-    rest_length = geometry.rest_length
-    tangent, normal = segment_frame(geometry, displacement)
-    # ṅ = R (u̇_f - u̇_r) / ℓ_0
-    normal_rate = rotate(segment_difference(velocity) / rest_length[:, None])
-    rear_velocity, rear_acceleration = velocity[:-1], acceleration[:-1]
+    tangent, _ = segment_frame(geometry, displacement)
+    # ṫ = (u̇_f - u̇_r) / ℓ_0
+    tangent_rate = segment_difference(velocity) / geometry.rest_length[:, None]
+    return segment_state_of(geometry.rest_length, tangent, tangent_rate, velocity[:-1], acceleration[:-1])
+
+
+def segment_state_of(rest_length, tangent, tangent_rate, rear_velocity, rear_acceleration) -> SegmentState:
+    """The segment state from each segment's t = (x_f - x_r)/ℓ_0, its rate ṫ and the rear node's u̇ and ü,
+    (n_segments, 2) each: n = R t, ṅ = R ṫ and the products a·n, v·ṅ, v·n."""
+    normal, normal_rate = rotate(tangent), rotate(tangent_rate)
     return SegmentState(
         rest_length=rest_length,
         tangent=tangent,

@@ -20,7 +20,8 @@ from mpi4py import MPI
 from aquarom_fenics.geometry.shapes import shape_displacement
 from aquarom_fenics.physics.stations import dorsal_profile
 from aquarom_fenics.physics.thrust import (SegmentBlocks, SegmentState, SpineGeometry, derivative_weights,
-                                           segment_difference, segment_state, segment_weighted_force, thrust_force,
+                                           segment_difference, segment_state, segment_state_of,
+                                           segment_weighted_force, thrust_force,
                                            thrust_force_of_state, thrust_jacobian_blocks, thrust_jacobians,
                                            virtual_mass, virtual_mass_gradient)
 
@@ -270,8 +271,14 @@ class ReducedThrust:
         self.dorsal_z = data.dorsal_z + data.dorsal_z_gradient @ delta if delta.size else data.dorsal_z
         rest_xy = data.rest_xy + data.rest_xy_gradient @ delta if moves else data.rest_xy
         self.spine = SpineGeometry(rest_xy, virtual_mass(self.dorsal_z, data.fluid_density), spine_force)
-        self.rows = data.rows.reshape(-1, data.rows.shape[-1])      # (2 n_points, m)
+        m = data.rows.shape[-1]
+        self.rows = data.rows.reshape(-1, m)                         # (2 n_points, m): W
         rear, front = data.rows[:-1], data.rows[1:]                  # (n_segments, 2, m): W_r, W_f
+        # the segment kinematics are linear in η: t = t_rest + T η, ṫ = T η̇, T = (W_f - W_r)/ℓ_0
+        length = self.spine.rest_length[:, None]
+        self.rest_tangent = segment_difference(self.spine.rest_xy) / length
+        self.tangent_rows = ((front - rear) / length[:, :, None]).reshape(-1, m)
+        self.rear_rows = rear.reshape(-1, m)
         self.block_kinds = block_kinds(self.spine)
         self.block_products = block_products(rear, front, rear, front, self.block_kinds)
         mass_gradient = virtual_mass_gradient(self.dorsal_z, data.dorsal_z_gradient, data.fluid_density)
@@ -279,16 +286,20 @@ class ReducedThrust:
         if self.moving_rest:
             gradient = data.rest_xy_gradient                                 # (n, 2, p): B U
             self.rest_products = block_products(rear, front, gradient[:-1], gradient[1:], self.block_kinds)
-            chord = segment_difference(self.spine.rest_xy) / self.spine.rest_length[:, None]
-            length_gradient = np.einsum("sc,sck->sk", chord, segment_difference(gradient))
+            # ∂ℓ_0/∂ξ_k = ê·(B U_k,f - B U_k,r), ê = t_rest the unit chord
+            length_gradient = np.einsum("sc,sck->sk", self.rest_tangent, segment_difference(gradient))
         self.derivative_weights = derivative_weights(self.spine, mass_gradient, length_gradient)
         self._point, self._state, self._blocks = None, None, None
 
     def _segment_state(self, eta, eta_dot, eta_ddot) -> SegmentState:
-        """The segment state of the reduced kinematics (W η, W η̇, W η̈), kept for the same point."""
+        """The segment state of the reduced kinematics (W η, W η̇, W η̈): t = t_rest + T η, ṫ = T η̇, the rear
+        nodes' W_r η̇ and W_r η̈; kept for the same point."""
         point = (eta.tobytes(), eta_dot.tobytes(), eta_ddot.tobytes())
         if point != self._point:
-            self._state = segment_state(self.spine, *((self.rows @ x).reshape(-1, 2) for x in (eta, eta_dot, eta_ddot)))
+            tangent = self.rest_tangent + (self.tangent_rows @ eta).reshape(-1, 2)
+            self._state = segment_state_of(self.spine.rest_length, tangent, (self.tangent_rows @ eta_dot).reshape(-1, 2),
+                                           (self.rear_rows @ eta_dot).reshape(-1, 2),
+                                           (self.rear_rows @ eta_ddot).reshape(-1, 2))
             self._point, self._blocks = point, None
         return self._state
 
