@@ -307,7 +307,8 @@ def derivative_weights(geometry: SpineGeometry, mass_gradient: np.ndarray,
     lengths, ∂ℓ_0/∂ξ = ``length_gradient`` (n_segments, p; None: fixed).
 
     f is linear in m̃: w = ∂m̃/∂ξ_k (Σ_i (∂f/∂m̃_i) ∂m̃_i/∂ξ_k). With t, n and ṅ each ∝ 1/ℓ_0, f_spine and g are
-    ∝ ℓ_0⁻¹ and f_tail ∝ ℓ_0⁻³: w = -m̃ (∂ℓ_0/∂ξ_k)/ℓ_0 more, three times that on f_tail (``thrust_force_per_rest_length``).
+    ∝ ℓ_0⁻¹ and f_tail ∝ ℓ_0⁻³: w = -m̃ (∂ℓ_0/∂ξ_k)/ℓ_0 more, three times that on f_tail
+    (``thrust_force_per_rest_length``).
     """
     spine_weight = mass_gradient.T
     tail_weight = spine_weight[:, 0]

@@ -297,7 +297,8 @@ class ReducedThrust:
         point = (eta.tobytes(), eta_dot.tobytes(), eta_ddot.tobytes())
         if point != self._point:
             tangent = self.rest_tangent + (self.tangent_rows @ eta).reshape(-1, 2)
-            self._state = segment_state_of(self.spine.rest_length, tangent, (self.tangent_rows @ eta_dot).reshape(-1, 2),
+            tangent_rate = (self.tangent_rows @ eta_dot).reshape(-1, 2)
+            self._state = segment_state_of(self.spine.rest_length, tangent, tangent_rate,
                                            (self.rear_rows @ eta_dot).reshape(-1, 2),
                                            (self.rear_rows @ eta_ddot).reshape(-1, 2))
             self._point, self._blocks = point, None
@@ -327,10 +328,12 @@ class ReducedThrust:
         (∂f/∂u) B U_k + Σ_s (∂f/∂ℓ_0,s) ê_s·(B U_k,f - B U_k,r)."""
         state = self._segment_state(eta, eta_dot, eta_ddot)
         thrust_k = segment_weighted_force(self.spine, state, *self.derivative_weights)      # (p, n, 2)
-        derivative = -(thrust_k.reshape(thrust_k.shape[0], -1) @ self.rows)
+        p = thrust_k.shape[0]
+        derivative = -(thrust_k.reshape(p, -1) @ self.rows)
         if self.moving_rest:
             stiffness = self._jacobian_blocks(eta, eta_dot, eta_ddot)[0]
-            derivative -= project_jacobians((stiffness,), self.rest_products, self.block_kinds)[0].reshape(-1, thrust_k.shape[0]).T
+            # Wᵀ (∂f/∂u) B U, (m, p)
+            derivative -= project_jacobians((stiffness,), self.rest_products, self.block_kinds)[0].reshape(-1, p).T
         return derivative
 
 
