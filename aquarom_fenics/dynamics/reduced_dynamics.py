@@ -7,13 +7,14 @@ S = (1 - α_f) K_t + (1 - α_f)(γ/(βh)) C_t + ((1 - α_m)/(βh²)) M_t of that
 from __future__ import annotations
 
 import functools
+import math
 import time as clock
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
 import scipy.linalg
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 from aquarom_fenics.dynamics.integrator import IntegrationStopped, NewtonSettings, StepReport, TimeScheme, between, integrate
 from aquarom_fenics.reduction.prom import ReducedModel
@@ -23,12 +24,19 @@ from aquarom_fenics.dynamics.trajectory import (Trajectory, swimming_distance, t
 
 
 
+@functools.cache
+def blas_thread_pools() -> ThreadpoolController:
+    """The thread pools of the loaded libraries, inspected once (numpy's and scipy's BLAS are loaded on
+    import): ``threadpool_limits`` inspects them again on every call, about 0.5 ms."""
+    return ThreadpoolController()
+
+
 def one_blas_thread(function):
     """Run ``function`` with one BLAS thread. The reduced systems are m × m with m ≈ 10: a threaded
     BLAS spends about 2 ms per 13 × 13 solve on two busy cores, one thread 7 µs (measured)."""
     @functools.wraps(function)
     def single_threaded(*args, **kwargs):
-        with threadpool_limits(limits=1, user_api="blas"):
+        with blas_thread_pools().limit(limits=1, user_api="blas"):
             return function(*args, **kwargs)
     return single_threaded
 
@@ -73,13 +81,10 @@ class ReducedSystem:
         return residual, max(self.norm(internal), self.norm(external), self.norm(inertia))
 
     def tangents(self, time, eta, eta_dot, eta_ddot):
-        """(K_t, C_t, M_t) = ∂r/∂(η, η̇, η̈), the sums of the terms' parts."""
-        totals = [np.zeros((eta.size, eta.size)) for _ in range(3)]
-        for term in self.terms:
-            for total, part in zip(totals, term.tangents(time, eta, eta_dot, eta_ddot)):
-                if part is not None:
-                    total += part
-        return tuple(totals)
+        """(K_t, C_t, M_t) = ∂r/∂(η, η̇, η̈), the sums of the terms' parts (new arrays)."""
+        parts = [term.tangents(time, eta, eta_dot, eta_ddot) for term in self.terms]
+        return tuple(sum_of_matrices([part[slot] for part in parts if part[slot] is not None], eta.size)
+                     for slot in range(3))
 
     def set_time_step(self, scheme: TimeScheme) -> None:
         self.scheme = scheme
@@ -92,10 +97,13 @@ class ReducedSystem:
         self._factors = scipy.linalg.lu_factor(self.newton_matrix(time, eta, eta_dot, eta_ddot))
 
     def solve(self, rhs):
-        return scipy.linalg.lu_solve(self._factors, rhs)
+        """S⁻¹ rhs; the factors come from a checked ``lu_factor`` and the integrator has checked the
+        residual ``rhs`` to be finite, so ``lu_solve`` checks nothing again."""
+        return scipy.linalg.lu_solve(self._factors, rhs, check_finite=False)
 
     def norm(self, vector):
-        return float(np.linalg.norm(vector))
+        """‖x‖ = √(x·x) (what np.linalg.norm computes, without its dispatch)."""
+        return math.sqrt(vector.dot(vector))
 
     def dot(self, left, right):
         return float(left @ right)
@@ -218,6 +226,16 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
         result.distance_gradient = distance_gradient(system, arrays["time"], result.states, result.sensitivities,
                                                      weights_gradient)
     return result
+
+
+def sum_of_matrices(matrices: list[np.ndarray], size: int) -> np.ndarray:
+    """Σ matrices as a new (size, size) array, zero for none."""
+    if not matrices:
+        return np.zeros((size, size))
+    total = matrices[0] + matrices[1] if len(matrices) > 1 else matrices[0].copy()
+    for matrix in matrices[2:]:
+        total += matrix
+    return total
 
 
 def newton_matrix(scheme: TimeScheme, stiffness, damping, mass) -> np.ndarray:

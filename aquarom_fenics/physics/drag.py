@@ -106,6 +106,7 @@ class ReducedDrag:
     def __init__(self, tensors: DragTensors, delta: np.ndarray, head_x_row: np.ndarray):
         self.tensors, self.delta, self.head_x_row = tensors, delta, head_x_row
         self.direction = tensors.direction.at(delta)
+        self.direction_gradient = tensors.direction.gradient(delta)            # ∂g_r/∂ξ_k, (p, m)
 
     def force(self, eta_dot: np.ndarray) -> np.ndarray:
         return drag_force(self.direction, self.head_x_row @ eta_dot)
@@ -113,7 +114,7 @@ class ReducedDrag:
     def tangents(self, time, eta, eta_dot, eta_ddot):
         """C_t part -∂f/∂η̇ = -2 g_r v_x (head x row)ᵀ."""
         column = drag_velocity_jacobian(self.direction, self.head_x_row @ eta_dot)
-        return None, -np.outer(column, self.head_x_row), None
+        return None, np.multiply.outer(-column, self.head_x_row), None
 
     def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
-        return -drag_force(self.tensors.direction.gradient(self.delta), self.head_x_row @ eta_dot)
+        return -drag_force(self.direction_gradient, self.head_x_row @ eta_dot)

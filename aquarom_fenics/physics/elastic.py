@@ -76,21 +76,38 @@ class ElasticTensors:
 
 
 class ReducedElastic:
-    """The reduced internal force at one design ξ (a :class:`ReducedTerm`)."""
+    """The reduced internal force at one design ξ (a :class:`ReducedTerm`).
+
+    The tensors are contracted with η as matrices, K2 as (m², m) and K3 as (m³, m); the contractions
+    K2 η and K3 η η of the last η are kept for the tangent at the same point.
+    """
 
     def __init__(self, tensors: ElasticTensors, delta: np.ndarray):
         self.tensors, self.delta = tensors, delta
         self.k1, self.k2, self.k3 = (t.at(delta) for t in (tensors.linear, tensors.quadratic, tensors.cubic))
+        m = self.k1.shape[0]
+        self._k2_rows, self._k3_rows = self.k2.reshape(-1, m), self.k3.reshape(-1, m)
+        self._eta, self._contractions = None, None
+
+    def contractions(self, eta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(K2 η, K3 η η), each (m, m)."""
+        key = eta.tobytes()
+        if key != self._eta:
+            m = eta.size
+            k2_eta = (self._k2_rows @ eta).reshape(m, m)
+            k3_eta_eta = ((self._k3_rows @ eta).reshape(-1, m) @ eta).reshape(m, m)
+            self._eta, self._contractions = key, (k2_eta, k3_eta_eta)
+        return self._contractions
 
     def force(self, eta: np.ndarray) -> np.ndarray:
         """K1 η + K2 η η + K3 η η η."""
-        quadratic = self.k2 @ eta
-        cubic = (self.k3 @ eta) @ eta
-        return self.k1 @ eta + quadratic @ eta + cubic @ eta
+        k2_eta, k3_eta_eta = self.contractions(eta)
+        return self.k1 @ eta + k2_eta @ eta + k3_eta_eta @ eta
 
     def tangent(self, eta: np.ndarray) -> np.ndarray:
         """K1 + 2 K2 η + 3 K3 η η."""
-        return self.k1 + 2.0 * (self.k2 @ eta) + 3.0 * ((self.k3 @ eta) @ eta)
+        k2_eta, k3_eta_eta = self.contractions(eta)
+        return self.k1 + 2.0 * k2_eta + 3.0 * k3_eta_eta
 
     def tangents(self, time, eta, eta_dot, eta_ddot):
         return self.tangent(eta), None, None
@@ -100,10 +117,20 @@ class ReducedElastic:
         """(∂K1/∂ξ_k, ∂K2/∂ξ_k, ∂K3/∂ξ_k) at this design, each with a leading axis k of length p."""
         return tuple(t.gradient(self.delta) for t in (self.tensors.linear, self.tensors.quadratic, self.tensors.cubic))
 
+    @cached_property
+    def _gradient_rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The gradients as matrices on η's index: (p m, m), (p m², m), (p m³, m)."""
+        m = self.k1.shape[0]
+        return tuple(gradient.reshape(-1, m) for gradient in self.gradients)
+
     def force_gradient(self, eta: np.ndarray) -> np.ndarray:
         """∂f_int,r/∂ξ_k = K1_k η + K2_k η η + K3_k η η η, shape (p, m) (contracted one η at a time)."""
-        k1_k, k2_k, k3_k = self.gradients
-        return k1_k @ eta + (k2_k @ eta) @ eta + ((k3_k @ eta) @ eta) @ eta
+        m = eta.size
+        k1_k, k2_k, k3_k = self._gradient_rows
+        linear = k1_k @ eta
+        quadratic = (k2_k @ eta).reshape(-1, m) @ eta
+        cubic = ((k3_k @ eta).reshape(-1, m) @ eta).reshape(-1, m) @ eta
+        return (linear + quadratic + cubic).reshape(-1, m)
 
     def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
         return self.force_gradient(eta)

@@ -104,17 +104,16 @@ class ReducedInertia:
         self.damping = rayleigh_damping(tensors.rayleigh_alpha, self.mass, tensors.rayleigh_beta, rest_stiffness_value)
         self.total_mass = float(tensors.total_mass.at(delta))
         self.com_weights = tensors.mass_moment_x.at(delta) / self.total_mass
+        self.mass_gradient = tensors.mass.gradient(delta)                       # ∂M_r/∂ξ_k, (p, m, m)
+        self.damping_gradient = rayleigh_damping(tensors.rayleigh_alpha, self.mass_gradient, tensors.rayleigh_beta,
+                                                 rest_stiffness.gradient(delta))     # ∂C_r/∂ξ_k
 
     def tangents(self, time, eta, eta_dot, eta_ddot):
         return None, self.damping, self.mass
 
     def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
         """∂M_r/∂ξ_k η̈ + ∂C_r/∂ξ_k η̇, shape (p, m)."""
-        tensors = self.tensors
-        mass_k = tensors.mass.gradient(self.delta)
-        damping_k = rayleigh_damping(tensors.rayleigh_alpha, mass_k, tensors.rayleigh_beta,
-                                     self.rest_stiffness.gradient(self.delta))
-        return mass_k @ eta_ddot + damping_k @ eta_dot
+        return self.mass_gradient @ eta_ddot + self.damping_gradient @ eta_dot
 
     def com_weights_gradient(self) -> np.ndarray:
         """∂c/∂ξ_k of com_x = c(ξ)·η, c = n(ξ)/mass(ξ): (∂n/∂ξ_k - c ∂mass/∂ξ_k) / mass, shape (p, m)."""

@@ -111,7 +111,10 @@ class MuscleTensors:
 
 
 class ReducedMuscle:
-    """The reduced muscles at one design ξ and amplitude A (a :class:`ReducedTerm`)."""
+    """The reduced muscles at one design ξ and amplitude A (a :class:`ReducedTerm`).
+
+    B_j and ∂B_j/∂ξ_k are kept flat, (2, m²) and (p, 2, m²), to contract Σ_j a_j B_j as one product.
+    """
 
     def __init__(self, tensors: MuscleTensors, delta: np.ndarray, amplitude: float, frequency: float,
                  ramp_time: float = 0.0):
@@ -119,13 +122,26 @@ class ReducedMuscle:
         self.amplitude, self.frequency, self.ramp_time = amplitude, frequency, ramp_time
         self.constant = tensors.constant.at(delta)
         self.linear = tensors.linear.at(delta)
+        m = self.constant.shape[-1]
+        self._linear_rows = self.linear.reshape(2, m * m)
+        self.constant_gradient = tensors.constant.gradient(delta)                      # (p, 2, m)
+        self._linear_gradient_rows = tensors.linear.gradient(delta).reshape(-1, 2, m * m)
+        self._time, self._activations = None, None
 
     def activations(self, time: float) -> np.ndarray:
-        return activations(self.amplitude, self.frequency, time, self.ramp_time)
+        """(a_left, a_right) at time t (kept for the same t)."""
+        if time != self._time:
+            self._time, self._activations = time, activations(self.amplitude, self.frequency, time, self.ramp_time)
+        return self._activations
+
+    def _stiffness(self, a: np.ndarray) -> np.ndarray:
+        """Σ_j a_j B_j, (m, m)."""
+        m = self.constant.shape[-1]
+        return (a @ self._linear_rows).reshape(m, m)
 
     def _per_activation(self, a: np.ndarray, eta: np.ndarray) -> np.ndarray:
         """Σ_j a_j (b_j + B_j η)."""
-        return a @ self.constant + np.einsum("j,jab,b->a", a, self.linear, eta)
+        return a @ self.constant + self._stiffness(a) @ eta
 
     def force(self, time: float, eta: np.ndarray) -> np.ndarray:
         return -self._per_activation(self.activations(time), eta)
@@ -136,9 +152,10 @@ class ReducedMuscle:
 
     def tangents(self, time, eta, eta_dot, eta_ddot):
         """K_t part Σ_j a_j B_j."""
-        return np.einsum("j,jab->ab", self.activations(time), self.linear), None, None
+        return self._stiffness(self.activations(time)), None, None
 
     def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
+        """Σ_j a_j (∂b_j/∂ξ_k + ∂B_j/∂ξ_k η), shape (p, m)."""
         a = self.activations(time)
-        return (np.einsum("j,kja->ka", a, self.tensors.constant.gradient(self.delta))
-                + np.einsum("j,kjab,b->ka", a, self.tensors.linear.gradient(self.delta), eta))
+        m = eta.size
+        return a @ self.constant_gradient + ((a @ self._linear_gradient_rows).reshape(-1, m) @ eta).reshape(-1, m)

@@ -30,6 +30,8 @@ order (x0, y0, x1, y1, ...).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 
@@ -37,6 +39,18 @@ ROTATION_90 = np.array([[0.0, -1.0], [1.0, 0.0]])
 """R: rotation by +90° about z, R (a, b) = (-b, a)."""
 
 _IDENTITY_2 = np.eye(2)
+
+_ROTATE_SIGNS = np.array([-1.0, 1.0])
+
+
+def rotate(rows: np.ndarray) -> np.ndarray:
+    """R x of row vectors x (..., 2): (-x_y, x_x), the product x Rᵀ without a matrix product."""
+    return rows[..., ::-1] * _ROTATE_SIGNS
+
+
+def rotate_back(rows: np.ndarray) -> np.ndarray:
+    """Rᵀ x of row vectors x (..., 2): (x_y, -x_x), the product x R without a matrix product."""
+    return rows[..., ::-1] * -_ROTATE_SIGNS
 
 
 @dataclass(frozen=True)
@@ -77,10 +91,10 @@ class SpineGeometry:
     def n_nodes(self) -> int:
         return self.rest_xy.shape[0]
 
-    @property
+    @cached_property
     def rest_length(self) -> np.ndarray:
-        """(n_segments,) ℓ_0 = |x_f - x_r| at rest [m]."""
-        return np.linalg.norm(np.diff(self.rest_xy, axis=0), axis=1)
+        """(n_segments,) ℓ_0 = |x_f - x_r| at rest [m] (computed once: the geometry is frozen)."""
+        return np.linalg.norm(segment_difference(self.rest_xy), axis=1)
 
 
 def virtual_mass(dorsal_z, fluid_density: float) -> np.ndarray:
@@ -101,6 +115,11 @@ def virtual_mass_gradient(dorsal_z, dorsal_z_gradient, fluid_density: float) -> 
     return 2 * np.pi * fluid_density * np.asarray(dorsal_z, dtype=float)[:, None] * dorsal_z_gradient
 
 
+def segment_difference(nodal: np.ndarray) -> np.ndarray:
+    """x_f - x_r of every segment (rear r = i, front f = i + 1) of a nodal array, (n_segments, ...)."""
+    return nodal[1:] - nodal[:-1]
+
+
 def segment_frame(geometry: SpineGeometry, displacement: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Tangent t and normal n of every segment, each (n_segments, 2) [dimensionless].
 
@@ -108,15 +127,14 @@ def segment_frame(geometry: SpineGeometry, displacement: np.ndarray) -> tuple[np
     """
     positions = geometry.rest_xy + displacement
     # t = (x_f - x_r) / ℓ_0
-    tangent = np.diff(positions, axis=0) / geometry.rest_length[:, None]
-    # n = R t  (row vectors: n = t Rᵀ)
-    normal = tangent @ ROTATION_90.T
+    tangent = segment_difference(positions) / geometry.rest_length[:, None]
+    # n = R t
+    normal = rotate(tangent)
     return tangent, normal
 
 
-@dataclass(frozen=True)
-class _SegmentState:
-    """Per-segment quantities entering the Lighthill forces, (n_segments, ...) arrays."""
+class SegmentState(NamedTuple):
+    """Per-segment quantities entering the Lighthill forces and their Jacobians, (n_segments, ...) arrays."""
 
     rest_length: np.ndarray
     tangent: np.ndarray
@@ -124,21 +142,34 @@ class _SegmentState:
     normal_rate: np.ndarray
     rear_velocity: np.ndarray
     rear_acceleration: np.ndarray
+    a_dot_n: np.ndarray          # a·n
+    v_dot_ndot: np.ndarray       # v·ṅ
+    v_dot_n: np.ndarray          # v·n
 
 
-def _segment_state(geometry, displacement, velocity, acceleration) -> _SegmentState:
+def segment_state(geometry: SpineGeometry, displacement, velocity, acceleration) -> SegmentState:
+    """The segments' frames, rates and rear kinematics of the (n_nodes, 2) x-y nodal fields, tail -> head."""
     displacement, velocity, acceleration = _check_nodal(geometry, displacement, velocity, acceleration)
-    rest_length = geometry.rest_length
-    tangent, normal = segment_frame(geometry, displacement)
-    # ṅ = R (u̇_f - u̇_r) / ℓ_0
-    normal_rate = (np.diff(velocity, axis=0) / rest_length[:, None]) @ ROTATION_90.T
-    return _SegmentState(
+    tangent, _ = segment_frame(geometry, displacement)
+    # ṫ = (u̇_f - u̇_r) / ℓ_0
+    tangent_rate = segment_difference(velocity) / geometry.rest_length[:, None]
+    return segment_state_of(geometry.rest_length, tangent, tangent_rate, velocity[:-1], acceleration[:-1])
+
+
+def segment_state_of(rest_length, tangent, tangent_rate, rear_velocity, rear_acceleration) -> SegmentState:
+    """The segment state from each segment's t = (x_f - x_r)/ℓ_0, its rate ṫ and the rear node's u̇ and ü,
+    (n_segments, 2) each: n = R t, ṅ = R ṫ and the products a·n, v·ṅ, v·n."""
+    normal, normal_rate = rotate(tangent), rotate(tangent_rate)
+    return SegmentState(
         rest_length=rest_length,
         tangent=tangent,
         normal=normal,
         normal_rate=normal_rate,
-        rear_velocity=velocity[:-1],
-        rear_acceleration=acceleration[:-1],
+        rear_velocity=rear_velocity,
+        rear_acceleration=rear_acceleration,
+        a_dot_n=_row_dot(rear_acceleration, normal),
+        v_dot_ndot=_row_dot(rear_velocity, normal_rate),
+        v_dot_n=_row_dot(rear_velocity, normal),
     )
 
 
@@ -152,35 +183,61 @@ def _check_nodal(geometry, *nodal_fields):
 
 
 def _row_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.einsum("ij,ij->i", a, b)
+    """a_i·b_i of (n, 2) rows."""
+    return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]
 
 
 def _outer(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a_i b_iᵀ of (n, 2) rows, (n, 2, 2)."""
     return a[:, :, None] * b[:, None, :]
 
 
-def _tail_force_per_mass(state: _SegmentState) -> np.ndarray:
+def _outer_2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a bᵀ of two 2-vectors (np.outer without its reshaping)."""
+    return a[:, None] * b
+
+
+def _tail_force_per_mass(state: SegmentState) -> np.ndarray:
     """f_tail / m̃_0 = ½ (v·n)² t with segment 0's t, n and the tail node's v, (2,) [m²/s²]."""
     normal_velocity = state.rear_velocity[0] @ state.normal[0]
     # f_tail / m̃ = ½ (v·n)² t
     return 0.5 * normal_velocity**2 * state.tangent[0]
 
 
-def _spine_force_per_mass(state: _SegmentState) -> np.ndarray:
+def _spine_force_per_mass(state: SegmentState) -> np.ndarray:
     """f_spine / m̃ = -ℓ_0 [(a·n) n + (v·ṅ) n + (v·n) ṅ] per segment, (n_segments, 2) [m²/s²]."""
-    a_dot_n = _row_dot(state.rear_acceleration, state.normal)
-    v_dot_ndot = _row_dot(state.rear_velocity, state.normal_rate)
-    v_dot_n = _row_dot(state.rear_velocity, state.normal)
     # f_spine / m̃ = -ℓ_0 [ (a·n + v·ṅ) n + (v·n) ṅ ]
-    bracket = (a_dot_n + v_dot_ndot)[:, None] * state.normal + v_dot_n[:, None] * state.normal_rate
+    bracket = (state.a_dot_n + state.v_dot_ndot)[:, None] * state.normal + state.v_dot_n[:, None] * state.normal_rate
     return -state.rest_length[:, None] * bracket
 
 
-def _position_force_per_mass(state: _SegmentState) -> np.ndarray:
+def _position_force_per_mass(state: SegmentState) -> np.ndarray:
     """g / m̃ = (v·n) Rᵀ v per segment (∂T_a/∂x_f / m̃, = -∂T_a/∂x_r / m̃), (n_segments, 2) [m²/s²]."""
-    v_dot_n = _row_dot(state.rear_velocity, state.normal)
-    # Rᵀ v as row vectors: v R
-    return v_dot_n[:, None] * (state.rear_velocity @ ROTATION_90)
+    return state.v_dot_n[:, None] * rotate_back(state.rear_velocity)
+
+
+def segment_weighted_force(geometry: SpineGeometry, state: SegmentState, spine_weight: np.ndarray,
+                           tail_weight, position_weight: np.ndarray | None = None) -> np.ndarray:
+    """Σ_i w_i f_i/m̃_i on the nodes, (..., n_nodes, 2): the per-mass forces of every segment i weighted by
+    ``spine_weight`` (..., n_segments) at its rear node, f_tail/m̃_0 by ``tail_weight`` (...) at node 0 and,
+    for the lagrangian form, ±g_i/m̃_i by ``position_weight`` (default ``spine_weight``) at nodes i + 1, i.
+
+    With w = m̃ this is the thrust f; f is linear in m̃, so with w = ∂m̃/∂ξ_k it is ∂f/∂ξ_k through the virtual
+    masses (leading axis k).
+    """
+    spine_weight = np.asarray(spine_weight)
+    force = np.zeros(spine_weight.shape[:-1] + (geometry.n_nodes, 2))
+    # f_r += w f_spine/m̃ at each segment's rear node r
+    force[..., :-1, :] = spine_weight[..., :, None] * _spine_force_per_mass(state)
+    # f_0 += w_0 f_tail/m̃_0
+    force[..., 0, :] += np.asarray(tail_weight)[..., None] * _tail_force_per_mass(state)
+    if geometry.lagrangian:
+        # f_f += g, f_r -= g with g = w (v·n) Rᵀ v
+        weight = spine_weight if position_weight is None else np.asarray(position_weight)
+        position_force = weight[..., :, None] * _position_force_per_mass(state)
+        force[..., 1:, :] += position_force
+        force[..., :-1, :] -= position_force
+    return force
 
 
 def thrust_force(geometry: SpineGeometry, displacement, velocity, acceleration) -> np.ndarray:
@@ -189,19 +246,13 @@ def thrust_force(geometry: SpineGeometry, displacement, velocity, acceleration) 
     displacement [m], velocity [m/s], acceleration [m/s²]: (n_nodes, 2) x-y fields of the spine
     nodes, tail -> head. The head node (the last one) is never a rear node and receives nothing.
     """
-    state = _segment_state(geometry, displacement, velocity, acceleration)
+    return thrust_force_of_state(geometry, segment_state(geometry, displacement, velocity, acceleration))
+
+
+def thrust_force_of_state(geometry: SpineGeometry, state: SegmentState) -> np.ndarray:
+    """``thrust_force`` from the segment state."""
     mass = geometry.virtual_mass
-    force = np.zeros((geometry.n_nodes, 2))
-    # f_r += m̃ f_spine/m̃ at each segment's rear node r
-    force[:-1] = mass[:, None] * _spine_force_per_mass(state)
-    # f_0 += m̃_0 f_tail/m̃_0
-    force[0] += mass[0] * _tail_force_per_mass(state)
-    if geometry.lagrangian:
-        # f_f += g, f_r -= g with g = m̃ (v·n) Rᵀ v
-        position_force = mass[:, None] * _position_force_per_mass(state)
-        force[1:] += position_force
-        force[:-1] -= position_force
-    return force
+    return segment_weighted_force(geometry, state, mass, mass[0])
 
 
 def thrust_force_per_virtual_mass(
@@ -213,7 +264,7 @@ def thrust_force_per_virtual_mass(
     i, plus f_tail / m̃_0 at node 0 for i = 0, and for the lagrangian form ±g_i / m̃_i at nodes
     i + 1 and i.
     """
-    state = _segment_state(geometry, displacement, velocity, acceleration)
+    state = segment_state(geometry, displacement, velocity, acceleration)
     n_segments = geometry.n_nodes - 1
     segments = np.arange(n_segments)
     per_mass = np.zeros((n_segments, geometry.n_nodes, 2))
@@ -235,7 +286,7 @@ def thrust_force_per_rest_length(geometry: SpineGeometry, displacement, velocity
     With t, n and ṅ each ∝ 1/ℓ_0: f_tail = ½ m̃ (v·n)² t ∝ ℓ_0⁻³, f_spine = -m̃ ℓ_0 [...] ∝ ℓ_0⁻¹ and
     g = m̃ (v·n) Rᵀ v ∝ ℓ_0⁻¹, so ∂f/∂ℓ_0 = -(3 f_tail + f_spine ± g)/ℓ_0 per segment.
     """
-    state = _segment_state(geometry, displacement, velocity, acceleration)
+    state = segment_state(geometry, displacement, velocity, acceleration)
     n_segments = geometry.n_nodes - 1
     segments = np.arange(n_segments)
     mass = geometry.virtual_mass[:, None]
@@ -249,6 +300,35 @@ def thrust_force_per_rest_length(geometry: SpineGeometry, displacement, velocity
     return per_length
 
 
+def derivative_weights(geometry: SpineGeometry, mass_gradient: np.ndarray,
+                       length_gradient: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(spine weights (p, n_segments), tail weights (p,)) for which ``segment_weighted_force`` is ∂f/∂ξ_k at
+    fixed positions through the virtual masses, ∂m̃/∂ξ = ``mass_gradient`` (n_segments, p), and the rest
+    lengths, ∂ℓ_0/∂ξ = ``length_gradient`` (n_segments, p; None: fixed).
+
+    f is linear in m̃: w = ∂m̃/∂ξ_k (Σ_i (∂f/∂m̃_i) ∂m̃_i/∂ξ_k). With t, n and ṅ each ∝ 1/ℓ_0, f_spine and g are
+    ∝ ℓ_0⁻¹ and f_tail ∝ ℓ_0⁻³: w = -m̃ (∂ℓ_0/∂ξ_k)/ℓ_0 more, three times that on f_tail
+    (``thrust_force_per_rest_length``).
+    """
+    spine_weight = mass_gradient.T
+    tail_weight = spine_weight[:, 0]
+    if length_gradient is not None:
+        length_weight = -(geometry.virtual_mass / geometry.rest_length) * length_gradient.T
+        spine_weight = spine_weight + length_weight
+        tail_weight = tail_weight + 3.0 * length_weight[:, 0]
+    return spine_weight, tail_weight
+
+
+class SegmentBlocks(NamedTuple):
+    """A matrix on the nodes (dof order x0, y0, x1, y1, ...) as per-segment 2x2 blocks (n_segments, 2, 2),
+    None where zero: ∂f_r/∂x_r, ∂f_r/∂x_f, ∂f_f/∂x_r, ∂f_f/∂x_f of segment i (rear r = i, front f = i + 1)."""
+
+    rear_rear: np.ndarray | None = None
+    rear_front: np.ndarray | None = None
+    front_rear: np.ndarray | None = None
+    front_front: np.ndarray | None = None
+
+
 def thrust_jacobians(
     geometry: SpineGeometry, displacement, velocity, acceleration
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -260,31 +340,41 @@ def thrust_jacobians(
     lagrangian term adds the lower blocks. ∂f/∂ü is the added-mass block, non-zero on the block
     diagonal only: -m̃ ℓ_0 n nᵀ.
     """
-    state = _segment_state(geometry, displacement, velocity, acceleration)
-    mass = geometry.virtual_mass[:, None, None]
-    length = state.rest_length[:, None, None]
+    state = segment_state(geometry, displacement, velocity, acceleration)
+    jacobians = []
+    for parts in thrust_jacobian_blocks(geometry, state):
+        jacobian = _assemble_segment_blocks(geometry.n_nodes, *parts[0])
+        for part in parts[1:]:
+            jacobian += _assemble_segment_blocks(geometry.n_nodes, *part)
+        jacobians.append(jacobian)
+    return tuple(jacobians)
+
+
+def thrust_jacobian_blocks(geometry: SpineGeometry, state: SegmentState) -> tuple[list[SegmentBlocks], ...]:
+    """The Jacobians of `thrust_jacobians` as segment blocks: for each of (∂f/∂u, ∂f/∂u̇, ∂f/∂ü) the list of
+    parts whose sum it is (the source's form, then the lagrangian term's)."""
+    negative_mass = -geometry.virtual_mass[:, None, None]
+    negative_mass_length = negative_mass * state.rest_length[:, None, None]
     n, n_rate = state.normal, state.normal_rate
     v, a = state.rear_velocity, state.rear_acceleration
-    a_dot_n = _row_dot(a, n)
-    v_dot_ndot = _row_dot(v, n_rate)
-    v_dot_n = _row_dot(v, n)
+    v_dot_n = state.v_dot_n
 
     # Spine force, B = (a·n) n + (v·ṅ) n + (v·n) ṅ, f_spine = -m̃ ℓ_0 B.
     # ∂B/∂n = (a·n + v·ṅ) I + n aᵀ + ṅ vᵀ;  ∂n/∂u_f = -∂n/∂u_r = R/ℓ_0
     # => ∂f_spine/∂u_f = -m̃ (∂B/∂n) R,  ∂f_spine/∂u_r = +m̃ (∂B/∂n) R
-    db_dn = (a_dot_n + v_dot_ndot)[:, None, None] * _IDENTITY_2 + _outer(n, a) + _outer(n_rate, v)
-    stiffness_front = -mass * (db_dn @ ROTATION_90)
+    db_dn = (state.a_dot_n + state.v_dot_ndot)[:, None, None] * _IDENTITY_2 + _outer(n, a) + _outer(n_rate, v)
+    stiffness_front = negative_mass * rotate_back(db_dn)             # (∂B/∂n) R: rows of ∂B/∂n times R
     stiffness_rear = -stiffness_front
 
     # ∂B/∂ṅ = n vᵀ + (v·n) I;  ∂ṅ/∂u̇_f = -∂ṅ/∂u̇_r = R/ℓ_0;  ∂B/∂v (explicit) = n ṅᵀ + ṅ nᵀ
     # => ∂f_spine/∂u̇_f = -m̃ (∂B/∂ṅ) R
     #    ∂f_spine/∂u̇_r = -m̃ ℓ_0 (n ṅᵀ + ṅ nᵀ) + m̃ (∂B/∂ṅ) R
     db_dndot = _outer(n, v) + v_dot_n[:, None, None] * _IDENTITY_2
-    damping_front = -mass * (db_dndot @ ROTATION_90)
-    damping_rear = -mass * length * (_outer(n, n_rate) + _outer(n_rate, n)) - damping_front
+    damping_front = negative_mass * rotate_back(db_dndot)
+    damping_rear = negative_mass_length * (_outer(n, n_rate) + _outer(n_rate, n)) - damping_front
 
     # ∂f_spine/∂ü_r = -m̃ ℓ_0 n nᵀ  (added mass)
-    added_mass_rear = -mass * length * _outer(n, n)
+    added_mass_rear = negative_mass_length * _outer(n, n)
 
     # Tail force, f_tail = ½ m̃ (v·n)² t, segment 0, v = u̇_0; ∂t/∂u_1 = -∂t/∂u_0 = I/ℓ_0,
     # ∂(v·n)/∂t = Rᵀ v
@@ -293,43 +383,39 @@ def thrust_jacobians(
     tail_mass, tail_length = geometry.virtual_mass[0], state.rest_length[0]
     tail_t, tail_n, tail_v, tail_v_dot_n = state.tangent[0], n[0], v[0], v_dot_n[0]
     tail_stiffness_front = (tail_mass / tail_length) * (
-        tail_v_dot_n * np.outer(tail_t, ROTATION_90.T @ tail_v) + 0.5 * tail_v_dot_n**2 * _IDENTITY_2
+        tail_v_dot_n * _outer_2(tail_t, rotate_back(tail_v)) + 0.5 * tail_v_dot_n**2 * _IDENTITY_2
     )
     stiffness_front[0] += tail_stiffness_front
     stiffness_rear[0] -= tail_stiffness_front
-    damping_rear[0] += tail_mass * tail_v_dot_n * np.outer(tail_t, tail_n)
+    damping_rear[0] += tail_mass * tail_v_dot_n * _outer_2(tail_t, tail_n)
 
-    n_nodes = geometry.n_nodes
-    jacobians = (
-        _assemble_segment_blocks(n_nodes, rear_rear=stiffness_rear, rear_front=stiffness_front),
-        _assemble_segment_blocks(n_nodes, rear_rear=damping_rear, rear_front=damping_front),
-        _assemble_segment_blocks(n_nodes, rear_rear=added_mass_rear),
-    )
+    blocks = ([SegmentBlocks(rear_rear=stiffness_rear, rear_front=stiffness_front)],
+              [SegmentBlocks(rear_rear=damping_rear, rear_front=damping_front)],
+              [SegmentBlocks(rear_rear=added_mass_rear)])
     if geometry.lagrangian:
-        jacobians[0][...] += _position_force_stiffness(geometry, state)
-        jacobians[1][...] += _position_force_damping(geometry, state)
-    return jacobians
+        blocks[0].append(_position_force_stiffness(geometry, state))
+        blocks[1].append(_position_force_damping(geometry, state))
+    return blocks
 
 
-def _position_force_stiffness(geometry: SpineGeometry, state: _SegmentState) -> np.ndarray:
+def _position_force_stiffness(geometry: SpineGeometry, state: SegmentState) -> SegmentBlocks:
     """∂(±g)/∂u of the lagrangian term g = m̃ (v·n) Rᵀ v (front +g, rear -g).
 
     ∂g/∂n = m̃ Rᵀ v vᵀ, ∂n/∂u_f = -∂n/∂u_r = R/ℓ_0  =>  ∂g/∂u_f = -∂g/∂u_r = (m̃/ℓ_0) Rᵀ v vᵀ R.
     """
     v = state.rear_velocity
-    rotated = v @ ROTATION_90                      # rows Rᵀ v
+    rotated = rotate_back(v)                       # rows Rᵀ v
     block = (geometry.virtual_mass / state.rest_length)[:, None, None] * _outer(rotated, rotated)
     # vᵀ R = (Rᵀ v)ᵀ, so Rᵀ v vᵀ R = (Rᵀ v)(Rᵀ v)ᵀ
-    return _assemble_segment_blocks(geometry.n_nodes, rear_rear=block, rear_front=-block,
-                                    front_rear=-block, front_front=block)
+    return SegmentBlocks(rear_rear=block, rear_front=-block, front_rear=-block, front_front=block)
 
 
-def _position_force_damping(geometry: SpineGeometry, state: _SegmentState) -> np.ndarray:
+def _position_force_damping(geometry: SpineGeometry, state: SegmentState) -> SegmentBlocks:
     """∂(±g)/∂u̇_r of g = m̃ (v·n) Rᵀ v: ∂g/∂v = m̃ [Rᵀ v nᵀ + (v·n) Rᵀ]."""
     v, n = state.rear_velocity, state.normal
     mass = geometry.virtual_mass[:, None, None]
-    block = mass * (_outer(v @ ROTATION_90, n) + _row_dot(v, n)[:, None, None] * ROTATION_90.T)
-    return _assemble_segment_blocks(geometry.n_nodes, rear_rear=-block, front_rear=block)
+    block = mass * (_outer(rotate_back(v), n) + state.v_dot_n[:, None, None] * ROTATION_90.T)
+    return SegmentBlocks(rear_rear=-block, front_rear=block)
 
 
 def _assemble_segment_blocks(n_nodes: int, rear_rear=None, rear_front=None, front_rear=None,

@@ -19,9 +19,11 @@ from mpi4py import MPI
 
 from aquarom_fenics.geometry.shapes import shape_displacement
 from aquarom_fenics.physics.stations import dorsal_profile
-from aquarom_fenics.physics.thrust import (SpineGeometry, thrust_force, thrust_force_per_rest_length,
-                                           thrust_force_per_virtual_mass, thrust_jacobians, virtual_mass,
-                                           virtual_mass_gradient)
+from aquarom_fenics.physics.thrust import (SegmentBlocks, SegmentState, SpineGeometry, derivative_weights,
+                                           segment_difference, segment_state, segment_state_of,
+                                           segment_weighted_force, thrust_force,
+                                           thrust_force_of_state, thrust_jacobian_blocks, thrust_jacobians,
+                                           virtual_mass, virtual_mass_gradient)
 
 
 def shape_rows(fish) -> np.ndarray:
@@ -256,7 +258,11 @@ class ThrustData:
 
 
 class ReducedThrust:
-    """The reduced thrust at one design ξ (a :class:`ReducedTerm`)."""
+    """The reduced thrust at one design ξ (a :class:`ReducedTerm`).
+
+    The Newton iterations evaluate the residual, the tangents and the ξ-derivative repeatedly at the same
+    point: the segment state of the last point and its Jacobian blocks are kept for the next call.
+    """
 
     def __init__(self, data: ThrustData, delta: np.ndarray, spine_force: str):
         self.data = data
@@ -265,34 +271,98 @@ class ReducedThrust:
         self.dorsal_z = data.dorsal_z + data.dorsal_z_gradient @ delta if delta.size else data.dorsal_z
         rest_xy = data.rest_xy + data.rest_xy_gradient @ delta if moves else data.rest_xy
         self.spine = SpineGeometry(rest_xy, virtual_mass(self.dorsal_z, data.fluid_density), spine_force)
-        self.rows = data.rows.reshape(-1, data.rows.shape[-1])      # (2 n_points, m)
+        m = data.rows.shape[-1]
+        self.rows = data.rows.reshape(-1, m)                         # (2 n_points, m): W
+        rear, front = data.rows[:-1], data.rows[1:]                  # (n_segments, 2, m): W_r, W_f
+        # the segment kinematics are linear in η: t = t_rest + T η, ṫ = T η̇, T = (W_f - W_r)/ℓ_0
+        length = self.spine.rest_length[:, None]
+        self.rest_tangent = segment_difference(self.spine.rest_xy) / length
+        self.tangent_rows = ((front - rear) / length[:, :, None]).reshape(-1, m)
+        self.rear_rows = rear.reshape(-1, m)
+        self.block_kinds = block_kinds(self.spine)
+        self.block_products = block_products(rear, front, rear, front, self.block_kinds)
+        mass_gradient = virtual_mass_gradient(self.dorsal_z, data.dorsal_z_gradient, data.fluid_density)
+        length_gradient = None
+        if self.moving_rest:
+            gradient = data.rest_xy_gradient                                 # (n, 2, p): B U
+            self.rest_products = block_products(rear, front, gradient[:-1], gradient[1:], self.block_kinds)
+            # ∂ℓ_0/∂ξ_k = ê·(B U_k,f - B U_k,r), ê = t_rest the unit chord
+            length_gradient = np.einsum("sc,sck->sk", self.rest_tangent, segment_difference(gradient))
+        self.derivative_weights = derivative_weights(self.spine, mass_gradient, length_gradient)
+        self._point, self._state, self._blocks = None, None, None
 
-    def _spine_states(self, eta, eta_dot, eta_ddot):
-        return [(self.rows @ x).reshape(-1, 2) for x in (eta, eta_dot, eta_ddot)]
+    def _segment_state(self, eta, eta_dot, eta_ddot) -> SegmentState:
+        """The segment state of the reduced kinematics (W η, W η̇, W η̈): t = t_rest + T η, ṫ = T η̇, the rear
+        nodes' W_r η̇ and W_r η̈; kept for the same point."""
+        point = (eta.tobytes(), eta_dot.tobytes(), eta_ddot.tobytes())
+        if point != self._point:
+            tangent = self.rest_tangent + (self.tangent_rows @ eta).reshape(-1, 2)
+            tangent_rate = (self.tangent_rows @ eta_dot).reshape(-1, 2)
+            self._state = segment_state_of(self.spine.rest_length, tangent, tangent_rate,
+                                           (self.rear_rows @ eta_dot).reshape(-1, 2),
+                                           (self.rear_rows @ eta_ddot).reshape(-1, 2))
+            self._point, self._blocks = point, None
+        return self._state
+
+    def _jacobian_blocks(self, eta, eta_dot, eta_ddot) -> tuple[list[SegmentBlocks], ...]:
+        """The Jacobians' segment blocks at the point, kept with its segment state."""
+        state = self._segment_state(eta, eta_dot, eta_ddot)
+        if self._blocks is None:
+            self._blocks = thrust_jacobian_blocks(self.spine, state)
+        return self._blocks
 
     def force(self, eta, eta_dot, eta_ddot) -> np.ndarray:
-        return self.rows.T @ thrust_force(self.spine, *self._spine_states(eta, eta_dot, eta_ddot)).ravel()
+        """Wᵀ f(W η, W η̇, W η̈)."""
+        return self.rows.T @ thrust_force_of_state(self.spine, self._segment_state(eta, eta_dot, eta_ddot)).ravel()
 
     def tangents(self, time, eta, eta_dot, eta_ddot):
-        """-Wᵀ (∂f/∂u, ∂f/∂u̇, ∂f/∂ü) W."""
-        jacobians = thrust_jacobians(self.spine, *self._spine_states(eta, eta_dot, eta_ddot))
-        return tuple(-(self.rows.T @ jacobian @ self.rows) for jacobian in jacobians)
+        """-Wᵀ (∂f/∂u, ∂f/∂u̇, ∂f/∂ü) W, from the Jacobians' segment blocks."""
+        m = self.rows.shape[1]
+        projected = project_jacobians(self._jacobian_blocks(eta, eta_dot, eta_ddot), self.block_products,
+                                      self.block_kinds)
+        return tuple(-jacobian.reshape(m, m) for jacobian in projected)
 
     def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
         """-Wᵀ ∂f/∂ξ_k, shape (p, m): through the virtual masses, Σ_i (∂f/∂m̃_i) ∂m̃_i/∂ξ_k, and, where the
         shape moves the rest points (x̄_rest = B(X + U ξ)), through the positions and rest lengths:
         (∂f/∂u) B U_k + Σ_s (∂f/∂ℓ_0,s) ê_s·(B U_k,f - B U_k,r)."""
-        states = self._spine_states(eta, eta_dot, eta_ddot)
-        per_mass = thrust_force_per_virtual_mass(self.spine, *states)
-        mass_gradient = virtual_mass_gradient(self.dorsal_z, self.data.dorsal_z_gradient, self.data.fluid_density)
-        thrust_k = np.einsum("snc,sk->knc", per_mass, mass_gradient)
+        state = self._segment_state(eta, eta_dot, eta_ddot)
+        thrust_k = segment_weighted_force(self.spine, state, *self.derivative_weights)      # (p, n, 2)
+        p = thrust_k.shape[0]
+        derivative = -(thrust_k.reshape(p, -1) @ self.rows)
         if self.moving_rest:
-            gradient = self.data.rest_xy_gradient                             # (n, 2, p)
-            p = gradient.shape[-1]
-            stiffness = thrust_jacobians(self.spine, *states)[0]
-            thrust_k = thrust_k + (stiffness @ gradient.reshape(-1, p)).T.reshape(p, -1, 2)
-            chord = np.diff(self.spine.rest_xy, axis=0) / self.spine.rest_length[:, None]
-            length_gradient = np.einsum("sc,sck->sk", chord, np.diff(gradient, axis=0))
-            per_length = thrust_force_per_rest_length(self.spine, *states)
-            thrust_k = thrust_k + np.einsum("snc,sk->knc", per_length, length_gradient)
-        return -(thrust_k.reshape(mass_gradient.shape[1], -1) @ self.rows)
+            stiffness = self._jacobian_blocks(eta, eta_dot, eta_ddot)[0]
+            # Wᵀ (∂f/∂u) B U, (m, p)
+            derivative -= project_jacobians((stiffness,), self.rest_products, self.block_kinds)[0].reshape(-1, p).T
+        return derivative
+
+
+def block_products(left_rear: np.ndarray, left_front: np.ndarray, right_rear: np.ndarray,
+                   right_front: np.ndarray, kinds) -> np.ndarray:
+    """(n_kinds · 4 n_segments, k l) products L_sa,i R_sb,j of the rows L (n_segments, 2, k) and R (n_segments, 2, l)
+    at the segments' rear and front points, for the block ``kinds`` (indices into ``SegmentBlocks``: rear_rear,
+    rear_front, front_rear, front_front) in turn, rows (kind, s, a, b), columns (i, j):
+    Lᵀ J R = (J's blocks of those kinds as one vector) @ products."""
+    pairs = ((left_rear, right_rear), (left_rear, right_front), (left_front, right_rear), (left_front, right_front))
+    return np.vstack([np.einsum("sai,sbj->sabij", *pairs[kind]).reshape(4 * left_rear.shape[0], -1) for kind in kinds])
+
+
+def project_jacobians(jacobians, products: np.ndarray, kinds) -> np.ndarray:
+    """Lᵀ J R flattened, (n_jacobians, k l), of each Jacobian J = Σ parts (a list of ``SegmentBlocks`` with blocks
+    of the given ``kinds`` only) in ``jacobians``: Σ_s L_rᵀ J_rr R_r + L_rᵀ J_rf R_f + L_fᵀ J_fr R_r + L_fᵀ J_ff R_f,
+    one matrix product with the ``products`` of :func:`block_products` for those kinds."""
+    values = np.zeros((len(jacobians), len(kinds), products.shape[0] // len(kinds)))
+    for jacobian_values, parts in zip(values, jacobians):
+        for part in parts:
+            for kind_values, kind in zip(jacobian_values, kinds):
+                if part[kind] is not None:
+                    kind_values += part[kind].reshape(-1)
+    return values.reshape(len(jacobians), -1) @ products
+
+
+def block_kinds(spine: SpineGeometry) -> tuple[int, ...]:
+    """The kinds of segment blocks (indices into ``SegmentBlocks``) the thrust's Jacobians have on this spine:
+    rear rows only for the source's form, all four with the lagrangian term."""
+    at_rest = segment_state(spine, *np.zeros((3, spine.n_nodes, 2)))
+    return tuple(kind for kind in range(4) if any(part[kind] is not None for parts in
+                                                   thrust_jacobian_blocks(spine, at_rest) for part in parts))
