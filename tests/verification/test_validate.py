@@ -325,3 +325,21 @@ def test_successive_differences_over_the_last_stroke_leave_out_the_start_transie
     assert min(entry["window_ratios"]) < 2.0
     assert entry["last_stroke_window_ratios"] == pytest.approx([4.0, 4.0], rel=1e-6)
     assert "last_stroke_window_ratios" not in convergence("q", values, time, steps, len(steps), {})
+
+
+def test_an_mpi_case_computed_again_replaces_its_earlier_attempt(runner):
+    """Study e's case writes `aquarom simulate --out` into its own folder; computing the case again
+    (after a crash, the time limit, or a removed record) must not stop at that folder."""
+    import shutil
+
+    if shutil.which("mpirun") is None:
+        pytest.skip("mpirun not installed")
+    from aquarom_fenics.verification.validation.cases import mpi_case
+    from aquarom_fenics.verification.validation.settings import base_scene
+
+    scene = base_scene(QUICK, level=1).replace("solver", duration=0.1)
+    case = mpi_case("mpirun -n 1 FOM L1, 0.1 s", scene, ranks=1)
+    records = [runner.compute(case) for _ in range(2)]
+    for record in records:
+        assert record["status"] == "completed", record.get("message")
+    assert records[0]["distance"] == records[1]["distance"]

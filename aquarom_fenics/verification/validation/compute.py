@@ -170,8 +170,9 @@ def compute_mpi(runner: Runner, case: Case) -> dict:
     scene_file = work / "scene.toml"
     write_text_atomic(scene_file, case.scene.to_toml())
     out = work / "out"
+    # --force: ``out`` is this case's own folder, left by an earlier attempt (a crash or the time limit)
     command = ["mpirun", "-n", str(ranks), str(Path(sys.executable).with_name("aquarom")), "simulate",
-               str(scene_file), "--out", str(out), "--no-progress"]
+               str(scene_file), "--out", str(out), "--no-progress", "--force"]
     environment = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
                        OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
     started = time.perf_counter()
