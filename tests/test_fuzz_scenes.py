@@ -4,6 +4,7 @@ Seeded and bounded: every run mutates the same scenes the same way, and the CLI 
 through `--dry-run` (scene loader, argument checks, time grid, design space, plan) without
 running a solver.
 """
+import copy
 import json
 import math
 import random
@@ -66,6 +67,12 @@ def container(data, path):
     return data
 
 
+def odd_value(rng: random.Random):
+    """A fresh copy of one of ODD_VALUES: the lists among them are mutated later, and a shared one
+    put into itself would make a cyclic scene (no TOML has one)."""
+    return copy.deepcopy(rng.choice(ODD_VALUES))
+
+
 def mutate(data: dict, rng: random.Random) -> dict:
     """One to three structural mutations: delete, replace with an odd value, scale, add a key."""
     for _ in range(rng.randint(1, 3)):
@@ -73,14 +80,14 @@ def mutate(data: dict, rng: random.Random) -> dict:
         kind = rng.choice(["delete", "replace", "scale", "add"])
         if not paths or kind == "add":
             target = rng.choice([data] + [v for v in data.values() if isinstance(v, dict)])
-            target[rng.choice(["extra", "level", "bounds", "weights", "z_tail", "method"])] = rng.choice(ODD_VALUES)
+            target[rng.choice(["extra", "level", "bounds", "weights", "z_tail", "method"])] = odd_value(rng)
             continue
         path = rng.choice(paths)
         parent = container(data, path)
         if kind == "delete":
             del parent[path[-1]]
         elif kind == "replace":
-            parent[path[-1]] = rng.choice(ODD_VALUES)
+            parent[path[-1]] = odd_value(rng)
         elif isinstance(parent[path[-1]], (int, float)) and not isinstance(parent[path[-1]], bool):
             parent[path[-1]] = parent[path[-1]] * rng.choice([-10, -1, 0, 1e-6, 1e6])
     return data
