@@ -142,8 +142,19 @@ def _cache_root() -> str:
     return str(Path(cache_root()).resolve())
 
 
+def worker_threads():
+    """A context with one BLAS and OpenMP thread in this process, as in every worker of a many-run job
+    (local workers and Dask's get THREAD_VARIABLES = 1): a threaded BLAS sums in another order, so
+    tasks run here would otherwise differ in the last digits from the same tasks on a worker."""
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1)
+
+
 class InProcess:
-    """Runs each task at submission, in this process: the serial backend (one worker, no cluster)."""
+    """Runs each task at submission, in this process: the serial backend (one worker, no cluster).
+
+    A task runs with one BLAS and OpenMP thread (:func:`worker_threads`), as on the other backends."""
 
     name = "serial"
     workers = 1
@@ -151,7 +162,9 @@ class InProcess:
     def submit(self, function: Callable, *args) -> Future:
         future: Future = Future()
         try:
-            future.set_result(function(*args))
+            with worker_threads():
+                result = function(*args)
+            future.set_result(result)
         except Exception as error:  # noqa: BLE001 — handed to the caller like a worker's error
             future.set_exception(error)
         return future

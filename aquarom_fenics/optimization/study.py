@@ -16,6 +16,7 @@ from mpi4py import MPI
 from aquarom_fenics.optimization.background_fom import BackgroundFom, start_if_useful
 from aquarom_fenics.optimization.cost import CostWeights, design_space
 from aquarom_fenics.errors import InputError, Interrupted, SolverError
+from aquarom_fenics.executors import worker_threads
 from aquarom_fenics.geometry.fish import Fish, load_fish
 from aquarom_fenics.optimization.history import Checkpoint, history_columns
 from aquarom_fenics.optimization.optimize import (DEFAULT_MAX_TIME, OptimizationResult, optimization_space, optimize,
@@ -182,8 +183,9 @@ def run_multistart(scene: Scene, out_dir: Path, resume: bool = False, weights: C
     settings = scene.optimizer
     starts = start_points(space, settings.starts, settings.seed, PromBuilder(scene, fish, space).meshes)
     if pool is None:
-        runs = [run_optimization(scene, out_dir / f"start_{k + 1}", resume, weights, fish, render=False,
-                                 max_time=max_time, start=z) for k, z in enumerate(starts)]
+        with worker_threads():
+            runs = [run_optimization(scene, out_dir / f"start_{k + 1}", resume, weights, fish, render=False,
+                                     max_time=max_time, start=z) for k, z in enumerate(starts)]
     else:
         from aquarom_fenics.executors import run_all
 
@@ -341,7 +343,8 @@ def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None, pool=Non
     """
     if pool is None:
         fish = fish or load_fish(scene)
-        points = [pareto_point(scene, out_dir, w1, fish) for w1 in scene.cooptimization.weights]
+        with worker_threads():
+            points = [pareto_point(scene, out_dir, w1, fish) for w1 in scene.cooptimization.weights]
     else:
         from aquarom_fenics.executors import run_all
 
