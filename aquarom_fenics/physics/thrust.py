@@ -280,26 +280,6 @@ def thrust_force_per_virtual_mass(
     return per_mass
 
 
-def thrust_force_per_rest_length(geometry: SpineGeometry, displacement, velocity, acceleration) -> np.ndarray:
-    """∂f/∂ℓ_0,i of the thrust at fixed positions, (n_segments, n_nodes, 2) [N/m].
-
-    With t, n and ṅ each ∝ 1/ℓ_0: f_tail = ½ m̃ (v·n)² t ∝ ℓ_0⁻³, f_spine = -m̃ ℓ_0 [...] ∝ ℓ_0⁻¹ and
-    g = m̃ (v·n) Rᵀ v ∝ ℓ_0⁻¹, so ∂f/∂ℓ_0 = -(3 f_tail + f_spine ± g)/ℓ_0 per segment.
-    """
-    state = segment_state(geometry, displacement, velocity, acceleration)
-    n_segments = geometry.n_nodes - 1
-    segments = np.arange(n_segments)
-    mass = geometry.virtual_mass[:, None]
-    per_length = np.zeros((n_segments, geometry.n_nodes, 2))
-    per_length[segments, segments] = -mass * _spine_force_per_mass(state) / state.rest_length[:, None]
-    per_length[0, 0] += -3.0 * geometry.virtual_mass[0] * _tail_force_per_mass(state) / state.rest_length[0]
-    if geometry.lagrangian:
-        position_force = -mass * _position_force_per_mass(state) / state.rest_length[:, None]
-        per_length[segments, segments + 1] += position_force
-        per_length[segments, segments] -= position_force
-    return per_length
-
-
 def derivative_weights(geometry: SpineGeometry, mass_gradient: np.ndarray,
                        length_gradient: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(spine weights (p, n_segments), tail weights (p,)) for which ``segment_weighted_force`` is ∂f/∂ξ_k at
@@ -307,8 +287,8 @@ def derivative_weights(geometry: SpineGeometry, mass_gradient: np.ndarray,
     lengths, ∂ℓ_0/∂ξ = ``length_gradient`` (n_segments, p; None: fixed).
 
     f is linear in m̃: w = ∂m̃/∂ξ_k (Σ_i (∂f/∂m̃_i) ∂m̃_i/∂ξ_k). With t, n and ṅ each ∝ 1/ℓ_0, f_spine and g are
-    ∝ ℓ_0⁻¹ and f_tail ∝ ℓ_0⁻³: w = -m̃ (∂ℓ_0/∂ξ_k)/ℓ_0 more, three times that on f_tail
-    (``thrust_force_per_rest_length``).
+    ∝ ℓ_0⁻¹ and f_tail ∝ ℓ_0⁻³, so ∂f/∂ℓ_0 = -(3 f_tail + f_spine ± g)/ℓ_0 at fixed positions: w gains
+    -m̃ (∂ℓ_0/∂ξ_k)/ℓ_0, three times that on f_tail.
     """
     spine_weight = mass_gradient.T
     tail_weight = spine_weight[:, 0]
