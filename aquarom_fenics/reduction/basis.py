@@ -27,7 +27,7 @@ from petsc4py import PETSc
 from slepc4py import SLEPc
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
-from aquarom_fenics.fem.fom import FullOrderModel, direct_solver
+from aquarom_fenics.fem.fom import FullOrderModel, direct_solver, upper_triangle_copy
 from aquarom_fenics.physics.muscle import ANTAGONIST_PATTERN
 
 log = logging.getLogger("aquarom")
@@ -78,11 +78,18 @@ class _SecondVariations:
         return self.evaluate(self.muscle, a)
 
 
-def clamped_stiffness(fom: FullOrderModel) -> PETSc.Mat:
-    """K_0 of the design at rest with the head clamped (identity rows on the clamped dofs)."""
+def clamped_stiffness(fom: FullOrderModel, upper_triangle: bool = False) -> PETSc.Mat:
+    """K_0 of the design at rest with the head clamped (identity rows on the clamped dofs); with
+    ``upper_triangle`` its upper triangle (SBAIJ) marked positive definite, for a Cholesky
+    factorisation (MUMPS SYM = 1)."""
     matrix = fom.rest_stiffness.copy()
     matrix.zeroRowsColumns(fom.global_dofs(fom.clamped_dofs), diag=1.0)
-    return matrix
+    if not upper_triangle:
+        return matrix
+    upper = upper_triangle_copy(matrix, None)
+    upper.setOption(PETSc.Mat.Option.SPD, True)
+    matrix.destroy()
+    return upper
 
 
 def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int,
@@ -107,7 +114,7 @@ def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int,
     else:
         inner = spectral.getKSP()
         inner.setType("preonly")
-        inner.getPC().setType("lu")
+        inner.getPC().setType("cholesky" if "sbaij" in stiffness.getType() else "lu")
         inner.getPC().setFactorSolverType("mumps")
     solver.setTolerances(1e-12, 200)
     solver.solve()
@@ -154,8 +161,8 @@ def build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
     settings = fom.scene.reduction
     timings = {}
     started = time.perf_counter()
-    stiffness = clamped_stiffness(fom)
-    solver = direct_solver(fom.comm)
+    stiffness = clamped_stiffness(fom, upper_triangle=True)
+    solver = direct_solver(fom.comm, symmetric=True)
     solver.setOperators(stiffness)
     clamped = fom.clamped_dofs
 
