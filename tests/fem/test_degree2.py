@@ -56,7 +56,7 @@ def test_degree_two_dof_layout_matches_the_nodes():
 
 @pytest.fixture(scope="module")
 def quadratic_so1():
-    from test_prom import SO1_SHAPES
+    from prom_checks import SO1_SHAPES
 
     from aquarom_fenics.reduction.reductor import build_prom
 
@@ -67,13 +67,13 @@ def quadratic_so1():
 
 def test_degree_two_prom_reproduces_the_projected_fom_forces(quadratic_so1):
     """The strains sampled at the quadrature points of the FOM's forms give Vᵀ r exactly (SPEC §8)."""
-    from test_prom import assert_prom_reproduces_the_projected_fom_forces
+    from prom_checks import assert_prom_reproduces_the_projected_fom_forces
 
     assert_prom_reproduces_the_projected_fom_forces(*quadratic_so1, samples=5)
 
 
 def test_degree_two_first_xi_derivative_matches_central_difference_of_the_fom(quadratic_so1):
-    from test_prom import assert_first_xi_derivative_matches_the_fom
+    from prom_checks import assert_first_xi_derivative_matches_the_fom
 
     assert_first_xi_derivative_matches_the_fom(*quadratic_so1)
 

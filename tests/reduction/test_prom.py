@@ -3,17 +3,14 @@ import numpy as np
 import pytest
 
 from aquarom_fenics.geometry.fish import load_fish
-from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.dynamics.integrator import TimeScheme
-from aquarom_fenics.reduction.projection import project_vector
 from aquarom_fenics.reduction.prom import ReducedModel
 from aquarom_fenics.dynamics.reduced_dynamics import ReducedSystem, simulate_reduced
 from aquarom_fenics.reduction.reductor import build_prom
 from aquarom_fenics.dynamics.simulate import simulate_fom
 from conftest import coarse_scene
-
-SO1_SHAPES = {"z_tail": {"bounds": [-0.5, 0.5]}, "z_head": {"bounds": [-0.5, 0.5]},
-              "y_thin": {"bounds": [-0.15, 0.15]}}
+from prom_checks import (SO1_SHAPES, ProjectedFOM, assert_first_xi_derivative_matches_the_fom,
+                         assert_prom_reproduces_the_projected_fom_forces, random_states, relative_error)
 
 
 @pytest.fixture(scope="module")
@@ -37,30 +34,6 @@ def second_order_prom(fish):
     return build_prom(scene, fish=fish)
 
 
-def relative_error(actual, expected):
-    return np.linalg.norm(np.asarray(actual) - np.asarray(expected)) / np.linalg.norm(expected)
-
-
-class ProjectedFOM:
-    """Vᵀ r_FOM(V η, V η̇, V η̈) of a design (pulled back with its exact shape gradient, the
-    reference of SPEC §5, or meshed directly), with the PROM's basis V."""
-
-    def __init__(self, scene, fish, prom, xi, moved_mesh=False):
-        self.model = FullOrderModel(scene, fish, xi, moved_mesh=moved_mesh)
-        self.vectors = np.column_stack([self.model.owned_values(prom.basis[:, :, j]) for j in range(prom.size)])
-
-    def residual(self, time, eta, eta_dot, eta_ddot):
-        V = self.vectors
-        return project_vector(self.model.comm, V, self.model.residual(time, V @ eta, V @ eta_dot, V @ eta_ddot)[0])
-
-    def internal_force(self, eta):
-        return project_vector(self.model.comm, self.vectors, self.model.internal_force(self.vectors @ eta))
-
-
-def random_states(rng, m, scale):
-    return [scale * rng.standard_normal(m) for _ in range(3)]
-
-
 def test_sampled_tensors_reproduce_every_projected_fom_force(scene, fish, prom):
     assert_prom_reproduces_the_projected_fom_forces(scene, fish, prom, samples=20)
 
@@ -74,19 +47,6 @@ def test_a_prom_on_a_reused_basis_is_exact_for_its_own_centre(scene, fish, prom)
     assert moved.labels == prom.labels and "vibration_modes" not in moved.timings
     assert relative_error(moved.inertia.mass.constant, prom.inertia.mass.constant) > 1e-3
     assert_prom_reproduces_the_projected_fom_forces(scene, fish, moved, samples=5)
-
-
-def assert_prom_reproduces_the_projected_fom_forces(scene, fish, prom, samples):
-    """Vᵀ r of the FOM and the PROM's residual and internal force agree to 1e-9 at random states (SPEC §8)."""
-    projected = ProjectedFOM(scene, fish, prom, prom.xi_center)
-    system = ReducedSystem(prom, scene, prom.xi_center, TimeScheme.newmark(0.02, 0.005))
-    rng = np.random.default_rng(0)
-    for sample in range(samples):
-        eta, eta_dot, eta_ddot = random_states(rng, prom.size, 0.02)
-        time = 0.05 * (sample + 1)
-        expected = projected.residual(time, eta, eta_dot, eta_ddot)
-        assert relative_error(system.residual(time, eta, eta_dot, eta_ddot)[0], expected) < 1e-9
-        assert relative_error(system.internal_force(eta), projected.internal_force(eta)) < 1e-9
 
 
 def test_reduced_jacobians_match_finite_differences(scene, prom):
@@ -129,26 +89,6 @@ def test_reduced_newton_matrix_is_the_derivative_of_the_step_residual(scene, pro
 
 def test_first_xi_derivative_matches_central_difference_of_the_fom(scene, fish, prom):
     assert_first_xi_derivative_matches_the_fom(scene, fish, prom)
-
-
-def assert_first_xi_derivative_matches_the_fom(scene, fish, prom):
-    """∂/∂ξ_k Vᵀ f_int(Vη; ξ): PROM Taylor term against a 4th-order central difference of the FOM."""
-    eta = 0.02 * np.random.default_rng(2).standard_normal(prom.size)
-    system = ReducedSystem(prom, scene, prom.xi_center, TimeScheme.newmark(0.02, 0.005))
-    derivative = system.internal_force_gradient(eta)
-    step = 2e-3
-
-    def projected_force(offset):
-        return ProjectedFOM(scene, fish, prom, prom.xi_center + offset).internal_force(eta)
-
-    force_scale = np.linalg.norm(projected_force(0.0))
-    for k, name in enumerate(prom.shape_names):
-        unit = step * np.eye(prom.n_parameters)[k]
-        central = (8 * (projected_force(unit) - projected_force(-unit))
-                   - (projected_force(2 * unit) - projected_force(-2 * unit))) / (12 * step)
-        # z_head only moves the clamped head, where no basis vector deforms: both sides are zero.
-        reference = max(np.linalg.norm(central), 1e-9 * force_scale)
-        assert np.linalg.norm(derivative[k] - central) < 1e-5 * reference, name
 
 
 @pytest.mark.parametrize("order_fixture, expected_ratio", [("prom", 4.0), ("second_order_prom", 8.0)])
