@@ -163,12 +163,18 @@ def owned_cells(mesh) -> np.ndarray:
     return np.arange(mesh.topology.index_map(3).size_local, dtype=np.int32)
 
 
+def owned_cells_among(mesh, input_cells: np.ndarray) -> np.ndarray:
+    """Local indices of the owned cells whose input-mesh index is in ``input_cells``."""
+    owned = owned_cells(mesh)
+    return owned[np.isin(input_cell_indices(mesh)[owned], input_cells)]
+
+
 def cell_measure(mesh, regions: dict[int, np.ndarray]) -> ufl.Measure:
     """dx whose ``dx(i)`` integrates over the cells of region i only (input-mesh cell indices)."""
     owned = owned_cells(mesh)
     region_of_cell = np.zeros(owned.size, dtype=np.int32)
     for region, cells in regions.items():
-        region_of_cell[np.isin(input_cell_indices(mesh)[owned], cells)] = region
+        region_of_cell[owned_cells_among(mesh, cells)] = region
     tagged = np.flatnonzero(region_of_cell).astype(np.int32)
     tags = dolfinx_mesh.meshtags(mesh, 3, tagged, region_of_cell[tagged])
     return ufl.Measure("dx", domain=mesh, subdomain_data=tags)

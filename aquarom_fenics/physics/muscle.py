@@ -15,9 +15,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import ufl
+from mpi4py import MPI
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
-from aquarom_fenics.forms.muscle import muscle_energy
+from aquarom_fenics.forms.muscle import muscle_energy, muscle_energy_density
 from aquarom_fenics.reduction.projection import Taylor, stack_taylor
 
 LEFT, RIGHT = 1, 2
@@ -86,10 +87,16 @@ class MuscleTerm:
         return -fx.assemble_vector_into(self._vector, self._negative_force)
 
     def reduce(self, projector) -> "MuscleTensors":
-        """b_j = Vᵀ ∂Π_act,j/∂u and B_j = Vᵀ ∂²Π_act,j/∂u² V at rest, a_j = 1 (zero when off)."""
+        """b_j = Vᵀ ∂Π_act,j/∂u and B_j = Vᵀ ∂²Π_act,j/∂u² V at rest, a_j = 1 (zero when off), with
+        their Taylor terms in ξ, sampled (:func:`sampled_muscle_tensors`)."""
         m = projector.vectors.shape[1]
         if not self.on:
             return MuscleTensors(Taylor(np.zeros((2, m))), Taylor(np.zeros((2, m, m))))
+        return sampled_muscle_tensors(self.fom, projector)
+
+    def projected_tensors(self, projector) -> "MuscleTensors":
+        """The same tensors projected from the assembled force and tangent forms (the reference of the
+        sampled ones)."""
         self.fom.set_displacement(np.zeros(self.fom.n_owned_dofs))
         constant_parts, linear_parts = [], []
         for unit in np.eye(2):
@@ -97,6 +104,73 @@ class MuscleTerm:
             constant_parts.append(projector.taylor(self.negative_force_form))
             linear_parts.append(projector.taylor(self.tangent_form))
         return MuscleTensors(stack_taylor(constant_parts), stack_taylor(linear_parts))
+
+
+def sampled_muscle_tensors(fom, projector) -> "MuscleTensors":
+    """b_j and B_j of each muscle j with their Taylor terms in ξ, from its energy at unit activation
+    sampled on the basis. Π_j(u) = ∫_muscle_j ψ(u) dV_0 with the density ψ of ``forms/muscle.py``,
+    quadratic in u (the stretch F_2 m is affine in u), so that on u = V η
+
+        Π_j(V η) = Π_j(0) + b_jᵀ η + ½ ηᵀ B_j η,
+        b_j,i = (Π_j(V_i) - Π_j(-V_i)) / 2,   B_j,ii = Π_j(V_i) + Π_j(-V_i) - 2 Π_j(0),
+        B_j,ik = Π_j(V_i + V_k) - Π_j(0) - b_j,i - b_j,k - ½ (B_j,ii + B_j,kk),
+
+    each Π_j the FOM's quadrature sum Σ_c Σ_q ω_q |det J_c| ψ over muscle j's cells, and its ξ-derivatives
+    (UFL derivatives of ψ along the shape directions) in the same evaluations.
+    """
+    scene, vectors = fom.scene, projector.vectors
+    m, p, order = vectors.shape[1], projector.n_parameters, projector.order
+    sample = fx.new_function(fom.space, "muscle_sample")
+    density = muscle_energy_density(sample, fom.shape_gradients["stiffness"],
+                                    fx.constant(fom.mesh, scene.actuation.stiffness),
+                                    nominal_volume=scene.actuation.muscle_volume == "nominal")
+    directions = [fom.shape_direction(f"muscle_direction_{k}") for k in range(p if order >= 1 else 0)]
+    for k, direction in enumerate(directions):
+        direction.set_parameter(k)
+    first = [fom.shape_derivative(density, direction) for direction in directions]
+    pairs = [(k, l) for k in range(p) for l in range(k, p)] if order >= 2 else []
+    second = [fom.shape_derivative(first[k], directions[l]) for k, l in pairs]
+    degree = fom.quadrature_degrees["stiffness"]
+    expression = fx.compile_quadrature_expression(
+        abs(ufl.JacobianDeterminant(fom.mesh)) * ufl.as_vector([density] + first + second), degree)
+    reference_weights = fx.quadrature_rule(degree)[1]
+    n_terms = 1 + len(first) + len(second)
+    tags = fom.fish.tags
+
+    def energies(cells, displacement):        # (Π, ∂Π/∂ξ_k, ∂²Π/∂ξ_k∂ξ_l) at u
+        fx.set_owned_values(sample, displacement)
+        values = fx.evaluate_expression(expression, cells).reshape(cells.size, reference_weights.size, n_terms)
+        return np.einsum("cqt,q->t", values, reference_weights)
+
+    shifts = [vectors[:, i] for i in range(m)] + [-vectors[:, i] for i in range(m)]
+    pair_list = [(i, k) for i in range(m) for k in range(i + 1, m)]
+    shifts += [vectors[:, i] + vectors[:, k] for i, k in pair_list]
+    constants, linears = [], []
+    for muscle_cells in (tags.left_muscle_cells, tags.right_muscle_cells):
+        cells = fx.owned_cells_among(fom.mesh, muscle_cells)
+        sampled = np.stack([energies(cells, np.zeros(fom.n_owned_dofs))] + [energies(cells, u) for u in shifts])
+        sampled = fom.comm.allreduce(sampled, op=MPI.SUM)
+        rest, plus, minus, both = sampled[0], sampled[1: 1 + m], sampled[1 + m: 1 + 2 * m], sampled[1 + 2 * m:]
+        gradient = (plus - minus) / 2.0                                                   # (m, n_terms)
+        hessian = np.empty((m, m, n_terms))
+        for i in range(m):
+            hessian[i, i] = plus[i] + minus[i] - 2.0 * rest
+        for (i, k), value in zip(pair_list, both):
+            hessian[i, k] = hessian[k, i] = value - rest - gradient[i] - gradient[k] - 0.5 * (hessian[i, i] + hessian[k, k])
+        constants.append(_taylor_of_terms(np.moveaxis(gradient, -1, 0), p, pairs))
+        linears.append(_taylor_of_terms(np.moveaxis(hessian, -1, 0), p, pairs))
+    return MuscleTensors(stack_taylor(constants), stack_taylor(linears))
+
+
+def _taylor_of_terms(terms: np.ndarray, p: int, pairs) -> Taylor:
+    """Taylor from stacked terms: [value, ∂/∂ξ_k (k < p), ∂²/∂ξ_k∂ξ_l (the ``pairs`` k ≤ l)]."""
+    first = terms[1: 1 + p] if terms.shape[0] > 1 else None
+    second = None
+    if pairs:
+        second = np.empty((p, p) + terms.shape[1:])
+        for number, (k, l) in enumerate(pairs):
+            second[k, l] = second[l, k] = terms[1 + p + number]
+    return Taylor(terms[0], first, second)
 
 
 @dataclass
