@@ -39,6 +39,7 @@ from scipy.stats import qmc
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.fish import Fish, load_fish
+from aquarom_fenics.reduction.basis import KEPT_FACTORS
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.optimization.cost import (CostWeights, DesignSpace, Evaluation, FirstOrder, design_space,
                                               first_order_at, meshable_space)
@@ -127,9 +128,12 @@ def optimize(scene: Scene, fish: Fish | None = None, weights: CostWeights | None
     algorithm = {"paper": paper_method, "trust-region": trust_region}[method]
     log.info("stability of the designs: %s", stability_plan(scene))
     safeguard = Safeguard(started, max_time)
-    optimum, evaluation, reason = algorithm(scene, space, builder, weights, history, checkpoint,
-                                            saved["state"] if saved else None, safeguard,
-                                            on_iteration or (lambda row: None))
+    try:
+        optimum, evaluation, reason = algorithm(scene, space, builder, weights, history, checkpoint,
+                                                saved["state"] if saved else None, safeguard,
+                                                on_iteration or (lambda row: None))
+    finally:
+        KEPT_FACTORS.release()      # the builds' K_0 factorisation: not needed by the FOM check that follows
     timings = {"prom_builds": builder.build_time, "prom_solves": builder.solve_time,
                "tail_screens": builder.screen_time, "total": time.perf_counter() - started}
     optimality = first_order_at(scene, space, evaluation)

@@ -170,7 +170,7 @@ class KeptFactors:
     """
 
     def __init__(self):
-        self.lock = threading.Lock()
+        self.lock = threading.RLock()
         self.key = None
         self.matrix: PETSc.Mat | None = None
         self.solver: PETSc.KSP | None = None
@@ -208,11 +208,12 @@ class KeptFactors:
         return self.matrix, self.solver
 
     def release(self) -> None:
-        """Free the kept factorisation and matrix."""
-        for petsc_object in (self.solver, self.matrix):
-            if petsc_object is not None:
-                petsc_object.destroy()
-        self.key = self.matrix = self.solver = None
+        """Free the kept factorisation and matrix (after a build of another thread has ended)."""
+        with self.lock:
+            for petsc_object in (self.solver, self.matrix):
+                if petsc_object is not None:
+                    petsc_object.destroy()
+            self.key = self.matrix = self.solver = None
 
 
 KEPT_FACTORS = KeptFactors()
