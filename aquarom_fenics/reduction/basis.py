@@ -79,18 +79,11 @@ class _SecondVariations:
         return self.evaluate(self.muscle, a)
 
 
-def clamped_stiffness(fom: FullOrderModel, upper_triangle: bool = False) -> PETSc.Mat:
-    """K_0 of the design at rest with the head clamped (identity rows on the clamped dofs); with
-    ``upper_triangle`` its upper triangle (SBAIJ) marked positive definite, for a Cholesky
-    factorisation (MUMPS SYM = 1)."""
+def clamped_stiffness(fom: FullOrderModel) -> PETSc.Mat:
+    """K_0 of the design at rest with the head clamped (identity rows on the clamped dofs)."""
     matrix = fom.rest_stiffness.copy()
     matrix.zeroRowsColumns(fom.global_dofs(fom.clamped_dofs), diag=1.0)
-    if not upper_triangle:
-        return matrix
-    upper = upper_triangle_copy(matrix, None)
-    upper.setOption(PETSc.Mat.Option.SPD, True)
-    matrix.destroy()
-    return upper
+    return matrix
 
 
 def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int,
@@ -115,7 +108,7 @@ def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int,
     else:
         inner = spectral.getKSP()
         inner.setType("preonly")
-        inner.getPC().setType("cholesky" if "sbaij" in stiffness.getType() else "lu")
+        inner.getPC().setType("lu")
         inner.getPC().setFactorSolverType("mumps")
     solver.setTolerances(1e-12, 200)
     solver.solve()
@@ -161,7 +154,7 @@ class KeptFactors:
     """The last Cholesky factorisation of a clamped K_0 in this process, kept with its matrix.
 
     MUMPS spends about a third of a factorisation on its analysis (the ordering and the symbolic
-    factorisation: degree 2, level 3, 1.0 s against 0.65 s for the numeric part alone), which
+    factorisation: degree 2, level 3, 1.08 s against 0.69 s for the numeric part alone), which
     depends only on the sparsity pattern. The builds of one optimisation share the nominal mesh,
     hence the pattern: each build refills the kept matrix and refactorises numerically. The pattern
     is that of the dof map: the same cell-to-dof lists and ownership on the same communicator give
