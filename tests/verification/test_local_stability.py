@@ -251,6 +251,24 @@ if MPI.COMM_WORLD.rank == 0:
 """
 
 
+def test_threaded_eigenvalues_give_the_screen_of_one_state_after_the_other(swimming_prom, monkeypatch):
+    """With the eigenvalues in a thread pool (the default on one rank) the screen meets the same
+    fastest mode at the same state and counts the same states, with and without an early stop."""
+    import aquarom_fenics.verification.local_stability as screen
+
+    scene, fish, prom = swimming_prom
+    rates = growth_rates_at(prom, scene, fish, tail_sample_steps(scene))
+    limit = float(np.median(rates))
+    assert np.flatnonzero(rates > limit)[0] < rates.size - 1       # the second screen stops early
+    for stop_above in (np.inf, limit):
+        screens = []
+        for threads in (0, 2, 3):
+            monkeypatch.setattr(screen, "eigenvalue_threads", lambda comm, threads=threads: threads)
+            screens.append(prom_tail_growth(prom, scene, fish, stop_above=stop_above))
+        assert screens[0] == screens[1] == screens[2]
+    assert screens[0].states < rates.size
+
+
 def test_ranks_share_the_tail_screens_states_and_answer_as_one_rank(swimming_prom, tmp_path):
     """Under mpirun -n 2 each rank linearises every other state; the fastest mode, its time and the
     states counted up to the first one over the limit are those of the serial screen."""
