@@ -129,24 +129,7 @@ def sampled_inertia(fom, projector, density) -> tuple[Taylor, Taylor, Taylor]:
                  weights @ values[:, 0, :], np.array(weights.sum()))
         return tuple(comm.allreduce(part, op=MPI.SUM) for part in local)
 
-    p = projector.n_parameters
-    constant = sums(0)
-    first_terms = second_terms = [None] * 3
-    if projector.order >= 1 and p:
-        first_terms = []
-        for k in range(p):
-            projector.directions[0].set_parameter(k)
-            first_terms.append(sums(1))
-        first_terms = [np.stack(parts) for parts in zip(*first_terms)]
-    if projector.order >= 2 and p:
-        second_terms = [np.empty((p, p) + np.shape(part)) for part in constant]
-        for k in range(p):
-            for l in range(k, p):
-                projector.directions[0].set_parameter(k)
-                projector.directions[1].set_parameter(l)
-                for term, part in zip(second_terms, sums(2)):
-                    term[k, l] = term[l, k] = part
-    return tuple(Taylor(*parts) for parts in zip(constant, first_terms, second_terms))
+    return tuple(projector.taylor_terms(sums))
 
 
 @dataclass

@@ -94,17 +94,6 @@ class MuscleTerm:
             return MuscleTensors(Taylor(np.zeros((2, m))), Taylor(np.zeros((2, m, m))))
         return sampled_muscle_tensors(self.fom, projector)
 
-    def projected_tensors(self, projector) -> "MuscleTensors":
-        """The same tensors projected from the assembled force and tangent forms (the reference of the
-        sampled ones)."""
-        self.fom.set_displacement(np.zeros(self.fom.n_owned_dofs))
-        constant_parts, linear_parts = [], []
-        for unit in np.eye(2):
-            self.set_activations(unit)
-            constant_parts.append(projector.taylor(self.negative_force_form))
-            linear_parts.append(projector.taylor(self.tangent_form))
-        return MuscleTensors(stack_taylor(constant_parts), stack_taylor(linear_parts))
-
 
 def sampled_muscle_tensors(fom, projector) -> "MuscleTensors":
     """b_j and B_j of each muscle j with their Taylor terms in ξ, from its energy at unit activation

@@ -97,22 +97,30 @@ class Projector:
             matrix = fx.assemble_matrix_into(storage, compiled[derivative])
             return self.matrix(transform(matrix) if transform else matrix)
 
+        [taylor] = self.taylor_terms(lambda derivative: (project(derivative),))
+        if storage is not None:
+            storage.destroy()
+        return taylor
+
+    def taylor_terms(self, evaluate: Callable[[int], tuple]) -> list[Taylor]:
+        """The Taylor in Δξ of each value of ``evaluate(d)``, a tuple whose entries are the d-th
+        ξ-derivatives of the values along the directions as this method sets them (d = 0: the values;
+        1: along e_k; 2: along e_k and e_l)."""
         p = self.n_parameters
-        constant = project(0)
-        first = second = None
+        constant = evaluate(0)
+        first = second = [None] * len(constant)
         if self.order >= 1 and p:
-            first = []
+            per_parameter = []
             for k in range(p):
                 self.directions[0].set_parameter(k)
-                first.append(project(1))
-            first = np.stack(first)
+                per_parameter.append(evaluate(1))
+            first = [np.stack(parts) for parts in zip(*per_parameter)]
         if self.order >= 2 and p:
-            second = np.empty((p, p) + np.shape(constant))
+            second = [np.empty((p, p) + np.shape(part)) for part in constant]
             for k in range(p):
                 for l in range(k, p):
                     self.directions[0].set_parameter(k)
                     self.directions[1].set_parameter(l)
-                    second[k, l] = second[l, k] = project(2)
-        if storage is not None:
-            storage.destroy()
-        return Taylor(constant, first, second)
+                    for term, part in zip(second, evaluate(2)):
+                        term[k, l] = term[l, k] = part
+        return [Taylor(*parts) for parts in zip(constant, first, second)]

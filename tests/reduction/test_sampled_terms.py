@@ -5,8 +5,9 @@ import pytest
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.physics.inertia import sampled_inertia
+from aquarom_fenics.physics.muscle import MuscleTensors
 from aquarom_fenics.reduction.basis import build_basis
-from aquarom_fenics.reduction.projection import Projector
+from aquarom_fenics.reduction.projection import Projector, stack_taylor
 from conftest import coarse_scene
 from prom_checks import SO1_SHAPES
 
@@ -35,7 +36,7 @@ def test_sampled_muscle_tensors_equal_the_projected_assembled_forms(degree, orde
     scene = coarse_scene(mesh={"degree": degree}, shapes=SO1_SHAPES, actuation={"muscle_volume": volume})
     model = FullOrderModel(scene, load_fish(scene), np.array([0.1, -0.2, 0.05]))
     projector = Projector(model, build_basis(model, 3).vectors, 3, order)
-    expected, sampled = model.muscle.projected_tensors(projector), model.muscle.reduce(projector)
+    expected, sampled = projected_muscle_tensors(model, projector), model.muscle.reduce(projector)
     for part in ("constant", "linear"):
         scale = np.abs(getattr(expected, part).constant).max()
         for name in ("constant", "first", "second"):
@@ -43,3 +44,15 @@ def test_sampled_muscle_tensors_equal_the_projected_assembled_forms(degree, orde
             assert (reference is None) == (value is None), (part, name)
             if reference is not None:
                 assert np.abs(value - reference).max() <= 1e-11 * scale, (part, name)
+
+
+def projected_muscle_tensors(model, projector) -> MuscleTensors:
+    """b_j, B_j projected from the assembled force and tangent forms of muscle j alone (a_j = 1) at rest."""
+    muscle = model.muscle
+    model.set_displacement(np.zeros(model.n_owned_dofs))
+    constant_parts, linear_parts = [], []
+    for unit in np.eye(2):
+        muscle.set_activations(unit)
+        constant_parts.append(projector.taylor(muscle.negative_force_form))
+        linear_parts.append(projector.taylor(muscle.tangent_form))
+    return MuscleTensors(stack_taylor(constant_parts), stack_taylor(linear_parts))
