@@ -25,7 +25,7 @@ from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.io.outputs import software_versions
 from aquarom_fenics.io.persistence import write_text_atomic
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.optimization.study import pareto_sweep, run_optimization
+from aquarom_fenics.optimization.study import completed_summary, pareto_sweep, run_optimization
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 
@@ -46,6 +46,9 @@ def main():
                         help="local worker processes for a case's weights or starts (default 1: one after the other)")
     parser.add_argument("--scheduler", metavar="ADDRESS", help="run weights and starts on this Dask scheduler")
     parser.add_argument("--scheduler-file", type=Path, metavar="FILE", help="as --scheduler, from a scheduler file")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue a study in --out: keep the runs that completed, continue the others from "
+                             "their checkpoints (the case wall time is then that of this invocation)")
     args = parser.parse_args()
     try:
         cluster = choose_cluster(args.scheduler, args.scheduler_file)
@@ -55,6 +58,9 @@ def main():
         return InputError.exit_code
     try:
         run_cases(args, pool)
+    except InputError as error:
+        print(f"study: error: {error}", file=sys.stderr)
+        return InputError.exit_code
     finally:
         if pool is not None:
             pool.shutdown()
@@ -69,11 +75,13 @@ def run_cases(args, pool) -> None:
         started = time.perf_counter()
         fish = load_fish(scene)
         if scene.cooptimization.enabled:
-            points = pareto_sweep(scene, args.out / case, fish=fish, pool=pool)
+            points = pareto_sweep(scene, args.out / case, fish=fish, pool=pool, resume=args.resume)
             summaries = [(f"{case} w1={point['w1']:g}", args.out / case / f"w1_{point['w1']:g}" / "summary.json")
                          for point in points]
         else:
-            run_optimization(scene, args.out / case, fish=fish, pool=pool)
+            if not (args.resume and completed_summary(args.out / case, scene)):
+                run_optimization(scene, args.out / case, fish=fish, pool=pool,
+                                 resume=args.resume and _has_checkpoint(args.out / case))
             summaries = [(case, args.out / case / "summary.json")]
         case_time = time.perf_counter() - started
         rows = [_row(name, scene, fish, json.loads(path.read_text()), case_time if k == 0 else None)
@@ -81,6 +89,11 @@ def run_cases(args, pool) -> None:
         write_text_atomic(args.out / case / ROWS, "\n".join(rows) + "\n")
         write_text_atomic(args.out / "summary.md", "\n".join(summary_lines(args.out)) + "\n")
     print((args.out / "summary.md").read_text(), end="")
+
+
+def _has_checkpoint(folder: Path) -> bool:
+    """Whether a run in ``folder`` (or one of its multi-start runs) left a checkpoint to continue from."""
+    return any(path.is_file() for pattern in ("checkpoint.json", "start_*/checkpoint.json") for path in folder.glob(pattern))
 
 
 def summary_lines(out: Path) -> list[str]:

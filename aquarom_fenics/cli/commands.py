@@ -79,7 +79,8 @@ def run_optimize(args) -> int:
         weight = DEFAULT_WEIGHT if args.weight is None else args.weight
         weights = CostWeights(weight, 1.0 - weight, scene.cooptimization.energy_weight)
     with shutting_down(open_work_pool(args, scene, scene.optimizer.starts, default_workers=1)) as pool:
-        out = claim_output(args, args.out or Path("results") / "optimize" / scene.name, resume=args.resume)
+        out = claim_output(args, args.out or Path("results") / "optimize" / scene.name, resume=args.resume,
+                           resume_file="checkpoint.json" if scene.optimizer.starts == 1 else "start_*/checkpoint.json")
         result, check = run_optimization(scene, out, resume=args.resume, weights=weights, pool=pool,
                                          max_time=DEFAULT_MAX_TIME if args.max_time is None else args.max_time)
     args.timings = result.timings | {"fom_check": check.time}
@@ -99,8 +100,9 @@ def run_pareto(args) -> int:
 
     scene, _ = check_inputs(args, load_scene(args))
     with shutting_down(open_work_pool(args, scene, len(scene.cooptimization.weights), default_workers=1)) as pool:
-        out = claim_output(args, args.out or Path("results") / "pareto" / scene.name)
-        points = pareto_sweep(scene, out, pool=pool)
+        out = claim_output(args, args.out or Path("results") / "pareto" / scene.name, resume=args.resume,
+                           resume_file="w1_*/checkpoint.json")
+        points = pareto_sweep(scene, out, pool=pool, resume=args.resume)
     for point in points:
         fom = (f"FOM distance {100 * point['distance_m']:.3f} cm" if point["fom_check"] == "completed"
                else f"FOM check stopped (infeasible), PROM distance {100 * point['prom_distance_m']:.3f} cm")

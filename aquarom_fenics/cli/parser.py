@@ -15,7 +15,8 @@ EXAMPLES = {
     "compare": "aquarom compare so1 --xi y_thin=0.02 --level 1 --out results/so1-compare",
     "optimize": "aquarom optimize so1 --level 1 --out results/so1-opt\n  aquarom optimize so1 --out results/so1-opt --resume",
     "pareto": "aquarom pareto co --level 1 --out results/co-pareto\n"
-              "  aquarom pareto co --scheduler-file ~/dask-scheduler.json --out results/co-pareto",
+              "  aquarom pareto co --scheduler-file ~/dask-scheduler.json --out results/co-pareto\n"
+              "  aquarom pareto co --level 1 --out results/co-pareto --resume",
     "animate": "aquarom animate results/nominal-fom --fps 20 --stride 2",
     "basis": "aquarom basis so1 --level 1 --out results/so1-basis",
     "check": "aquarom check so1 --level 1\n  aquarom check so1 --level 1 --degree 2\n"
@@ -105,6 +106,9 @@ def build_parser() -> argparse.ArgumentParser:
                      out="output directory (default results/pareto/SCENE)")
     add_cluster_options(pareto, "the weights", "local worker processes, one weight each "
                                                "(default 1: the weights one after the other in this process)")
+    pareto.add_argument("--resume", action="store_true",
+                        help="continue the sweep in --out: keep the weights that completed, continue the others "
+                             "from their checkpoints")
     add_sweep(command("sweep", "run a model at every design of a CSV file, a grid or a Latin hypercube (sweep.csv, "
                             "sweep.png); on local worker processes or a Dask cluster",
                       out="output directory (default results/sweep/SCENE-MODEL)"))

@@ -171,13 +171,14 @@ def claim_folder(path: Path, force: bool, resume: bool, resume_file: str = "chec
     The run first takes the folder's lock (:mod:`output_lock`: one writer per output). Without
     ``force`` an occupied folder is refused; with it, only a folder of an earlier run (its
     ``manifest.json`` lists every file in it) is accepted, and the new run writes beside it.
-    ``resume``: the folder of an earlier run, which must hold ``resume_file``, is continued in place.
+    ``resume``: the folder of an earlier run, which must hold ``resume_file`` (a name or a glob
+    pattern such as ``w1_*/checkpoint.json``), is continued in place.
     """
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise InputError(f"output {path} is a file, not a folder; choose another --out")
     if resume:
-        if not (path / resume_file).is_file():
+        if not any(found.is_file() for found in path.glob(resume_file)):
             raise InputError(f"--resume: no {resume_file} in {path}; run without --resume")
         lock_output(path)
         require_writable(path)

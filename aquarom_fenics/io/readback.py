@@ -169,9 +169,12 @@ def load_run_summary(path: Path) -> dict:
     return data
 
 
-def checkpoint_schema(dimension: int, method: str) -> record:
-    """checkpoint.json of an optimisation with ``dimension`` design variables."""
+def checkpoint_schema(dimension: int, method: str, shapes: int | None = None) -> record:
+    """checkpoint.json of an optimisation with ``dimension`` design variables, the first ``shapes``
+    of them shape parameters (all of them when None; a co-optimisation adds the amplitude): the
+    basis centre is a shape."""
     vector = list_of(FINITE, dimension)
+    shape = list_of(FINITE, dimension if shapes is None else shapes)
     if method == "paper":
         state = record({"z": vector, "iteration": INTEGER, "scaling": vector, "previous_gradient": optional(vector),
                         "since_build": INTEGER,
@@ -184,12 +187,32 @@ def checkpoint_schema(dimension: int, method: str) -> record:
     return record({"scene_hash": TEXT, "method": TEXT, "state": state, "history": list_of(row),
                    "builds": INTEGER, "build_time": FINITE, "solve_time": FINITE},
                   {"reused": INTEGER, "basis_reuses": INTEGER, "build_records": list_of(ANYTHING),
-                   "basis_center": optional(vector)})
+                   "basis_center": optional(shape)})
 
 
-def load_checkpoint(path: Path, dimension: int, method: str) -> dict:
+def load_checkpoint(path: Path, dimension: int, method: str, shapes: int | None = None) -> dict:
     """checkpoint.json, checked against :func:`checkpoint_schema` (nothing is written before)."""
-    return load_json(path, checkpoint_schema(dimension, method), "checkpoint", "start without --resume")
+    return load_json(path, checkpoint_schema(dimension, method, shapes), "checkpoint", "start without --resume")
+
+
+def optimization_summary_schema(names: list[str]) -> record:
+    """summary.json of an optimisation over the design variables ``names``: a completed run, or
+    one stopped early (``completed`` false, with its stop reason)."""
+    completed = record({"optimum": record({name: FINITE for name in names}), "prom_distance_optimal": FINITE,
+                        "cost_weights": record({"distance": FINITE, "energy": FINITE, "alpha": FINITE}),
+                        "fom_check": record({"optimal_distance": optional(FINITE), "error": optional(TEXT)})})
+    stopped = record({"stop_reason": TEXT})
+
+    def check(value, where):
+        record({"scene_hash": TEXT}, {"completed": FLAG})(value, where)
+        (stopped if value.get("completed") is False else completed)(value, where)
+    return check
+
+
+def load_optimization_summary(path: Path, names: list[str]) -> dict:
+    """summary.json of an optimisation, checked against :func:`optimization_summary_schema`."""
+    return load_json(path, optimization_summary_schema(names), "optimisation summary",
+                     "run without --resume into another --out")
 
 
 def manifest_schema() -> record:

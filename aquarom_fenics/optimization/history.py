@@ -67,7 +67,8 @@ class Checkpoint:
 
         if self.path is None or not self.path.exists():
             return None
-        data = load_checkpoint(self.path, len(design_space(self.scene).names), self.method)
+        space = design_space(self.scene)
+        data = load_checkpoint(self.path, len(space.names), self.method, space.n_shapes)
         if data["scene_hash"] != self.scene_hash or data["method"] != self.method:
             raise InputError(f"checkpoint {self.path}: written for scene hash {data['scene_hash']} with "
                              f"method {data['method']}, not this scene ({self.scene_hash}, {self.method}); "

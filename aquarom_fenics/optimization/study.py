@@ -176,7 +176,8 @@ def run_multistart(scene: Scene, out_dir: Path, resume: bool = False, weights: C
     best FOM-verified one (the best PROM distance when no FOM check finished).
 
     ``pool``: a backend of :mod:`aquarom_fenics.executors` running one start per task; None runs
-    them one after the other here."""
+    them one after the other here. ``resume``: a start with a checkpoint continues from it, one
+    without (not begun when the run stopped) runs from the start."""
     out_dir = Path(out_dir)
     fish = fish or load_fish(scene)
     space = optimization_space(scene, fish)
@@ -184,8 +185,7 @@ def run_multistart(scene: Scene, out_dir: Path, resume: bool = False, weights: C
     starts = start_points(space, settings.starts, settings.seed, PromBuilder(scene, fish, space).meshes)
     if pool is None:
         with worker_threads():
-            runs = [run_optimization(scene, out_dir / f"start_{k + 1}", resume, weights, fish, render=False,
-                                     max_time=max_time, start=z) for k, z in enumerate(starts)]
+            runs = [start_run(scene, out_dir, resume, weights, max_time, (k, z), fish) for k, z in enumerate(starts)]
     else:
         from aquarom_fenics.executors import run_all
 
@@ -209,12 +209,14 @@ def run_multistart(scene: Scene, out_dir: Path, resume: bool = False, weights: C
     return result, check
 
 
-def start_run(scene: Scene, out_dir: str, resume: bool, weights: CostWeights | None, max_time: float,
-              item: tuple[int, np.ndarray]) -> tuple[OptimizationResult, FomCheck]:
-    """The optimisation of multi-start ``item`` = (k, z_start), in ``out_dir/start_<k+1>`` (a worker's task)."""
+def start_run(scene: Scene, out_dir: str | Path, resume: bool, weights: CostWeights | None, max_time: float,
+              item: tuple[int, np.ndarray], fish: Fish | None = None) -> tuple[OptimizationResult, FomCheck]:
+    """The optimisation of multi-start ``item`` = (k, z_start), in ``out_dir/start_<k+1>`` (a worker's
+    task); ``resume`` continues it from its checkpoint if it has one."""
     k, z = item
-    return run_optimization(scene, Path(out_dir) / f"start_{k + 1}", resume, weights, render=False, max_time=max_time,
-                            start=z)
+    folder = Path(out_dir) / f"start_{k + 1}"
+    return run_optimization(scene, folder, resume and (folder / "checkpoint.json").is_file(), weights, fish,
+                            render=False, max_time=max_time, start=z)
 
 
 def _verified_distance(result: OptimizationResult, check: FomCheck) -> tuple[bool, float]:
@@ -333,23 +335,25 @@ def _write_figures(out_dir, scene, fish, result, render):
                                        out_dir / "start_vs_optimal.png", f"{scene.name}: start and optimal design")
 
 
-def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None, pool=None) -> list[dict]:
+def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None, pool=None, resume: bool = False) -> list[dict]:
     """Co-optimisation over the scene's weights w_1 (w_2 = 1 - w_1): pareto.csv and pareto.png.
 
     A point whose FOM check does not complete is no optimum of the model: it is marked
     ``fom_check = infeasible`` with the FOM's stop reason, and left off the front.
     ``pool``: a backend of :mod:`aquarom_fenics.executors` (local worker processes or a Dask
     cluster) running one weight per task; None runs them one after the other here (under MPI too).
+    ``resume``: a weight whose run completed is read back from its summary.json, one with a
+    checkpoint continues from it, and the others run from the start (:func:`pareto_point`).
     """
     if pool is None:
         fish = fish or load_fish(scene)
         with worker_threads():
-            points = [pareto_point(scene, out_dir, w1, fish) for w1 in scene.cooptimization.weights]
+            points = [pareto_point(scene, out_dir, w1, fish, resume) for w1 in scene.cooptimization.weights]
     else:
         from aquarom_fenics.executors import run_all
 
         found = {}
-        for w1, point, error in run_all(pool, partial(pareto_point, scene, str(Path(out_dir).resolve())),
+        for w1, point, error in run_all(pool, partial(pareto_point, scene, str(Path(out_dir).resolve()), resume=resume),
                                         scene.cooptimization.weights):
             if error is not None:
                 raise error
@@ -367,17 +371,60 @@ def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None, pool=Non
     return points
 
 
-def pareto_point(scene: Scene, out_dir: Path, w1: float, fish: Fish | None = None) -> dict:
-    """The co-optimisation at weight w_1 (in ``out_dir/w1_<w1>``) and its row of pareto.csv."""
+def pareto_point(scene: Scene, out_dir: Path, w1: float, fish: Fish | None = None, resume: bool = False) -> dict:
+    """The co-optimisation at weight w_1 (in ``out_dir/w1_<w1>``) and its row of pareto.csv.
+
+    ``resume``: a completed run there (:func:`completed_summary`) is kept, an interrupted one
+    continues from its checkpoint, and a folder without a checkpoint runs from the start.
+    """
     co = scene.cooptimization
     weights = CostWeights(distance=w1, energy=1.0 - w1, alpha=co.energy_weight)
-    result, check = run_optimization(scene, Path(out_dir) / f"w1_{w1:g}", weights=weights,
-                                     fish=fish or load_fish(scene), render=False)
-    amplitude = float(result.optimum[-1])
-    completed = check.optimal_distance is not None
+    folder = Path(out_dir) / f"w1_{w1:g}"
+    space = design_space(scene)
+    summary = completed_summary(folder, scene, weights) if resume else None
+    if summary is not None:
+        check = summary["fom_check"]
+        return _pareto_row(w1, weights, space, np.array([summary["optimum"][n] for n in space.names]),
+                           summary["prom_distance_optimal"], check["optimal_distance"], check["error"])
+    result, check = run_optimization(scene, folder, resume=resume and (folder / "checkpoint.json").is_file(),
+                                     weights=weights, fish=fish or load_fish(scene), render=False)
+    return _pareto_row(w1, weights, result.space, result.optimum, result.evaluation.distance,
+                       check.optimal_distance, check.error)
+
+
+def completed_summary(folder: Path, scene: Scene, weights: CostWeights | None = None) -> dict | None:
+    """The summary.json of a completed optimisation in ``folder`` (None if there is none, or if the
+    run there was interrupted); a summary of another scene or other cost weights is refused
+    (InputError), since resuming would mix two studies in one table."""
+    from aquarom_fenics.io.readback import load_optimization_summary
+
+    path = Path(folder) / "summary.json"
+    if not path.is_file():
+        return None
+    summary = load_optimization_summary(path, design_space(scene).names)
+    if summary["scene_hash"] != scene.hash:
+        raise InputError(f"--resume: {path} was written for scene hash {summary['scene_hash']}, this scene "
+                         f"is {scene.hash}; resume with the scene it was run with, or choose another --out")
+    if summary.get("completed") is False:
+        return None
+    expected = weights or CostWeights()
+    written = summary["cost_weights"]
+    if [written[k] for k in ("distance", "energy", "alpha")] != [expected.distance, expected.energy, expected.alpha]:
+        raise InputError(f"--resume: {path} was written for cost weights {written}, this run uses "
+                         f"distance {expected.distance:g}, energy {expected.energy:g}, alpha {expected.alpha:g}; "
+                         "choose another --out")
+    return summary
+
+
+def _pareto_row(w1: float, weights: CostWeights, space, optimum: np.ndarray, prom_distance: float,
+                fom_distance: float | None, fom_error: str | None) -> dict:
+    """A row of pareto.csv: the amplitude is the last design variable; a FOM check that did not
+    complete leaves the distance NaN and gives the FOM's stop reason."""
+    amplitude = float(optimum[-1])
+    completed = fom_distance is not None
     return {"w1": w1, "amplitude": amplitude, "energy": weights.energy_term(amplitude),
-            "distance_m": check.optimal_distance if completed else float("nan"),
-            "prom_distance_m": result.evaluation.distance,
+            "distance_m": fom_distance if completed else float("nan"),
+            "prom_distance_m": prom_distance,
             "fom_check": "completed" if completed else "infeasible",
-            "fom_check_reason": "" if completed else (check.error or ""),
-            **{f"xi_{n}": float(v) for n, v in zip(result.space.names[:-1], result.optimum[:-1])}}
+            "fom_check_reason": "" if completed else (fom_error or ""),
+            **{f"xi_{n}": float(v) for n, v in zip(space.names[:-1], optimum[:-1])}}

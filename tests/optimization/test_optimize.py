@@ -2,6 +2,7 @@
 import re
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -113,6 +114,25 @@ def test_killed_and_resumed_run_ends_at_the_same_optimum(tmp_path, toy_fish, mon
     straight_history = (tmp_path / "straight" / "history.csv").read_text().splitlines()
     resumed_history = (tmp_path / "killed" / "history.csv").read_text().splitlines()
     assert len(resumed_history) == len(straight_history)
+
+
+def test_a_co_optimisation_checkpoint_with_a_basis_centre_reads_back(tmp_path):
+    # the co-optimisation's design adds the amplitude; the basis centre is a shape, one entry shorter
+    from aquarom_fenics.io.scene import Scene
+
+    scene = Scene.load("co")
+    space = design_space(scene)
+    assert len(space.names) == space.n_shapes + 1
+    z = space.start.tolist()
+    builder = SimpleNamespace(builds=3, reused=0, build_time=1.0, solve_time=0.1, basis_reuses=1, records=[],
+                              basis_center=np.array(z[: space.n_shapes]) + 0.01)
+    state = {"z": z, "iteration": 2, "scaling": [1.0] * len(z), "previous_gradient": None, "since_build": 1,
+             "center": {"z": z, "distance": 0.1, "distance_gradient": [0.0] * len(z), "prom_z": z}}
+    checkpoint = history.Checkpoint(tmp_path / "checkpoint.json", scene, "paper")
+    checkpoint.save(state, [], builder)
+    saved = checkpoint.load()
+    np.testing.assert_array_equal(saved["basis_center"], builder.basis_center)
+    assert saved["state"]["iteration"] == 2
 
 
 def test_optimize_command_writes_its_outputs(tmp_path, capsys):
