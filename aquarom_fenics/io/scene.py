@@ -24,7 +24,7 @@ from aquarom_fenics.io.paths import shipped_scenes
 from aquarom_fenics.io.scene_sections import (SECTIONS, ActuationSection, CooptimizationSection, FluidSection,
                                               LinearConstraint, MaterialSection, MeshSection, OptimizerSection,
                                               OutputSection, ReductionSection, RegionsSection, ShapeSpec,
-                                              SolverSection)
+                                              SolverSection, hash_neutral_defaults)
 
 SCENES_DIR = shipped_scenes()
 
@@ -106,16 +106,25 @@ class Scene:
 
     @property
     def hash(self) -> str:
-        """SHA-256 (16 hex digits) of the resolved scene and of the mesh file's content."""
-        return self._digest(self.to_dict())
+        """SHA-256 (16 hex digits) of the resolved scene and of the mesh file's content (keys added
+        later are left out at their default: :func:`hash_neutral_defaults`)."""
+        return self._digest(self._hashed_dict())
 
     @property
     def fom_hash(self) -> str:
         """The hash of what a FOM run at a given design reads: mesh (and file), material, regions,
         actuation, fluid, solver and the shape names; not the bounds, reduction, optimiser or output."""
-        data = self.to_dict()
+        data = self._hashed_dict()
         selected = {section: data[section] for section in FOM_SECTIONS}
         return self._digest(selected | {"shapes": [shape.name for shape in self.shapes]})
+
+    def _hashed_dict(self) -> dict[str, Any]:
+        data = self.to_dict()
+        for section, cls in SECTIONS.items():
+            for key, default in hash_neutral_defaults(cls).items():
+                if data[section][key] == default:
+                    del data[section][key]
+        return data
 
     def _digest(self, data: dict) -> str:
         digest = hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode())

@@ -6,7 +6,8 @@ Every field carries its SPEC default, an optional validity check and its unit or
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
+from typing import Any
 
 
 def _positive(value) -> str | None:
@@ -23,12 +24,19 @@ def _one_of(*choices):
     return check
 
 
-def _spec(default, check=None, doc="", variable_length=False, coerce=None):
+def _spec(default, check=None, doc="", variable_length=False, coerce=None, added=False):
     """A scene field: its default, an optional validity check and a unit/meaning for the docs;
     ``coerce(value, where)`` replaces the type check by the default's type where a key takes
-    values of more than one type."""
+    values of more than one type. ``added``: a key added after scenes were hashed, whose default
+    reproduces what they computed; at its default it is left out of ``Scene.hash``, so the caches,
+    checkpoints and resumable studies of those scenes stay valid."""
     return field(default=default, metadata={"check": check, "doc": doc, "variable_length": variable_length,
-                                            "coerce": coerce})
+                                            "coerce": coerce, "added": added})
+
+
+def hash_neutral_defaults(section) -> dict[str, Any]:
+    """{key: default} of a section's keys that ``Scene.hash`` leaves out at their default (``added``)."""
+    return {f.name: f.default for f in fields(section) if f.metadata.get("added")}
 
 
 def _station_count(value, where):
@@ -93,6 +101,7 @@ class FluidSection:
     drag: bool = _spec(True, None, "form drag on the skin")
     tail_station: str = _spec("face", _one_of("face", "slab"), "the tail station's kinematics: the average over the end face x = -L ('face', within 3 % of the station-converged distance at N_s = 40) or the half-hat average over the last slab ('slab', SPEC §5's first definition, -4 % at N_s = 40)")
     spine_force: str = _spec("source", _one_of("source", "lagrangian"), "spine force -d/dt(∂T_a/∂v) ('source') or with +∂T_a/∂x ('lagrangian', exchanges no energy by itself)")
+    spine_rule: str = _spec("rear", _one_of("rear", "trapezoid"), "quadrature of the spine force along the body: on each segment's rear station ('rear', SPEC §5, first order in 1/N_s) or shared by its two stations ('trapezoid', second order; docs/theory/stations.md)", added=True)
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,17 @@ T_a = ½ m̃ ℓ_0 (v·n)² (n depends on the positions of its front and rear no
 so that f_spine + ∂T_a/∂x = -d/dt(∂T_a/∂v) + ∂T_a/∂x (Lagrange's equations): its power is -dT_a/dt,
 the added mass exchanges no net energy with the body over a closed cycle.
 
+The spine force discretises Lighthill's line integral ∫ -d/dt[m̃ (v·n) n] ds along the body. The
+rear-node rule above (SPEC §5) is its one-sided, first-order quadrature. With the segments' front
+virtual masses m̃_f (``SpineGeometry.front_mass``) the *trapezoid rule* shares each segment between
+its two nodes, second order in the segment length:
+
+    f_r += ½ f_spine(v_r, a_r; m̃_r),   f_f += ½ f_spine(v_f, a_f; m̃_f)   (n, ṅ of the segment)
+
+the added-mass energy T_a = Σ ¼ ℓ_0 [m̃_r (v_r·n)² + m̃_f (v_f·n)²]. Its front half is the rear rule
+on the mirrored spine (nodes head -> tail: t, n, ṅ change sign, and every term is even in them), so
+the forces and Jacobians of the front half are those of the rear half, mirrored back.
+
 Every array is plain numpy; nodal vectors are (n_nodes, 2) in (x, y), and matrices use the dof
 order (x0, y0, x1, y1, ...).
 """
@@ -59,13 +70,16 @@ class SpineGeometry:
 
     rest_xy: (n_nodes, 2) x-y positions [m] of the spine nodes in the shape-varied configuration
         at rest, sorted tail -> head.
-    virtual_mass: (n_nodes - 1,) virtual mass per length m̃ [kg/m] of each segment.
+    virtual_mass: (n_nodes - 1,) virtual mass per length m̃ [kg/m] of each segment (at its rear node).
     spine_force: "source" (-d/dt(∂T_a/∂v)) or "lagrangian" (+∂T_a/∂x as well).
+    front_mass: (n_nodes - 1,) m̃ [kg/m] at each segment's front node, for the trapezoid rule;
+        None: the rear-node rule.
     """
 
     rest_xy: np.ndarray
     virtual_mass: np.ndarray
     spine_force: str = "source"
+    front_mass: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         rest_xy = np.asarray(self.rest_xy, dtype=float)
@@ -78,6 +92,11 @@ class SpineGeometry:
             )
         object.__setattr__(self, "rest_xy", rest_xy)
         object.__setattr__(self, "virtual_mass", segment_mass)
+        if self.front_mass is not None:
+            front_mass = np.asarray(self.front_mass, dtype=float)
+            if front_mass.shape != segment_mass.shape:
+                raise ValueError(f"front_mass must be {segment_mass.shape} (one per segment), got {front_mass.shape}")
+            object.__setattr__(self, "front_mass", front_mass)
         if np.any(self.rest_length <= 0.0):
             raise ValueError("spine nodes must be distinct (a segment has zero rest length)")
         if self.spine_force not in ("source", "lagrangian"):
@@ -88,8 +107,18 @@ class SpineGeometry:
         return self.spine_force == "lagrangian"
 
     @property
+    def trapezoid(self) -> bool:
+        """Whether the spine force follows the trapezoid rule (front masses given)."""
+        return self.front_mass is not None
+
+    @property
     def n_nodes(self) -> int:
         return self.rest_xy.shape[0]
+
+    def mirrored(self) -> "SpineGeometry":
+        """The spine with its nodes in the opposite order (head -> tail), its front masses as the segments'
+        rear-node masses: the rear rule on it is the trapezoid rule's front half."""
+        return SpineGeometry(self.rest_xy[::-1], self.front_mass[::-1], self.spine_force)
 
     @cached_property
     def rest_length(self) -> np.ndarray:
@@ -145,20 +174,27 @@ class SegmentState(NamedTuple):
     a_dot_n: np.ndarray          # a·n
     v_dot_ndot: np.ndarray       # v·ṅ
     v_dot_n: np.ndarray          # v·n
+    tangent_rate: np.ndarray | None = None        # ṫ (kept for the mirrored state)
+    front_velocity: np.ndarray | None = None      # u̇_f, u̇_f (the trapezoid rule's front half)
+    front_acceleration: np.ndarray | None = None
 
 
 def segment_state(geometry: SpineGeometry, displacement, velocity, acceleration) -> SegmentState:
-    """The segments' frames, rates and rear kinematics of the (n_nodes, 2) x-y nodal fields, tail -> head."""
+    """The segments' frames, rates and rear (and, for the trapezoid rule, front) kinematics of the
+    (n_nodes, 2) x-y nodal fields, tail -> head."""
     displacement, velocity, acceleration = _check_nodal(geometry, displacement, velocity, acceleration)
     tangent, _ = segment_frame(geometry, displacement)
     # ṫ = (u̇_f - u̇_r) / ℓ_0
     tangent_rate = segment_difference(velocity) / geometry.rest_length[:, None]
-    return segment_state_of(geometry.rest_length, tangent, tangent_rate, velocity[:-1], acceleration[:-1])
+    front = (velocity[1:], acceleration[1:]) if geometry.trapezoid else (None, None)
+    return segment_state_of(geometry.rest_length, tangent, tangent_rate, velocity[:-1], acceleration[:-1], *front)
 
 
-def segment_state_of(rest_length, tangent, tangent_rate, rear_velocity, rear_acceleration) -> SegmentState:
-    """The segment state from each segment's t = (x_f - x_r)/ℓ_0, its rate ṫ and the rear node's u̇ and ü,
-    (n_segments, 2) each: n = R t, ṅ = R ṫ and the products a·n, v·ṅ, v·n."""
+def segment_state_of(rest_length, tangent, tangent_rate, rear_velocity, rear_acceleration,
+                     front_velocity=None, front_acceleration=None) -> SegmentState:
+    """The segment state from each segment's t = (x_f - x_r)/ℓ_0, its rate ṫ and the rear node's u̇ and ü
+    (and the front node's, for the trapezoid rule), (n_segments, 2) each: n = R t, ṅ = R ṫ and the
+    products a·n, v·ṅ, v·n of the rear node."""
     normal, normal_rate = rotate(tangent), rotate(tangent_rate)
     return SegmentState(
         rest_length=rest_length,
@@ -170,7 +206,17 @@ def segment_state_of(rest_length, tangent, tangent_rate, rear_velocity, rear_acc
         a_dot_n=_row_dot(rear_acceleration, normal),
         v_dot_ndot=_row_dot(rear_velocity, normal_rate),
         v_dot_n=_row_dot(rear_velocity, normal),
+        tangent_rate=tangent_rate,
+        front_velocity=front_velocity,
+        front_acceleration=front_acceleration,
     )
+
+
+def mirrored_state(state: SegmentState) -> SegmentState:
+    """The state of the mirrored spine (``SpineGeometry.mirrored``): segments head -> tail, t and ṫ
+    of opposite sign, the front nodes' kinematics as the rear ones."""
+    return segment_state_of(state.rest_length[::-1], -state.tangent[::-1], -state.tangent_rate[::-1],
+                            state.front_velocity[::-1], state.front_acceleration[::-1])
 
 
 def _check_nodal(geometry, *nodal_fields):
@@ -217,14 +263,27 @@ def _position_force_per_mass(state: SegmentState) -> np.ndarray:
 
 
 def segment_weighted_force(geometry: SpineGeometry, state: SegmentState, spine_weight: np.ndarray,
-                           tail_weight, position_weight: np.ndarray | None = None) -> np.ndarray:
+                           tail_weight, front_weight: np.ndarray | None = None) -> np.ndarray:
     """Σ_i w_i f_i/m̃_i on the nodes, (..., n_nodes, 2): the per-mass forces of every segment i weighted by
     ``spine_weight`` (..., n_segments) at its rear node, f_tail/m̃_0 by ``tail_weight`` (...) at node 0 and,
-    for the lagrangian form, ±g_i/m̃_i by ``position_weight`` (default ``spine_weight``) at nodes i + 1, i.
+    for the lagrangian form, ±g_i/m̃_i by the same weight at nodes i + 1, i. For the trapezoid rule the
+    rear half carries ½ ``spine_weight`` and the front half ½ ``front_weight``.
 
     With w = m̃ this is the thrust f; f is linear in m̃, so with w = ∂m̃/∂ξ_k it is ∂f/∂ξ_k through the virtual
     masses (leading axis k).
     """
+    if not geometry.trapezoid:
+        return _rear_rule_force(geometry, state, spine_weight, tail_weight)
+    force = _rear_rule_force(geometry, state, 0.5 * np.asarray(spine_weight), tail_weight)
+    front_half = 0.5 * np.asarray(front_weight)[..., ::-1]
+    force += _rear_rule_force(geometry.mirrored(), mirrored_state(state), front_half,
+                              np.zeros(front_half.shape[:-1]))[..., ::-1, :]
+    return force
+
+
+def _rear_rule_force(geometry: SpineGeometry, state: SegmentState, spine_weight: np.ndarray, tail_weight,
+                     position_weight: np.ndarray | None = None) -> np.ndarray:
+    """The rear-node rule of :func:`segment_weighted_force`."""
     spine_weight = np.asarray(spine_weight)
     force = np.zeros(spine_weight.shape[:-1] + (geometry.n_nodes, 2))
     # f_r += w f_spine/m̃ at each segment's rear node r
@@ -252,7 +311,7 @@ def thrust_force(geometry: SpineGeometry, displacement, velocity, acceleration) 
 def thrust_force_of_state(geometry: SpineGeometry, state: SegmentState) -> np.ndarray:
     """``thrust_force`` from the segment state."""
     mass = geometry.virtual_mass
-    return segment_weighted_force(geometry, state, mass, mass[0])
+    return segment_weighted_force(geometry, state, mass, mass[0], geometry.front_mass)
 
 
 def thrust_force_per_virtual_mass(
@@ -262,8 +321,10 @@ def thrust_force_per_virtual_mass(
 
     f is linear in each segment's m̃, so f = Σ_i m̃_i ∂f/∂m̃_i. Row i holds f_spine,i / m̃_i at node
     i, plus f_tail / m̃_0 at node 0 for i = 0, and for the lagrangian form ±g_i / m̃_i at nodes
-    i + 1 and i.
+    i + 1 and i. The rear-node rule only (the trapezoid rule is linear in m̃_r and m̃_f alike).
     """
+    if geometry.trapezoid:
+        raise ValueError("thrust_force_per_virtual_mass is the rear-node rule's; this spine has front masses")
     state = segment_state(geometry, displacement, velocity, acceleration)
     n_segments = geometry.n_nodes - 1
     segments = np.arange(n_segments)
@@ -281,22 +342,28 @@ def thrust_force_per_virtual_mass(
 
 
 def derivative_weights(geometry: SpineGeometry, mass_gradient: np.ndarray,
-                       length_gradient: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(spine weights (p, n_segments), tail weights (p,)) for which ``segment_weighted_force`` is ∂f/∂ξ_k at
-    fixed positions through the virtual masses, ∂m̃/∂ξ = ``mass_gradient`` (n_segments, p), and the rest
-    lengths, ∂ℓ_0/∂ξ = ``length_gradient`` (n_segments, p; None: fixed).
+                       length_gradient: np.ndarray | None = None,
+                       front_mass_gradient: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(spine weights (p, n_segments), tail weights (p,), front weights (p, n_segments) or None) for which
+    ``segment_weighted_force`` is ∂f/∂ξ_k at fixed positions through the virtual masses, ∂m̃/∂ξ =
+    ``mass_gradient`` (n_segments, p) and, for the trapezoid rule, ∂m̃_f/∂ξ = ``front_mass_gradient``, and
+    the rest lengths, ∂ℓ_0/∂ξ = ``length_gradient`` (n_segments, p; None: fixed).
 
     f is linear in m̃: w = ∂m̃/∂ξ_k (Σ_i (∂f/∂m̃_i) ∂m̃_i/∂ξ_k). With t, n and ṅ each ∝ 1/ℓ_0, f_spine and g are
     ∝ ℓ_0⁻¹ and f_tail ∝ ℓ_0⁻³, so ∂f/∂ℓ_0 = -(3 f_tail + f_spine ± g)/ℓ_0 at fixed positions: w gains
-    -m̃ (∂ℓ_0/∂ξ_k)/ℓ_0, three times that on f_tail.
+    -m̃ (∂ℓ_0/∂ξ_k)/ℓ_0, three times that on f_tail (and -m̃_f (∂ℓ_0/∂ξ_k)/ℓ_0 on the front half).
     """
     spine_weight = mass_gradient.T
     tail_weight = spine_weight[:, 0]
+    front_weight = front_mass_gradient.T if geometry.trapezoid else None
     if length_gradient is not None:
-        length_weight = -(geometry.virtual_mass / geometry.rest_length) * length_gradient.T
+        relative_length = length_gradient.T / geometry.rest_length
+        length_weight = -geometry.virtual_mass * relative_length
         spine_weight = spine_weight + length_weight
         tail_weight = tail_weight + 3.0 * length_weight[:, 0]
-    return spine_weight, tail_weight
+        if front_weight is not None:
+            front_weight = front_weight - geometry.front_mass * relative_length
+    return spine_weight, tail_weight, front_weight
 
 
 class SegmentBlocks(NamedTuple):
@@ -317,8 +384,9 @@ def thrust_jacobians(
     Each is (2 n_nodes, 2 n_nodes) in the dof order (x0, y0, x1, y1, ...). A segment's forces
     depend only on its rear and front nodes r and r + 1, so the matrices are block-tridiagonal
     with 2x2 blocks; the source's form acts on rear nodes only (block upper-bidiagonal), the
-    lagrangian term adds the lower blocks. ∂f/∂ü is the added-mass block, non-zero on the block
-    diagonal only: -m̃ ℓ_0 n nᵀ.
+    lagrangian term and the trapezoid rule's front half add the lower blocks. ∂f/∂ü is the added-mass
+    block, non-zero on the block diagonal only: -m̃ ℓ_0 n nᵀ (halves of it from each of a node's two
+    segments for the trapezoid rule).
     """
     state = segment_state(geometry, displacement, velocity, acceleration)
     jacobians = []
@@ -332,8 +400,30 @@ def thrust_jacobians(
 
 def thrust_jacobian_blocks(geometry: SpineGeometry, state: SegmentState) -> tuple[list[SegmentBlocks], ...]:
     """The Jacobians of `thrust_jacobians` as segment blocks: for each of (∂f/∂u, ∂f/∂u̇, ∂f/∂ü) the list of
-    parts whose sum it is (the source's form, then the lagrangian term's)."""
-    negative_mass = -geometry.virtual_mass[:, None, None]
+    parts whose sum it is (the source's form, then the lagrangian term's; for the trapezoid rule the rear
+    half's, then the front half's)."""
+    if not geometry.trapezoid:
+        return _rear_rule_blocks(state, geometry.virtual_mass, geometry.virtual_mass[0], geometry.lagrangian)
+    rear = _rear_rule_blocks(state, 0.5 * geometry.virtual_mass, geometry.virtual_mass[0], geometry.lagrangian)
+    front = _rear_rule_blocks(mirrored_state(state), 0.5 * geometry.front_mass[::-1], None, geometry.lagrangian)
+    return tuple(rear_parts + [_mirrored_blocks(part) for part in front_parts]
+                 for rear_parts, front_parts in zip(rear, front))
+
+
+def _mirrored_blocks(blocks: SegmentBlocks) -> SegmentBlocks:
+    """The blocks of the mirrored spine's segments on the spine's own segments: the mirrored rear node
+    is the front node, and segment s is mirrored segment n_segments - 1 - s."""
+    def back(values):
+        return None if values is None else values[::-1]
+    return SegmentBlocks(rear_rear=back(blocks.front_front), rear_front=back(blocks.front_rear),
+                         front_rear=back(blocks.rear_front), front_front=back(blocks.rear_rear))
+
+
+def _rear_rule_blocks(state: SegmentState, spine_mass: np.ndarray, tail_mass: float | None,
+                      lagrangian: bool) -> tuple[list[SegmentBlocks], ...]:
+    """The rear-node rule's Jacobian blocks with segment masses ``spine_mass`` and the tail force's
+    ``tail_mass`` (None: no tail force)."""
+    negative_mass = -spine_mass[:, None, None]
     negative_mass_length = negative_mass * state.rest_length[:, None, None]
     n, n_rate = state.normal, state.normal_rate
     v, a = state.rear_velocity, state.rear_acceleration
@@ -360,40 +450,41 @@ def thrust_jacobian_blocks(geometry: SpineGeometry, state: SegmentState) -> tupl
     # ∂(v·n)/∂t = Rᵀ v
     # => ∂f_tail/∂u_1 = -∂f_tail/∂u_0 = (m̃/ℓ_0) [ (v·n) t (Rᵀ v)ᵀ + ½ (v·n)² I ]
     #    ∂f_tail/∂u̇_0 = m̃ (v·n) t nᵀ
-    tail_mass, tail_length = geometry.virtual_mass[0], state.rest_length[0]
-    tail_t, tail_n, tail_v, tail_v_dot_n = state.tangent[0], n[0], v[0], v_dot_n[0]
-    tail_stiffness_front = (tail_mass / tail_length) * (
-        tail_v_dot_n * _outer_2(tail_t, rotate_back(tail_v)) + 0.5 * tail_v_dot_n**2 * _IDENTITY_2
-    )
-    stiffness_front[0] += tail_stiffness_front
-    stiffness_rear[0] -= tail_stiffness_front
-    damping_rear[0] += tail_mass * tail_v_dot_n * _outer_2(tail_t, tail_n)
+    if tail_mass is not None:
+        tail_length = state.rest_length[0]
+        tail_t, tail_n, tail_v, tail_v_dot_n = state.tangent[0], n[0], v[0], v_dot_n[0]
+        tail_stiffness_front = (tail_mass / tail_length) * (
+            tail_v_dot_n * _outer_2(tail_t, rotate_back(tail_v)) + 0.5 * tail_v_dot_n**2 * _IDENTITY_2
+        )
+        stiffness_front[0] += tail_stiffness_front
+        stiffness_rear[0] -= tail_stiffness_front
+        damping_rear[0] += tail_mass * tail_v_dot_n * _outer_2(tail_t, tail_n)
 
     blocks = ([SegmentBlocks(rear_rear=stiffness_rear, rear_front=stiffness_front)],
               [SegmentBlocks(rear_rear=damping_rear, rear_front=damping_front)],
               [SegmentBlocks(rear_rear=added_mass_rear)])
-    if geometry.lagrangian:
-        blocks[0].append(_position_force_stiffness(geometry, state))
-        blocks[1].append(_position_force_damping(geometry, state))
+    if lagrangian:
+        blocks[0].append(_position_force_stiffness(spine_mass, state))
+        blocks[1].append(_position_force_damping(spine_mass, state))
     return blocks
 
 
-def _position_force_stiffness(geometry: SpineGeometry, state: SegmentState) -> SegmentBlocks:
+def _position_force_stiffness(spine_mass: np.ndarray, state: SegmentState) -> SegmentBlocks:
     """∂(±g)/∂u of the lagrangian term g = m̃ (v·n) Rᵀ v (front +g, rear -g).
 
     ∂g/∂n = m̃ Rᵀ v vᵀ, ∂n/∂u_f = -∂n/∂u_r = R/ℓ_0  =>  ∂g/∂u_f = -∂g/∂u_r = (m̃/ℓ_0) Rᵀ v vᵀ R.
     """
     v = state.rear_velocity
     rotated = rotate_back(v)                       # rows Rᵀ v
-    block = (geometry.virtual_mass / state.rest_length)[:, None, None] * _outer(rotated, rotated)
+    block = (spine_mass / state.rest_length)[:, None, None] * _outer(rotated, rotated)
     # vᵀ R = (Rᵀ v)ᵀ, so Rᵀ v vᵀ R = (Rᵀ v)(Rᵀ v)ᵀ
     return SegmentBlocks(rear_rear=block, rear_front=-block, front_rear=-block, front_front=block)
 
 
-def _position_force_damping(geometry: SpineGeometry, state: SegmentState) -> SegmentBlocks:
+def _position_force_damping(spine_mass: np.ndarray, state: SegmentState) -> SegmentBlocks:
     """∂(±g)/∂u̇_r of g = m̃ (v·n) Rᵀ v: ∂g/∂v = m̃ [Rᵀ v nᵀ + (v·n) Rᵀ]."""
     v, n = state.rear_velocity, state.normal
-    mass = geometry.virtual_mass[:, None, None]
+    mass = spine_mass[:, None, None]
     block = mass * (_outer(rotate_back(v), n) + state.v_dot_n[:, None, None] * ROTATION_90.T)
     return SegmentBlocks(rear_rear=-block, front_rear=block)
 

@@ -48,6 +48,9 @@ class ThrustTerm:
     def __init__(self, fom, rest_points: np.ndarray):
         self.fom = fom
         tags, fluid = fom.fish.tags, fom.scene.fluid
+        if fluid.spine_rule != "rear":
+            raise InputError(f"scene {fom.scene.source}: [fluid] spine_rule = \"{fluid.spine_rule}\" needs stations "
+                             "(stations = N_s); with stations = \"nodes\" the spine rule is \"rear\"")
         self.dorsal_z = rest_points[tags.dorsal_nodes, 2] - tags.box.z_axis
         self.spine = SpineGeometry(rest_points[tags.spine_nodes, :2], virtual_mass(self.dorsal_z, fluid.density),
                                    fluid.spine_force)
@@ -117,24 +120,29 @@ class StationThrustTerm:
         self.owned_weights = averages.weights[:, fom.layout.owned_nodes].tocsr()      # (N_s + 1, owned nodes)
         self.owned_weights_t = self.owned_weights.T.tocsr()
         rest_xy = averages.average(rest_points[:, :2])
-        self.rear_points = rear_station_points(fish, averages)
-        self.dorsal_z = self.rear_points[:, 2] + self.rear_points_shift(fom.xi)
-        self.spine = SpineGeometry(rest_xy, virtual_mass(self.dorsal_z, fluid.density), fluid.spine_force)
+        points = station_dorsal_points(fish, averages)
+        self.rear_points = points[:-1]
+        self.front_points = points[1:] if fluid.spine_rule == "trapezoid" else None
+        self.dorsal_z = self.rear_points[:, 2] + self.dorsal_shift(fom.xi, self.rear_points)
+        self.front_dorsal_z = (None if self.front_points is None
+                               else self.front_points[:, 2] + self.dorsal_shift(fom.xi, self.front_points))
+        self.spine = SpineGeometry(rest_xy, virtual_mass(self.dorsal_z, fluid.density), fluid.spine_force,
+                                   None if self.front_points is None else virtual_mass(self.front_dorsal_z, fluid.density))
         n_owned = self.owned_weights.shape[1]
         self._block_rows = np.arange(n_owned + 1, dtype=np.int32)
         self._block_columns = fom.layout.global_block[:n_owned].astype(np.int32)
 
-    def rear_points_shift(self, xi: np.ndarray) -> np.ndarray:
-        """Δz of the dorsal skin at the rear stations for the design ξ: Σ_k ξ_k U_k,z (exact)."""
-        return self.dorsal_gradient(xi.size) @ xi if xi.size else np.zeros(self.rear_points.shape[0])
+    def dorsal_shift(self, xi: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """Δz of the dorsal skin at ``points`` (rear or front stations) for the design ξ: Σ_k ξ_k U_k,z (exact)."""
+        return self.dorsal_gradient(xi.size, points) @ xi if xi.size else np.zeros(points.shape[0])
 
-    def dorsal_gradient(self, n_parameters: int) -> np.ndarray:
-        """(N_s, p) ∂z_dorsal/∂ξ_k at the rear stations: U_k,z of the exact shape fields there."""
+    def dorsal_gradient(self, n_parameters: int, points: np.ndarray) -> np.ndarray:
+        """(N_s, p) ∂z_dorsal/∂ξ_k at ``points``: U_k,z of the exact shape fields there."""
         fish = self.fom.fish
         names = fish.shape_names[:n_parameters]
         if not names:
-            return np.zeros((self.rear_points.shape[0], 0))
-        return np.column_stack([shape_displacement(name, self.rear_points, fish.tags.box)[:, 2] for name in names])
+            return np.zeros((points.shape[0], 0))
+        return np.column_stack([shape_displacement(name, points, fish.tags.box)[:, 2] for name in names])
 
     def station_values(self, owned: np.ndarray) -> np.ndarray:
         """(N_s + 1, 2) x-y station averages B_i of an owned dof array, on every rank."""
@@ -220,15 +228,17 @@ class StationThrustTerm:
         rows = fom.comm.allreduce(self.owned_weights @ columns, op=MPI.SUM).reshape(-1, 2, m)
         shape_xy = shape_rows(fom.fish)[:, :2, :p].reshape(fom.fish.nodes.points.shape[0], 2 * p)
         rest_gradient = fom.station_averages.weights @ shape_xy
+        front = {} if self.front_points is None else {
+            "front_dorsal_z": self.front_dorsal_z, "front_dorsal_z_gradient": self.dorsal_gradient(p, self.front_points)}
         return ThrustData(rows=rows, rest_xy=self.spine.rest_xy, rest_xy_gradient=np.asarray(rest_gradient).reshape(self.spine.n_nodes, 2, p),
-                          dorsal_z=self.dorsal_z, dorsal_z_gradient=self.dorsal_gradient(p),
-                          fluid_density=fom.scene.fluid.density)
+                          dorsal_z=self.dorsal_z, dorsal_z_gradient=self.dorsal_gradient(p, self.rear_points),
+                          fluid_density=fom.scene.fluid.density, **front)
 
 
-def rear_station_points(fish, averages) -> np.ndarray:
-    """(N_s, 3) relative positions (X_r, 0, z_dorsal(X_r)) of the nominal dorsal skin on y = 0 at every
-    segment's rear station; z_dorsal interpolates the skin nodes on y = 0 above the axis (their
-    highest z at each x)."""
+def station_dorsal_points(fish, averages) -> np.ndarray:
+    """(N_s + 1, 3) relative positions (X_i, 0, z_dorsal(X_i)) of the nominal dorsal skin on y = 0 at
+    every station (tail -> head; the rear stations are all but the last, the front ones all but the
+    first); z_dorsal interpolates the skin nodes on y = 0 above the axis (their highest z at each x)."""
     tags = fish.tags
     relative = tags.box.relative(fish.nodes.points)
     skin = tags.skin_nodes
@@ -236,9 +246,9 @@ def rear_station_points(fish, averages) -> np.ndarray:
     x, z = relative[on_plane, 0], relative[on_plane, 2]
     same_x = np.abs(x[:, None] - x[None, :]) <= tags.tolerance
     highest = np.where(same_x, z[None, :], -np.inf).max(axis=1)
-    rear_x = averages.stations[:-1] - tags.box.x_head
+    station_x = averages.stations - tags.box.x_head
     profile = dorsal_profile(x, highest)
-    return np.column_stack([rear_x, np.zeros_like(rear_x), profile(rear_x)])
+    return np.column_stack([station_x, np.zeros_like(station_x), profile(station_x)])
 
 
 @dataclass
@@ -252,6 +262,8 @@ class ThrustData:
     dorsal_z: np.ndarray                 # (n_segments,) z_dorsal - z_axis at ξ_c
     dorsal_z_gradient: np.ndarray        # (n_segments, p) ∂z_dorsal/∂ξ (exact)
     fluid_density: float                 # ρ_w [kg/m³]
+    front_dorsal_z: np.ndarray | None = None            # the same at the segments' front stations
+    front_dorsal_z_gradient: np.ndarray | None = None   # (trapezoid rule; None: rear rule)
 
     def at(self, delta: np.ndarray, spine_force: str) -> "ReducedThrust":
         return ReducedThrust(self, delta, spine_force)
@@ -269,11 +281,17 @@ class ReducedThrust:
         moves = delta.size and np.any(data.rest_xy_gradient)
         self.moving_rest = bool(moves)
         self.dorsal_z = data.dorsal_z + data.dorsal_z_gradient @ delta if delta.size else data.dorsal_z
+        trapezoid = data.front_dorsal_z is not None
+        front_z = None
+        if trapezoid:
+            front_z = data.front_dorsal_z + data.front_dorsal_z_gradient @ delta if delta.size else data.front_dorsal_z
         rest_xy = data.rest_xy + data.rest_xy_gradient @ delta if moves else data.rest_xy
-        self.spine = SpineGeometry(rest_xy, virtual_mass(self.dorsal_z, data.fluid_density), spine_force)
+        self.spine = SpineGeometry(rest_xy, virtual_mass(self.dorsal_z, data.fluid_density), spine_force,
+                                   virtual_mass(front_z, data.fluid_density) if trapezoid else None)
         m = data.rows.shape[-1]
         self.rows = data.rows.reshape(-1, m)                         # (2 n_points, m): W
         rear, front = data.rows[:-1], data.rows[1:]                  # (n_segments, 2, m): W_r, W_f
+        self.front_rows = front.reshape(-1, m) if trapezoid else None
         # the segment kinematics are linear in η: t = t_rest + T η, ṫ = T η̇, T = (W_f - W_r)/ℓ_0
         length = self.spine.rest_length[:, None]
         self.rest_tangent = segment_difference(self.spine.rest_xy) / length
@@ -288,19 +306,23 @@ class ReducedThrust:
             self.rest_products = block_products(rear, front, gradient[:-1], gradient[1:], self.block_kinds)
             # ∂ℓ_0/∂ξ_k = ê·(B U_k,f - B U_k,r), ê = t_rest the unit chord
             length_gradient = np.einsum("sc,sck->sk", self.rest_tangent, segment_difference(gradient))
-        self.derivative_weights = derivative_weights(self.spine, mass_gradient, length_gradient)
+        front_gradient = (virtual_mass_gradient(front_z, data.front_dorsal_z_gradient, data.fluid_density)
+                          if trapezoid else None)
+        self.derivative_weights = derivative_weights(self.spine, mass_gradient, length_gradient, front_gradient)
         self._point, self._state, self._blocks = None, None, None
 
     def _segment_state(self, eta, eta_dot, eta_ddot) -> SegmentState:
         """The segment state of the reduced kinematics (W η, W η̇, W η̈): t = t_rest + T η, ṫ = T η̇, the rear
-        nodes' W_r η̇ and W_r η̈; kept for the same point."""
+        nodes' W_r η̇ and W_r η̈ (and the front nodes', for the trapezoid rule); kept for the same point."""
         point = (eta.tobytes(), eta_dot.tobytes(), eta_ddot.tobytes())
         if point != self._point:
             tangent = self.rest_tangent + (self.tangent_rows @ eta).reshape(-1, 2)
             tangent_rate = (self.tangent_rows @ eta_dot).reshape(-1, 2)
+            front = (() if self.front_rows is None else
+                     ((self.front_rows @ eta_dot).reshape(-1, 2), (self.front_rows @ eta_ddot).reshape(-1, 2)))
             self._state = segment_state_of(self.spine.rest_length, tangent, tangent_rate,
                                            (self.rear_rows @ eta_dot).reshape(-1, 2),
-                                           (self.rear_rows @ eta_ddot).reshape(-1, 2))
+                                           (self.rear_rows @ eta_ddot).reshape(-1, 2), *front)
             self._point, self._blocks = point, None
         return self._state
 

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.dynamics.integrator import TimeScheme
@@ -50,14 +51,15 @@ def test_rigid_motions_produce_no_elastic_force(xi):
     assert np.linalg.norm(model.internal_force(rotated)) < 1e-10 * reference
 
 
-@pytest.mark.parametrize("integrator, spine_force", [("generalized-alpha", "source"), ("newmark", "source"),
-                                                     ("generalized-alpha", "lagrangian")])
-def test_newton_matrix_is_the_derivative_of_the_step_residual(shaped_model, integrator, spine_force):
+@pytest.mark.parametrize("integrator, spine_force, spine_rule", [
+    ("generalized-alpha", "source", "rear"), ("newmark", "source", "rear"), ("generalized-alpha", "lagrangian", "rear"),
+    ("generalized-alpha", "source", "trapezoid"), ("generalized-alpha", "lagrangian", "trapezoid")])
+def test_newton_matrix_is_the_derivative_of_the_step_residual(shaped_model, integrator, spine_force, spine_rule):
     """S du = d/dε r(t_{n+1-α_f}, u_{n+1-α_f}, u̇_{n+1-α_f}, ü_{n+1-α_m}) at u_{n+1} + ε du (thrust, drag,
     muscles all on), the intermediate state interpolated from an old state with the scheme's kinematics."""
     model = shaped_model
-    if spine_force != "source":
-        scene = coarse_scene(shapes=SHAPES, fluid={"spine_force": spine_force})
+    if (spine_force, spine_rule) != ("source", "rear"):
+        scene = coarse_scene(shapes=SHAPES, fluid={"spine_force": spine_force, "spine_rule": spine_rule})
         model = FullOrderModel(scene, load_fish(scene), DESIGN)
     scheme = TimeScheme.from_solver(coarse_scene(solver={"integrator": integrator}).solver)
     model.set_time_step(scheme)
@@ -98,15 +100,16 @@ def test_the_stations_coupling_stays_out_of_the_matrix(stations):
         assert relative_error(assembled, exact) > 1e-6
 
 
-@pytest.mark.parametrize("stations", [40, "nodes"])
-def test_the_symmetric_newton_matrix_is_factorised_by_ldlt(stations):
+@pytest.mark.parametrize("stations, spine_rule", [(40, "rear"), (40, "trapezoid"), ("nodes", "rear")])
+def test_the_symmetric_newton_matrix_is_factorised_by_ldlt(stations, spine_rule):
     """With stations S is symmetric at any state (K_t, M, C and the lumped added mass, for a shaped
-    design and the muscles on), so the model factorises its upper triangle with LDLᵀ and solves as LU
-    does; the nodal model's S (thrust and drag Jacobians) is not symmetric and keeps LU."""
+    design and the muscles on; with either spine rule), so the model factorises its upper triangle with
+    LDLᵀ and solves as LU does; the nodal model's S (thrust and drag Jacobians) is not symmetric and
+    keeps LU."""
     from petsc4py import PETSc
     from aquarom_fenics.fem.fom import direct_solver
 
-    scene = coarse_scene(fluid={"stations": stations}, shapes=SHAPES)
+    scene = coarse_scene(fluid={"stations": stations, "spine_rule": spine_rule}, shapes=SHAPES)
     model = FullOrderModel(scene, load_fish(scene), DESIGN)
     free = free_dofs_mask(model)
     rng = np.random.default_rng(4)
@@ -124,6 +127,13 @@ def test_the_symmetric_newton_matrix_is_factorised_by_ldlt(stations):
     scalar_rows.destroy()
     model.destroy()
 
+
+
+def test_the_trapezoid_rule_on_the_spine_nodes_is_refused_in_one_line():
+    scene = coarse_scene(fluid={"stations": "nodes", "spine_rule": "trapezoid"})
+    with pytest.raises(InputError, match="spine_rule") as refused:
+        FullOrderModel(scene, load_fish(scene))
+    assert "\n" not in str(refused.value) and "stations = N_s" in str(refused.value)
 
 
 def test_a_new_time_step_frees_the_matrices_of_the_previous_one(shaped_model):

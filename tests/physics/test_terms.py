@@ -178,16 +178,20 @@ def test_reduced_drag_damping_and_xi_derivative(rng):
 
 @pytest.mark.parametrize("spine_force", ["source", "lagrangian"])
 @pytest.mark.parametrize("rest_moves", [False, True])
-def test_reduced_thrust_tangents_and_xi_derivative(rng, spine_force, rest_moves):
+@pytest.mark.parametrize("spine_rule", ["rear", "trapezoid"])
+def test_reduced_thrust_tangents_and_xi_derivative(rng, spine_force, rest_moves, spine_rule):
     """The ξ-derivative through the virtual mass and, when the shape moves the rest stations
-    (x̄_rest = B(X + U ξ), e.g. xz_concave_tail), through their positions and rest lengths."""
+    (x̄_rest = B(X + U ξ), e.g. xz_concave_tail), through their positions and rest lengths; for the
+    trapezoid rule through the front stations' virtual masses as well."""
     n_spine = 5
     rest_gradient = 0.005 * rng.standard_normal((n_spine, 2, P)) if rest_moves else np.zeros((n_spine, 2, P))
+    front = {} if spine_rule == "rear" else {"front_dorsal_z": rng.uniform(0.02, 0.04, n_spine - 1),
+                                             "front_dorsal_z_gradient": 0.01 * rng.standard_normal((n_spine - 1, P))}
     data = ThrustData(rows=0.1 * rng.standard_normal((n_spine, 2, M)),
                       rest_xy=np.column_stack([np.linspace(-0.2, 0.0, n_spine), np.zeros(n_spine)]),
                       rest_xy_gradient=rest_gradient,
                       dorsal_z=rng.uniform(0.02, 0.04, n_spine - 1),
-                      dorsal_z_gradient=0.01 * rng.standard_normal((n_spine - 1, P)), fluid_density=1000.0)
+                      dorsal_z_gradient=0.01 * rng.standard_normal((n_spine - 1, P)), fluid_density=1000.0, **front)
     eta, eta_dot, eta_ddot = (10 * x for x in state(rng))
     term = data.at(np.full(P, 0.2), spine_force)
     stiffness, damping, mass = term.tangents(0.0, eta, eta_dot, eta_ddot)

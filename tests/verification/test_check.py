@@ -29,6 +29,16 @@ def test_shipped_scenes_pass_every_check(scene, capsys):
     assert "ratios" in taylor and "ratio 4 ± 25 %" in taylor
 
 
+@pytest.mark.parametrize("scene", ["so1", "so3"])
+def test_the_trapezoid_spine_rule_passes_every_check(scene, capsys):
+    """The trapezoid rule's front-station virtual masses and, for SO3's xz_concave_tail, the moving rest
+    stations: tensors, ξ-derivatives, Taylor order, sensitivities and cost gradient against the FOM."""
+    assert main(["check", scene, "--level", "1", "--set", "fluid.spine_rule=trapezoid"]) == 0
+    rows = table_rows(capsys.readouterr().out)
+    assert {row[0] for row in rows} == set("12345")
+    assert all("PASS" in row and "FAIL" not in row for row in rows), rows
+
+
 def test_prom_from_another_mesh_fails_the_tensor_check(tmp_path, capsys):
     scene_file = tmp_path / "tail.toml"
     scene_file.write_text(ONE_SHAPE_SCENE)
