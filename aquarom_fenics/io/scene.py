@@ -24,7 +24,7 @@ from aquarom_fenics.io.paths import shipped_scenes
 from aquarom_fenics.io.scene_sections import (SECTIONS, ActuationSection, CooptimizationSection, FluidSection,
                                               LinearConstraint, MaterialSection, MeshSection, OptimizerSection,
                                               OutputSection, ReductionSection, RegionsSection, ShapeSpec,
-                                              SolverSection, hash_neutral_defaults)
+                                              SolverSection, legacy_values)
 
 SCENES_DIR = shipped_scenes()
 
@@ -106,8 +106,8 @@ class Scene:
 
     @property
     def hash(self) -> str:
-        """SHA-256 (16 hex digits) of the resolved scene and of the mesh file's content (keys added
-        later are left out at their default: :func:`hash_neutral_defaults`)."""
+        """SHA-256 (16 hex digits) of the resolved scene and of the mesh file's content (a key added
+        later is left out at the value scenes computed with before it: :func:`legacy_values`)."""
         return self._digest(self._hashed_dict())
 
     @property
@@ -121,8 +121,8 @@ class Scene:
     def _hashed_dict(self) -> dict[str, Any]:
         data = self.to_dict()
         for section, cls in SECTIONS.items():
-            for key, default in hash_neutral_defaults(cls).items():
-                if data[section][key] == default:
+            for key, legacy in legacy_values(cls).items():
+                if data[section][key] == legacy:
                     del data[section][key]
         return data
 

@@ -24,19 +24,23 @@ def _one_of(*choices):
     return check
 
 
-def _spec(default, check=None, doc="", variable_length=False, coerce=None, added=False):
+NO_LEGACY = object()
+"""The ``legacy`` of a key that scenes had from the start."""
+
+
+def _spec(default, check=None, doc="", variable_length=False, coerce=None, legacy=NO_LEGACY):
     """A scene field: its default, an optional validity check and a unit/meaning for the docs;
     ``coerce(value, where)`` replaces the type check by the default's type where a key takes
-    values of more than one type. ``added``: a key added after scenes were hashed, whose default
-    reproduces what they computed; at its default it is left out of ``Scene.hash``, so the caches,
-    checkpoints and resumable studies of those scenes stay valid."""
+    values of more than one type. ``legacy``: for a key added after scenes were hashed, the value
+    that reproduces what they computed before; at that value the key is left out of ``Scene.hash``,
+    so the caches, checkpoints and resumable studies made before it existed stay valid for it."""
     return field(default=default, metadata={"check": check, "doc": doc, "variable_length": variable_length,
-                                            "coerce": coerce, "added": added})
+                                            "coerce": coerce, "legacy": legacy})
 
 
-def hash_neutral_defaults(section) -> dict[str, Any]:
-    """{key: default} of a section's keys that ``Scene.hash`` leaves out at their default (``added``)."""
-    return {f.name: f.default for f in fields(section) if f.metadata.get("added")}
+def legacy_values(section) -> dict[str, Any]:
+    """{key: value} of a section's keys that ``Scene.hash`` leaves out at that value (``legacy``)."""
+    return {f.name: f.metadata["legacy"] for f in fields(section) if f.metadata.get("legacy", NO_LEGACY) is not NO_LEGACY}
 
 
 def _station_count(value, where):
@@ -101,7 +105,7 @@ class FluidSection:
     drag: bool = _spec(True, None, "form drag on the skin")
     tail_station: str = _spec("face", _one_of("face", "slab"), "the tail station's kinematics: the average over the end face x = -L ('face', within 3 % of the station-converged distance at N_s = 40) or the half-hat average over the last slab ('slab', SPEC §5's first definition, -4 % at N_s = 40)")
     spine_force: str = _spec("source", _one_of("source", "lagrangian"), "spine force -d/dt(∂T_a/∂v) ('source') or with +∂T_a/∂x ('lagrangian', exchanges no energy by itself)")
-    spine_rule: str = _spec("rear", _one_of("rear", "trapezoid"), "quadrature of the spine force along the body: on each segment's rear station ('rear', SPEC §5, first order in 1/N_s) or shared by its two stations ('trapezoid', second order; docs/theory/stations.md)", added=True)
+    spine_rule: str = _spec("trapezoid", _one_of("trapezoid", "rear"), "quadrature of the spine force along the body: shared by each segment's two stations ('trapezoid', second order in 1/N_s: 0.1 % from the station-converged distance at N_s = 40) or on its rear station ('rear', SPEC §5, first order: +2 %); stations = \"nodes\" is the source's model and always 'rear'", legacy="rear")
 
 
 @dataclass(frozen=True)

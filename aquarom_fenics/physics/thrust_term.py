@@ -43,14 +43,12 @@ def check_spine_is_not_moved(fish) -> None:
 
 
 class ThrustTerm:
-    """The thrust on one FOM's spine nodes (tail -> head), from the rest shape of its design."""
+    """The thrust on one FOM's spine nodes (tail -> head), from the rest shape of its design: the
+    source's model, with its rear-node rule whatever ``[fluid] spine_rule`` says."""
 
     def __init__(self, fom, rest_points: np.ndarray):
         self.fom = fom
         tags, fluid = fom.fish.tags, fom.scene.fluid
-        if fluid.spine_rule != "rear":
-            raise InputError(f"scene {fom.scene.source}: [fluid] spine_rule = \"{fluid.spine_rule}\" needs stations "
-                             "(stations = N_s); with stations = \"nodes\" the spine rule is \"rear\"")
         self.dorsal_z = rest_points[tags.dorsal_nodes, 2] - tags.box.z_axis
         self.spine = SpineGeometry(rest_points[tags.spine_nodes, :2], virtual_mass(self.dorsal_z, fluid.density),
                                    fluid.spine_force)

@@ -5,7 +5,6 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.dynamics.integrator import TimeScheme
@@ -129,11 +128,15 @@ def test_the_symmetric_newton_matrix_is_factorised_by_ldlt(stations, spine_rule)
 
 
 
-def test_the_trapezoid_rule_on_the_spine_nodes_is_refused_in_one_line():
-    scene = coarse_scene(fluid={"stations": "nodes", "spine_rule": "trapezoid"})
-    with pytest.raises(InputError, match="spine_rule") as refused:
-        FullOrderModel(scene, load_fish(scene))
-    assert "\n" not in str(refused.value) and "stations = N_s" in str(refused.value)
+def test_the_nodal_model_is_the_sources_rear_rule_whatever_the_spine_rule():
+    forces = []
+    for rule in ("trapezoid", "rear"):
+        scene = coarse_scene(fluid={"stations": "nodes", "spine_rule": rule})
+        model = FullOrderModel(scene, load_fish(scene))
+        state = [scale * np.random.default_rng(8).standard_normal(model.n_owned_dofs) for scale in (1e-3, 1e-1, 1.0)]
+        forces.append(model.thrust_force(*state))
+        assert not model.thrust.spine.trapezoid
+    np.testing.assert_array_equal(*forces)
 
 
 def test_a_new_time_step_frees_the_matrices_of_the_previous_one(shaped_model):

@@ -111,7 +111,7 @@ def test_solver_stop_with_force_keeps_the_previous_results_and_the_partial_run_b
     partial = [p for p in tmp_path.iterdir() if p.name.startswith("prev.new-")]
     assert len(partial) == 1 and str(partial[0] / "trajectory.csv") in message
     summary = json.loads((partial[0] / "summary.json").read_text())
-    assert not summary["completed"] and "step 14 of 100" in summary["stop_reason"]
+    assert not summary["completed"] and "step 15 of 100" in summary["stop_reason"]
     assert (partial[0] / "manifest.json").exists()
 
 
