@@ -115,11 +115,6 @@ class SpineGeometry:
     def n_nodes(self) -> int:
         return self.rest_xy.shape[0]
 
-    def mirrored(self) -> "SpineGeometry":
-        """The spine with its nodes in the opposite order (head -> tail), its front masses as the segments'
-        rear-node masses: the rear rule on it is the trapezoid rule's front half."""
-        return SpineGeometry(self.rest_xy[::-1], self.front_mass[::-1], self.spine_force)
-
     @cached_property
     def rest_length(self) -> np.ndarray:
         """(n_segments,) ℓ_0 = |x_f - x_r| at rest [m] (computed once: the geometry is frozen)."""
@@ -163,7 +158,12 @@ def segment_frame(geometry: SpineGeometry, displacement: np.ndarray) -> tuple[np
 
 
 class SegmentState(NamedTuple):
-    """Per-segment quantities entering the Lighthill forces and their Jacobians, (n_segments, ...) arrays."""
+    """Per-segment quantities entering the Lighthill forces and their Jacobians, (n_segments, ...) arrays.
+
+    For the trapezoid rule the rows are the 2 n_segments *half-segments*: the spine's segments with
+    their rear nodes' kinematics, then the mirrored spine's (segment n_segments - 1 - i of the spine,
+    with -t, -ṫ and its front node's kinematics), so that one pass of the rear rule's formulas
+    evaluates both halves."""
 
     rest_length: np.ndarray
     tangent: np.ndarray
@@ -174,9 +174,6 @@ class SegmentState(NamedTuple):
     a_dot_n: np.ndarray          # a·n
     v_dot_ndot: np.ndarray       # v·ṅ
     v_dot_n: np.ndarray          # v·n
-    tangent_rate: np.ndarray | None = None        # ṫ (kept for the mirrored state)
-    front_velocity: np.ndarray | None = None      # u̇_f, u̇_f (the trapezoid rule's front half)
-    front_acceleration: np.ndarray | None = None
 
 
 def segment_state(geometry: SpineGeometry, displacement, velocity, acceleration) -> SegmentState:
@@ -186,15 +183,22 @@ def segment_state(geometry: SpineGeometry, displacement, velocity, acceleration)
     tangent, _ = segment_frame(geometry, displacement)
     # ṫ = (u̇_f - u̇_r) / ℓ_0
     tangent_rate = segment_difference(velocity) / geometry.rest_length[:, None]
-    front = (velocity[1:], acceleration[1:]) if geometry.trapezoid else (None, None)
+    front = (velocity[1:], acceleration[1:]) if geometry.trapezoid else ()
     return segment_state_of(geometry.rest_length, tangent, tangent_rate, velocity[:-1], acceleration[:-1], *front)
 
 
 def segment_state_of(rest_length, tangent, tangent_rate, rear_velocity, rear_acceleration,
                      front_velocity=None, front_acceleration=None) -> SegmentState:
-    """The segment state from each segment's t = (x_f - x_r)/ℓ_0, its rate ṫ and the rear node's u̇ and ü
-    (and the front node's, for the trapezoid rule), (n_segments, 2) each: n = R t, ṅ = R ṫ and the
-    products a·n, v·ṅ, v·n of the rear node."""
+    """The segment state from each segment's t = (x_f - x_r)/ℓ_0, its rate ṫ and the rear node's u̇ and ü,
+    (n_segments, 2) each: n = R t, ṅ = R ṫ and the products a·n, v·ṅ, v·n of the rear node. With the
+    front nodes' u̇ and ü (the trapezoid rule) the rows are the half-segments of :class:`SegmentState`."""
+    if front_velocity is not None:
+        # the mirrored spine: segments head -> tail, t and ṫ of opposite sign, rear node = the front node
+        rest_length = np.concatenate([rest_length, rest_length[::-1]])
+        tangent = np.concatenate([tangent, -tangent[::-1]])
+        tangent_rate = np.concatenate([tangent_rate, -tangent_rate[::-1]])
+        rear_velocity = np.concatenate([rear_velocity, front_velocity[::-1]])
+        rear_acceleration = np.concatenate([rear_acceleration, front_acceleration[::-1]])
     normal, normal_rate = rotate(tangent), rotate(tangent_rate)
     return SegmentState(
         rest_length=rest_length,
@@ -206,17 +210,7 @@ def segment_state_of(rest_length, tangent, tangent_rate, rear_velocity, rear_acc
         a_dot_n=_row_dot(rear_acceleration, normal),
         v_dot_ndot=_row_dot(rear_velocity, normal_rate),
         v_dot_n=_row_dot(rear_velocity, normal),
-        tangent_rate=tangent_rate,
-        front_velocity=front_velocity,
-        front_acceleration=front_acceleration,
     )
-
-
-def mirrored_state(state: SegmentState) -> SegmentState:
-    """The state of the mirrored spine (``SpineGeometry.mirrored``): segments head -> tail, t and ṫ
-    of opposite sign, the front nodes' kinematics as the rear ones."""
-    return segment_state_of(state.rest_length[::-1], -state.tangent[::-1], -state.tangent_rate[::-1],
-                            state.front_velocity[::-1], state.front_acceleration[::-1])
 
 
 def _check_nodal(geometry, *nodal_fields):
@@ -272,30 +266,29 @@ def segment_weighted_force(geometry: SpineGeometry, state: SegmentState, spine_w
     With w = m̃ this is the thrust f; f is linear in m̃, so with w = ∂m̃/∂ξ_k it is ∂f/∂ξ_k through the virtual
     masses (leading axis k).
     """
-    if not geometry.trapezoid:
-        return _rear_rule_force(geometry, state, spine_weight, tail_weight)
-    force = _rear_rule_force(geometry, state, 0.5 * np.asarray(spine_weight), tail_weight)
-    front_half = 0.5 * np.asarray(front_weight)[..., ::-1]
-    force += _rear_rule_force(geometry.mirrored(), mirrored_state(state), front_half,
-                              np.zeros(front_half.shape[:-1]))[..., ::-1, :]
-    return force
-
-
-def _rear_rule_force(geometry: SpineGeometry, state: SegmentState, spine_weight: np.ndarray, tail_weight,
-                     position_weight: np.ndarray | None = None) -> np.ndarray:
-    """The rear-node rule of :func:`segment_weighted_force`."""
     spine_weight = np.asarray(spine_weight)
+    n_segments = geometry.n_nodes - 1
+    if geometry.trapezoid:
+        # the half-segments' weights: ½ w_r, then ½ w_f of the mirrored segments (head -> tail)
+        spine_weight = 0.5 * np.concatenate([spine_weight, np.asarray(front_weight)[..., ::-1]], axis=-1)
+    # w f_spine/m̃ on each (half-)segment's own node: the rear node, or the front node for the mirrored half
+    per_segment = spine_weight[..., :, None] * _spine_force_per_mass(state)
     force = np.zeros(spine_weight.shape[:-1] + (geometry.n_nodes, 2))
-    # f_r += w f_spine/m̃ at each segment's rear node r
-    force[..., :-1, :] = spine_weight[..., :, None] * _spine_force_per_mass(state)
+    force[..., :-1, :] = per_segment[..., :n_segments, :]
+    if geometry.trapezoid:
+        force[..., 1:, :] += per_segment[..., :n_segments - 1:-1, :]
     # f_0 += w_0 f_tail/m̃_0
     force[..., 0, :] += np.asarray(tail_weight)[..., None] * _tail_force_per_mass(state)
     if geometry.lagrangian:
-        # f_f += g, f_r -= g with g = w (v·n) Rᵀ v
-        weight = spine_weight if position_weight is None else np.asarray(position_weight)
-        position_force = weight[..., :, None] * _position_force_per_mass(state)
-        force[..., 1:, :] += position_force
-        force[..., :-1, :] -= position_force
+        # f_f += g, f_r -= g with g = w (v·n) Rᵀ v (for the mirrored half its f is the rear node r)
+        position_force = spine_weight[..., :, None] * _position_force_per_mass(state)
+        rear_half = position_force[..., :n_segments, :]
+        force[..., 1:, :] += rear_half
+        force[..., :-1, :] -= rear_half
+        if geometry.trapezoid:
+            front_half = position_force[..., :n_segments - 1:-1, :]
+            force[..., :-1, :] += front_half
+            force[..., 1:, :] -= front_half
     return force
 
 
@@ -404,10 +397,17 @@ def thrust_jacobian_blocks(geometry: SpineGeometry, state: SegmentState) -> tupl
     half's, then the front half's)."""
     if not geometry.trapezoid:
         return _rear_rule_blocks(state, geometry.virtual_mass, geometry.virtual_mass[0], geometry.lagrangian)
-    rear = _rear_rule_blocks(state, 0.5 * geometry.virtual_mass, geometry.virtual_mass[0], geometry.lagrangian)
-    front = _rear_rule_blocks(mirrored_state(state), 0.5 * geometry.front_mass[::-1], None, geometry.lagrangian)
-    return tuple(rear_parts + [_mirrored_blocks(part) for part in front_parts]
-                 for rear_parts, front_parts in zip(rear, front))
+    masses = 0.5 * np.concatenate([geometry.virtual_mass, geometry.front_mass[::-1]])
+    halves = _rear_rule_blocks(state, masses, geometry.virtual_mass[0], geometry.lagrangian)
+    n_segments = geometry.n_nodes - 1
+    return tuple([_half_blocks(part, slice(0, n_segments)) for part in parts]
+                 + [_mirrored_blocks(_half_blocks(part, slice(n_segments, None))) for part in parts]
+                 for parts in halves)
+
+
+def _half_blocks(blocks: SegmentBlocks, rows: slice) -> SegmentBlocks:
+    """The blocks of the half-segments ``rows`` (the rear half or the mirrored half)."""
+    return SegmentBlocks(*(None if values is None else values[rows] for values in blocks))
 
 
 def _mirrored_blocks(blocks: SegmentBlocks) -> SegmentBlocks:

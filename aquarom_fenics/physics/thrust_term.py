@@ -289,12 +289,18 @@ class ReducedThrust:
         m = data.rows.shape[-1]
         self.rows = data.rows.reshape(-1, m)                         # (2 n_points, m): W
         rear, front = data.rows[:-1], data.rows[1:]                  # (n_segments, 2, m): W_r, W_f
-        self.front_rows = front.reshape(-1, m) if trapezoid else None
         # the segment kinematics are linear in η: t = t_rest + T η, ṫ = T η̇, T = (W_f - W_r)/ℓ_0
         length = self.spine.rest_length[:, None]
         self.rest_tangent = segment_difference(self.spine.rest_xy) / length
-        self.tangent_rows = ((front - rear) / length[:, :, None]).reshape(-1, m)
-        self.rear_rows = rear.reshape(-1, m)
+        tangent_rows, own_rows = (front - rear) / length[:, :, None], rear
+        self.half_rest_length, self.half_rest_tangent = self.spine.rest_length, self.rest_tangent
+        if trapezoid:       # the half-segments of SegmentState: the mirrored half has -t, -ṫ and the front node
+            self.half_rest_length = np.concatenate([self.spine.rest_length, self.spine.rest_length[::-1]])
+            self.half_rest_tangent = np.concatenate([self.rest_tangent, -self.rest_tangent[::-1]])
+            tangent_rows = np.concatenate([tangent_rows, -tangent_rows[::-1]])
+            own_rows = np.concatenate([rear, front[::-1]])
+        self.tangent_rows = tangent_rows.reshape(-1, m)
+        self.rear_rows = own_rows.reshape(-1, m)                     # each half-segment's own node
         self.block_kinds = block_kinds(self.spine)
         self.block_products = block_products(rear, front, rear, front, self.block_kinds)
         mass_gradient = virtual_mass_gradient(self.dorsal_z, data.dorsal_z_gradient, data.fluid_density)
@@ -311,16 +317,15 @@ class ReducedThrust:
 
     def _segment_state(self, eta, eta_dot, eta_ddot) -> SegmentState:
         """The segment state of the reduced kinematics (W η, W η̇, W η̈): t = t_rest + T η, ṫ = T η̇, the rear
-        nodes' W_r η̇ and W_r η̈ (and the front nodes', for the trapezoid rule); kept for the same point."""
+        nodes' W_r η̇ and W_r η̈ (for the trapezoid rule, of the half-segments: rows made once); kept for the
+        same point."""
         point = (eta.tobytes(), eta_dot.tobytes(), eta_ddot.tobytes())
         if point != self._point:
-            tangent = self.rest_tangent + (self.tangent_rows @ eta).reshape(-1, 2)
+            tangent = self.half_rest_tangent + (self.tangent_rows @ eta).reshape(-1, 2)
             tangent_rate = (self.tangent_rows @ eta_dot).reshape(-1, 2)
-            front = (() if self.front_rows is None else
-                     ((self.front_rows @ eta_dot).reshape(-1, 2), (self.front_rows @ eta_ddot).reshape(-1, 2)))
-            self._state = segment_state_of(self.spine.rest_length, tangent, tangent_rate,
+            self._state = segment_state_of(self.half_rest_length, tangent, tangent_rate,
                                            (self.rear_rows @ eta_dot).reshape(-1, 2),
-                                           (self.rear_rows @ eta_ddot).reshape(-1, 2), *front)
+                                           (self.rear_rows @ eta_ddot).reshape(-1, 2))
             self._point, self._blocks = point, None
         return self._state
 
