@@ -19,7 +19,7 @@ from mpi4py import MPI
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.forms.muscle import muscle_energy, muscle_energy_density
-from aquarom_fenics.reduction.projection import Taylor, stack_taylor
+from aquarom_fenics.reduction.projection import Taylor, stack_taylor, taylor_of
 
 LEFT, RIGHT = 1, 2
 """Region numbers of the muscles' cells in the forms' measure."""
@@ -124,6 +124,8 @@ def sampled_muscle_tensors(fom, projector) -> "MuscleTensors":
         abs(ufl.JacobianDeterminant(fom.mesh)) * ufl.as_vector([density] + first + second), degree)
     reference_weights = fx.quadrature_rule(degree)[1]
     n_terms = 1 + len(first) + len(second)
+    # the sampled terms: [value, ∂/∂ξ_k (k < p), ∂²/∂ξ_k∂ξ_l (the pairs k ≤ l)], by derivative indices
+    column = {indices: n for n, indices in enumerate([()] + [(k,) for k in range(len(first))] + pairs)}
     tags = fom.fish.tags
 
     def energies(cells, displacement):        # (Π, ∂Π/∂ξ_k, ∂²Π/∂ξ_k∂ξ_l) at u
@@ -146,20 +148,11 @@ def sampled_muscle_tensors(fom, projector) -> "MuscleTensors":
             hessian[i, i] = plus[i] + minus[i] - 2.0 * rest
         for (i, k), value in zip(pair_list, both):
             hessian[i, k] = hessian[k, i] = value - rest - gradient[i] - gradient[k] - 0.5 * (hessian[i, i] + hessian[k, k])
-        constants.append(_taylor_of_terms(np.moveaxis(gradient, -1, 0), p, pairs))
-        linears.append(_taylor_of_terms(np.moveaxis(hessian, -1, 0), p, pairs))
+        b, b_matrix = taylor_of(lambda indices: (gradient[..., column[indices]], hessian[..., column[indices]]),
+                                p, order)
+        constants.append(b)
+        linears.append(b_matrix)
     return MuscleTensors(stack_taylor(constants), stack_taylor(linears))
-
-
-def _taylor_of_terms(terms: np.ndarray, p: int, pairs) -> Taylor:
-    """Taylor from stacked terms: [value, ∂/∂ξ_k (k < p), ∂²/∂ξ_k∂ξ_l (the ``pairs`` k ≤ l)]."""
-    first = terms[1: 1 + p] if terms.shape[0] > 1 else None
-    second = None
-    if pairs:
-        second = np.empty((p, p) + terms.shape[1:])
-        for number, (k, l) in enumerate(pairs):
-            second[k, l] = second[l, k] = terms[1 + p + number]
-    return Taylor(terms[0], first, second)
 
 
 @dataclass

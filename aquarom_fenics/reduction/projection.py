@@ -49,6 +49,24 @@ def stack_taylor(parts: list[Taylor]) -> Taylor:
     return Taylor(np.stack([part.constant for part in parts]), stacked("first"), stacked("second"))
 
 
+def taylor_of(evaluate: Callable[[tuple[int, ...]], tuple], n_parameters: int, order: int) -> list[Taylor]:
+    """The Taylor in Δξ of each value of ``evaluate(indices)``, a tuple whose entries are the values'
+    ξ-derivatives along e_k for k in ``indices`` (``()``: the values; ``(k,)``; ``(k, l)`` with k ≤ l),
+    up to ``order``: T1[k] = evaluate((k,)), T2[k, l] = T2[l, k] = evaluate((k, l))."""
+    p = n_parameters
+    constant = evaluate(())
+    first = second = [None] * len(constant)
+    if order >= 1 and p:
+        first = [np.stack(parts) for parts in zip(*(evaluate((k,)) for k in range(p)))]
+    if order >= 2 and p:
+        second = [np.empty((p, p) + np.shape(part)) for part in constant]
+        for k in range(p):
+            for l in range(k, p):
+                for term, part in zip(second, evaluate((k, l))):
+                    term[k, l] = term[l, k] = part
+    return [Taylor(*parts) for parts in zip(constant, first, second)]
+
+
 def project_vector(comm: MPI.Comm, vectors: np.ndarray, owned: np.ndarray) -> np.ndarray:
     """Vᵀ b over all ranks; ``owned`` is one owned dof array or its columns."""
     return comm.allreduce(vectors.T @ owned, op=MPI.SUM)
@@ -105,22 +123,9 @@ class Projector:
     def taylor_terms(self, evaluate: Callable[[int], tuple]) -> list[Taylor]:
         """The Taylor in Δξ of each value of ``evaluate(d)``, a tuple whose entries are the d-th
         ξ-derivatives of the values along the directions as this method sets them (d = 0: the values;
-        1: along e_k; 2: along e_k and e_l)."""
-        p = self.n_parameters
-        constant = evaluate(0)
-        first = second = [None] * len(constant)
-        if self.order >= 1 and p:
-            per_parameter = []
-            for k in range(p):
-                self.directions[0].set_parameter(k)
-                per_parameter.append(evaluate(1))
-            first = [np.stack(parts) for parts in zip(*per_parameter)]
-        if self.order >= 2 and p:
-            second = [np.empty((p, p) + np.shape(part)) for part in constant]
-            for k in range(p):
-                for l in range(k, p):
-                    self.directions[0].set_parameter(k)
-                    self.directions[1].set_parameter(l)
-                    for term, part in zip(second, evaluate(2)):
-                        term[k, l] = term[l, k] = part
-        return [Taylor(*parts) for parts in zip(constant, first, second)]
+        1: along e_k; 2: along e_k and e_l): :func:`taylor_of`."""
+        def along(indices: tuple[int, ...]) -> tuple:
+            for direction, k in zip(self.directions, indices):
+                direction.set_parameter(k)
+            return evaluate(len(indices))
+        return taylor_of(along, self.n_parameters, self.order)
