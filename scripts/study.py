@@ -22,10 +22,10 @@ from aquarom_fenics.errors import InputError
 from aquarom_fenics.executors import choose_cluster, open_pool
 
 from aquarom_fenics.geometry.fish import load_fish
-from aquarom_fenics.io.outputs import software_versions
+from aquarom_fenics.io.outputs import holds_file, software_versions
 from aquarom_fenics.io.persistence import write_text_atomic
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.optimization.study import completed_summary, pareto_sweep, run_optimization
+from aquarom_fenics.optimization.study import checkpoint_pattern, completed_summary, pareto_sweep, run_optimization
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 
@@ -81,7 +81,7 @@ def run_cases(args, pool) -> None:
         else:
             if not (args.resume and completed_summary(args.out / case, scene)):
                 run_optimization(scene, args.out / case, fish=fish, pool=pool,
-                                 resume=args.resume and _has_checkpoint(args.out / case))
+                                 resume=args.resume and holds_file(args.out / case, checkpoint_pattern(scene)))
             summaries = [(case, args.out / case / "summary.json")]
         case_time = time.perf_counter() - started
         rows = [_row(name, scene, fish, json.loads(path.read_text()), case_time if k == 0 else None)
@@ -89,11 +89,6 @@ def run_cases(args, pool) -> None:
         write_text_atomic(args.out / case / ROWS, "\n".join(rows) + "\n")
         write_text_atomic(args.out / "summary.md", "\n".join(summary_lines(args.out)) + "\n")
     print((args.out / "summary.md").read_text(), end="")
-
-
-def _has_checkpoint(folder: Path) -> bool:
-    """Whether a run in ``folder`` (or one of its multi-start runs) left a checkpoint to continue from."""
-    return any(path.is_file() for pattern in ("checkpoint.json", "start_*/checkpoint.json") for path in folder.glob(pattern))
 
 
 def summary_lines(out: Path) -> list[str]:

@@ -71,7 +71,7 @@ def run_optimize(args) -> int:
     from aquarom_fenics.cli.parser import DEFAULT_WEIGHT
     from aquarom_fenics.optimization.cost import CostWeights
     from aquarom_fenics.optimization.optimize import DEFAULT_MAX_TIME
-    from aquarom_fenics.optimization.study import run_optimization
+    from aquarom_fenics.optimization.study import checkpoint_pattern, run_optimization
 
     scene, _ = check_inputs(args, load_scene(args))
     weights = CostWeights()
@@ -80,7 +80,7 @@ def run_optimize(args) -> int:
         weights = CostWeights(weight, 1.0 - weight, scene.cooptimization.energy_weight)
     with shutting_down(open_work_pool(args, scene, scene.optimizer.starts, default_workers=1)) as pool:
         out = claim_output(args, args.out or Path("results") / "optimize" / scene.name, resume=args.resume,
-                           resume_file="checkpoint.json" if scene.optimizer.starts == 1 else "start_*/checkpoint.json")
+                           resume_file=checkpoint_pattern(scene))
         result, check = run_optimization(scene, out, resume=args.resume, weights=weights, pool=pool,
                                          max_time=DEFAULT_MAX_TIME if args.max_time is None else args.max_time)
     args.timings = result.timings | {"fom_check": check.time}

@@ -165,6 +165,11 @@ class OutputLocation:
     foreign: list[str] = field(default_factory=list)    # files in ``working`` at the claim not of the toolkit
 
 
+def holds_file(folder: Path, pattern: str) -> bool:
+    """Whether ``folder`` holds a file matching ``pattern`` (a name or a glob such as ``w1_*/checkpoint.json``)."""
+    return any(found.is_file() for found in Path(folder).glob(pattern))
+
+
 def claim_folder(path: Path, force: bool, resume: bool, resume_file: str = "checkpoint.json") -> OutputLocation:
     """An output folder that may be written, refusing to touch anything the toolkit did not write.
 
@@ -178,7 +183,7 @@ def claim_folder(path: Path, force: bool, resume: bool, resume_file: str = "chec
     if path.exists() and not path.is_dir():
         raise InputError(f"output {path} is a file, not a folder; choose another --out")
     if resume:
-        if not any(found.is_file() for found in path.glob(resume_file)):
+        if not holds_file(path, resume_file):
             raise InputError(f"--resume: no {resume_file} in {path}; run without --resume")
         lock_output(path)
         require_writable(path)

@@ -22,7 +22,7 @@ from aquarom_fenics.optimization.history import Checkpoint, history_columns
 from aquarom_fenics.optimization.optimize import (DEFAULT_MAX_TIME, OptimizationResult, optimization_space, optimize,
                                                   start_points)
 from aquarom_fenics.optimization.prom_builder import PromBuilder
-from aquarom_fenics.io.outputs import IncrementalCSV, software_versions
+from aquarom_fenics.io.outputs import IncrementalCSV, holds_file, software_versions
 from aquarom_fenics.io.paths import cache_root
 from aquarom_fenics.io.persistence import (entry_key, get_or_compute, require_cache_writable, write_json_atomic,
                                            write_text_atomic)
@@ -113,6 +113,11 @@ def fom_check(scene: Scene, fish: Fish, result: OptimizationResult,
     prom_start = first_built["distance"] if np.array_equal(space.start, start) else None
     return FomCheck(start_distance, optimal_distance, prom_start, result.evaluation.distance,
                     time.perf_counter() - started, "; ".join(errors[::-1]) or None)
+
+
+def checkpoint_pattern(scene: Scene) -> str:
+    """Where an optimisation's output folder keeps its checkpoint: at the top, or one per multi-start run."""
+    return "checkpoint.json" if scene.optimizer.starts == 1 else "start_*/checkpoint.json"
 
 
 def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights: CostWeights | None = None,
@@ -215,7 +220,7 @@ def start_run(scene: Scene, out_dir: str | Path, resume: bool, weights: CostWeig
     task); ``resume`` continues it from its checkpoint if it has one."""
     k, z = item
     folder = Path(out_dir) / f"start_{k + 1}"
-    return run_optimization(scene, folder, resume and (folder / "checkpoint.json").is_file(), weights, fish,
+    return run_optimization(scene, folder, resume and holds_file(folder, "checkpoint.json"), weights, fish,
                             render=False, max_time=max_time, start=z)
 
 
@@ -380,13 +385,12 @@ def pareto_point(scene: Scene, out_dir: Path, w1: float, fish: Fish | None = Non
     co = scene.cooptimization
     weights = CostWeights(distance=w1, energy=1.0 - w1, alpha=co.energy_weight)
     folder = Path(out_dir) / f"w1_{w1:g}"
-    space = design_space(scene)
     summary = completed_summary(folder, scene, weights) if resume else None
     if summary is not None:
-        check = summary["fom_check"]
+        check, space = summary["fom_check"], design_space(scene)
         return _pareto_row(w1, weights, space, np.array([summary["optimum"][n] for n in space.names]),
                            summary["prom_distance_optimal"], check["optimal_distance"], check["error"])
-    result, check = run_optimization(scene, folder, resume=resume and (folder / "checkpoint.json").is_file(),
+    result, check = run_optimization(scene, folder, resume=resume and holds_file(folder, checkpoint_pattern(scene)),
                                      weights=weights, fish=fish or load_fish(scene), render=False)
     return _pareto_row(w1, weights, result.space, result.optimum, result.evaluation.distance,
                        check.optimal_distance, check.error)
