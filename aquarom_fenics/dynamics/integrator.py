@@ -203,7 +203,15 @@ class _Newton:
         step from the factors' S (its history restarts with every factorisation and every step).
         With ``line_search`` every iteration refactorises and the update is u ← u - λ S⁻¹ r with the
         largest λ = 2^-k meeting ‖r(λ)‖ ≤ (1 - c λ) ‖r‖.
+
+        An iterate that diverges overflows: the non-finite residual norm it leads to is this step's
+        failure (a :class:`StepFailure`, which the step control cuts or reports), so numpy's overflow,
+        division and invalid-value warnings on the way are not raised.
         """
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+            return self._iterate(scheme, time, old, line_search)
+
+    def _iterate(self, scheme: TimeScheme, time: float, old, line_search: bool):
         settings, system = self.settings, self.system
         u_predicted, v_predicted = scheme.predict(*old)
         u_new = u_predicted.copy()
