@@ -6,13 +6,15 @@ process's first build and as a later one (K_0's factorisation analysis kept, as 
 optimisation), the later build's split (FOM set-up, vibration modes, static solves, the basis in all,
 internal-force tensors, other tensors), basis time, tensor time, number of form evaluations
 (vector/matrix assemblies and cell-wise expression evaluations), reduced solve time with and
-without sensitivities (fastest of 5), and the FOM time on the same mesh.
+without sensitivities (fastest and median of 20), and the FOM time on the same mesh.
 Writes results/bench/prom.json.
 """
 import argparse
 import os
 import time
 from pathlib import Path
+
+import numpy as np
 
 from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
 from aquarom_fenics.dynamics.simulate import simulate_fom
@@ -27,14 +29,17 @@ from aquarom_fenics.reduction.reductor import build_prom
 REPOSITORY = Path(__file__).resolve().parents[1]
 
 SHAPE_SETS = {0: "nominal", 3: "so1", 5: "so2", 8: "so3"}
-SOLVE_REPEATS = 5
-"""Reduced solves are timed as the fastest of this many (one run is tens of milliseconds: a single
-sample carries the host's noise and the first call's set-up)."""
+SOLVE_REPEATS = 20
+"""Reduced solves are timed over this many runs (one run is tens of milliseconds: a single sample
+carries the host's noise and the first call's set-up; the fastest of 5 varied by 40 % between
+benchmark runs on an idle host)."""
 
 
-def fastest_of(repeats: int, run):
-    """The result of ``run()`` with the smallest ``wall_time`` of ``repeats`` calls."""
-    return min((run() for _ in range(repeats)), key=lambda result: result.wall_time)
+def timed_runs(repeats: int, run):
+    """(the result of ``run()`` with the smallest ``wall_time``, the median ``wall_time`` [s]) of
+    ``repeats`` calls."""
+    results = sorted((run() for _ in range(repeats)), key=lambda result: result.wall_time)
+    return results[0], float(np.median([result.wall_time for result in results]))
 
 
 class EvaluationCounter:
@@ -87,8 +92,9 @@ def main():
             prom = build_prom(scene, fish=fish)   # as the next builds of an optimisation: K_0's analysis kept
             build_time = time.perf_counter() - started
             evaluations = counter.take()
-            plain = fastest_of(SOLVE_REPEATS, lambda: simulate_reduced(prom, scene))
-            with_sensitivities = fastest_of(SOLVE_REPEATS, lambda: simulate_reduced(prom, scene, sensitivities=True))
+            plain, plain_median = timed_runs(SOLVE_REPEATS, lambda: simulate_reduced(prom, scene))
+            with_sensitivities, sensitivities_median = timed_runs(
+                SOLVE_REPEATS, lambda: simulate_reduced(prom, scene, sensitivities=True))
             runs.append({
                 "degree": degree, "level": level, "cells": prom.cells, "dofs": prom.dofs, "parameters": p,
                 "scene": name, "reduced_size": prom.size, "basis": prom.labels, "dropped": prom.dropped,
@@ -98,6 +104,7 @@ def main():
                 "tensor_time": prom.timings["internal_force_tensors"] + prom.timings["other_tensors"],
                 "form_evaluations": evaluations,
                 "solve_time": plain.wall_time, "solve_time_with_sensitivities": with_sensitivities.wall_time,
+                "solve_time_median": plain_median, "solve_time_with_sensitivities_median": sensitivities_median,
                 "distance": plain.distance, "fom_time": fom.wall_time, "fom_distance": fom.distance,
                 "fom_over_prom_total_time": fom.wall_time / (build_time + plain.wall_time)})
             print({key: runs[-1][key] for key in ("degree", "level", "cells", "parameters", "reduced_size",
