@@ -96,12 +96,12 @@ def run_optimize(args) -> int:
 
 
 def run_pareto(args) -> int:
-    from aquarom_fenics.optimization.study import pareto_sweep
+    from aquarom_fenics.optimization.study import checkpoint_pattern, pareto_sweep
 
     scene, _ = check_inputs(args, load_scene(args))
     with shutting_down(open_work_pool(args, scene, len(scene.cooptimization.weights), default_workers=1)) as pool:
         out = claim_output(args, args.out or Path("results") / "pareto" / scene.name, resume=args.resume,
-                           resume_file="w1_*/checkpoint.json")
+                           resume_file=f"w1_*/{checkpoint_pattern(scene)}")
         points = pareto_sweep(scene, out, pool=pool, resume=args.resume)
     for point in points:
         fom = (f"FOM distance {100 * point['distance_m']:.3f} cm" if point["fom_check"] == "completed"

@@ -98,3 +98,14 @@ def test_pareto_resume_without_any_checkpoint_is_refused_and_creates_nothing(tmp
     error = capsys.readouterr().err.strip()
     assert "no w1_*/checkpoint.json" in error and error.count("\n") == 0
     assert not (tmp_path / "none").exists()
+
+
+def test_pareto_resume_of_a_multi_start_scene_looks_for_its_starts_checkpoints(tmp_path, capsys):
+    """A weight of a multi-start scene keeps one checkpoint per start: that is what --resume needs."""
+    from aquarom_fenics.cli import main
+
+    assert main(["pareto", "co", "--level", "1", "--set", "optimizer.starts=2", "--out", str(tmp_path / "none"),
+                 "--resume"]) == 2
+    error = capsys.readouterr().err.strip()
+    assert "no w1_*/start_*/checkpoint.json" in error and error.count("\n") == 0
+    assert not (tmp_path / "none").exists()
