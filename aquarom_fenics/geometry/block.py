@@ -1,8 +1,10 @@
 """The reference block of SPEC §3 meshed with linear tetrahedra, and its mesh cache.
 
-The block meshes are generated with gmsh on one quarter of the box and mirrored in numpy, so
-that they are exactly symmetric about y = 0 and z = 0 and have equally spaced nodes on the body
-axis y = z = 0. Levels, element sizes and gmsh options are the recipe ``meshes/block.toml``.
+The block meshes are generated with gmsh on one quarter of the box, cut by the planes of the
+region interfaces (head/body, muscle ends) so that every region is a tagged set of cells, and
+mirrored in numpy, so that they are exactly symmetric about y = 0 and z = 0 (the plane between the
+left and the right muscle) and have nodes on the body axis y = z = 0. Levels, element sizes and
+gmsh options are the recipe ``meshes/block.toml``.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import numpy as np
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.gmsh_session import GMSH_TETRAHEDRON, gmsh_model, gmsh_version, points_and_cells_from_gmsh
-from aquarom_fenics.geometry.mesh import FishMesh, oriented_positively
+from aquarom_fenics.geometry.mesh import FishMesh, check_region_fractions, oriented_positively
 from aquarom_fenics.io.paths import mesh_cache, shipped_meshes
 from aquarom_fenics.io.persistence import get_or_compute, write_npz_atomic
 
@@ -54,27 +56,48 @@ def block_mesh_size(level: int, length: float, width: float, height: float) -> f
     return LEVEL_MESH_SIZE[level] * (length * width * height / reference_volume) ** (1.0 / 3.0)
 
 
-def block_axis_segments(level: int, length: float, width: float, height: float) -> int:
-    """Number of equal segments of the body axis: round(L / h), at least 2."""
-    return max(2, int(round(length / block_mesh_size(level, length, width, height))))
-
-
-def _snap_to_box(points: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
-    """Coordinates within 1e-9 × box size of a box plane or of 0 set to that value exactly."""
+def _snap_to_box(points: np.ndarray, lower: np.ndarray, upper: np.ndarray, x_planes=()) -> np.ndarray:
+    """Coordinates within 1e-9 × box size of a box plane, of 0 or (x) of an interface plane set to
+    that value exactly."""
     tolerance = 1e-9 * float(np.max(upper - lower))
     snapped = points.copy()
     for planes in (lower, upper, np.zeros(3)):
         near = np.abs(snapped - planes) <= tolerance
         snapped = np.where(near, planes, snapped)
+    for x in x_planes:
+        near = np.abs(snapped[:, 0] - x) <= tolerance
+        snapped[near, 0] = x
     return snapped
 
 
-def _quarter_block(size: float, axis_nodes: int, length: float, width: float, height: float):
-    """gmsh mesh of x ∈ [-L, 0], y ∈ [0, W/2], z ∈ [0, H/2] with equally spaced nodes on the two
-    box edges in the plane y = 0 (z = 0 and z = H/2). Returns (points, cells)."""
+def region_planes(length: float, head_fraction: float, muscle_range) -> np.ndarray:
+    """Sorted x positions (m, head face at x = 0) of the region interfaces inside the box: the head's
+    rear face x = -head_fraction L and the muscles' ends x = muscle_range L (SPEC §2–§3)."""
+    planes = {-head_fraction * length, *(bound * length for bound in muscle_range)}
+    inside = [x for x in planes if -length < x < 0.0]
+    return np.array(sorted(inside))
+
+
+QUARTER_REGIONS = ("head", "muscle", "body")
+"""Physical volume groups of the quarter block; the mirror in y splits "muscle" into left and right."""
+
+
+def _quarter_block(size: float, length: float, width: float, height: float, planes: np.ndarray,
+                   head_fraction: float, muscle_range):
+    """gmsh mesh of x ∈ [-L, 0], y ∈ [0, W/2], z ∈ [0, H/2], cut by the planes x = planes[k] into
+    slabs that the mesh conforms to. Each slab belongs to the physical group "head"
+    (x ≥ -head_fraction L), "muscle" (muscle_range[0] L ≤ x ≤ muscle_range[1] L) or "body".
+    The two box edges in the plane y = 0 (z = 0 and z = H/2) get equally spaced nodes per slab.
+
+    Returns (points, cells, region of each cell as an index into QUARTER_REGIONS).
+    """
     options = {**_GMSH_BLOCK_OPTIONS, "Mesh.MeshSizeMin": size, "Mesh.MeshSizeMax": size}
+    ends = np.concatenate([[-length], planes, [0.0]])
     with gmsh_model("aquarom_block_quarter", options) as gmsh:
-        gmsh.model.occ.addBox(-length, 0.0, 0.0, length, width / 2, height / 2)
+        slabs = [(3, gmsh.model.occ.addBox(rear, 0.0, 0.0, front - rear, width / 2, height / 2))
+                 for rear, front in zip(ends[:-1], ends[1:])]
+        if len(slabs) > 1:
+            gmsh.model.occ.fragment(slabs[:1], slabs[1:])
         gmsh.model.occ.synchronize()
         margin = 1e-6 * length
         for z_edge in (0.0, height / 2):
@@ -82,13 +105,30 @@ def _quarter_block(size: float, axis_nodes: int, length: float, width: float, he
                 -length - margin, -margin, z_edge - margin, margin, margin, z_edge + margin, 1
             )
             for _, tag in edges:
-                gmsh.model.mesh.setTransfiniteCurve(tag, axis_nodes)
+                low, high = gmsh.model.getBoundingBox(1, tag)[0], gmsh.model.getBoundingBox(1, tag)[3]
+                gmsh.model.mesh.setTransfiniteCurve(tag, max(1, int(round((high - low) / size))) + 1)
+        groups = {name: [] for name in QUARTER_REGIONS}
+        head_rear, (muscle_rear, muscle_front) = -head_fraction * length, (b * length for b in muscle_range)
+        for _, volume in gmsh.model.getEntities(3):
+            box = gmsh.model.getBoundingBox(3, volume)
+            centre = 0.5 * (box[0] + box[3])
+            name = ("head" if centre >= head_rear else
+                    "muscle" if muscle_rear < centre < muscle_front else "body")
+            groups[name].append(volume)
+        for name, volumes in groups.items():
+            if volumes:
+                gmsh.model.setPhysicalName(3, gmsh.model.addPhysicalGroup(3, volumes), name)
         gmsh.model.mesh.generate(3)
         node_tags, coordinates, _ = gmsh.model.mesh.getNodes()
-        _, element_nodes = gmsh.model.mesh.getElementsByType(GMSH_TETRAHEDRON)
-    return points_and_cells_from_gmsh(node_tags, coordinates, element_nodes)
-
-
+        element_nodes, regions = [], []
+        for dim, group in gmsh.model.getPhysicalGroups(3):
+            region = QUARTER_REGIONS.index(gmsh.model.getPhysicalName(dim, group))
+            for volume in gmsh.model.getEntitiesForPhysicalGroup(dim, group):
+                _, nodes = gmsh.model.mesh.getElementsByType(GMSH_TETRAHEDRON, volume)
+                element_nodes.append(nodes)
+                regions.append(np.full(len(nodes) // 4, region, dtype=np.int64))
+    points, cells = points_and_cells_from_gmsh(node_tags, coordinates, np.concatenate(element_nodes))
+    return points, cells, np.concatenate(regions)
 
 
 def _mirrored(points: np.ndarray, cells: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
@@ -107,39 +147,64 @@ def _mirrored(points: np.ndarray, cells: np.ndarray, axis: int) -> tuple[np.ndar
     return np.vstack([points, mirror_points]), np.vstack([cells, mirror_cells])
 
 
-def _generate_block(level: int, length: float, width: float, height: float):
-    """(points, cells) of the block: the gmsh quarter mirrored in y, then in z."""
+def _generate_block(level: int, length: float, width: float, height: float, head_fraction: float = 0.35,
+                    muscle_range=(-0.95, -0.35)):
+    """(points, cells, regions) of the block: the gmsh quarter mirrored in y, then in z; ``regions``
+    maps "head", "left_muscle" (y > 0) and "right_muscle" (y < 0) to sorted cell indices."""
     size = block_mesh_size(level, length, width, height)
-    axis_nodes = block_axis_segments(level, length, width, height) + 1
-    points, cells = _quarter_block(size, axis_nodes, length, width, height)
+    planes = region_planes(length, head_fraction, muscle_range)
+    points, cells, quarter_regions = _quarter_block(size, length, width, height, planes, head_fraction, muscle_range)
     lower = np.array([-length, 0.0, 0.0])
     upper = np.array([0.0, width / 2, height / 2])
-    points = _snap_to_box(points, lower, upper)
+    points = _snap_to_box(points, lower, upper, planes)
     cells = oriented_positively(points, cells)
+    n_quarter = len(cells)
     points, cells = _mirrored(points, cells, axis=1)
     points, cells = _mirrored(points, cells, axis=2)
-    return points, cells
+    region = np.tile(quarter_regions, 4)
+    left_half = np.tile(np.arange(2 * n_quarter) < n_quarter, 2)
+    muscle = region == QUARTER_REGIONS.index("muscle")
+    regions = {"head": np.flatnonzero(region == QUARTER_REGIONS.index("head")),
+               "left_muscle": np.flatnonzero(muscle & left_half),
+               "right_muscle": np.flatnonzero(muscle & ~left_half)}
+    return points, cells, regions
 
 
-def block_cache_path(level: int, length: float, width: float, height: float, cache_dir: Path | None = None) -> Path:
+def block_cache_path(level: int, length: float, width: float, height: float, cache_dir: Path | None = None,
+                     head_fraction: float = 0.35, muscle_range=(-0.95, -0.35)) -> Path:
     """Where :func:`block_mesh` caches a level (whether or not it exists yet)."""
-    return _block_cache_path(cache_dir or mesh_cache(), level, length, width, height)
+    return _block_cache_path(cache_dir or mesh_cache(), level, length, width, height, head_fraction, muscle_range)
 
 
-def _block_cache_path(cache_dir: Path, level: int, length: float, width: float, height: float):
+def _block_cache_path(cache_dir: Path, level: int, length: float, width: float, height: float,
+                      head_fraction: float, muscle_range):
+    rear, front = muscle_range
     name = (
         f"block_level{level}_L{length:.9g}_W{width:.9g}_H{height:.9g}"
+        f"_head{head_fraction:.9g}_muscles{rear:.9g}_{front:.9g}"
         f"_gmsh{gmsh_version()}_recipe{BLOCK_MESH_RECIPE}.npz"
     )
     return cache_dir / name
 
 
-def _load_cached_block(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(points, cells) from a cache file; ValueError if it is not a valid mesh."""
+_REGION_KEY = "region_"
+"""Prefix of the cache archive's region arrays (cell indices)."""
+
+
+def _save_block(mesh, path: Path) -> None:
+    points, cells, regions = mesh
+    write_npz_atomic(path, {"points": points, "cells": cells,
+                            **{_REGION_KEY + name: indices for name, indices in regions.items()}})
+
+
+def _load_cached_block(path: Path):
+    """(points, cells, regions) from a cache file; ValueError if it is not a valid tagged mesh."""
     try:
         with np.load(path, allow_pickle=False) as data:
             points = np.array(data["points"], dtype=float)
             cells = np.array(data["cells"], dtype=np.int64)
+            regions = {key[len(_REGION_KEY):]: np.array(data[key], dtype=np.int64)
+                       for key in data.files if key.startswith(_REGION_KEY)}
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as error:
         raise ValueError(f"not a mesh archive ({error})") from None
     valid = (
@@ -151,10 +216,13 @@ def _load_cached_block(path: Path) -> tuple[np.ndarray, np.ndarray]:
         and np.all(np.isfinite(points))
         and cells.min() >= 0
         and cells.max() < len(points)
+        and set(regions) == {"head", "left_muscle", "right_muscle"}
+        and all(indices.ndim == 1 and len(indices) > 0 and indices.min() >= 0 and indices.max() < len(cells)
+                for indices in regions.values())
     )
     if not valid:
-        raise ValueError("not a valid tetrahedral mesh")
-    return points, cells
+        raise ValueError("not a valid tetrahedral mesh with its regions")
+    return points, cells, regions
 
 
 def block_mesh(
@@ -163,26 +231,32 @@ def block_mesh(
     width: float = 0.04,
     height: float = 0.10,
     cache_dir: Path | None = None,
+    head_fraction: float = 0.35,
+    muscle_range=(-0.95, -0.35),
 ) -> FishMesh:
-    """The box x ∈ [-L, 0], y ∈ [-W/2, W/2], z ∈ [-H/2, H/2] (m) meshed with linear tetrahedra.
+    """The box x ∈ [-L, 0], y ∈ [-W/2, W/2], z ∈ [-H/2, H/2] (m) meshed with linear tetrahedra that
+    conform to the regions (SPEC §3): the head x ≥ -head_fraction L and the muscles
+    muscle_range[0] L < x < muscle_range[1] L, left (y > 0) and right (y < 0), are tagged cell sets
+    (``FishMesh.regions``) whose interfaces are faces of the mesh.
 
-    The mesh is mirror-symmetric about y = 0 and z = 0 and has round(L/h) + 1 equally spaced
-    nodes on the body axis y = z = 0 from x = -L to x = 0 (h: `block_mesh_size`). The result is
-    cached in `cache_dir` (default `meshes/cache` of the repository) and read from there on
-    later calls (checksummed, see `persistence.get_or_compute`); a damaged cache file is regenerated,
-    an unwritable cache only warned about.
+    The mesh is mirror-symmetric about y = 0 and z = 0 and has nodes on the body axis y = z = 0
+    from x = -L to x = 0, equally spaced between the interface planes (h: `block_mesh_size`). The
+    result is cached in `cache_dir` (default `meshes/cache` of the repository) and read from there
+    on later calls (checksummed, see `persistence.get_or_compute`); a damaged cache file is
+    regenerated, an unwritable cache only warned about.
     """
     _check_block_input(level, length, width, height)
+    check_region_fractions(f"block level {level}", head_fraction, muscle_range)
     level = int(level)
+    head_fraction, muscle_range = float(head_fraction), tuple(float(bound) for bound in muscle_range)
     cache_dir = mesh_cache() if cache_dir is None else Path(cache_dir)
-    cache_path = _block_cache_path(cache_dir, level, length, width, height)
+    cache_path = _block_cache_path(cache_dir, level, length, width, height, head_fraction, muscle_range)
 
     def not_cached(error: OSError) -> None:
         warnings.warn(f"block mesh not cached in {cache_dir}: {error}", stacklevel=4)
 
-    points, cells = get_or_compute(
-        cache_path, lambda: _generate_block(level, length, width, height),
-        save=lambda mesh, path: write_npz_atomic(path, {"points": mesh[0], "cells": mesh[1]}),
-        load=_load_cached_block, label="mesh cache", on_store_error=not_cached)
+    points, cells, regions = get_or_compute(
+        cache_path, lambda: _generate_block(level, length, width, height, head_fraction, muscle_range),
+        save=_save_block, load=_load_cached_block, label="mesh cache", on_store_error=not_cached)
     source = f"block level {level} (L={length:g} m, W={width:g} m, H={height:g} m)"
-    return FishMesh(points=points, cells=cells, source=source)
+    return FishMesh(points=points, cells=cells, source=source, regions=regions)

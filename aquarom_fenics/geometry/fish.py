@@ -118,7 +118,8 @@ class Fish:
 def load_mesh(scene: Scene) -> FishMesh:
     if scene.mesh_file is not None:
         return read_mesh(scene.mesh_file, scale=scene.mesh.scale, translate=scene.mesh.translate)
-    return block_mesh(scene.mesh.level, scene.mesh.length, scene.mesh.width, scene.mesh.height)
+    return block_mesh(scene.mesh.level, scene.mesh.length, scene.mesh.width, scene.mesh.height,
+                      head_fraction=scene.regions.head_fraction, muscle_range=scene.regions.muscle_range)
 
 
 def load_fish(scene: Scene, comm: MPI.Comm = MPI.COMM_WORLD) -> Fish:

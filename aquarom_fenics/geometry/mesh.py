@@ -6,18 +6,37 @@ The reference block is generated in ``block.py``, mesh files are read in ``mesh_
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+
+from aquarom_fenics.errors import InputError
 
 
 @dataclass(frozen=True)
 class FishMesh:
-    """A linear tetrahedral mesh."""
+    """A linear tetrahedral mesh and its tagged regions."""
 
     points: np.ndarray  # (n_nodes, 3) float64, metres
     cells: np.ndarray  # (n_cells, 4) int64, positively oriented tetrahedra
     source: str  # where it came from, e.g. "block level 1" or the file path
+    regions: dict[str, np.ndarray] = field(default_factory=dict)
+    """Tagged cell sets by name (sorted cell indices), e.g. "head", "left_muscle", "right_muscle";
+    empty for a mesh without tags."""
+
+
+def check_region_fractions(source: str, head_fraction: float, muscle_range) -> None:
+    """InputError unless 0 < head_fraction < 1 and -1 ≤ rear < front ≤ 0 (units of L from the head)."""
+    if not 0.0 < head_fraction < 1.0:
+        raise InputError(
+            f"mesh {source}: head_fraction = {head_fraction!r}; it must lie between 0 and 1"
+        )
+    rear, front = muscle_range
+    if not -1.0 <= rear < front <= 0.0:
+        raise InputError(
+            f"mesh {source}: muscle_range = {tuple(muscle_range)!r}; it must be (rear, front) "
+            "with -1 <= rear < front <= 0 (units of L from the head face)"
+        )
 
 
 TETRAHEDRON_EDGES = np.array([[2, 3], [1, 3], [1, 2], [0, 3], [0, 2], [0, 1]])

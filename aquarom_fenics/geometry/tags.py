@@ -1,4 +1,4 @@
-"""Regions and special nodes of the fish (SPEC §3), found from coordinates.
+"""Regions and special nodes of the fish (SPEC §3): the mesh's tagged regions, nodes found from coordinates.
 
 Every comparison uses a tolerance relative to the mesh size (`mesh_tolerance`), never exact
 float equality. Positions are taken relative to the bounding box (`FishBox.relative`), so that
@@ -7,12 +7,16 @@ the reference fish has x ∈ [-L, 0], y ∈ [-W/2, W/2], z ∈ [-H/2, H/2] whate
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.geometry.mesh import FishMesh, LagrangeNodes, lagrange_nodes, mean_edge_length
+from aquarom_fenics.geometry.mesh import (FishMesh, LagrangeNodes, check_region_fractions, lagrange_nodes,
+                                           mean_edge_length)
+
+log = logging.getLogger("aquarom")
 
 RELATIVE_TOLERANCE = 1e-4
 """Tolerance as a fraction of the mean edge length: far below any node spacing, far above the
@@ -63,10 +67,10 @@ class FishTags:
 
     box: FishBox
     tolerance: float  # metres
-    head_cells: np.ndarray  # cell indices, centroid x_rel >= -head_fraction L
+    head_cells: np.ndarray  # cell indices of the tagged head
     head_nodes: np.ndarray  # nodes of head cells
-    left_muscle_cells: np.ndarray  # muscle_range[0] L < x_c < muscle_range[1] L and y_c > 0
-    right_muscle_cells: np.ndarray  # same, y_c < 0
+    left_muscle_cells: np.ndarray  # tagged left muscle (y > 0)
+    right_muscle_cells: np.ndarray  # tagged right muscle (y < 0)
     skin_facets: np.ndarray  # (n_facets, 3) exterior boundary triangles, normals pointing out
     skin_nodes: np.ndarray
     spine_nodes: np.ndarray  # nodes with y_rel = z_rel = 0, sorted tail -> head
@@ -111,19 +115,6 @@ def skin_facets(cells) -> np.ndarray:
         np.sort(faces, axis=1), axis=0, return_index=True, return_counts=True
     )
     return faces[np.sort(first[counts == 1])]
-
-
-def _check_fractions(source: str, head_fraction: float, muscle_range) -> None:
-    if not 0.0 < head_fraction < 1.0:
-        raise InputError(
-            f"mesh {source}: head_fraction = {head_fraction!r}; it must lie between 0 and 1"
-        )
-    rear, front = muscle_range
-    if not -1.0 <= rear < front <= 0.0:
-        raise InputError(
-            f"mesh {source}: muscle_range = {tuple(muscle_range)!r}; it must be (rear, front) "
-            "with -1 <= rear < front <= 0 (units of L from the head face)"
-        )
 
 
 def _spine(mesh: FishMesh, nodes: LagrangeNodes, box: FishBox, tolerance: float) -> np.ndarray:
@@ -178,31 +169,66 @@ def _nonempty(mesh: FishMesh, name: str, cells: np.ndarray, rule: str) -> np.nda
     return cells
 
 
+TAGGED_REGIONS = ("head", "left_muscle", "right_muscle")
+"""The regions a tagged mesh names (``FishMesh.regions``): cell sets the mesh conforms to."""
+
+_CENTROID_WARNED: set[str] = set()
+"""Meshes already warned about (a study loads one mesh many times)."""
+
+
+def tagged_regions(mesh: FishMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(head, left muscle, right muscle) cells of a tagged mesh, checked; InputError names what is missing."""
+    missing = [name for name in TAGGED_REGIONS if len(mesh.regions.get(name, ())) == 0]
+    if missing:
+        raise InputError(f"mesh {mesh.source}: no cells tagged {', '.join(missing)}; a tagged mesh names the "
+                         f"regions {', '.join(TAGGED_REGIONS)}")
+    head, left, right = (np.unique(np.asarray(mesh.regions[name], dtype=np.int64)) for name in TAGGED_REGIONS)
+    for name, cells in zip(TAGGED_REGIONS, (head, left, right)):
+        if cells.min() < 0 or cells.max() >= len(mesh.cells):
+            raise InputError(f"mesh {mesh.source}: region {name} names cells outside the mesh")
+    if len(np.intersect1d(head, np.union1d(left, right))) or len(np.intersect1d(left, right)):
+        raise InputError(f"mesh {mesh.source}: the regions {', '.join(TAGGED_REGIONS)} overlap")
+    return head, left, right
+
+
+def centroid_regions(mesh: FishMesh, box: FishBox, tolerance: float, head_fraction, muscle_range):
+    """(head, left muscle, right muscle) cells chosen by cell centroid: the fallback for a mesh
+    without tags, warned about once per mesh (a mesh that does not conform to the regions has a
+    zig-zag interface that moves with the mesh, SPEC §3)."""
+    if mesh.source not in _CENTROID_WARNED:
+        _CENTROID_WARNED.add(mesh.source)
+        log.warning("mesh %s has no tagged regions (%s): head and muscles chosen by cell centroid; their "
+                    "interfaces then zig-zag through the cells and move with the mesh, so tag the regions "
+                    "(gmsh physical groups) for results that converge", mesh.source, ", ".join(TAGGED_REGIONS))
+    centroids = cell_centroids(mesh.points, mesh.cells)
+    head = _nonempty(mesh, "head", np.flatnonzero(head_cell_mask(centroids, box, tolerance, head_fraction)),
+                     f"x >= {-head_fraction:g} L")
+    left_mask, right_mask = muscle_cell_masks(centroids, box, tolerance, muscle_range)
+    rule = f"{muscle_range[0]:g} L < x < {muscle_range[1]:g} L and y"
+    left = _nonempty(mesh, "left muscle", np.flatnonzero(left_mask), rule + " > 0")
+    right = _nonempty(mesh, "right muscle", np.flatnonzero(right_mask), rule + " < 0")
+    return head, left, right
+
+
 def tag_fish(mesh: FishMesh, head_fraction=0.35, muscle_range=(-0.95, -0.35),
              nodes: LagrangeNodes | None = None) -> FishTags:
     """All tags of SPEC §3 for a fish mesh (head, muscles, skin, spine, tail, dorsal nodes).
 
-    Node tags refer to ``nodes`` (default: the vertices, i.e. linear elements).
+    Head and muscles are the mesh's tagged regions (``FishMesh.regions``); a mesh without tags
+    falls back to cell centroids and the fractions, with a warning. Node tags refer to ``nodes``
+    (default: the vertices, i.e. linear elements).
     """
-    _check_fractions(mesh.source, head_fraction, muscle_range)
+    check_region_fractions(mesh.source, head_fraction, muscle_range)
     nodes = nodes or lagrange_nodes(mesh, 1)
     box = FishBox.of(mesh.points)
     tolerance = mesh_tolerance(mesh.points, mesh.cells)
     spine_nodes = _spine(mesh, nodes, box, tolerance)
     spine_segments = np.column_stack([spine_nodes[:-1], spine_nodes[1:]])
-    centroids = cell_centroids(mesh.points, mesh.cells)
-    head_cells = _nonempty(
-        mesh,
-        "head",
-        np.flatnonzero(head_cell_mask(centroids, box, tolerance, head_fraction)),
-        f"x >= {-head_fraction:g} L",
-    )
-    left_mask, right_mask = muscle_cell_masks(centroids, box, tolerance, muscle_range)
-    rule = f"{muscle_range[0]:g} L < x < {muscle_range[1]:g} L and y"
-    left_muscle_cells = _nonempty(mesh, "left muscle", np.flatnonzero(left_mask), rule + " > 0")
-    right_muscle_cells = _nonempty(
-        mesh, "right muscle", np.flatnonzero(right_mask), rule + " < 0"
-    )
+    if mesh.regions:
+        head_cells, left_muscle_cells, right_muscle_cells = tagged_regions(mesh)
+    else:
+        head_cells, left_muscle_cells, right_muscle_cells = centroid_regions(mesh, box, tolerance, head_fraction,
+                                                                             muscle_range)
     facets = skin_facets(mesh.cells)
     skin_nodes = nodes.facet_nodes(facets)
     return FishTags(

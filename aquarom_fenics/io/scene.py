@@ -20,7 +20,7 @@ from typing import Any
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.executors import ClusterSettings, cluster_from_table
-from aquarom_fenics.io.paths import shipped_scenes
+from aquarom_fenics.io.paths import shipped_meshes, shipped_scenes
 from aquarom_fenics.io.scene_sections import (SECTIONS, ActuationSection, CooptimizationSection, FluidSection,
                                               LinearConstraint, MaterialSection, MeshSection, OptimizerSection,
                                               OutputSection, ReductionSection, RegionsSection, ShapeSpec,
@@ -106,8 +106,9 @@ class Scene:
 
     @property
     def hash(self) -> str:
-        """SHA-256 (16 hex digits) of the resolved scene and of the mesh file's content (a key added
-        later is left out at the value scenes computed with before it: :func:`legacy_values`)."""
+        """SHA-256 (16 hex digits) of the resolved scene and of the mesh file's content, or of the
+        block's meshing recipe ``meshes/block.toml`` (a key added later is left out at the value
+        scenes computed with before it: :func:`legacy_values`)."""
         return self._digest(self._hashed_dict())
 
     @property
@@ -128,7 +129,9 @@ class Scene:
 
     def _digest(self, data: dict) -> str:
         digest = hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode())
-        if self.mesh_file is not None and self.mesh_file.exists():
+        if self.mesh_file is None:
+            digest.update((shipped_meshes() / "block.toml").read_bytes())  # the block's meshing recipe
+        elif self.mesh_file.exists():
             digest.update(self.mesh_file.read_bytes())
         return digest.hexdigest()[:16]
 

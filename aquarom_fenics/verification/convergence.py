@@ -6,14 +6,19 @@ muscles at their peak (a_left = A, a_right = -A, head clamped, fully nonlinear) 
 station's static compliance under a unit x-force on it (head clamped, B_0 K_0⁻¹ B_0ᵀ: the
 quantity a point force has no mesh limit of, SPEC §5).
 
-The reference of each quantity is Richardson's extrapolation of the three finest cases of one
+The reference of each quantity is a Richardson extrapolation of the three finest cases of one
 series (one element degree), with the mesh size h = (cells)^(-1/3) (levels are not refined by
-a constant ratio):
+a constant ratio), made safe in the manner of Roache's grid-convergence index:
 
     f_i = f* + C h_i^p,   i = 1, 2, 3 (coarse → fine),
 
-solved for the observed order p, then f* = f_3 - C h_3^p. The estimated error of f* is
-|f* - f_3|, the correction itself (conservative: the extrapolation is usually better than that).
+is solved for the observed order p_obs; the extrapolation uses p = min(p_obs, p_formal), never an
+order above the element's formal order for that quantity (FORMAL_ORDER), from the two finest cases:
+
+    f* = f_3 + (f_3 - f_2)/(r^p - 1),   r = h_2/h_3,
+
+and its error bar is F_s |f* - f_3| with the safety factor F_s = 1.25, or F_s = 3 with p = p_formal
+when no order is observed (differences changing sign, or no order in ORDER_RANGE fits).
 """
 from __future__ import annotations
 
@@ -95,21 +100,24 @@ def tail_compliances(model: FullOrderModel) -> dict[str, float]:
     return compliances
 
 
-def richardson(cells, values) -> dict:
-    """Reference value, observed order and estimated error from the three finest cases.
+SAFETY_FACTOR = {"observed": 1.25, "formal": 3.0}
+"""F_s of the error bar: with an observed order (three cases in the asymptotic range), without one."""
 
-    ``cells`` and ``values`` per case of one series; h = cells^(-1/3). The order p solves
-    (f_1 - f_2)/(f_2 - f_3) = (h_1^p - h_2^p)/(h_2^p - h_3^p) (bisection in ORDER_RANGE); when the
-    differences change sign or no order in range fits, the finest value is returned with the
-    last difference as its error and order None.
-    """
-    order = np.argsort(cells)[-3:]
-    h = np.asarray(cells, dtype=float)[order] ** (-1.0 / 3.0)
-    f = np.asarray(values, dtype=float)[order]
-    fallback = {"value": float(f[-1]), "observed_order": None, "estimated_error": float(abs(f[-1] - f[-2])),
-                "series_cells": [int(c) for c in np.asarray(cells)[order]]}
-    if len(f) < 3 or (f[0] - f[1]) * (f[1] - f[2]) <= 0.0:
-        return fallback
+
+def formal_orders(degree: int) -> dict[str, float]:
+    """Formal convergence order in h of each quantity for Lagrange elements of ``degree`` k: k + 1 for
+    displacement values (distance, tail amplitude, static deflection), 2k for the eigenvalue-like and
+    energy-like ones (first frequency, compliance f^T K^-1 f)."""
+    displacement, energy = degree + 1.0, 2.0 * degree
+    return {"distance": displacement, "tail_amplitude": displacement, "static_tail_deflection": displacement,
+            "first_frequency": energy, "tail_compliance": energy}
+
+
+def observed_order(h, f) -> float | None:
+    """p solving (f_1 - f_2)/(f_2 - f_3) = (h_1^p - h_2^p)/(h_2^p - h_3^p) by bisection in ORDER_RANGE;
+    None when the differences change sign or vanish, or no order in range fits."""
+    if (f[0] - f[1]) * (f[1] - f[2]) <= 0.0:
+        return None
     ratio = (f[0] - f[1]) / (f[1] - f[2])
 
     def mismatch(p):
@@ -117,18 +125,36 @@ def richardson(cells, values) -> dict:
 
     low, high = ORDER_RANGE
     if mismatch(low) * mismatch(high) > 0.0:
-        return fallback
+        return None
     for _ in range(200):
         middle = 0.5 * (low + high)
         if mismatch(low) * mismatch(middle) <= 0.0:
             high = middle
         else:
             low = middle
-    p = 0.5 * (low + high)
-    constant = (f[1] - f[2]) / (h[1] ** p - h[2] ** p)
-    value = f[2] - constant * h[2] ** p
-    return {"value": float(value), "observed_order": float(p), "estimated_error": float(abs(value - f[2])),
-            "series_cells": fallback["series_cells"]}
+    return 0.5 * (low + high)
+
+
+def richardson(cells, values, formal_order: float) -> dict:
+    """Reference value, observed order, order used and error bar from the three finest cases.
+
+    ``cells`` and ``values`` per case of one series; h = cells^(-1/3). The order used is
+    min(observed, ``formal_order``), or ``formal_order`` when none is observed; the error bar is
+    F_s × |f* - f_finest| (SAFETY_FACTOR, see the module's docstring).
+    """
+    order = np.argsort(cells)[-3:]
+    h = np.asarray(cells, dtype=float)[order] ** (-1.0 / 3.0)
+    f = np.asarray(values, dtype=float)[order]
+    series_cells = [int(c) for c in np.asarray(cells)[order]]
+    if len(f) < 2:
+        raise ValueError("a convergence series needs at least two cases")
+    observed = observed_order(h, f) if len(f) >= 3 else None
+    used = formal_order if observed is None else min(observed, formal_order)
+    safety = SAFETY_FACTOR["formal" if observed is None else "observed"]
+    correction = (f[-1] - f[-2]) / ((h[-2] / h[-1]) ** used - 1.0)
+    return {"value": float(f[-1] + correction), "observed_order": None if observed is None else float(observed),
+            "order_used": float(used), "formal_order": float(formal_order), "safety_factor": safety,
+            "estimated_error": float(safety * abs(correction)), "series_cells": series_cells}
 
 
 def reference_series(cases: list[MeshCase]) -> list[MeshCase]:
@@ -143,8 +169,9 @@ def reference_series(cases: list[MeshCase]) -> list[MeshCase]:
 def mesh_convergence(cases: list[MeshCase], tolerance: float = DEFAULT_TOLERANCE) -> dict:
     """``reference`` per quantity, ``rows`` per case with the relative distance error, ``default``."""
     series = reference_series(cases)
-    reference = {name: richardson([case.cells for case in series], [getattr(case, name) for case in series])
-                 | {"degree": series[0].degree} for name in QUANTITIES}
+    formal = formal_orders(series[0].degree)
+    reference = {name: richardson([case.cells for case in series], [getattr(case, name) for case in series],
+                                  formal[name]) | {"degree": series[0].degree} for name in QUANTITIES}
     rows = []
     for case in sorted(cases, key=lambda case: (case.degree, case.level)):
         row = asdict(case)

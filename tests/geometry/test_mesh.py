@@ -11,7 +11,7 @@ from aquarom_fenics.geometry import block as block_module
 from aquarom_fenics.geometry import gmsh_session
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.io.paths import shipped_meshes
-from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS, block_axis_segments, block_mesh
+from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS, block_mesh, region_planes
 from aquarom_fenics.geometry.mesh import FishMesh, cell_quality, signed_cell_volumes
 from aquarom_fenics.geometry.mesh_files import read_mesh
 from aquarom_fenics.geometry.tags import cell_centroids, head_cell_mask, muscle_cell_masks, tag_fish
@@ -145,15 +145,73 @@ def test_block_cells_are_positive_and_fill_the_box(coarse):
     assert len(np.unique(coarse.cells)) == len(coarse.points)
 
 
-def test_spine_nodes_are_equally_spaced_from_tail_to_head(coarse, coarse_tags):
+def test_spine_nodes_are_equally_spaced_between_the_interface_planes(coarse, coarse_tags):
     spine = coarse.points[coarse_tags.spine_nodes]
-    assert len(spine) == block_axis_segments(1, L, W, H) + 1
     np.testing.assert_array_equal(spine[:, 1:], 0.0)
-    np.testing.assert_allclose(np.diff(spine[:, 0]), L / (len(spine) - 1), rtol=1e-12)
+    ends = np.concatenate([[-L], region_planes(L, 0.35, (-0.95, -0.35)), [0.0]])
+    assert np.isin(ends, spine[:, 0]).all()           # a node where each interface plane cuts the axis
+    for rear, front in zip(ends[:-1], ends[1:]):
+        inside = spine[(spine[:, 0] >= rear) & (spine[:, 0] <= front), 0]
+        assert len(inside) >= 2
+        np.testing.assert_allclose(np.diff(inside), (front - rear) / (len(inside) - 1), rtol=1e-9)
     assert coarse.points[coarse_tags.tail_node, 0] == -L
     assert coarse.points[coarse_tags.head_spine_node, 0] == 0.0
     np.testing.assert_array_equal(coarse_tags.spine_segments[:, 0], coarse_tags.spine_nodes[:-1])
     np.testing.assert_array_equal(coarse_tags.spine_segments[:, 1], coarse_tags.spine_nodes[1:])
+
+
+@pytest.mark.parametrize("level", sorted(LEVEL_TARGET_CELLS))
+def test_regions_are_tagged_cells_that_fill_their_boxes_exactly(level, cache_dir):
+    """SPEC §3: the head (x ≥ -0.35 L) and the muscles (-0.95 L < x < -0.35 L, either side of
+    y = 0) are tagged cell sets of a mesh that conforms to them: their volumes are the boxes'
+    volumes to rounding, and no cell has vertices on both sides of an interface."""
+    mesh = block_mesh(level, cache_dir=cache_dir)
+    tags = tag_fish(mesh)
+    volumes = signed_cell_volumes(mesh.points, mesh.cells)
+    assert volumes[tags.head_cells].sum() == pytest.approx(0.35 * L * W * H, rel=1e-12)
+    for cells in (tags.left_muscle_cells, tags.right_muscle_cells):
+        assert volumes[cells].sum() == pytest.approx(0.6 * L * (W / 2) * H, rel=1e-12)
+    x, y = mesh.points[mesh.cells, 0], mesh.points[mesh.cells, 1]      # (cells, 4) vertex coordinates
+    tolerance = 1e-12 * L
+    for plane in region_planes(L, 0.35, (-0.95, -0.35)):
+        behind, ahead = (x < plane - tolerance).any(axis=1), (x > plane + tolerance).any(axis=1)
+        assert not np.any(behind & ahead), f"cells straddle the plane x = {plane}"
+    assert not np.any((y < -tolerance).any(axis=1) & (y > tolerance).any(axis=1))
+    head = np.zeros(len(mesh.cells), bool)
+    head[tags.head_cells] = True
+    assert np.all(x[head] >= -0.35 * L - tolerance) and np.all(x[~head].min(axis=1) < -0.35 * L)
+    for cells, side in ((tags.left_muscle_cells, 1.0), (tags.right_muscle_cells, -1.0)):
+        assert np.all(x[cells] >= -0.95 * L - tolerance) and np.all(x[cells] <= -0.35 * L + tolerance)
+        assert np.all(side * y[cells] >= -tolerance)
+    outside = np.setdiff1d(np.arange(len(mesh.cells)),
+                           np.concatenate([tags.head_cells, tags.left_muscle_cells, tags.right_muscle_cells]))
+    in_muscle_slab = (x[outside] > -0.95 * L + tolerance).any(axis=1) & (x[outside] < -0.35 * L - tolerance).any(axis=1)
+    assert not np.any(in_muscle_slab)                   # every cell of the muscle slab belongs to a muscle
+
+
+def test_regions_follow_the_scenes_fractions(tmp_path):
+    mesh = block_mesh(1, cache_dir=tmp_path, head_fraction=0.3, muscle_range=(-0.9, -0.4))
+    volumes = signed_cell_volumes(mesh.points, mesh.cells)
+    assert volumes[mesh.regions["head"]].sum() == pytest.approx(0.3 * L * W * H, rel=1e-12)
+    assert volumes[mesh.regions["left_muscle"]].sum() == pytest.approx(0.5 * L * (W / 2) * H, rel=1e-12)
+    assert len(list(tmp_path.glob("*head0.3_muscles-0.9_-0.4*.npz"))) == 1
+
+
+def test_an_untagged_mesh_falls_back_to_centroids_with_a_warning(coarse, coarse_tags, caplog):
+    untagged = FishMesh(points=coarse.points, cells=coarse.cells, source="untagged block")
+    with caplog.at_level("WARNING", logger="aquarom"):
+        tags = tag_fish(untagged)
+    assert "untagged block has no tagged regions" in caplog.text and "cell centroid" in caplog.text
+    # on a mesh that conforms to the regions, the centroid rule finds the tagged cells
+    np.testing.assert_array_equal(tags.head_cells, coarse_tags.head_cells)
+    np.testing.assert_array_equal(tags.left_muscle_cells, coarse_tags.left_muscle_cells)
+
+
+def test_a_mesh_missing_a_tagged_region_is_an_input_error(coarse):
+    partial = FishMesh(points=coarse.points, cells=coarse.cells, source="partial",
+                       regions={"head": coarse.regions["head"]})
+    with pytest.raises(InputError, match="partial: no cells tagged left_muscle, right_muscle"):
+        tag_fish(partial)
 
 
 def test_every_segment_has_a_dorsal_node_above_its_rear_node(coarse, coarse_tags):
@@ -329,7 +387,7 @@ def test_msh_round_trip_keeps_tetrahedra_and_their_nodes_only(tmp_path, coarse, 
     np.testing.assert_array_equal(fish.cells, coarse.cells)
 
 
-def test_inp_round_trip_with_sparse_labels_scale_and_translate(tmp_path, coarse):
+def test_inp_round_trip_with_sparse_labels_scale_and_translate(tmp_path, coarse, coarse_tags):
     path = tmp_path / "fish.inp"
     node_labels = 7 + 3 * np.arange(len(coarse.points))
     element_labels = 1000 + 2 * np.arange(len(coarse.cells))
@@ -341,7 +399,8 @@ def test_inp_round_trip_with_sparse_labels_scale_and_translate(tmp_path, coarse)
     assert np.all(signed_cell_volumes(fish.points, fish.cells) > 0.0)
     np.testing.assert_array_equal(np.sort(fish.cells, axis=1), np.sort(coarse.cells, axis=1))
     tags = tag_fish(fish)
-    assert len(tags.spine_nodes) == block_axis_segments(1, L, W, H) + 1
+    np.testing.assert_allclose(fish.points[tags.spine_nodes] - [1.0, 2.0, 3.0],
+                               coarse.points[coarse_tags.spine_nodes], atol=1e-14)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -417,10 +476,11 @@ def test_mesh_without_nodes_on_the_axis_is_an_input_error(tmp_path):
 
 
 def test_empty_regions_are_input_errors(coarse):
+    untagged = FishMesh(points=coarse.points, cells=coarse.cells, source="untagged")
     with pytest.raises(InputError, match="the head is empty"):
-        tag_fish(coarse, head_fraction=0.001)
+        tag_fish(untagged, head_fraction=0.001)
     with pytest.raises(InputError, match="the left muscle is empty"):
-        tag_fish(coarse, muscle_range=(-1.0, -0.995))
+        tag_fish(untagged, muscle_range=(-1.0, -0.995))
     with pytest.raises(InputError, match="head_fraction = 1.5"):
         tag_fish(coarse, head_fraction=1.5)
 

@@ -206,7 +206,9 @@ def study_stations(runner: Runner, settings: Settings) -> dict:
     if len(completed) >= 3:
         # richardson's h = cells^(-1/3): pass N_s³ so that h is the station spacing in units of L
         spacing_cells = [row["stations"] ** 3 for row in completed]
-        reference = {name: richardson(spacing_cells, [row[name] for row in completed]) for name in QUANTITIES}
+        # the spine's line integral: the trapezoid rule is second order in L/N_s, the rear-station rule first
+        formal = 2.0 if base_scene(settings).fluid.spine_rule == "trapezoid" else 1.0
+        reference = {name: richardson(spacing_cells, [row[name] for row in completed], formal) for name in QUANTITIES}
         for row in rows:
             if row["status"] == "completed":
                 row["distance_error"] = row["distance"] / reference["distance"]["value"] - 1.0

@@ -38,7 +38,7 @@ FULL = Settings(quick=False, levels=(1, 2, 3), stiffnesses=(1.2e4, 2.5e4, 4e4, 6
                 finer_convergence_steps=(("FOM", (0.00125,)), ("ROM", (0.00125, 0.000625, 0.0003125)),
                                          ("PROM", (0.00125, 0.000625, 0.0003125))),
                 convergence_mesh=None, mpi_levels=(2, 3), stress_level=3, fine_prom_level=5, time_limit=1800.0,
-                mesh_series=((1, (1, 2, 3, 4, 5)), (2, (1, 2, 3, 4))))
+                mesh_series=((1, (1, 2, 3, 4, 5)), (2, (1, 2, 3, 4, 5))))
 QUICK = Settings(quick=True, levels=(1, 2), stiffnesses=(1.2e4, 6e4, 7.5e4), duration=0.4, reference_level=1,
                  time_steps=(0.04, 0.02, 0.01, 0.005), convergence_steps=(0.02, 0.01, 0.005, 0.0025),
                  finer_convergence_steps=(("ROM", (0.00125,)),), convergence_mesh=(1, 1), mpi_levels=(1, 2), stress_level=1, fine_prom_level=2, time_limit=300.0,
