@@ -84,8 +84,8 @@ class MaterialSection:
 
 @dataclass(frozen=True)
 class RegionsSection:
-    head_fraction: float = _spec(0.35, lambda v: None if 0 < v < 1 else "must be in (0, 1)", "head: centroid x ≥ -fraction·L")
-    muscle_range: tuple[float, float] = _spec((-0.95, -0.35), _interval_within(-1.0, 0.0), "muscles: -a·L < centroid x < -b·L, as [-a, -b]")
+    head_fraction: float = _spec(0.35, lambda v: None if 0 < v < 1 else "must be in (0, 1)", "head: x ≥ -fraction·L; the block mesh is cut at this plane and tags the head (a mesh file without tags: cells whose centroid is there, with a warning)")
+    muscle_range: tuple[float, float] = _spec((-0.95, -0.35), _interval_within(-1.0, 0.0), "muscles: -a·L < x < -b·L, as [-a, -b], left and right of y = 0; the block mesh is cut at these planes and tags them (a mesh file without tags: by cell centroid, with a warning)")
 
 
 @dataclass(frozen=True)
