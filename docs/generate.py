@@ -3,7 +3,12 @@
 ``scene_keys.rst``: every key of every scene section with its default (as TOML), its check and
 its meaning, from the schema in ``aquarom_fenics.io.scene_sections``. ``cli.rst``: the ``--help``
 of ``aquarom`` and of every sub-command. ``report.md``: the validation report
-``results/REPORT.md`` of ``make validate`` when it exists, otherwise how to make it.
+``results/REPORT.md`` of ``make validate`` when it exists, otherwise how to make it. The measured
+tables of the README and of the pages in ``measured.PAGES``, rewritten between their markers from
+the snapshot ``docs/data/`` (``measured.py``).
+
+    python docs/generate.py                 # the generated pages and the measured tables
+    python docs/generate.py --snapshot      # copy results/ into docs/data/ (date, host), then the same
 """
 from __future__ import annotations
 
@@ -112,11 +117,35 @@ def write_if_changed(path: Path, text: str) -> None:
 
 
 def write_generated_pages(folder: Path) -> None:
+    from measured import write_pages
+
     folder.mkdir(parents=True, exist_ok=True)
+    write_pages(REPOSITORY)
     write_if_changed(folder / "scene_keys.rst", scene_keys_page())
     write_if_changed(folder / "cli_help.rst", command_help_page())
     write_if_changed(folder / "report.md", report_page(REPOSITORY / "results", folder))
 
 
-if __name__ == "__main__":
+def main(argv=None) -> int:
+    import sys
+
+    from measured import refresh
+
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--snapshot", action="store_true",
+                        help="first copy the measurements' JSON files from --results into docs/data/")
+    parser.add_argument("--results", type=Path, default=REPOSITORY / "results",
+                        help="where the measurements wrote their files (default results/)")
+    args = parser.parse_args(argv)
+    if args.snapshot:
+        if not args.results.is_dir():
+            print(f"generate: error: --results {args.results} is not a folder", file=sys.stderr)
+            return 2
+        copied = refresh(args.results)
+        print(f"snapshot: {len(copied)} file(s) copied into docs/data/" + "".join(f"\n  {name}" for name in copied))
     write_generated_pages(Path(__file__).resolve().parent / "_generated")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
