@@ -1,7 +1,8 @@
 """Pages of the manual generated from the code, so they cannot drift from it.
 
 ``scene_keys.rst``: every key of every scene section with its default (as TOML), its check and
-its meaning, from the schema in ``aquarom_fenics.io.scene_sections``. ``cli.rst``: the ``--help``
+its meaning, from the schema in ``aquarom_fenics.io.scene_sections`` and, for ``[cluster]``,
+``aquarom_fenics.executors.ClusterSettings``. ``cli.rst``: the ``--help``
 of ``aquarom`` and of every sub-command. ``report.md``: the validation report
 ``results/REPORT.md`` of ``make validate`` when it exists, otherwise how to make it. The measured
 tables of the README and of the pages in ``measured.PAGES``, rewritten between their markers from
@@ -26,14 +27,33 @@ def toml_literal(value) -> str:
     return _toml_value(list(value) if isinstance(value, tuple) else value)
 
 
-def scene_key_rows() -> list[tuple[str, str, str, str]]:
-    """(section, key, default as TOML, meaning) of every key of the scene schema."""
+CLUSTER_KEYS_MEANING = {
+    "scheduler": "address of a Dask scheduler (e.g. \"tcp://head-node:8786\") for the designs of `aquarom sweep`, "
+                 "the weights of `aquarom pareto` and the starts of a multi-start `aquarom optimize` when the "
+                 "command line names none; empty: local worker processes. Not part of the scene's hash",
+    "scheduler_file": "as scheduler, the address read from this file of `dask scheduler --scheduler-file`, "
+                      "relative to the scene file (give scheduler or scheduler_file, not both)",
+    "connect_timeout": "seconds to wait for the scheduler (or for its file to appear) before the command ends "
+                       "with exit code 2",
+}
+"""Meaning of each key of a scene's [cluster] table (``aquarom_fenics.executors.ClusterSettings``)."""
+
+
+def key_tables() -> dict:
+    """Every table of a scene file: the sections of the scene schema, then [cluster]."""
+    from aquarom_fenics.executors import ClusterSettings
     from aquarom_fenics.io.scene import SECTIONS
 
+    return {**SECTIONS, "cluster": ClusterSettings}
+
+
+def scene_key_rows() -> list[tuple[str, str, str, str]]:
+    """(section, key, default as TOML, meaning) of every key of the scene schema and of [cluster]."""
     rows = []
-    for section, cls in SECTIONS.items():
+    for section, cls in key_tables().items():
         for field in dataclasses.fields(cls):
-            rows.append((section, field.name, toml_literal(field.default), field.metadata.get("doc", "")))
+            meaning = CLUSTER_KEYS_MEANING[field.name] if section == "cluster" else field.metadata.get("doc", "")
+            rows.append((section, field.name, toml_literal(field.default), meaning))
     return rows
 
 
