@@ -39,6 +39,10 @@ SOURCES = {
     "studies/so2/summary.json": "scripts/study.py --cases so2",
     "studies/so3/summary.json": "scripts/study.py --cases so3",
     "studies/co/w1_*/summary.json": "scripts/study.py --cases co",
+    "so1-fom/summary.json": "the README's walkthrough: aquarom simulate so1 --level 1 --out results/so1-fom",
+    "so1-compare/compare.json": "the README's walkthrough: aquarom compare so1 --level 1 … --out results/so1-compare",
+    "so1-compare/prom/summary.json": "the README's walkthrough: aquarom compare so1 --level 1 … --out results/so1-compare",
+    "so1-opt/summary.json": "the README's walkthrough: aquarom optimize so1 --level 1 --out results/so1-opt",
 }
 """Snapshot files (paths under ``results/`` and ``docs/data/`` alike) and the command that writes each."""
 
@@ -103,7 +107,7 @@ def provenance(data: dict) -> str:
     record = data.get("_snapshot", {})
     if record.get("transcribed"):
         return f"transcribed from the pages on {record['date']}"
-    return f"measured on {record.get('host', '?')}, {record.get('date', '?')}"
+    return f"measured on {record.get('host', '?')}, {str(record.get('date', '?'))[:10]}"
 
 
 def sources_note(named: list[tuple[str, dict]]) -> str:
@@ -362,7 +366,44 @@ def co_table(folder: Path = SNAPSHOT) -> str:
     return table(header, rows) + "\n" + sources_note(notes)
 
 
-TABLES = {"accuracy": accuracy_table, "costs": cost_table, "mesh-convergence": mesh_table,
+def shape_order(scene: str, values: dict) -> list[str]:
+    """The names of ``values`` in the order of the shipped scene's [shapes] (as the commands print them)."""
+    from aquarom_fenics.io.scene import Scene
+
+    order = [name for name in Scene.load(scene).shape_names if name in values]
+    return order + [name for name in values if name not in order]
+
+
+def walkthrough_table(folder: Path = SNAPSHOT) -> str:
+    """What the README's walkthrough prints, from the files its commands wrote (SO1, level 1)."""
+    fom = load("so1-fom/summary.json", folder)
+    compare = load("so1-compare/compare.json", folder)
+    prom = load("so1-compare/prom/summary.json", folder)
+    optimum = load("so1-opt/summary.json", folder)
+    design = ", ".join(f"{name} = {value:g}" for name, value in compare["design"].items() if value)
+    dropped = f"; left out: {', '.join(prom['basis_dropped'])} …" if prom.get("basis_dropped") else ""
+    errors = compare["errors"]
+    check = optimum["fom_check"]
+    rows = [
+        ["`mesh`", f"{fom['cells']} cells ({fom['dofs']} degrees of freedom), then the head, muscles, skin and spine "
+                   "with their cells and nodes"],
+        ["`simulate`", f"`distance {cm(fom['distance'])} cm, tail amplitude {cm(fom['tail_amplitude'])} cm` "
+                       f"({fom['steps']} steps)"],
+        ["`build`", f"`m = {prom['reduced_size']} ({', '.join(prom['basis'])}), p = {len(prom['xi'])}{dropped}`"],
+        ["`compare`", f"`distance FOM {cm(compare['fom']['distance'])} cm, PROM {cm(compare['prom']['distance'])} cm "
+                      f"({percent(errors['distance_relative'])}); tail amplitude "
+                      f"{percent(errors['tail_amplitude_relative'])}` at {design or 'the start design'}"],
+        ["`optimize`", "optimum `" + ", ".join(f"{name} = {optimum['optimum'][name]:.4g}"
+                                               for name in shape_order(optimum["scene"], optimum["optimum"]))
+                       + f"`, {optimum['prom_builds']} PROM builds; `FOM check: start {cm(check['start_distance'])} cm, "
+                       f"optimal {cm(check['optimal_distance'])} cm (PROM {cm(check['prom_optimal_distance'])} cm), "
+                       f"ratio {check['ratio']:.2f}`"]]
+    notes = sources_note([("so1-fom/summary.json", fom), ("so1-compare/compare.json", compare),
+                          ("so1-compare/prom/summary.json", prom), ("so1-opt/summary.json", optimum)])
+    return table(["step", "prints"], rows) + "\n" + notes
+
+
+TABLES = {"walkthrough": walkthrough_table, "accuracy": accuracy_table, "costs": cost_table, "mesh-convergence": mesh_table,
           "station-convergence": stations_table, "studies": study_table, "studies-co": co_table}
 
 
