@@ -46,7 +46,7 @@ SOURCES = {
 }
 """Snapshot files (paths under ``results/`` and ``docs/data/`` alike) and the command that writes each."""
 
-PAGES = ("README.md", "docs/studies.md", "docs/theory/stations.md")
+PAGES = ("README.md", "docs/validation.md", "docs/studies.md", "docs/theory/stations.md")
 """Files whose measured tables ``make docs`` rewrites."""
 
 MARKER = re.compile(r"(<!-- measured: (?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /measured -->)", re.S)
