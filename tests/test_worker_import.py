@@ -2,7 +2,6 @@
 2), before any design runs and without an output folder: a real scheduler and a worker started
 with Debian's Python, which has Dask but not this package."""
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
