@@ -239,7 +239,11 @@ class DaskCluster:
     def __init__(self, settings: ClusterSettings):
         self.settings = settings
         self.client = connect(settings)
-        self.client.register_worker_plugin(MainThreadImports(), name=MainThreadImports.name)
+        try:
+            self.client.register_worker_plugin(MainThreadImports(), name=MainThreadImports.name)
+        except Exception as error:        # raised on a worker, handed back by the scheduler
+            self.client.close()
+            raise worker_import_error(settings, error) from None
         self._executor = self.client.get_executor(pure=False)
 
     @property
@@ -254,6 +258,19 @@ class DaskCluster:
         cancels this client's pending tasks."""
         self._executor.shutdown(wait=not cancel)
         self.client.close()
+
+
+def worker_import_error(settings: ClusterSettings, error: Exception) -> Exception:
+    """InputError (one line, with the fix) when the workers cannot import the toolkit; otherwise
+    ``error`` itself (a bug)."""
+    text = str(error)
+    if isinstance(error, ImportError) or "ModuleNotFoundError" in text or "No module named" in text:
+        reason = text.splitlines()[0] if text else type(error).__name__
+        return InputError(f"the workers of the {settings.describe().removeprefix('Dask ')} cannot import the toolkit "
+                          f"({reason}): start them with the Python of a checkout's .venv, "
+                          "`.venv/bin/python -m distributed.cli.dask_worker ADDRESS --nthreads 1` "
+                          "(docs/user/cluster.rst)")
+    return error
 
 
 def connect(settings: ClusterSettings):

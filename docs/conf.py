@@ -2,7 +2,8 @@
 
 Pages generated from the code at every build (into ``_generated/``, not tracked): the scene
 keys table from the scene schema, the ``--help`` of every command, and the validation report
-when ``results/REPORT.md`` exists.
+when ``results/REPORT.md`` exists. The measured tables of the README and of the pages in
+``measured.PAGES`` are rewritten in place from the snapshot ``data/`` (``generate.py``).
 """
 import sys
 from pathlib import Path
@@ -17,7 +18,7 @@ copyright = "the AquaROM-FEniCSx developers"
 
 extensions = ["sphinx.ext.autodoc", "myst_parser"]
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
-exclude_patterns = ["_build", "_generated/*.part.md"]
+exclude_patterns = ["_build", "_generated/*.part.md", "data"]
 html_theme = "alabaster"            # shipped with Sphinx: no theme from the network
 html_static_path = []
 autodoc_member_order = "bysource"

@@ -1,9 +1,15 @@
 """Pages of the manual generated from the code, so they cannot drift from it.
 
 ``scene_keys.rst``: every key of every scene section with its default (as TOML), its check and
-its meaning, from the schema in ``aquarom_fenics.io.scene_sections``. ``cli.rst``: the ``--help``
+its meaning, from the schema in ``aquarom_fenics.io.scene_sections`` and, for ``[cluster]``,
+``aquarom_fenics.executors.ClusterSettings``. ``cli.rst``: the ``--help``
 of ``aquarom`` and of every sub-command. ``report.md``: the validation report
-``results/REPORT.md`` of ``make validate`` when it exists, otherwise how to make it.
+``results/REPORT.md`` of ``make validate`` when it exists, otherwise how to make it. The measured
+tables of the README and of the pages in ``measured.PAGES``, rewritten between their markers from
+the snapshot ``docs/data/`` (``measured.py``).
+
+    python docs/generate.py                 # the generated pages and the measured tables
+    python docs/generate.py --snapshot      # copy results/ into docs/data/ (date, host), then the same
 """
 from __future__ import annotations
 
@@ -21,14 +27,33 @@ def toml_literal(value) -> str:
     return _toml_value(list(value) if isinstance(value, tuple) else value)
 
 
-def scene_key_rows() -> list[tuple[str, str, str, str]]:
-    """(section, key, default as TOML, meaning) of every key of the scene schema."""
+CLUSTER_KEYS_MEANING = {
+    "scheduler": "address of a Dask scheduler (e.g. \"tcp://head-node:8786\") for the designs of `aquarom sweep`, "
+                 "the weights of `aquarom pareto` and the starts of a multi-start `aquarom optimize` when the "
+                 "command line names none; empty: local worker processes. Not part of the scene's hash",
+    "scheduler_file": "as scheduler, the address read from this file of `dask scheduler --scheduler-file`, "
+                      "relative to the scene file (give scheduler or scheduler_file, not both)",
+    "connect_timeout": "seconds to wait for the scheduler (or for its file to appear) before the command ends "
+                       "with exit code 2",
+}
+"""Meaning of each key of a scene's [cluster] table (``aquarom_fenics.executors.ClusterSettings``)."""
+
+
+def key_tables() -> dict:
+    """Every table of a scene file: the sections of the scene schema, then [cluster]."""
+    from aquarom_fenics.executors import ClusterSettings
     from aquarom_fenics.io.scene import SECTIONS
 
+    return {**SECTIONS, "cluster": ClusterSettings}
+
+
+def scene_key_rows() -> list[tuple[str, str, str, str]]:
+    """(section, key, default as TOML, meaning) of every key of the scene schema and of [cluster]."""
     rows = []
-    for section, cls in SECTIONS.items():
+    for section, cls in key_tables().items():
         for field in dataclasses.fields(cls):
-            rows.append((section, field.name, toml_literal(field.default), field.metadata.get("doc", "")))
+            meaning = CLUSTER_KEYS_MEANING[field.name] if section == "cluster" else field.metadata.get("doc", "")
+            rows.append((section, field.name, toml_literal(field.default), meaning))
     return rows
 
 
@@ -112,11 +137,35 @@ def write_if_changed(path: Path, text: str) -> None:
 
 
 def write_generated_pages(folder: Path) -> None:
+    from measured import write_pages
+
     folder.mkdir(parents=True, exist_ok=True)
+    write_pages(REPOSITORY)
     write_if_changed(folder / "scene_keys.rst", scene_keys_page())
     write_if_changed(folder / "cli_help.rst", command_help_page())
     write_if_changed(folder / "report.md", report_page(REPOSITORY / "results", folder))
 
 
-if __name__ == "__main__":
+def main(argv=None) -> int:
+    import sys
+
+    from measured import refresh
+
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--snapshot", action="store_true",
+                        help="first copy the measurements' JSON files from --results into docs/data/")
+    parser.add_argument("--results", type=Path, default=REPOSITORY / "results",
+                        help="where the measurements wrote their files (default results/)")
+    args = parser.parse_args(argv)
+    if args.snapshot:
+        if not args.results.is_dir():
+            print(f"generate: error: --results {args.results} is not a folder", file=sys.stderr)
+            return 2
+        copied = refresh(args.results)
+        print(f"snapshot: {len(copied)} file(s) copied into docs/data/" + "".join(f"\n  {name}" for name in copied))
     write_generated_pages(Path(__file__).resolve().parent / "_generated")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -26,7 +26,7 @@ SHORT_RUN = ["--set", "solver.duration=0.2", "--set", "optimizer.max_iterations=
 """Appended to the walkthrough's commands: a 0.2 s horizon and two optimiser iterations."""
 
 sys.path.insert(0, str(DOCS))
-from generate import scene_key_rows  # noqa: E402  (docs/generate.py makes the keys table)
+from generate import key_tables, scene_key_rows  # noqa: E402  (docs/generate.py makes the keys table)
 
 
 def console_blocks(text: str, markdown: bool) -> list[list[str]]:
@@ -96,12 +96,15 @@ def test_every_toml_snippet_loads(snippet):
 def test_the_keys_table_names_every_key_of_the_code_with_its_default():
     rows = scene_key_rows()
     documented = {(section, key) for section, key, _, _ in rows}
-    for section, cls in SECTIONS.items():
+    tables = key_tables()
+    assert set(SECTIONS) | {"cluster"} <= set(tables)
+    for section, cls in tables.items():
         for field in dataclasses.fields(cls):
             assert (section, field.name) in documented, f"[{section}] {field.name} is missing from the table"
-    for section, key, default, _ in rows:
+    for section, key, default, meaning in rows:
+        assert meaning, f"[{section}] {key} has no meaning in the table"
         scene = scene_from_dict(tomllib.loads(f"[{section}]\n{key} = {default}\n"), source="docs")
-        field = next(f for f in dataclasses.fields(SECTIONS[section]) if f.name == key)
+        field = next(f for f in dataclasses.fields(tables[section]) if f.name == key)
         assert getattr(getattr(scene, section), key) == field.default, (section, key, default)
 
 
@@ -155,7 +158,8 @@ def test_the_readme_walkthrough_runs_at_level_1(tmp_path, monkeypatch, capsys):
     for command in commands:
         arguments = aquarom_arguments(command)
         if arguments[0] != "animate":
-            arguments += SHORT_RUN + (["--no-progress"] if arguments[0] in ("simulate", "compare") else [])
+            arguments += SHORT_RUN + (["--no-progress"] if arguments[0] in ("simulate", "compare", "build",
+                                                                            "optimize") else [])
         assert main(arguments) == 0, command
     for output in ("results/so1-fom/trajectory.csv", "results/so1-prom.npz", "results/so1-compare/compare.json",
                    "results/so1-opt/summary.json", "results/so1-fom/animation.gif",

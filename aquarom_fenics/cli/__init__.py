@@ -6,6 +6,7 @@ commands in ``commands.py`` and ``runs.py``, the output folders in ``outputs.py`
 """
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import sys
@@ -68,7 +69,8 @@ def run_and_settle(args) -> tuple[int, str | None]:
     started = time.perf_counter()
     line = None
     try:
-        code = run_dry(args) if getattr(args, "dry_run", False) else COMMANDS[args.command](args)
+        with progress_shown(not getattr(args, "no_progress", False)):
+            code = run_dry(args) if getattr(args, "dry_run", False) else COMMANDS[args.command](args)
     except (Exception, KeyboardInterrupt) as error:
         code, line = describe_failure(args, error)
     with stop_between_steps() as stop_requested:
@@ -82,6 +84,15 @@ def run_and_settle(args) -> tuple[int, str | None]:
         code = stop_for(stop, "").exit_code
         line = f"{stop_for(stop, 'after the run had finished')}; its outputs are complete"
     return code, line
+
+
+def progress_shown(shown: bool):
+    """``--no-progress``: no FOM progress bar in the command's run (and its FOM checks)."""
+    if shown:
+        return contextlib.nullcontext()
+    from aquarom_fenics.dynamics.simulate import progress_bars
+
+    return progress_bars(False)
 
 
 def describe_failure(args, error: BaseException) -> tuple[int, str]:

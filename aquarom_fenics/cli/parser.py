@@ -75,7 +75,9 @@ def build_parser() -> argparse.ArgumentParser:
             sub.add_argument("--out", type=Path, help=out)
             sub.add_argument("--force", action="store_true", help="replace existing outputs")
         if progress:
-            sub.add_argument("--no-progress", action="store_true", help="no progress bar")
+            sub.add_argument("--no-progress", action="store_true",
+                             help="no progress bars of FOM runs (they show on a terminal only)"
+                                  + ("; no line per finished design" if name == "sweep" else ""))
         return sub
 
     command("mesh", "report the scene's mesh: cells, nodes, tags, cell quality")
@@ -87,13 +89,14 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--model", choices=["fom", "rom", "prom"], default="fom",
                           help="full-order model, ROM of the design, or PROM of the scene (default fom)")
     command("build", "build the scene's PROM (basis and reduced tensors) and save it to one file",
-            out="PROM file (default results/build/SCENE-prom.npz)", xi="building point (default: start values)")
+            out="PROM file (default results/build/SCENE-prom.npz)", xi="building point (default: start values)",
+            progress=True)
     compare = command("compare", "run the FOM and the reduced model at one design and report their errors",
                       out="output directory (default results/compare/SCENE)", xi=shape_parameter,
                       prom="PROM file from `aquarom build` (built if absent)", progress=True)
     compare.add_argument("--model", choices=["rom", "prom"], default="prom", help="reduced model to check")
     optimize = command("optimize", "optimise the shape (and the amplitude, for co-optimisation scenes) with the PROM",
-                       out="output directory (default results/optimize/SCENE)")
+                       out="output directory (default results/optimize/SCENE)", progress=True)
     optimize.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out")
     optimize.add_argument("--method", choices=["paper", "trust-region"], help="override the scene's method")
     optimize.add_argument("--weight", type=float,
@@ -103,7 +106,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_cluster_options(optimize, "the starts of a multi-start ([optimizer] starts > 1)",
                         "local worker processes, one start each (default 1: one after the other here)")
     pareto = command("pareto", "co-optimisation weight sweep: Pareto front of distance against actuation energy",
-                     out="output directory (default results/pareto/SCENE)")
+                     out="output directory (default results/pareto/SCENE)", progress=True)
     add_cluster_options(pareto, "the weights", "local worker processes, one weight each "
                                                "(default 1: the weights one after the other in this process)")
     pareto.add_argument("--resume", action="store_true",
@@ -111,7 +114,7 @@ def build_parser() -> argparse.ArgumentParser:
                              "from their checkpoints")
     add_sweep(command("sweep", "run a model at every design of a CSV file, a grid or a Latin hypercube (sweep.csv, "
                             "sweep.png); on local worker processes or a Dask cluster",
-                      out="output directory (default results/sweep/SCENE-MODEL)"))
+                      out="output directory (default results/sweep/SCENE-MODEL)", progress=True))
     from aquarom_fenics.viz.animate import DEFAULT_FPS
 
     animate_help = "animate a simulation run (MP4 and GIF preview): the fish from above and from the side"

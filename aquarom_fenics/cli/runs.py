@@ -106,11 +106,22 @@ def run_build(args) -> int:
     out = claim_output_file(args, args.out or Path("results") / "build" / f"{scene.name}-prom.npz")
     fish = load_fish(scene)
     center = fish.parameter_vector(xi)
-    prom = cached_prom(scene, center, lambda: build_prom(scene, xi_center=center, fish=fish))
+    built = []
+
+    def build():
+        built.append(True)
+        return build_prom(scene, xi_center=center, fish=fish)
+
+    prom = cached_prom(scene, center, build)
     if MPI.COMM_WORLD.rank == 0:
         prom.save(out)
-    say(f"PROM of {scene.name}: m = {prom.size} ({', '.join(prom.labels)}), p = {prom.n_parameters}, "
-        f"built in {prom.timings['total']:.2f} s; wrote {out}")
+    origin = (f"built in {prom.timings['total']:.2f} s" if built else
+              f"reused from the PROM cache (built there in {prom.timings['total']:.2f} s)")
+    combination = "a numerical combination" if len(prom.dropped) == 1 else "numerical combinations"
+    dropped = (f"; left out: {', '.join(prom.dropped)} ({combination} of the others: the basis spans the same "
+               "motions)" if prom.dropped else "")
+    say(f"PROM of {scene.name}: m = {prom.size} ({', '.join(prom.labels)}), p = {prom.n_parameters}{dropped}; "
+        f"{origin}; wrote {out}")
     return 0
 
 

@@ -68,7 +68,8 @@ def run_sweep(args) -> int:
         say(f"sweep of {scene.name}: {len(designs)} designs ({source}), model {args.model}, {missing} to run "
             f"{backend}" + (f", {len(kept)} kept from sweep.csv" if kept else ""))
         rows = sweep.run_sweep(scene, designs, args.model, out, pool, resume=args.resume,
-                               on_row=progress_line(len(designs), len(kept), scene.shape_names))
+                               on_row=None if args.no_progress else progress_line(len(designs), len(kept),
+                                                                                  scene.shape_names))
     result = sweep.summary(rows)
     args.timings = {"sweep": time.perf_counter() - started}
     args.manifest_extra = {"sweep": {"designs": len(designs), "source": source, "model": args.model,

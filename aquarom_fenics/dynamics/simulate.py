@@ -4,6 +4,7 @@ from __future__ import annotations
 import logging
 import signal
 import time as clock
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -169,8 +170,24 @@ def _asked_to_stop(stop_requested, comm) -> int | None:
     return number or None
 
 
+PROGRESS_BARS = {"shown": True}
+"""Whether FOM runs of this process may show a progress bar (on a terminal): ``--no-progress`` of
+every command sets it to False for the command's run (:func:`progress_bars`)."""
+
+
+@contextmanager
+def progress_bars(shown: bool):
+    """FOM progress bars shown (on a terminal) or not while the block runs."""
+    before = PROGRESS_BARS["shown"]
+    PROGRESS_BARS["shown"] = shown
+    try:
+        yield
+    finally:
+        PROGRESS_BARS["shown"] = before
+
+
 def _progress_bar(total: int, label: str, enabled: bool):
-    if not enabled:
+    if not (enabled and PROGRESS_BARS["shown"]):
         return None
     from tqdm import tqdm
 

@@ -1,0 +1,463 @@
+"""Measured tables of the README and the manual, made from the JSON files the measurements wrote.
+
+The measurements (``scripts/validate.py``, ``scripts/rom_accuracy.py``, ``scripts/validate_gradient.py``,
+``scripts/bench_*.py``, ``scripts/study.py``, ``aquarom optimize``) write JSON under ``results/``,
+which is not tracked. ``docs/data/`` holds a snapshot of those files, each with a ``_snapshot``
+record: where it was copied from, when and on which host, or, for a figure measured before its
+file was kept, ``transcribed`` with the page it was read from. ``make docs`` rewrites every table
+between the markers
+
+    <!-- measured: NAME -->
+    ...
+    <!-- /measured -->
+
+in the README and the manual's pages from the snapshot, so a re-measurement changes the pages and
+nobody retypes a figure. ``python docs/generate.py --snapshot`` copies what ``results/`` holds
+into the snapshot (``--results`` elsewhere) with the date and host recorded.
+"""
+from __future__ import annotations
+
+import json
+import platform
+import re
+import shutil
+import time
+from pathlib import Path
+
+REPOSITORY = Path(__file__).resolve().parents[1]
+SNAPSHOT = Path(__file__).resolve().parent / "data"
+
+SOURCES = {
+    "validation/mesh_convergence.json": "scripts/validate.py --only mesh_convergence",
+    "validation/stations.json": "scripts/validate.py --only stations",
+    "validation/rom_accuracy.json": "scripts/rom_accuracy.py --meshes 2/1 2/2 2/3",
+    "validation/prom_gradient.json": "scripts/validate_gradient.py --radius",
+    "bench/fom.json": "scripts/bench_fom.py",
+    "bench/prom.json": "scripts/bench_prom.py",
+    "optimize/so1/summary.json": "aquarom optimize so1 --out results/optimize/so1 (empty cache)",
+    "studies/so1/summary.json": "scripts/study.py --cases so1",
+    "studies/so2/summary.json": "scripts/study.py --cases so2",
+    "studies/so3/summary.json": "scripts/study.py --cases so3",
+    "studies/co/w1_*/summary.json": "scripts/study.py --cases co",
+    "so1-fom/summary.json": "the README's walkthrough: aquarom simulate so1 --level 1 --out results/so1-fom",
+    "so1-compare/compare.json": "the README's walkthrough: aquarom compare so1 --level 1 … --out results/so1-compare",
+    "so1-compare/prom/summary.json": "the README's walkthrough: aquarom compare so1 --level 1 … --out results/so1-compare",
+    "so1-opt/summary.json": "the README's walkthrough: aquarom optimize so1 --level 1 --out results/so1-opt",
+}
+"""Snapshot files (paths under ``results/`` and ``docs/data/`` alike) and the command that writes each."""
+
+PAGES = ("README.md", "docs/validation.md", "docs/studies.md", "docs/theory/stations.md")
+"""Files whose measured tables ``make docs`` rewrites."""
+
+MARKER = re.compile(r"(<!-- measured: (?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /measured -->)", re.S)
+
+
+class SnapshotError(RuntimeError):
+    """A snapshot file is missing or lacks what a table needs."""
+
+
+# ---------------------------------------------------------------- the snapshot
+
+def snapshot_files(folder: Path = SNAPSHOT) -> list[Path]:
+    """Every JSON file of the snapshot."""
+    return sorted(path for pattern in SOURCES for path in folder.glob(pattern))
+
+
+def load(relative: str, folder: Path = SNAPSHOT) -> dict:
+    path = folder / relative
+    if not path.is_file():
+        raise SnapshotError(f"{path.relative_to(REPOSITORY) if path.is_relative_to(REPOSITORY) else path} is "
+                            f"missing: run `{command_of(relative)}` and `python docs/generate.py --snapshot`")
+    return json.loads(path.read_text())
+
+
+def command_of(relative: str) -> str:
+    for pattern, command in SOURCES.items():
+        if Path(relative).match(pattern):
+            return command
+    return "the measurement"
+
+
+def refresh(results: Path, folder: Path = SNAPSHOT, host: str | None = None) -> list[str]:
+    """Copy every snapshot file that ``results`` holds into ``folder``, each with a ``_snapshot``
+    record (the path it came from, the file's modification date, the host); return the paths copied.
+    Files ``results`` does not hold keep their earlier snapshot."""
+    copied = []
+    for pattern in SOURCES:
+        for source in sorted(results.glob(pattern)):
+            relative = source.relative_to(results).as_posix()
+            data = json.loads(source.read_text())
+            data["_snapshot"] = {"copied_from": f"results/{relative}", "command": command_of(relative),
+                                 "date": time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(source.stat().st_mtime)),
+                                 "host": host or platform.node()}
+            target = folder / relative
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_text(json.dumps(data, indent=1, sort_keys=False) + "\n")
+            copied.append(relative)
+    if any(name.startswith("studies/co/") for name in copied):
+        kept = {name for name in copied if name.startswith("studies/co/")}
+        for stale in folder.glob("studies/co/w1_*/summary.json"):
+            if stale.relative_to(folder).as_posix() not in kept:
+                shutil.rmtree(stale.parent)
+    return copied
+
+
+def provenance(data: dict) -> str:
+    """'measured on HOST, DATE' or 'transcribed from the pages on DATE' (the page is in the file)."""
+    record = data.get("_snapshot", {})
+    if record.get("transcribed"):
+        return f"transcribed from the pages on {record['date']}"
+    return f"measured on {record.get('host', '?')}, {str(record.get('date', '?'))[:10]}"
+
+
+def sources_note(named: list[tuple[str, dict]]) -> str:
+    """One sentence naming the snapshot files of a table, grouped by provenance."""
+    groups: dict[str, list[str]] = {}
+    for name, data in named:
+        names = groups.setdefault(provenance(data), [])
+        if f"`{name}`" not in names:
+            names.append(f"`{name}`")
+    return ("From `docs/data/` " + "; ".join(f"{', '.join(names)} ({what})" for what, names in groups.items())
+            + ": `python docs/generate.py --snapshot` after a re-measurement replaces them.\n")
+
+
+# ---------------------------------------------------------------- numbers as the pages write them
+
+def cm(metres) -> str:
+    return "n/a" if metres is None else f"{100 * metres:.3f}"
+
+
+def percent(fraction) -> str:
+    """A signed relative error in %: two decimals below 10 %, one above."""
+    if fraction is None:
+        return "n/a"
+    value = 100 * fraction
+    return f"{value:+.2f} %" if abs(value) < 10 else f"{value:+.1f} %"
+
+
+def seconds(value) -> str:
+    if value is None:
+        return "n/a"
+    return f"{value:.3f} s" if value < 1 else f"{value:.1f} s"
+
+
+def span(values, unit=seconds) -> str:
+    """'a–b s' over several runs, 'a s' over one."""
+    values = sorted(v for v in values if v is not None)
+    if not values:
+        return ""
+    if len(values) == 1 or values[0] == values[-1]:
+        return unit(values[0])
+    return f"{unit(values[0]).rsplit(' ', 1)[0]}–{unit(values[-1])}"
+
+
+def table(header: list[str], rows: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
+    return "\n".join(lines) + "\n"
+
+
+def default_mesh() -> tuple[int, int]:
+    """(degree, level) of the shipped scenes (the nominal scene's mesh)."""
+    from aquarom_fenics.io.scene import Scene
+
+    mesh = Scene.load("nominal").mesh
+    return mesh.degree, mesh.level
+
+
+def default_station_count() -> int:
+    from aquarom_fenics.io.scene import Scene
+
+    return Scene.load("nominal").fluid.stations
+
+
+# ---------------------------------------------------------------- the tables
+
+def mesh_table(folder: Path = SNAPSHOT) -> str:
+    """Mesh convergence of the nominal FOM: every case and the Richardson reference."""
+    data = load("validation/mesh_convergence.json", folder)
+    default = default_mesh()
+    rows = []
+    for row in data["rows"]:
+        mark = "**" if (row["degree"], row["level"]) == default else ""
+        rows.append([f"{mark}{row['degree']}{mark}", f"{mark}{row['level']}{mark}", row.get("cells", ""),
+                     row.get("dofs", ""), f"{mark}{cm(row['distance'])}{mark}", percent(row["distance_error"]),
+                     cm(row["tail_amplitude"]), percent(row.get("tail_amplitude_error"))])
+    reference = data["reference"]
+    order = reference["distance"].get("observed_order")
+    rows.append([f"reference (degree {reference['distance']['degree']})", "", "", "",
+                 f"{cm(reference['distance']['value'])} ± {cm(reference['distance']['estimated_error'])}"
+                 + (f" (observed order {order:.1f})" if order else ""), "",
+                 f"{cm(reference['tail_amplitude']['value'])} ± {cm(reference['tail_amplitude']['estimated_error'])}", ""])
+    return (table(["degree", "level", "cells", "dofs", "distance [cm]", "error", "tail amplitude [cm]", "error"], rows)
+            + f"\n`{command_of('validation/mesh_convergence.json')}`. "
+            + sources_note([("validation/mesh_convergence.json", data)]))
+
+
+def stations_table(folder: Path = SNAPSHOT) -> str:
+    """Convergence in the station count on one mesh."""
+    data = load("validation/stations.json", folder)
+    default = default_station_count()
+    rows = []
+    for row in data["rows"]:
+        mark = "**" if row["stations"] == default else ""
+        rows.append([f"{mark}{row['stations']}{mark}", f"{mark}{cm(row['distance'])}{mark}",
+                     percent(row.get("distance_error")), cm(row.get("tail_amplitude"))])
+    reference = data["reference"]["distance"]
+    rows.append(["reference", f"{cm(reference['value'])} ± {cm(reference['estimated_error'])}", "", ""])
+    return (table([f"N_s (degree {data['degree']}, level {data['level']})", "distance [cm]",
+                   "error against the reference", "tail amplitude [cm]"], rows)
+            + f"\n`{command_of('validation/stations.json')}`. " + sources_note([("validation/stations.json", data)]))
+
+
+def _joined(values, unit=percent) -> str:
+    return ", ".join(unit(v).replace(" %", "") for v in values) + " %"
+
+
+def accuracy_table(folder: Path = SNAPSHOT) -> str:
+    """The README's accuracy table: FOM against mesh and station limits, ROM and PROM against the FOM."""
+    mesh = load("validation/mesh_convergence.json", folder)
+    stations = load("validation/stations.json", folder)
+    rom = load("validation/rom_accuracy.json", folder)
+    gradient = load("validation/prom_gradient.json", folder)
+    degree, level = default_mesh()
+    rows = []
+    series = [row for row in mesh["rows"] if row["degree"] == mesh["reference"]["distance"]["degree"]]
+    at_default = next(row for row in mesh["rows"] if (row["degree"], row["level"]) == (degree, level))
+    reference = mesh["reference"]
+    rows.append([f"FOM on degree {degree}, level {level} against the mesh-converged reference (degree "
+                 f"{series[0]['degree']}, levels {series[0]['level']}–{series[-1]['level']}: "
+                 f"{', '.join(cm(row['distance']) for row in series)} cm; reference "
+                 f"{cm(reference['distance']['value'])} ± {cm(reference['distance']['estimated_error'])} cm, "
+                 f"tail amplitude {cm(reference['tail_amplitude']['value'])} ± "
+                 f"{cm(reference['tail_amplitude']['estimated_error'])} cm)",
+                 percent(at_default["distance_error"]), percent(at_default.get("tail_amplitude_error")),
+                 "`validation/mesh_convergence.json`"])
+    count = default_station_count()
+    station_row = next(row for row in stations["rows"] if row["stations"] == count)
+    rows.append([f"FOM with N_s = {count} against its station-converged value on degree {stations['degree']}, level "
+                 f"{stations['level']} (N_s = {', '.join(str(row['stations']) for row in stations['rows'])}: "
+                 f"{', '.join(cm(row['distance']) for row in stations['rows'])} cm)",
+                 percent(station_row.get("distance_error")), "", "`validation/stations.json`"])
+    nominal = [row for row in rom["nominal"] if row["degree"] == degree]
+    rows.append([f"ROM (built at the design) against the FOM; degree {degree}, levels "
+                 f"{', '.join(str(row['level']) for row in nominal)}",
+                 _joined(row["default"]["distance_relative"] for row in nominal),
+                 _joined(row["default"]["tail_amplitude_relative"] for row in nominal),
+                 "`validation/rom_accuracy.json`"])
+    scene = gradient["scene"].upper()
+    for name in dict.fromkeys(row["parameter"] for row in gradient["radius_rows"]):
+        pair = [row for row in gradient["radius_rows"] if row["parameter"] == name]
+        rows.append([f"PROM ({scene}, built at ξ = 0) against the FOM at {name} = "
+                     + " / ".join(f"{row['value']:+g}" for row in pair) + " (its validity radius), degree "
+                     f"{gradient['degree']}, level {gradient['level']}",
+                     " / ".join(percent(row["relative_error"]).replace(" %", "") for row in pair) + " %", "",
+                     "`validation/prom_gradient.json`"])
+    if gradient["rows"]:
+        rows.append([f"{scene} PROM's distance gradient against FOM central differences (ε = {gradient['step']:g}; "
+                     f"{', '.join(row['parameter'] for row in gradient['rows'])})",
+                     _joined(row["relative_difference"] for row in gradient["rows"]), "",
+                     "`validation/prom_gradient.json`"])
+    notes = sources_note([(f"validation/{name}.json", data) for name, data in
+                          (("mesh_convergence", mesh), ("stations", stations), ("rom_accuracy", rom),
+                           ("prom_gradient", gradient))])
+    return table(["comparison", "distance", "tail amplitude", "file"], rows) + "\n" + notes
+
+
+def cost_table(folder: Path = SNAPSHOT) -> str:
+    """The README's cost table: FOM serial and on two ranks, PROM build, reduced solve, SO1's optimisation."""
+    fom = load("bench/fom.json", folder)
+    prom = load("bench/prom.json", folder)
+    optimize = load("optimize/so1/summary.json", folder)
+    degree, level = default_mesh()
+    rows = []
+    cases = sorted({(run["degree"], run["level"]) for run in fom["runs"] if run["degree"] == degree and "failed" not in run})
+    for case in cases:
+        runs = [run for run in fom["runs"] if (run["degree"], run["level"]) == case and "failed" not in run
+                and run.get("blas_threads", 1) == 1]
+        dofs = next(run["dofs"] for run in runs)
+        label = "FOM at the default" if case == (degree, level) else "FOM"
+        rows.append([f"{label}, degree {case[0]}, level {case[1]} ({dofs} dofs)",
+                     span(run["wall_time_simulation"] for run in runs if run["ranks"] == 1),
+                     span(run["wall_time_simulation"] for run in runs if run["ranks"] == 2)])
+    so1 = [run for run in prom["runs"] if run["scene"] == "so1" and run["degree"] == degree]
+    if so1:
+        rows.append([f"PROM build, SO1 (p = {so1[0]['parameters']}, m = {so1[0]['reduced_size']}), "
+                     + " / ".join(f"level {run['level']}" for run in so1),
+                     " / ".join(seconds(run["build_time"]) for run in so1), ""])
+        at_default = [run for run in so1 if run["level"] == level]
+        for run in at_default:
+            rows.append([f"reduced solve, SO1, with sensitivities, level {level} (fastest / median of 20)",
+                         f"{seconds(run['solve_time_with_sensitivities'])} / "
+                         f"{seconds(run['solve_time_with_sensitivities_median'])}", ""])
+    timings = optimize["timings"]
+    rows.append([f"`aquarom optimize so1` at the default, empty cache: optimisation ({optimize['prom_builds']} PROM "
+                 "builds) / FOM check", f"{seconds(timings['total'])} / {seconds(timings['fom_check'])}", ""])
+    notes = sources_note([("bench/fom.json", fom), ("bench/prom.json", prom), ("optimize/so1/summary.json", optimize)])
+    return table(["run", "serial", "`mpirun -n 2`"], rows) + "\n" + notes
+
+
+def _active(bounds: list[str]) -> str:
+    """'lower: z_tail; upper: z_head, y_thin' of ["z_tail = lower", ...]."""
+    sides = {}
+    for row in bounds:
+        name, _, side = row.partition(" = ")
+        sides.setdefault(side or "constraint", []).append(name if side else row)
+    return "; ".join(f"{side}: {', '.join(names)}" for side, names in sorted(sides.items())) or "none"
+
+
+def _stop(summary: dict) -> str:
+    reason = "optimality" if summary["converged"] else summary["stop_reason"].split(" (")[0].split(":")[0]
+    return f"{reason} ({summary['iterations']})"
+
+
+def _builds(summary: dict) -> str:
+    return f"{summary['prom_builds']} ({summary.get('prom_builds_reused_from_cache', 0)})"
+
+
+def _fom_check_time(summary: dict) -> str:
+    value = summary["timings"].get("fom_check")
+    return "cached" if value is None else f"{value:.1f}"
+
+
+def study_table(folder: Path = SNAPSHOT) -> str:
+    """SO1–SO3 of ``scripts/study.py``: one row per case from its summary.json."""
+    rows, notes = [], []
+    for case in ("so1", "so2", "so3"):
+        summary = load(f"studies/{case}/summary.json", folder)
+        check = summary["fom_check"]
+        optimum = ", ".join(f"{name} {value:+.3f}" for name, value in sorted(summary["optimum"].items()))
+        prom = summary["prom_distance_optimal"]
+        error = None if check["optimal_distance"] is None else prom / check["optimal_distance"] - 1.0
+        multistart = summary.get("multistart")
+        starts = "1" if multistart is None else (f"{multistart['starts']} (best {multistart['best_start']}; "
+                                                 f"{len(multistart['distinct_optima'])} distinct optima)")
+        rows.append([case.upper(), optimum, _active(summary["bounds_active"]), _stop(summary), starts,
+                     _builds(summary), f"{summary['timings']['total']:.1f}", _fom_check_time(summary),
+                     f"{cm(check['start_distance'])} → {cm(check['optimal_distance'])}",
+                     f"{cm(prom)} ({percent(error)})", "n/a" if check["ratio"] is None else f"{check['ratio']:.2f}"])
+        notes.append((f"studies/{case}/summary.json", summary))
+    header = ["case", "optimum", "active bounds", "stop (iterations)", "starts", "PROM builds (from the cache)",
+              "optimisation [s]", "FOM check [s]", "FOM start → optimal [cm]", "PROM optimal [cm] (error)", "ratio"]
+    return table(header, rows) + "\n" + sources_note(notes)
+
+
+def co_table(folder: Path = SNAPSHOT) -> str:
+    """The CO Pareto sweep of ``scripts/study.py --cases co``: one row per weight w1."""
+    paths = sorted(folder.glob("studies/co/w1_*/summary.json"), key=lambda p: float(p.parent.name[3:]))
+    if not paths:
+        raise SnapshotError("docs/data/studies/co/w1_*/summary.json are missing: run `scripts/study.py --cases co` "
+                            "and `python docs/generate.py --snapshot`")
+    rows, notes = [], []
+    for path in paths:
+        summary = json.loads(path.read_text())
+        check = summary["fom_check"]
+        optimum = dict(summary["optimum"])
+        amplitude = optimum.pop("amplitude", None)
+        shape = ", ".join(f"{name} {value:+.3f}" for name, value in sorted(optimum.items())) or "not recorded"
+        timings = summary["timings"]
+        rows.append([path.parent.name[3:], "n/a" if amplitude is None else f"{amplitude:.3f}", shape, _stop(summary),
+                     _builds(summary), f"{timings['total']:.0f} ({timings.get('tail_screens', 0):.0f})",
+                     _fom_check_time(summary), f"{cm(check['optimal_distance'])} ({cm(summary['prom_distance_optimal'])})",
+                     "n/a" if check["ratio"] is None else f"{check['ratio']:.2f}"])
+        notes.append(("studies/co/w1_*/summary.json", summary))
+    header = ["w1", "A", "shape at the optimum", "stop (iterations)", "PROM builds (from the cache)",
+              "optimisation [s] (of it the tail screens)", "FOM check [s]", "FOM optimal (PROM) [cm]", "ratio"]
+    return table(header, rows) + "\n" + sources_note(notes)
+
+
+def shape_order(scene: str, values: dict) -> list[str]:
+    """The names of ``values`` in the order of the shipped scene's [shapes] (as the commands print them)."""
+    from aquarom_fenics.io.scene import Scene
+
+    order = [name for name in Scene.load(scene).shape_names if name in values]
+    return order + [name for name in values if name not in order]
+
+
+def walkthrough_table(folder: Path = SNAPSHOT) -> str:
+    """What the README's walkthrough prints, from the files its commands wrote (SO1, level 1)."""
+    fom = load("so1-fom/summary.json", folder)
+    compare = load("so1-compare/compare.json", folder)
+    prom = load("so1-compare/prom/summary.json", folder)
+    optimum = load("so1-opt/summary.json", folder)
+    design = ", ".join(f"{name} = {value:g}" for name, value in compare["design"].items() if value)
+    dropped = f"; left out: {', '.join(prom['basis_dropped'])} …" if prom.get("basis_dropped") else ""
+    errors = compare["errors"]
+    check = optimum["fom_check"]
+    rows = [
+        ["`mesh`", f"{fom['cells']} cells ({fom['dofs']} degrees of freedom), then the head, muscles, skin and spine "
+                   "with their cells and nodes"],
+        ["`simulate`", f"`distance {cm(fom['distance'])} cm, tail amplitude {cm(fom['tail_amplitude'])} cm` "
+                       f"({fom['steps']} steps)"],
+        ["`build`", f"`m = {prom['reduced_size']} ({', '.join(prom['basis'])}), p = {len(prom['xi'])}{dropped}`"],
+        ["`compare`", f"`distance FOM {cm(compare['fom']['distance'])} cm, PROM {cm(compare['prom']['distance'])} cm "
+                      f"({percent(errors['distance_relative'])}); tail amplitude "
+                      f"{percent(errors['tail_amplitude_relative'])}` at {design or 'the start design'}"],
+        ["`optimize`", "optimum `" + ", ".join(f"{name} = {optimum['optimum'][name]:.4g}"
+                                               for name in shape_order(optimum["scene"], optimum["optimum"]))
+                       + f"`, {optimum['prom_builds']} PROM builds; `FOM check: start {cm(check['start_distance'])} cm, "
+                       f"optimal {cm(check['optimal_distance'])} cm (PROM {cm(check['prom_optimal_distance'])} cm), "
+                       f"ratio {check['ratio']:.2f}`"]]
+    notes = sources_note([("so1-fom/summary.json", fom), ("so1-compare/compare.json", compare),
+                          ("so1-compare/prom/summary.json", prom), ("so1-opt/summary.json", optimum)])
+    return table(["step", "prints"], rows) + "\n" + notes
+
+
+TABLES = {"walkthrough": walkthrough_table, "accuracy": accuracy_table, "costs": cost_table, "mesh-convergence": mesh_table,
+          "station-convergence": stations_table, "studies": study_table, "studies-co": co_table}
+
+
+# ---------------------------------------------------------------- the pages
+
+def render_page(text: str, folder: Path = SNAPSHOT) -> str:
+    """``text`` with every measured block rewritten from the snapshot."""
+    def block(match) -> str:
+        name = match.group("name")
+        if name not in TABLES:
+            raise SnapshotError(f"unknown measured table {name!r}; known: {', '.join(TABLES)}")
+        return match.group(1) + TABLES[name](folder) + match.group(4)
+
+    return MARKER.sub(block, text)
+
+
+def measured_blocks(text: str) -> dict[str, str]:
+    """Name → body of every measured block of a page."""
+    return {match.group("name"): match.group("body") for match in MARKER.finditer(text)}
+
+
+FIGURE = re.compile(r"(?<![\w.])[-+−]?\d+(?:\.\d+)?(?![\w.])")
+
+
+def figures(text: str) -> list[str]:
+    """The numbers a text quotes, as written ('−' read as '-')."""
+    return [figure.replace("−", "-") for figure in FIGURE.findall(text)]
+
+
+def unsupported_figures(page_text: str, folder: Path = SNAPSHOT) -> dict[str, list[str]]:
+    """Per measured block of a page: the figures it quotes that the snapshot's table does not hold
+    (one entry per quote beyond the table's own count)."""
+    problems = {}
+    for name, body in measured_blocks(page_text).items():
+        expected = figures(TABLES[name](folder))
+        extra = []
+        for figure in figures(body):
+            if figure in expected:
+                expected.remove(figure)
+            else:
+                extra.append(figure)
+        if extra:
+            problems[name] = extra
+    return problems
+
+
+def write_pages(repository: Path = REPOSITORY, folder: Path = SNAPSHOT) -> list[str]:
+    """Rewrite the measured blocks of every page in PAGES; return the pages that changed."""
+    changed = []
+    for name in PAGES:
+        path = repository / name
+        text = path.read_text()
+        new = render_page(text, folder)
+        if new != text:
+            path.write_text(new)
+            changed.append(name)
+    return changed
