@@ -173,8 +173,24 @@ def default_station_count() -> int:
 
 # ---------------------------------------------------------------- the tables
 
+def _reference_note(reference: dict, unit=None) -> str:
+    """'value ± error (order used p, observed q or none, F_s)' of a grid-convergence reference."""
+    unit = unit or cm
+    observed = reference.get("observed_order")
+    used = reference.get("order_used")
+    how = (f"order {used:.2g} used, observed {observed:.2g}" if observed is not None
+           else f"no order observed: formal order {used:g}") if used is not None else (
+           f"observed order {observed:.1f}" if observed is not None else "")
+    safety = f", F_s = {reference['safety_factor']:g}" if reference.get("safety_factor") else ""
+    return f"{unit(reference['value'])} ± {unit(reference['estimated_error'])}" + (f" ({how}{safety})" if how else "")
+
+
+def _hz(value) -> str:
+    return f"{value:.4f}"
+
+
 def mesh_table(folder: Path = SNAPSHOT) -> str:
-    """Mesh convergence of the nominal FOM: every case and the Richardson reference."""
+    """Mesh convergence of the nominal FOM: every case and the grid-convergence reference."""
     data = load("validation/mesh_convergence.json", folder)
     default = default_mesh()
     rows = []
@@ -182,14 +198,16 @@ def mesh_table(folder: Path = SNAPSHOT) -> str:
         mark = "**" if (row["degree"], row["level"]) == default else ""
         rows.append([f"{mark}{row['degree']}{mark}", f"{mark}{row['level']}{mark}", row.get("cells", ""),
                      row.get("dofs", ""), f"{mark}{cm(row['distance'])}{mark}", percent(row["distance_error"]),
-                     cm(row["tail_amplitude"]), percent(row.get("tail_amplitude_error"))])
+                     cm(row["tail_amplitude"]), percent(row.get("tail_amplitude_error")),
+                     _hz(row["first_frequency"]) if "first_frequency" in row else "",
+                     cm(row["static_tail_deflection"]) if "static_tail_deflection" in row else ""])
     reference = data["reference"]
-    order = reference["distance"].get("observed_order")
     rows.append([f"reference (degree {reference['distance']['degree']})", "", "", "",
-                 f"{cm(reference['distance']['value'])} ± {cm(reference['distance']['estimated_error'])}"
-                 + (f" (observed order {order:.1f})" if order else ""), "",
-                 f"{cm(reference['tail_amplitude']['value'])} ± {cm(reference['tail_amplitude']['estimated_error'])}", ""])
-    return (table(["degree", "level", "cells", "dofs", "distance [cm]", "error", "tail amplitude [cm]", "error"], rows)
+                 _reference_note(reference["distance"]), "", _reference_note(reference["tail_amplitude"]), "",
+                 _reference_note(reference["first_frequency"], _hz) if "first_frequency" in reference else "",
+                 _reference_note(reference["static_tail_deflection"]) if "static_tail_deflection" in reference else ""])
+    return (table(["degree", "level", "cells", "dofs", "distance [cm]", "error", "tail amplitude [cm]", "error",
+                   "f_1 [Hz]", "static tail y [cm]"], rows)
             + f"\n`{command_of('validation/mesh_convergence.json')}`. "
             + sources_note([("validation/mesh_convergence.json", data)]))
 
@@ -204,7 +222,7 @@ def stations_table(folder: Path = SNAPSHOT) -> str:
         rows.append([f"{mark}{row['stations']}{mark}", f"{mark}{cm(row['distance'])}{mark}",
                      percent(row.get("distance_error")), cm(row.get("tail_amplitude"))])
     reference = data["reference"]["distance"]
-    rows.append(["reference", f"{cm(reference['value'])} ± {cm(reference['estimated_error'])}", "", ""])
+    rows.append(["reference", _reference_note(reference), "", ""])
     return (table([f"N_s (degree {data['degree']}, level {data['level']})", "distance [cm]",
                    "error against the reference", "tail amplitude [cm]"], rows)
             + f"\n`{command_of('validation/stations.json')}`. " + sources_note([("validation/stations.json", data)]))

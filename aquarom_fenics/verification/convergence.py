@@ -179,10 +179,15 @@ def mesh_convergence(cases: list[MeshCase], tolerance: float = DEFAULT_TOLERANCE
             row[f"{name}_error"] = getattr(case, name) / reference[name]["value"] - 1.0
         row["relative_error_distance"] = row["distance_error"]
         rows.append(row)
+    return {"reference": reference, "rows": rows, "default": cheapest_within(rows, tolerance),
+            "cheapest_within_1_percent": cheapest_within(rows, 0.01), "tolerance": tolerance}
+
+
+def cheapest_within(rows: list[dict], tolerance: float) -> dict | None:
+    """(degree, level) of the fastest FOM whose distance is within ``tolerance`` of the reference, or None."""
     within = [row for row in rows if abs(row["relative_error_distance"]) <= tolerance]
-    default = None
-    if within:
-        best = min(within, key=lambda row: row["wall_time"])
-        default = {"degree": best["degree"], "level": best["level"],
-                   "relative_error_distance": best["relative_error_distance"], "wall_time": best["wall_time"]}
-    return {"reference": reference, "rows": rows, "default": default, "tolerance": tolerance}
+    if not within:
+        return None
+    best = min(within, key=lambda row: row["wall_time"])
+    return {"degree": best["degree"], "level": best["level"],
+            "relative_error_distance": best["relative_error_distance"], "wall_time": best["wall_time"]}

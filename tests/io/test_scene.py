@@ -2,6 +2,7 @@
 reported by the command line as one line with exit code 2."""
 import dataclasses
 import itertools
+import json
 import math
 import textwrap
 from pathlib import Path
@@ -101,7 +102,10 @@ SO8 = {"z_tail": (-0.5, 0.5), "z_head": (-0.5, 0.5), "y_thin": (-0.15, 0.15),
 SO9 = {"z_tail": (-0.5, 0.5), "z_head": (-0.5, 0.5), "z_tail_step": (-0.5, 0.5),
        "z_tail_lin": (-0.5, 0.5), "y_lin_long_tail": (-0.4, 0.4), "y_ellipse": (-0.4, 0.4)}
 
-DEFAULT_MESH = (3, 2)      # (level, degree): the cheapest mesh within 3% of the converged distance (docs/theory/geometry.md)
+DEFAULT_MESH = tuple(json.loads((Path(__file__).resolve().parents[2] / "docs" / "data" / "validation"
+                                  / "mesh_convergence.json").read_text())["default"][key] for key in ("level", "degree"))
+"""(level, degree) the mesh-convergence study chose: the cheapest mesh within 3 % of the converged distance
+(its committed snapshot docs/data/validation/mesh_convergence.json)."""
 FINE_MESH = (4, 1)         # SO4–SO6: SO1–SO3 on the 16k-cell level (SPEC §11)
 STUDIES = {
     "so1": (SO1, DEFAULT_MESH), "so2": (SO2, DEFAULT_MESH), "so3": (SO3, DEFAULT_MESH),
@@ -308,12 +312,12 @@ def test_hash_follows_the_content_of_the_mesh_file(tmp_path):
 
 def test_replace_changes_one_value_and_keeps_the_rest():
     scene = Scene.load("so1")
-    coarse = scene.replace("mesh", level=1)
-    assert coarse.mesh.level == 1 and scene.mesh.level == 3
-    assert coarse.mesh.translate == scene.mesh.translate and coarse.mesh.degree == scene.mesh.degree
-    assert coarse.shapes == scene.shapes and coarse.solver == scene.solver
-    assert coarse.hash != scene.hash
-    assert coarse.replace("mesh", level=3).hash == scene.hash
+    finer = scene.replace("mesh", level=2)
+    assert finer.mesh.level == 2 and scene.mesh.level == 1
+    assert finer.mesh.translate == scene.mesh.translate and finer.mesh.degree == scene.mesh.degree
+    assert finer.shapes == scene.shapes and finer.solver == scene.solver
+    assert finer.hash != scene.hash
+    assert finer.replace("mesh", level=1).hash == scene.hash
     shifted = scene.replace("regions", muscle_range=(-0.9, -0.4))
     assert shifted.regions.muscle_range == (-0.9, -0.4)
     assert scene.replace("cooptimization", weights=[0.5]).cooptimization.weights == (0.5,)
@@ -512,7 +516,7 @@ def test_fom_hash_ignores_what_a_fom_run_does_not_read():
                 dataclasses.replace(scene, shapes=(dataclasses.replace(scene.shapes[0], lower=-0.4),) + scene.shapes[1:]))
     for other in same_run:
         assert other.hash != scene.hash and other.fom_hash == scene.fom_hash
-    for other in (scene.replace("solver", time_step=0.01), scene.replace("mesh", level=1),
+    for other in (scene.replace("solver", time_step=0.01), scene.replace("mesh", level=2),
                   scene.replace("actuation", amplitude=0.3), scene.replace("fluid", drag=False),
                   dataclasses.replace(scene, shapes=scene.shapes[:-1])):
         assert other.fom_hash != scene.fom_hash
