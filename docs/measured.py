@@ -38,6 +38,9 @@ SOURCES = {
     "studies/so1/summary.json": "scripts/study.py --cases so1",
     "studies/so2/summary.json": "scripts/study.py --cases so2",
     "studies/so3/summary.json": "scripts/study.py --cases so3",
+    "studies/so7/summary.json": "scripts/study.py --cases so7",
+    "studies/so8/summary.json": "scripts/study.py --cases so8",
+    "studies/so9/summary.json": "scripts/study.py --cases so9",
     "studies/co/w1_*/summary.json": "scripts/study.py --cases co",
     "so1-fom/summary.json": "the README's walkthrough: aquarom simulate so1 --level 1 --out results/so1-fom",
     "so1-compare/compare.json": "the README's walkthrough: aquarom compare so1 --level 1 … --out results/so1-compare",
@@ -338,10 +341,14 @@ def _fom_check_time(summary: dict) -> str:
     return "cached" if value is None else f"{value:.1f}"
 
 
+STUDY_CASES = ("so1", "so2", "so3", "so7", "so8", "so9")
+"""The shape studies on the default mesh that the studies page shows."""
+
+
 def study_table(folder: Path = SNAPSHOT) -> str:
-    """SO1–SO3 of ``scripts/study.py``: one row per case from its summary.json."""
+    """SO1–SO3 and SO7–SO9 of ``scripts/study.py``: one row per case from its summary.json."""
     rows, notes = [], []
-    for case in ("so1", "so2", "so3"):
+    for case in STUDY_CASES:
         summary = load(f"studies/{case}/summary.json", folder)
         check = summary["fom_check"]
         optimum = ", ".join(f"{name} {value:+.3f}" for name, value in sorted(summary["optimum"].items()))
