@@ -27,7 +27,7 @@ def run_dry(args) -> int:
 
 
 def run_mesh(args) -> int:
-    from aquarom_fenics.geometry.fish import load_fish
+    from aquarom_fenics.geometry.fish import body_summary, load_fish
     from aquarom_fenics.geometry.mesh import cell_quality
 
     scene = load_scene(args)
@@ -46,6 +46,9 @@ def run_mesh(args) -> int:
           spine        {tags.spine_nodes.size} nodes, {tags.spine_segments.shape[0]} segments, tail node {tags.tail_node}
           dorsal nodes {tags.dorsal_nodes.size}
           quality      min {quality.min():.3f}, mean {quality.mean():.3f} (1 = regular tetrahedron)"""))
+    for line in body_summary(scene, mesh, tags):
+        label, _, text = line.partition(": ")
+        say(f"  {label:<12} {text}")
     return 0
 
 

@@ -117,7 +117,7 @@ def dry_run(args, scene, designs, source, kept, cluster, workers) -> int:
     cached = cached_designs(scene, todo, args.model)
     missing = len(todo) - cached
     say("plan for `aquarom sweep` (dry run, nothing is written):")
-    for line in plan("sweep", scene, args.model)[:3]:
+    for line in plan("sweep", scene, args.model)[:5]:      # scene, mesh, body (2 lines), forms
         say(f"  {line}")
     say(f"  designs: {len(designs)} ({source}) of {', '.join(scene.shape_names)}; model {args.model}")
     if kept:

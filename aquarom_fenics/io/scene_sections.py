@@ -52,6 +52,26 @@ def _station_count(value, where):
     raise InputError(f"{where} must be an integer number of station intervals in [2, 2000] or \"nodes\", got {value!r}")
 
 
+def _region_name(value, where):
+    """A non-empty region name (a physical group or element set of the mesh)."""
+    from aquarom_fenics.errors import InputError
+
+    if isinstance(value, str) and value.strip():
+        return value
+    raise InputError(f"{where} must be the name of a region of the mesh (a non-empty string), got {value!r}")
+
+
+def _muscle_pair(value, where):
+    """Two different region names: the muscle driven by +a(t) and the one driven by -a(t)."""
+    from aquarom_fenics.errors import InputError
+
+    if (isinstance(value, (list, tuple)) and len(value) == 2 and all(isinstance(name, str) and name.strip()
+                                                                      for name in value) and value[0] != value[1]):
+        return tuple(value)
+    raise InputError(f"{where} must name two different regions of the mesh, [left, right] (driven in antiphase: "
+                     f"a_left = A sin(2π f t), a_right = -a_left), got {value!r}")
+
+
 def _interval_within(low, high):
     def check(value) -> str | None:
         lower, upper = value
@@ -69,6 +89,7 @@ class MeshSection:
     length: float = _spec(0.20, _positive, "block length L along x [m]")
     width: float = _spec(0.04, _positive, "block width W along y [m]")
     height: float = _spec(0.10, _positive, "block height H along z [m]")
+    head_end: str = _spec("+x", _one_of("+x", "-x"), "where the head of the mesh lies along x: \"+x\" (at the largest x, as the block) or \"-x\" (the mesh is then mirrored in x, so that it swims towards +x); refused when the head region lies at the other end", legacy="+x")
 
 
 @dataclass(frozen=True)
@@ -86,6 +107,8 @@ class MaterialSection:
 class RegionsSection:
     head_fraction: float = _spec(0.35, lambda v: None if 0 < v < 1 else "must be in (0, 1)", "head: centroid x ≥ -fraction·L")
     muscle_range: tuple[float, float] = _spec((-0.95, -0.35), _interval_within(-1.0, 0.0), "muscles: -a·L < centroid x < -b·L, as [-a, -b]")
+    head: str = _spec("head", None, "the region (gmsh volume physical group, Abaqus element set) that is the stiff head; head_fraction and muscle_range place the block's regions, and choose the cells of a mesh without regions", coerce=_region_name, legacy="head")
+    muscles: tuple[str, str] = _spec(("left_muscle", "right_muscle"), None, "the two muscle regions [left, right], driven in antiphase (a_left = A sin(2π f t), a_right = -a_left)", coerce=_muscle_pair, legacy=("left_muscle", "right_muscle"))
 
 
 @dataclass(frozen=True)
