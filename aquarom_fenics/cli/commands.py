@@ -20,8 +20,9 @@ def run_dry(args) -> int:
     if args.command == "sweep":          # its plan needs the designs: the command makes it
         return run_sweep(args)
     scene, _ = check_inputs(args, load_scene(args))
+    lines = plan(args.command, scene, getattr(args, "model", None))      # refuses a bad mesh before printing
     say(f"plan for `aquarom {args.command}` (dry run, nothing is written):")
-    for line in plan(args.command, scene, getattr(args, "model", None)):
+    for line in lines:
         say(f"  {line}")
     return 0
 

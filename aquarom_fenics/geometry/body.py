@@ -21,7 +21,8 @@ def check_body_length(length: float, source: str) -> None:
         return
     hint = ("its coordinates are probably in millimetres or centimetres: set [mesh] scale = 0.001 (mm) or 0.01 "
             "(cm)" if length > high else "set [mesh] scale to the factor from its units to metres")
-    raise InputError(f"mesh {source}: the body is {length:.4g} m long along x, outside {low:g}-{high:g} m; {hint}")
+    raise InputError(f"mesh {source}: the body is {length:.4g} m long along x, outside {1000 * low:g} mm to "
+                     f"{high:g} m; {hint}")
 
 
 def head_side(mesh: FishMesh, head: str) -> str | None:
@@ -74,7 +75,7 @@ def body_lines(mesh: FishMesh, regions: dict[str, np.ndarray], how: str) -> list
              for name, cells in regions.items()]
     return [f"body: length {length:.4g} m along x (head at the largest x), volume {total:.4g} m³, "
             f"{len(mesh.cells)} tetrahedra",
-            f"regions ({how}): " + (", ".join(parts) or "none")]
+            f"regions: {', '.join(parts) or 'none'} ({how})"]
 
 
 def block_lines(length: float, width: float, height: float, head_fraction: float, muscle_range,
@@ -87,4 +88,4 @@ def block_lines(length: float, width: float, height: float, head_fraction: float
     parts = [f"{name} {volume:.4g} m³ ({100 * volume / total:.1f} %)" for name, volume in regions.items()]
     return [f"body: length {length:.4g} m along x (head at the largest x), volume {total:.4g} m³, "
             f"~{cells} tetrahedra (level {level}, meshed by the run)",
-            "regions (tagged): " + ", ".join(parts)]
+            f"regions: {', '.join(parts)} (tagged)"]

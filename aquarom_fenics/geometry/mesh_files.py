@@ -37,9 +37,6 @@ def _check_transform(path: Path, scale, translate) -> tuple[float, np.ndarray]:
 GMSH_QUADRATIC_TETRAHEDRON = 11
 """gmsh element type of the 10-node (second-order) tetrahedron."""
 
-_DIMENSION_NAMES = {0: "point", 1: "curve", 2: "surface", 3: "volume"}
-
-
 def _group_name(gmsh, dim: int, tag: int) -> str:
     """A physical group's name, or its number as text when it has none."""
     return gmsh.model.getPhysicalName(dim, tag) or str(tag)
@@ -47,7 +44,7 @@ def _group_name(gmsh, dim: int, tag: int) -> str:
 
 def _gmsh_contents(gmsh):
     """(node tags, coordinates, tetrahedron tags, tetrahedron node tags, {volume group: tetrahedron
-    tags}, other groups as 'name (dimension)', element types present) of the current gmsh model."""
+    tags}, the quoted names of the other groups, element types present) of the current gmsh model."""
     node_tags, coordinates, _ = gmsh.model.mesh.getNodes()
     element_tags, element_nodes = gmsh.model.mesh.getElementsByType(GMSH_TETRAHEDRON)
     volume_groups: dict[str, list[np.ndarray]] = {}
@@ -55,7 +52,7 @@ def _gmsh_contents(gmsh):
     for dim, tag in gmsh.model.getPhysicalGroups():
         name = _group_name(gmsh, dim, tag)
         if dim != 3:
-            other_groups.append(f"{name} ({_DIMENSION_NAMES[dim]})")
+            other_groups.append(f"'{name}'")
             continue
         for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, tag):
             tags, _ = gmsh.model.mesh.getElementsByType(GMSH_TETRAHEDRON, entity)
@@ -72,8 +69,8 @@ def _no_tetrahedra(path: Path, groups, other_groups, element_types) -> InputErro
                           "Mesh.ElementOrder = 1 (the FOM makes its own quadratic nodes with [mesh] degree = 2)")
     if other_groups and not groups:
         return InputError(
-            f"mesh file {path}: no tetrahedra: its physical groups are all of lower dimension "
-            f"({', '.join(other_groups)}), and gmsh saves only the elements of physical groups; add a volume "
+            f"mesh file {path}: no tetrahedra: its physical groups ({', '.join(other_groups)}) are all surfaces, "
+            "curves or points, and gmsh saves only the elements of physical groups; add a volume "
             "physical group for the body (gmsh.model.addPhysicalGroup(3, volume_tags), named e.g. \"body\"), "
             "or set Mesh.SaveAll = 1 before writing")
     return InputError(f"mesh file {path}: contains no linear tetrahedra (gmsh element type 4); "

@@ -124,7 +124,7 @@ def _spine(mesh: FishMesh, nodes: LagrangeNodes, box: FishBox, tolerance: float)
         (np.abs(relative[:, 1]) <= tolerance) & (np.abs(relative[:, 2]) <= tolerance)
     )
     spine_nodes = on_axis[np.argsort(relative[on_axis, 0], kind="stable")]
-    remedy = "mesh the box cut by the planes y = 0 and z = 0"
+    remedy = "mesh the body cut by both planes y = 0 and z = 0, so that its axis is a line of mesh edges"
     if len(spine_nodes) < 2:
         raise InputError(
             f"mesh {mesh.source}: no nodes on the body axis y = 0, z = 0 (within {tolerance:.3g}"
