@@ -83,7 +83,7 @@ def _interval_within(low, high):
 class MeshSection:
     level: int = _spec(3, _one_of(1, 2, 3, 4, 5), "refinement level of the built-in block (1: ~1.3k … 5: ~25k cells)")
     degree: int = _spec(1, _one_of(1, 2), "Lagrange degree of the displacement (1: linear, 2: quadratic tetrahedra)")
-    file: str = _spec("", None, "external mesh (.msh or .inp), relative to the scene file; overrides level")
+    file: str = _spec("", None, "external mesh (gmsh .msh or Abaqus .inp of first-order tetrahedra), relative to the scene file; its volume physical groups or element sets are the regions named in [regions]; replaces the block (--level is refused with it)")
     scale: float = _spec(1.0, _positive, "factor applied to the file's coordinates (to metres)")
     translate: tuple[float, float, float] = _spec((0.0, 0.0, 0.0), None, "shift after scaling [m]")
     length: float = _spec(0.20, _positive, "block length L along x [m]")
@@ -105,8 +105,8 @@ class MaterialSection:
 
 @dataclass(frozen=True)
 class RegionsSection:
-    head_fraction: float = _spec(0.35, lambda v: None if 0 < v < 1 else "must be in (0, 1)", "head: centroid x ≥ -fraction·L")
-    muscle_range: tuple[float, float] = _spec((-0.95, -0.35), _interval_within(-1.0, 0.0), "muscles: -a·L < centroid x < -b·L, as [-a, -b]")
+    head_fraction: float = _spec(0.35, lambda v: None if 0 < v < 1 else "must be in (0, 1)", "head x ≥ -fraction·L: the block's head region, and on a mesh without regions the cells whose centroid lies there")
+    muscle_range: tuple[float, float] = _spec((-0.95, -0.35), _interval_within(-1.0, 0.0), "muscles -a·L < x < -b·L, as [-a, -b]: the block's muscle regions, and on a mesh without regions the cells whose centroid lies there")
     head: str = _spec("head", None, "the region (gmsh volume physical group, Abaqus element set) that is the stiff head; head_fraction and muscle_range place the block's regions, and choose the cells of a mesh without regions", coerce=_region_name, legacy="head")
     muscles: tuple[str, str] = _spec(("left_muscle", "right_muscle"), None, "the two muscle regions [left, right], driven in antiphase (a_left = A sin(2π f t), a_right = -a_left)", coerce=_muscle_pair, legacy=("left_muscle", "right_muscle"))
 
