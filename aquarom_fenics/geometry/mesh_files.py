@@ -1,4 +1,5 @@
-"""Tetrahedral meshes and their regions read from files: gmsh ``.msh`` (gmsh's reader) and Abaqus ``.inp`` (C3D4, meshio)."""
+"""Tetrahedral meshes and their regions read from files: gmsh ``.msh`` (gmsh's own reader) and
+Abaqus ``.inp`` (C3D4, meshio)."""
 
 from __future__ import annotations
 

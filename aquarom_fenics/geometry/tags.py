@@ -253,8 +253,8 @@ def tag_fish(mesh: FishMesh, head_fraction=0.35, muscle_range=(-0.95, -0.35),
 
     Head and muscles are the mesh's tagged regions (``FishMesh.regions``) named ``head`` and
     ``muscles`` = (left, right): a mesh with one of them must have all three. A mesh with none of
-    them falls back to cell centroids and the fractions, with a warning. Node tags refer to ``nodes`` (default: the vertices, i.e. linear
-    elements).
+    them falls back to cell centroids and the fractions, with a warning. Node tags refer to
+    ``nodes`` (default: the vertices, i.e. linear elements).
     """
     check_region_fractions(mesh.source, head_fraction, muscle_range)
     nodes = nodes or lagrange_nodes(mesh, 1)

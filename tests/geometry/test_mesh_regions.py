@@ -224,6 +224,18 @@ def test_fom_on_the_mirrored_block_with_its_head_declared_equals_the_block(tmp_p
 # Bad meshes: one line and exit code 2 before any solve
 
 
+def test_a_spine_with_a_gap_no_edge_spans_is_refused(block):
+    """A vertex moved off the axis leaves its two neighbours on the axis with no edge between them."""
+    spine = tag_fish(block).spine_nodes
+    assert len(spine) > 4
+    points = block.points.copy()
+    points[spine[len(spine) // 2], 1] += 1e-3
+    moved = FishMesh(points=points, cells=block.cells, source="moved", regions=block.regions)
+    with pytest.raises(InputError, match=rf"^mesh moved: the body axis y = 0, z = 0 is not a line of mesh edges "
+                                         rf"\({len(spine) - 1} vertices on it, 1 of the {len(spine) - 2} gaps"):
+        tag_fish(moved)
+
+
 def half_cut_box(path):
     """The block's box cut by the plane z = 0 only, meshed without any constraint on y = 0."""
     gmsh = gmsh_session.import_gmsh()
@@ -263,7 +275,8 @@ def bad_mesh(kind, tmp_path, block):
         return path, "", ["region 'head' lies at the -x end", 'head_end = "-x"']
     if kind == "half cut":
         half_cut_box(path)
-        return path, "", ["the body axis y = 0, z = 0 is not a line of mesh edges", "cut by both planes y = 0 and z = 0"]
+        return path, "", ["the body axis y = 0, z = 0 is not a line of mesh edges",
+                          "cut by both planes y = 0 and z = 0"]
     raise ValueError(kind)
 
 
