@@ -14,13 +14,19 @@ LENGTH_RANGE = (1e-3, 5.0)
 """Lengths along x [m] of the bodies accepted: 1 mm to 5 m (a mesh outside is in other units)."""
 
 
-def check_body_length(length: float, source: str) -> None:
-    """InputError unless LENGTH_RANGE[0] ≤ length ≤ LENGTH_RANGE[1] (m, along x, after [mesh] scale)."""
+def check_body_length(length: float, source: str, block: bool = False) -> None:
+    """InputError unless LENGTH_RANGE[0] ≤ length ≤ LENGTH_RANGE[1] (m, along x, after [mesh] scale);
+    ``block``: the built-in block, whose sides are given in metres."""
     low, high = LENGTH_RANGE
     if low <= length <= high:
         return
-    hint = ("its coordinates are probably in millimetres or centimetres: set [mesh] scale = 0.001 (mm) or 0.01 "
-            "(cm)" if length > high else "set [mesh] scale to the factor from its units to metres")
+    if block:
+        hint = "give [mesh] length, width and height in metres"
+    elif length > high:
+        hint = ("its coordinates are probably in millimetres or centimetres: set [mesh] scale = 0.001 (mm) or "
+                "0.01 (cm)")
+    else:
+        hint = "set [mesh] scale to the factor from its units to metres"
     raise InputError(f"mesh {source}: the body is {length:.4g} m long along x, outside {1000 * low:g} mm to "
                      f"{high:g} m; {hint}")
 

@@ -123,7 +123,7 @@ def load_mesh(scene: Scene) -> FishMesh:
     if scene.mesh_file is not None:
         mesh = read_mesh(scene.mesh_file, scale=scene.mesh.scale, translate=scene.mesh.translate)
     else:
-        check_body_length(scene.mesh.length, f"block ([mesh] length = {scene.mesh.length:g})")
+        check_body_length(scene.mesh.length, "block", block=True)
         mesh = block_mesh(scene.mesh.level, scene.mesh.length, scene.mesh.width, scene.mesh.height,
                           head_fraction=scene.regions.head_fraction, muscle_range=scene.regions.muscle_range)
     check_body_length(float(np.ptp(mesh.points[:, 0])), mesh.source)
@@ -155,7 +155,7 @@ def planned_body(scene: Scene) -> list[str]:
                                   head_fraction=scene.regions.head_fraction,
                                   muscle_range=scene.regions.muscle_range).exists()
         if not cached:
-            check_body_length(mesh.length, f"block ([mesh] length = {mesh.length:g})")
+            check_body_length(mesh.length, "block", block=True)
             return block_lines(mesh.length, mesh.width, mesh.height, scene.regions.head_fraction,
                                scene.regions.muscle_range, LEVEL_TARGET_CELLS[mesh.level], mesh.level)
     body = load_mesh(scene)

@@ -310,6 +310,18 @@ def test_a_bad_mesh_is_one_line_and_exit_code_2(kind, command, tmp_path, block, 
 
 
 @pytest.mark.parametrize("command", [["mesh"], ["simulate", "--dry-run"]])
+@pytest.mark.parametrize("length", [10.0, 5e-4])
+def test_a_block_outside_1_mm_to_5_m_is_refused(command, length, tmp_path, capfd):
+    scene = tmp_path / "scene.toml"
+    scene.write_text(f"[mesh]\nlevel = 1\nlength = {length!r}\nwidth = {length / 5!r}\nheight = {length / 2!r}\n")
+    code = main([command[0], str(scene), *command[1:]])
+    out, err = capfd.readouterr()
+    assert code == 2 and "plan for" not in out
+    assert err.strip().splitlines() == [f"aquarom {command[0]}: error: mesh block: the body is {length:g} m long "
+                                        "along x, outside 1 mm to 5 m; give [mesh] length, width and height in metres"]
+
+
+@pytest.mark.parametrize("command", [["mesh"], ["simulate", "--dry-run"]])
 def test_level_with_a_mesh_file_is_refused(command, tmp_path, block, capfd):
     path = tmp_path / "block.msh"
     write_msh(path, block.points, block.cells, block_regions(block), passive=passive_cells(block))
