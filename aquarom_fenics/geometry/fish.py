@@ -146,9 +146,10 @@ def body_summary(scene: Scene, mesh: FishMesh, tags: FishTags) -> list[str]:
     return body_lines(mesh, regions, how)
 
 
-def planned_body(scene: Scene) -> list[str]:
-    """``body_summary`` for a dry run, which writes nothing: a mesh file or a cached block is read
-    and checked like the run would; a block not yet meshed is described from its box."""
+def planned_body(scene: Scene) -> tuple[list[str], int]:
+    """``body_summary`` and the number of cells for a dry run, which writes nothing: a mesh file or
+    a cached block is read and checked like the run would; a block not yet meshed is described
+    from its box and its level's advertised number of cells."""
     if scene.mesh_file is None:
         mesh = scene.mesh
         cached = block_cache_path(mesh.level, mesh.length, mesh.width, mesh.height,
@@ -156,10 +157,12 @@ def planned_body(scene: Scene) -> list[str]:
                                   muscle_range=scene.regions.muscle_range).exists()
         if not cached:
             check_body_length(mesh.length, "block", block=True)
+            cells = LEVEL_TARGET_CELLS[mesh.level]
             return block_lines(mesh.length, mesh.width, mesh.height, scene.regions.head_fraction,
-                               scene.regions.muscle_range, LEVEL_TARGET_CELLS[mesh.level], mesh.level)
+                               scene.regions.muscle_range, cells, mesh.level), cells
     body = load_mesh(scene)
-    return body_summary(scene, body, tag_scene_fish(scene, body, lagrange_nodes(body, scene.mesh.degree)))
+    tags = tag_scene_fish(scene, body, lagrange_nodes(body, scene.mesh.degree))
+    return body_summary(scene, body, tags), len(body.cells)
 
 
 def load_fish(scene: Scene, comm: MPI.Comm = MPI.COMM_WORLD) -> Fish:

@@ -38,6 +38,7 @@ def _check_transform(path: Path, scale, translate) -> tuple[float, np.ndarray]:
 GMSH_QUADRATIC_TETRAHEDRON = 11
 """gmsh element type of the 10-node (second-order) tetrahedron."""
 
+
 def _group_name(gmsh, dim: int, tag: int) -> str:
     """A physical group's name, or its number as text when it has none."""
     return gmsh.model.getPhysicalName(dim, tag) or str(tag)

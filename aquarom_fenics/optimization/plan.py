@@ -95,14 +95,16 @@ def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
     lines = [f"scene {scene.name} (hash {scene.hash})"]
     if scene.mesh_file:
         lines.append(f"mesh: read {scene.mesh_file} (scale {scene.mesh.scale:g})")
-        cells = cells or REFERENCE_CELLS
     else:
         cached = block_cache_path(scene.mesh.level, scene.mesh.length, scene.mesh.width, scene.mesh.height,
                                   head_fraction=scene.regions.head_fraction,
                                   muscle_range=scene.regions.muscle_range).exists()
         lines.append(f"mesh: level {scene.mesh.level} (~{cells} cells), "
                      + ("reused from the mesh cache" if cached else "generated with gmsh and cached"))
-    lines += planned_body(scene)
+    body, body_cells = planned_body(scene)
+    lines += body
+    if scene.mesh_file:
+        cells = body_cells          # the estimates below on the file's own cells
     if command in ("mesh", "shapes"):
         lines.append("work: tags" + (", design check, XDMF and PNG renders" if command == "shapes" else ""))
         return lines + ["estimate: a few seconds"]
