@@ -20,14 +20,15 @@ def run_dry(args) -> int:
     if args.command == "sweep":          # its plan needs the designs: the command makes it
         return run_sweep(args)
     scene, _ = check_inputs(args, load_scene(args))
+    lines = plan(args.command, scene, getattr(args, "model", None))      # refuses a bad mesh before printing
     say(f"plan for `aquarom {args.command}` (dry run, nothing is written):")
-    for line in plan(args.command, scene, getattr(args, "model", None)):
+    for line in lines:
         say(f"  {line}")
     return 0
 
 
 def run_mesh(args) -> int:
-    from aquarom_fenics.geometry.fish import load_fish
+    from aquarom_fenics.geometry.fish import body_summary, load_fish
     from aquarom_fenics.geometry.mesh import cell_quality
 
     scene = load_scene(args)
@@ -46,6 +47,9 @@ def run_mesh(args) -> int:
           spine        {tags.spine_nodes.size} nodes, {tags.spine_segments.shape[0]} segments, tail node {tags.tail_node}
           dorsal nodes {tags.dorsal_nodes.size}
           quality      min {quality.min():.3f}, mean {quality.mean():.3f} (1 = regular tetrahedron)"""))
+    for line in body_summary(scene, mesh, tags):
+        label, _, text = line.partition(": ")
+        say(f"  {label:<12} {text}")
     return 0
 
 

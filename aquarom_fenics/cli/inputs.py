@@ -17,6 +17,10 @@ def load_scene(args):
     for setting in getattr(args, "settings", None) or []:
         scene = with_setting(scene, setting)
     if args.level is not None:
+        if scene.mesh.file:
+            raise InputError(f"--level {args.level}: scene {scene.source} reads its mesh from the file "
+                             f"{scene.mesh.file} ([mesh] file), and levels are those of the built-in block; "
+                             "refine the file's mesh instead, or drop --level")
         scene = scene.replace("mesh", level=args.level)
     if args.degree is not None:
         scene = scene.replace("mesh", degree=args.degree)

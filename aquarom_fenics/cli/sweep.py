@@ -117,8 +117,9 @@ def dry_run(args, scene, designs, source, kept, cluster, workers) -> int:
     todo = [design for k, design in enumerate(designs) if k not in kept]
     cached = cached_designs(scene, todo, args.model)
     missing = len(todo) - cached
+    lines = plan("sweep", scene, args.model)[:5]      # scene, mesh, body (2 lines), forms; refuses a bad mesh
     say("plan for `aquarom sweep` (dry run, nothing is written):")
-    for line in plan("sweep", scene, args.model)[:3]:
+    for line in lines:
         say(f"  {line}")
     say(f"  designs: {len(designs)} ({source}) of {', '.join(scene.shape_names)}; model {args.model}")
     if kept:

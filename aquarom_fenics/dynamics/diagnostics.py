@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from aquarom_fenics.geometry.body import LENGTH_RANGE
 from aquarom_fenics.io.scene import Scene
 
 if TYPE_CHECKING:
@@ -20,8 +21,8 @@ YOUNG_MODULUS_RANGE = (1e3, 1e9)
 DENSITY_RANGE = (100.0, 20000.0)
 """Plausible density of a body or a fluid [kg/m³]."""
 
-BODY_LENGTH_RANGE = (1e-3, 10.0)
-"""Plausible body length [m]."""
+BODY_LENGTH_RANGE = LENGTH_RANGE
+"""Plausible body length [m]: the range outside which a mesh is refused (``geometry.body``)."""
 
 MUSCLE_STRESS_LIMIT = 0.2
 """Peak muscle stress k·A above this fraction of E makes the soft body buckle (reference fish: 0.046)."""

@@ -13,13 +13,14 @@ from mpi4py import MPI
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.fem import dolfinx_adapter as fx
-from aquarom_fenics.geometry.block import block_mesh
+from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS, block_cache_path, block_mesh
+from aquarom_fenics.geometry.body import block_lines, body_lines, check_body_length, with_head_at_max_x
 from aquarom_fenics.geometry.mesh import FishMesh, LagrangeNodes, lagrange_nodes
 from aquarom_fenics.geometry.mesh_files import read_mesh
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.geometry.design_check import check_exact_design
 from aquarom_fenics.geometry.shapes import design_points, reference_to_cells, shape_gradients, shape_matrix
-from aquarom_fenics.geometry.tags import FishTags, tag_fish
+from aquarom_fenics.geometry.tags import FishTags, is_tagged, tag_fish
 
 
 log = logging.getLogger("aquarom")
@@ -116,10 +117,52 @@ class Fish:
 
 
 def load_mesh(scene: Scene) -> FishMesh:
+    """The scene's mesh with its head at the largest x: the block, or the file's mesh scaled,
+    translated and (``[mesh] head_end = "-x"``) mirrored in x; InputError for a body outside
+    1 mm–5 m or a head region at the other end than the declared one."""
     if scene.mesh_file is not None:
-        return read_mesh(scene.mesh_file, scale=scene.mesh.scale, translate=scene.mesh.translate)
-    return block_mesh(scene.mesh.level, scene.mesh.length, scene.mesh.width, scene.mesh.height,
-                      head_fraction=scene.regions.head_fraction, muscle_range=scene.regions.muscle_range)
+        mesh = read_mesh(scene.mesh_file, scale=scene.mesh.scale, translate=scene.mesh.translate)
+    else:
+        check_body_length(scene.mesh.length, "block", block=True)
+        mesh = block_mesh(scene.mesh.level, scene.mesh.length, scene.mesh.width, scene.mesh.height,
+                          head_fraction=scene.regions.head_fraction, muscle_range=scene.regions.muscle_range)
+    check_body_length(float(np.ptp(mesh.points[:, 0])), mesh.source)
+    return with_head_at_max_x(mesh, scene.mesh.head_end, scene.regions.head)
+
+
+def tag_scene_fish(scene: Scene, mesh: FishMesh, nodes: LagrangeNodes) -> FishTags:
+    """The tags of the scene's mesh: its regions named in ``[regions]``, or the fractions' cells."""
+    return tag_fish(mesh, head_fraction=scene.regions.head_fraction, muscle_range=scene.regions.muscle_range,
+                    nodes=nodes, head=scene.regions.head, muscles=scene.regions.muscles)
+
+
+def body_summary(scene: Scene, mesh: FishMesh, tags: FishTags) -> list[str]:
+    """Length, volume, element count and region volumes of the scene's body (``aquarom mesh``, dry runs)."""
+    head, (left, right) = scene.regions.head, scene.regions.muscles
+    regions = {head: tags.head_cells, left: tags.left_muscle_cells, right: tags.right_muscle_cells}
+    regions |= {name: cells for name, cells in mesh.regions.items() if name not in regions}
+    how = ("tagged" if is_tagged(mesh, (head, left, right))
+           else f"head and muscles chosen by cell centroid: the mesh has no region {head}, {left} or {right}")
+    return body_lines(mesh, regions, how)
+
+
+def planned_body(scene: Scene) -> tuple[list[str], int]:
+    """``body_summary`` and the number of cells for a dry run, which writes nothing: a mesh file or
+    a cached block is read and checked like the run would; a block not yet meshed is described
+    from its box and its level's advertised number of cells."""
+    if scene.mesh_file is None:
+        mesh = scene.mesh
+        cached = block_cache_path(mesh.level, mesh.length, mesh.width, mesh.height,
+                                  head_fraction=scene.regions.head_fraction,
+                                  muscle_range=scene.regions.muscle_range).exists()
+        if not cached:
+            check_body_length(mesh.length, "block", block=True)
+            cells = LEVEL_TARGET_CELLS[mesh.level]
+            return block_lines(mesh.length, mesh.width, mesh.height, scene.regions.head_fraction,
+                               scene.regions.muscle_range, cells, mesh.level), cells
+    body = load_mesh(scene)
+    tags = tag_scene_fish(scene, body, lagrange_nodes(body, scene.mesh.degree))
+    return body_summary(scene, body, tags), len(body.cells)
 
 
 def load_fish(scene: Scene, comm: MPI.Comm = MPI.COMM_WORLD) -> Fish:
@@ -134,8 +177,7 @@ def load_fish(scene: Scene, comm: MPI.Comm = MPI.COMM_WORLD) -> Fish:
     if isinstance(mesh, InputError):
         raise mesh
     nodes = lagrange_nodes(mesh, scene.mesh.degree)
-    tags = tag_fish(mesh, head_fraction=scene.regions.head_fraction, muscle_range=scene.regions.muscle_range,
-                    nodes=nodes)
+    tags = tag_scene_fish(scene, mesh, nodes)
     names = tuple(scene.shape_names)
     relative = tags.box.relative(nodes.points)
     matrix = shape_matrix(names, relative, tags.box) if names else np.zeros((nodes.points.size, 0))

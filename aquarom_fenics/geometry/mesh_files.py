@@ -1,4 +1,5 @@
-"""Tetrahedral meshes read from files: gmsh ``.msh`` and Abaqus ``.inp`` (C3D4)."""
+"""Tetrahedral meshes and their regions read from files: gmsh ``.msh`` (gmsh's own reader) and
+Abaqus ``.inp`` (C3D4, meshio)."""
 
 from __future__ import annotations
 
@@ -34,133 +35,131 @@ def _check_transform(path: Path, scale, translate) -> tuple[float, np.ndarray]:
     return factor, shift
 
 
-def _read_gmsh(path: Path) -> tuple[np.ndarray, np.ndarray]:
+GMSH_QUADRATIC_TETRAHEDRON = 11
+"""gmsh element type of the 10-node (second-order) tetrahedron."""
+
+
+def _group_name(gmsh, dim: int, tag: int) -> str:
+    """A physical group's name, or its number as text when it has none."""
+    return gmsh.model.getPhysicalName(dim, tag) or str(tag)
+
+
+def _gmsh_contents(gmsh):
+    """(node tags, coordinates, tetrahedron tags, tetrahedron node tags, {volume group: tetrahedron
+    tags}, the quoted names of the other groups, element types present) of the current gmsh model."""
+    node_tags, coordinates, _ = gmsh.model.mesh.getNodes()
+    element_tags, element_nodes = gmsh.model.mesh.getElementsByType(GMSH_TETRAHEDRON)
+    volume_groups: dict[str, list[np.ndarray]] = {}
+    other_groups = []
+    for dim, tag in gmsh.model.getPhysicalGroups():
+        name = _group_name(gmsh, dim, tag)
+        if dim != 3:
+            other_groups.append(f"'{name}'")
+            continue
+        for entity in gmsh.model.getEntitiesForPhysicalGroup(dim, tag):
+            tags, _ = gmsh.model.mesh.getElementsByType(GMSH_TETRAHEDRON, entity)
+            volume_groups.setdefault(name, []).append(np.asarray(tags, dtype=np.int64))
+    groups = {name: np.concatenate(parts) for name, parts in volume_groups.items()}
+    element_types = set(int(kind) for kind in gmsh.model.mesh.getElementTypes())
+    return node_tags, coordinates, element_tags, element_nodes, groups, other_groups, element_types
+
+
+def _no_tetrahedra(path: Path, groups, other_groups, element_types) -> InputError:
+    """The one line for a .msh file without linear tetrahedra, naming the likely cause."""
+    if GMSH_QUADRATIC_TETRAHEDRON in element_types:
+        return InputError(f"mesh file {path}: its tetrahedra are second-order (gmsh element type 11); mesh with "
+                          "Mesh.ElementOrder = 1 (the FOM makes its own quadratic nodes with [mesh] degree = 2)")
+    if other_groups and not groups:
+        return InputError(
+            f"mesh file {path}: no tetrahedra: its physical groups ({', '.join(other_groups)}) are all surfaces, "
+            "curves or points, and gmsh saves only the elements of physical groups; add a volume "
+            "physical group for the body (gmsh.model.addPhysicalGroup(3, volume_tags), named e.g. \"body\"), "
+            "or set Mesh.SaveAll = 1 before writing")
+    return InputError(f"mesh file {path}: contains no linear tetrahedra (gmsh element type 4); "
+                      "mesh the volume with first-order tetrahedra")
+
+
+def _read_gmsh(path: Path):
+    """(points, cells, regions) of a gmsh .msh file (formats 2 and 4): the linear tetrahedra in the
+    order of their element tags, and every volume physical group as a region (its name, or its
+    number as text when unnamed)."""
     try:
         with gmsh_model("aquarom_read", _GMSH_READ_OPTIONS) as gmsh:
             gmsh.merge(str(path))
-            node_tags, coordinates, _ = gmsh.model.mesh.getNodes()
-            _, element_nodes = gmsh.model.mesh.getElementsByType(GMSH_TETRAHEDRON)
+            node_tags, coordinates, element_tags, element_nodes, groups, others, kinds = _gmsh_contents(gmsh)
     except Exception as error:
         raise InputError(f"mesh file {path}: gmsh cannot read it ({error})") from None
-    if len(element_nodes) == 0:
-        raise InputError(
-            f"mesh file {path}: contains no linear tetrahedra (gmsh element type 4); "
-            "mesh the volume with first-order tetrahedra"
-        )
+    if len(element_tags) == 0:
+        raise _no_tetrahedra(path, groups, others, kinds)
+    element_tags = np.asarray(element_tags, dtype=np.int64)
+    order = np.argsort(element_tags, kind="stable")
+    element_nodes = np.asarray(element_nodes, dtype=np.int64).reshape(-1, 4)[order]
     try:
-        return points_and_cells_from_gmsh(node_tags, coordinates, element_nodes)
+        points, cells = points_and_cells_from_gmsh(node_tags, coordinates, element_nodes)
     except ValueError as error:
         raise InputError(f"mesh file {path}: {error}") from None
+    sorted_tags = element_tags[order]
+    regions = {name: np.searchsorted(sorted_tags, tags) for name, tags in groups.items()}
+    return points, cells, regions
 
 
-def _keyword_line(line: str) -> tuple[str, dict[str, str]]:
-    """('*element', {'type': 'C3D4', ...}) from '*Element, type=C3D4, ...'."""
-    name, *parameters = [part.strip() for part in line.split(",")]
-    options = {}
-    for parameter in parameters:
-        key, _, value = parameter.partition("=")
-        options[key.strip().lower()] = value.strip()
-    return name.lower(), options
+def _read_abaqus(path: Path):
+    """(points, cells, regions) of an Abaqus .inp file read by meshio: the C3D4 elements in file
+    order, and every element set (*Elset, or elset= of an *Element section) holding some of them
+    as a region."""
+    from meshio import abaqus    # its own reader: meshio.read() prints a ReadError and exits
 
-
-_ABAQUS_RECORD_LENGTH = {"node": 4, "tetrahedron": 5}
-"""Values per record: 'label, x, y, z' and 'label, n1, n2, n3, n4'."""
-
-
-def _abaqus_records(path: Path, text: str):
-    """(section, values, line_number) per data record of *Node and *Element, type=C3D4 sections.
-
-    A record may continue over several lines until it has its number of values. Other sections
-    are skipped.
-    """
-    section = None
-    pending: list[str] = []
-    for line_number, raw in enumerate(text.splitlines(), start=1):
-        line = raw.strip()
-        if not line or line.startswith("**"):
-            continue
-        if line.startswith("*"):
-            if pending:
-                raise InputError(
-                    f"mesh file {path}, line {line_number}: the record before this keyword is "
-                    f"incomplete ({', '.join(pending)})"
-                )
-            keyword, options = _keyword_line(line)
-            section = None
-            if keyword == "*node":
-                section = "node"
-            elif keyword == "*element" and options.get("type", "").upper() == "C3D4":
-                section = "tetrahedron"
-            continue
-        if section is None:
-            continue
-        pending.extend(value.strip() for value in line.rstrip(",").split(","))
-        if len(pending) >= _ABAQUS_RECORD_LENGTH[section]:
-            yield section, pending, line_number
-            pending = []
-    if pending:
-        raise InputError(f"mesh file {path}: the file ends inside a record ({', '.join(pending)})")
-
-
-def _parse_abaqus(path: Path, text: str):
-    """(node labels, node coordinates, tetrahedra as node labels) of an Abaqus input file."""
-    node_labels, node_coordinates, tetrahedra = [], [], []
-    for section, values, line_number in _abaqus_records(path, text):
-        try:
-            if len(values) != _ABAQUS_RECORD_LENGTH[section]:
-                raise ValueError
-            if section == "node":
-                node_labels.append(int(values[0]))
-                node_coordinates.append([float(value) for value in values[1:]])
-            else:
-                tetrahedra.append([int(value) for value in values[1:]])
-        except ValueError:
-            kind = "'label, x, y, z'" if section == "node" else "'label, n1, n2, n3, n4'"
-            raise InputError(
-                f"mesh file {path}, line {line_number}: cannot read {', '.join(values)!r} "
-                f"as {kind}"
-            ) from None
-    return (
-        np.array(node_labels, dtype=np.int64),
-        np.array(node_coordinates, dtype=float).reshape(-1, 3),
-        np.array(tetrahedra, dtype=np.int64).reshape(-1, 4),
-    )
-
-
-def _read_abaqus(path: Path) -> tuple[np.ndarray, np.ndarray]:
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as error:
-        raise InputError(f"mesh file {path}: cannot read it as text ({error})") from None
-    labels, coordinates, tetrahedra = _parse_abaqus(path, text)
-    if len(labels) == 0:
+        mesh = abaqus.read(str(path))
+    except Exception as error:
+        problem = str(error).strip() or type(error).__name__
+        if isinstance(error, KeyError):
+            problem = f"an element or set refers to the undefined label {error}"
+        raise InputError(f"mesh file {path}: meshio cannot read it as an Abaqus input file ({problem})") from None
+    if len(mesh.points) == 0:
         raise InputError(f"mesh file {path}: no *Node section; expected an Abaqus input file")
-    if len(tetrahedra) == 0:
-        raise InputError(
-            f"mesh file {path}: no *Element, type=C3D4 section; expected linear tetrahedra"
-        )
-    sorted_labels, first_positions = np.unique(labels, return_index=True)
-    if len(sorted_labels) < len(labels):
-        raise InputError(f"mesh file {path}: node labels are not unique")
-    position = np.clip(np.searchsorted(sorted_labels, tetrahedra), 0, len(sorted_labels) - 1)
-    undefined = sorted_labels[position] != tetrahedra
-    if np.any(undefined):
-        raise InputError(
-            f"mesh file {path}: an element refers to the undefined node {tetrahedra[undefined][0]}"
-        )
-    return used_nodes_only(coordinates[first_positions], position)
+    blocks = [index for index, block in enumerate(mesh.cells) if block.type == "tetra"]
+    if not blocks:
+        kinds = ", ".join(sorted({block.type for block in mesh.cells})) or "none"
+        raise InputError(f"mesh file {path}: no *Element, type=C3D4 section (elements found: {kinds}); "
+                         "expected first-order tetrahedra")
+    offsets = dict(zip(blocks, np.cumsum([0] + [len(mesh.cells[index].data) for index in blocks[:-1]])))
+    cells = np.vstack([np.asarray(mesh.cells[index].data, dtype=np.int64) for index in blocks])
+    regions = {}
+    for name, per_block in mesh.cell_sets.items():
+        members = [offsets[index] + np.asarray(indices, dtype=np.int64)
+                   for index, indices in enumerate(per_block) if index in offsets and len(indices)]
+        if members:
+            regions[name] = np.concatenate(members)
+    points, cells = used_nodes_only(np.asarray(mesh.points, dtype=float), cells)
+    return points, cells, regions
+
+
+def _unique_cells(cells: np.ndarray, regions: dict[str, np.ndarray]):
+    """Cells without repeats (gmsh format 2 writes a tetrahedron once per physical group it is in),
+    the first of each kept, and the regions as sorted indices of the kept cells."""
+    _, first, inverse = np.unique(np.sort(cells, axis=1), axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.ravel()
+    keep = np.sort(first)
+    new_index = np.empty(len(first), dtype=np.int64)
+    new_index[np.argsort(first)] = np.arange(len(first))
+    renumber = new_index[inverse]
+    return cells[keep], {name: np.unique(renumber[indices]) for name, indices in regions.items()}
 
 
 _MESH_READERS = {".msh": _read_gmsh, ".inp": _read_abaqus}
 
 
 def read_mesh(path, scale: float = 1.0, translate=(0.0, 0.0, 0.0)) -> FishMesh:
-    """Read a gmsh `.msh` or Abaqus `.inp` (C3D4) tetrahedral mesh.
+    """Read a gmsh `.msh` (formats 2 and 4, with gmsh's own reader) or Abaqus `.inp` (C3D4, with
+    meshio) tetrahedral mesh and its regions.
 
-    Points become `points * scale + translate` (m); only nodes used by tetrahedra are kept and
-    every tetrahedron is oriented positively. Abaqus: the `*Node` and `*Element, type=C3D4`
-    data of the file are read as they stand (labels may be sparse; part instance placements
-    and all other keywords are ignored).
+    Points become `points * scale + translate` (m); only nodes used by tetrahedra are kept, a
+    tetrahedron repeated in the file is kept once and every tetrahedron is oriented positively.
+    Regions (``FishMesh.regions``): the volume physical groups of a .msh file (unnamed ones by
+    their number as text) and the element sets of an .inp file that hold tetrahedra. Abaqus: the
+    `*Node` and `*Element, type=C3D4` data are read as they stand (labels may be sparse; part
+    instance placements are ignored).
     """
     path = Path(path)
     factor, shift = _check_transform(path, scale, translate)
@@ -172,7 +171,10 @@ def read_mesh(path, scale: float = 1.0, translate=(0.0, 0.0, 0.0)) -> FishMesh:
         )
     if not path.is_file():
         raise InputError(f"mesh file {path}: not found")
-    points, cells = reader(path)
+    points, cells, regions = reader(path)
+    cells, regions = _unique_cells(cells, regions)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise InputError(f"mesh file {path}: its nodes have {points.shape[-1]} coordinates; expected x, y, z")
     points = points * factor + shift
     if not np.all(np.isfinite(points)):
         raise InputError(f"mesh file {path}: non-finite node coordinates")
@@ -184,4 +186,4 @@ def read_mesh(path, scale: float = 1.0, translate=(0.0, 0.0, 0.0)) -> FishMesh:
             f"mesh file {path}: {int(degenerate.sum())} tetrahedra have zero volume "
             f"(the first is tetrahedron number {first} of the file)"
         )
-    return FishMesh(points=points, cells=oriented_positively(points, cells), source=str(path))
+    return FishMesh(points=points, cells=oriented_positively(points, cells), source=str(path), regions=regions)

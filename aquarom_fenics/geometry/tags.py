@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.geometry.mesh import (FishMesh, LagrangeNodes, check_region_fractions, lagrange_nodes,
-                                           mean_edge_length)
+from aquarom_fenics.geometry.mesh import (TETRAHEDRON_EDGES, FishMesh, LagrangeNodes, check_region_fractions,
+                                           lagrange_nodes, mean_edge_length)
 
 log = logging.getLogger("aquarom")
 
@@ -124,7 +124,7 @@ def _spine(mesh: FishMesh, nodes: LagrangeNodes, box: FishBox, tolerance: float)
         (np.abs(relative[:, 1]) <= tolerance) & (np.abs(relative[:, 2]) <= tolerance)
     )
     spine_nodes = on_axis[np.argsort(relative[on_axis, 0], kind="stable")]
-    remedy = "mesh the box cut by the planes y = 0 and z = 0"
+    remedy = "mesh the body cut by both planes y = 0 and z = 0, so that its axis is a line of mesh edges"
     if len(spine_nodes) < 2:
         raise InputError(
             f"mesh {mesh.source}: no nodes on the body axis y = 0, z = 0 (within {tolerance:.3g}"
@@ -137,7 +137,28 @@ def _spine(mesh: FishMesh, nodes: LagrangeNodes, box: FishBox, tolerance: float)
                 f"mesh {mesh.source}: no node on the body axis y = 0, z = 0 at the {end} face "
                 f"x = {box.x_head + x_rel:.6g} m (within {tolerance:.3g} m); {remedy}"
             )
+    _check_axis_edges(mesh, spine_nodes[spine_nodes < nodes.n_vertices], remedy)
     return spine_nodes
+
+
+def _check_axis_edges(mesh: FishMesh, axis_vertices: np.ndarray, remedy: str) -> None:
+    """InputError unless consecutive vertices on the body axis (sorted along x) are joined by edges of the mesh.
+
+    On a body cut by the planes y = 0 and z = 0 the axis is a line of mesh edges; on a body cut by
+    one plane only, a few vertices fall on the axis by chance with gaps between them that no edge
+    spans (the spine would then be a few long segments).
+    """
+    edges = np.sort(np.asarray(mesh.cells, dtype=np.int64)[:, TETRAHEDRON_EDGES].reshape(-1, 2), axis=1)
+    keys = set((edges[:, 0] * len(mesh.points) + edges[:, 1]).tolist())
+    pairs = np.sort(np.column_stack([axis_vertices[:-1], axis_vertices[1:]]), axis=1)
+    joined = np.array([a * len(mesh.points) + b in keys for a, b in pairs], dtype=bool)
+    if not joined.all():
+        gaps = np.diff(mesh.points[axis_vertices, 0])
+        raise InputError(
+            f"mesh {mesh.source}: the body axis y = 0, z = 0 is not a line of mesh edges ({len(axis_vertices)} "
+            f"vertices on it, {int((~joined).sum())} of the {len(pairs)} gaps between them spanned by no edge, the "
+            f"longest {gaps.max():.3g} m); {remedy}"
+        )
 
 
 def _dorsal_nodes(
@@ -170,36 +191,51 @@ def _nonempty(mesh: FishMesh, name: str, cells: np.ndarray, rule: str) -> np.nda
 
 
 TAGGED_REGIONS = ("head", "left_muscle", "right_muscle")
-"""The regions a tagged mesh names (``FishMesh.regions``): cell sets the mesh conforms to."""
+"""The regions a tagged mesh names by default (``FishMesh.regions``, scene keys ``[regions] head`` and
+``muscles``): cell sets the mesh conforms to."""
 
 _CENTROID_WARNED: set[str] = set()
 """Meshes already warned about (a study loads one mesh many times)."""
 
 
-def tagged_regions(mesh: FishMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(head, left muscle, right muscle) cells of a tagged mesh, checked; InputError names what is missing."""
-    missing = [name for name in TAGGED_REGIONS if len(mesh.regions.get(name, ())) == 0]
-    if missing:
-        raise InputError(f"mesh {mesh.source}: no cells tagged {', '.join(missing)}; a tagged mesh names the "
-                         f"regions {', '.join(TAGGED_REGIONS)}")
-    head, left, right = (np.unique(np.asarray(mesh.regions[name], dtype=np.int64)) for name in TAGGED_REGIONS)
-    for name, cells in zip(TAGGED_REGIONS, (head, left, right)):
+def is_tagged(mesh: FishMesh, names=TAGGED_REGIONS) -> bool:
+    """True when the mesh has a region of any of the ``names`` (head, left, right): it must then have
+    all three; False sends a mesh to the centroid rule."""
+    return any(len(mesh.regions.get(name, ())) for name in names)
+
+
+def tagged_regions(mesh: FishMesh, names=TAGGED_REGIONS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(head, left muscle, right muscle) cells of a tagged mesh: its regions ``names`` = (head, left,
+    right), checked; InputError naming the missing region and the regions the mesh has."""
+    names = tuple(names)
+    keys = ("[regions] head", "[regions] muscles", "[regions] muscles")
+    for name, key in zip(names, keys):
+        if len(mesh.regions.get(name, ())) == 0:
+            present = ", ".join(f"'{region}'" for region in mesh.regions if len(mesh.regions[region])) or "none"
+            raise InputError(f"mesh {mesh.source}: no region '{name}' ({key}); its regions are {present}")
+    head, left, right = (np.unique(np.asarray(mesh.regions[name], dtype=np.int64)) for name in names)
+    for name, cells in zip(names, (head, left, right)):
         if cells.min() < 0 or cells.max() >= len(mesh.cells):
             raise InputError(f"mesh {mesh.source}: region {name} names cells outside the mesh")
     if len(np.intersect1d(head, np.union1d(left, right))) or len(np.intersect1d(left, right)):
-        raise InputError(f"mesh {mesh.source}: the regions {', '.join(TAGGED_REGIONS)} overlap")
+        raise InputError(f"mesh {mesh.source}: the regions {', '.join(names)} overlap; head and muscles must "
+                         "be disjoint sets of cells")
     return head, left, right
 
 
-def centroid_regions(mesh: FishMesh, box: FishBox, tolerance: float, head_fraction, muscle_range):
+def centroid_regions(mesh: FishMesh, box: FishBox, tolerance: float, head_fraction, muscle_range,
+                     names=TAGGED_REGIONS):
     """(head, left muscle, right muscle) cells chosen by cell centroid: the fallback for a mesh
-    without tags, warned about once per mesh (a mesh that does not conform to the regions has a
-    zig-zag interface that moves with the mesh, SPEC §3)."""
+    without the regions ``names``, warned about once per mesh (a mesh that does not conform to the
+    regions has a zig-zag interface that moves with the mesh, SPEC §3)."""
     if mesh.source not in _CENTROID_WARNED:
         _CENTROID_WARNED.add(mesh.source)
-        log.warning("mesh %s has no tagged regions (%s): head and muscles chosen by cell centroid; their "
+        present = (f"its regions are {', '.join(repr(name) for name in mesh.regions)}, none named in [regions] "
+                   "head or muscles" if mesh.regions else "it has no regions")
+        log.warning("mesh %s has no tagged regions (%s): head and muscles chosen by cell centroid (%s); their "
                     "interfaces then zig-zag through the cells and move with the mesh, so tag the regions "
-                    "(gmsh physical groups) for results that converge", mesh.source, ", ".join(TAGGED_REGIONS))
+                    "(gmsh volume physical groups, Abaqus element sets) for results that converge",
+                    mesh.source, ", ".join(names), present)
     centroids = cell_centroids(mesh.points, mesh.cells)
     head = _nonempty(mesh, "head", np.flatnonzero(head_cell_mask(centroids, box, tolerance, head_fraction)),
                      f"x >= {-head_fraction:g} L")
@@ -211,12 +247,14 @@ def centroid_regions(mesh: FishMesh, box: FishBox, tolerance: float, head_fracti
 
 
 def tag_fish(mesh: FishMesh, head_fraction=0.35, muscle_range=(-0.95, -0.35),
-             nodes: LagrangeNodes | None = None) -> FishTags:
+             nodes: LagrangeNodes | None = None, head: str = TAGGED_REGIONS[0],
+             muscles=TAGGED_REGIONS[1:]) -> FishTags:
     """All tags of SPEC §3 for a fish mesh (head, muscles, skin, spine, tail, dorsal nodes).
 
-    Head and muscles are the mesh's tagged regions (``FishMesh.regions``); a mesh without tags
-    falls back to cell centroids and the fractions, with a warning. Node tags refer to ``nodes``
-    (default: the vertices, i.e. linear elements).
+    Head and muscles are the mesh's tagged regions (``FishMesh.regions``) named ``head`` and
+    ``muscles`` = (left, right): a mesh with one of them must have all three. A mesh with none of
+    them falls back to cell centroids and the fractions, with a warning. Node tags refer to
+    ``nodes`` (default: the vertices, i.e. linear elements).
     """
     check_region_fractions(mesh.source, head_fraction, muscle_range)
     nodes = nodes or lagrange_nodes(mesh, 1)
@@ -224,11 +262,12 @@ def tag_fish(mesh: FishMesh, head_fraction=0.35, muscle_range=(-0.95, -0.35),
     tolerance = mesh_tolerance(mesh.points, mesh.cells)
     spine_nodes = _spine(mesh, nodes, box, tolerance)
     spine_segments = np.column_stack([spine_nodes[:-1], spine_nodes[1:]])
-    if mesh.regions:
-        head_cells, left_muscle_cells, right_muscle_cells = tagged_regions(mesh)
+    names = (head, *muscles)
+    if is_tagged(mesh, names):
+        head_cells, left_muscle_cells, right_muscle_cells = tagged_regions(mesh, names)
     else:
         head_cells, left_muscle_cells, right_muscle_cells = centroid_regions(mesh, box, tolerance, head_fraction,
-                                                                             muscle_range)
+                                                                             muscle_range, names)
     facets = skin_facets(mesh.cells)
     skin_nodes = nodes.facet_nodes(facets)
     return FishTags(

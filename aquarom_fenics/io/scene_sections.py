@@ -52,6 +52,26 @@ def _station_count(value, where):
     raise InputError(f"{where} must be an integer number of station intervals in [2, 2000] or \"nodes\", got {value!r}")
 
 
+def _region_name(value, where):
+    """A non-empty region name (a physical group or element set of the mesh)."""
+    from aquarom_fenics.errors import InputError
+
+    if isinstance(value, str) and value.strip():
+        return value
+    raise InputError(f"{where} must be the name of a region of the mesh (a non-empty string), got {value!r}")
+
+
+def _muscle_pair(value, where):
+    """Two different region names: the muscle driven by +a(t) and the one driven by -a(t)."""
+    from aquarom_fenics.errors import InputError
+
+    if (isinstance(value, (list, tuple)) and len(value) == 2 and all(isinstance(name, str) and name.strip()
+                                                                      for name in value) and value[0] != value[1]):
+        return tuple(value)
+    raise InputError(f"{where} must name two different regions of the mesh, [left, right] (driven in antiphase: "
+                     f"a_left = A sin(2π f t), a_right = -a_left), got {value!r}")
+
+
 def _interval_within(low, high):
     def check(value) -> str | None:
         lower, upper = value
@@ -63,12 +83,13 @@ def _interval_within(low, high):
 class MeshSection:
     level: int = _spec(3, _one_of(1, 2, 3, 4, 5), "refinement level of the built-in block (1: ~1.3k … 5: ~25k cells)")
     degree: int = _spec(1, _one_of(1, 2), "Lagrange degree of the displacement (1: linear, 2: quadratic tetrahedra)")
-    file: str = _spec("", None, "external mesh (.msh or .inp), relative to the scene file; overrides level")
+    file: str = _spec("", None, "external mesh (gmsh .msh or Abaqus .inp of first-order tetrahedra), relative to the scene file; its volume physical groups or element sets are the regions named in [regions]; replaces the block (--level is refused with it)")
     scale: float = _spec(1.0, _positive, "factor applied to the file's coordinates (to metres)")
     translate: tuple[float, float, float] = _spec((0.0, 0.0, 0.0), None, "shift after scaling [m]")
     length: float = _spec(0.20, _positive, "block length L along x [m]")
     width: float = _spec(0.04, _positive, "block width W along y [m]")
     height: float = _spec(0.10, _positive, "block height H along z [m]")
+    head_end: str = _spec("+x", _one_of("+x", "-x"), "where the head of the mesh lies along x: \"+x\" (at the largest x, as the block) or \"-x\" (the mesh is then mirrored in x, so that it swims towards +x); refused when the head region lies at the other end", legacy="+x")
 
 
 @dataclass(frozen=True)
@@ -84,8 +105,10 @@ class MaterialSection:
 
 @dataclass(frozen=True)
 class RegionsSection:
-    head_fraction: float = _spec(0.35, lambda v: None if 0 < v < 1 else "must be in (0, 1)", "head: x ≥ -fraction·L; the block mesh is cut at this plane and tags the head (a mesh file without tags: cells whose centroid is there, with a warning)")
-    muscle_range: tuple[float, float] = _spec((-0.95, -0.35), _interval_within(-1.0, 0.0), "muscles: -a·L < x < -b·L, as [-a, -b], left and right of y = 0; the block mesh is cut at these planes and tags them (a mesh file without tags: by cell centroid, with a warning)")
+    head_fraction: float = _spec(0.35, lambda v: None if 0 < v < 1 else "must be in (0, 1)", "head x ≥ -fraction·L: the block's head region, and on a mesh without regions the cells whose centroid lies there")
+    muscle_range: tuple[float, float] = _spec((-0.95, -0.35), _interval_within(-1.0, 0.0), "muscles -a·L < x < -b·L, as [-a, -b]: the block's muscle regions, and on a mesh without regions the cells whose centroid lies there")
+    head: str = _spec("head", None, "the region (gmsh volume physical group, Abaqus element set) that is the stiff head; head_fraction and muscle_range place the block's regions, and choose the cells of a mesh without regions", coerce=_region_name, legacy="head")
+    muscles: tuple[str, str] = _spec(("left_muscle", "right_muscle"), None, "the two muscle regions [left, right], driven in antiphase (a_left = A sin(2π f t), a_right = -a_left)", coerce=_muscle_pair, legacy=("left_muscle", "right_muscle"))
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,7 @@ import numpy as np
 from aquarom_fenics.errors import InputError
 
 from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS, block_cache_path
+from aquarom_fenics.geometry.fish import planned_body
 from aquarom_fenics.io.paths import bench_results
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.optimization.prom_builder import screens_tail, stability_plan
@@ -88,16 +89,22 @@ def expected_basis(scene: Scene, parametric: bool) -> list[str]:
 
 
 def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
-    """Lines describing the work of ``command`` on ``scene``."""
+    """Lines describing the work of ``command`` on ``scene``: the scene, its mesh, its body (read and
+    checked as the run would, see ``planned_body``), then the work."""
     cells = LEVEL_TARGET_CELLS.get(scene.mesh.level, 0) if not scene.mesh.file else None
     lines = [f"scene {scene.name} (hash {scene.hash})"]
     if scene.mesh_file:
         lines.append(f"mesh: read {scene.mesh_file} (scale {scene.mesh.scale:g})")
-        cells = cells or REFERENCE_CELLS
     else:
-        cached = block_cache_path(scene.mesh.level, scene.mesh.length, scene.mesh.width, scene.mesh.height).exists()
+        cached = block_cache_path(scene.mesh.level, scene.mesh.length, scene.mesh.width, scene.mesh.height,
+                                  head_fraction=scene.regions.head_fraction,
+                                  muscle_range=scene.regions.muscle_range).exists()
         lines.append(f"mesh: level {scene.mesh.level} (~{cells} cells), "
                      + ("reused from the mesh cache" if cached else "generated with gmsh and cached"))
+    body, body_cells = planned_body(scene)
+    lines += body
+    if scene.mesh_file:
+        cells = body_cells          # the estimates below on the file's own cells
     if command in ("mesh", "shapes"):
         lines.append("work: tags" + (", design check, XDMF and PNG renders" if command == "shapes" else ""))
         return lines + ["estimate: a few seconds"]

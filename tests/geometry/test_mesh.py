@@ -75,8 +75,9 @@ def write_msh(path, points, cells, boundary_triangles=(), isolated_point=None):
         gmsh.finalize()
 
 
-def write_inp(path, points, cells, node_labels, element_labels):
-    """An Abaqus input file with C3D4 elements, a comment, an Nset and a continued element line."""
+def write_inp(path, points, cells, node_labels, element_labels, element_sets=None):
+    """An Abaqus input file with C3D4 elements, a comment, an Nset and a continued element line;
+    ``element_sets`` ({name: cell indices}) become *Elset sections."""
     lines = ["*Heading", "** written by the tests", "*Part, name=fish", "*Node"]
     lines += [f"{label}, {x!r}, {y!r}, {z!r}" for label, (x, y, z) in zip(node_labels, points)]
     lines.append("*Element, type=C3D4")
@@ -89,7 +90,12 @@ def write_inp(path, points, cells, node_labels, element_labels):
         first_nodes[2:]
     )
     lines += element_lines
-    lines += ["*Nset, nset=all, generate", "1, 100, 1", "*End Part"]
+    lines += ["*Nset, nset=every_third, generate", f"{node_labels[0]}, {node_labels[-1]}, 3"]
+    for name, indices in (element_sets or {}).items():
+        labels = [str(element_labels[index]) for index in indices]
+        lines.append(f"*Elset, elset={name}")
+        lines += [", ".join(labels[start:start + 16]) for start in range(0, len(labels), 16)]
+    lines.append("*End Part")
     path.write_text("\n".join(lines) + "\n")
 
 
@@ -210,8 +216,12 @@ def test_an_untagged_mesh_falls_back_to_centroids_with_a_warning(coarse, coarse_
 def test_a_mesh_missing_a_tagged_region_is_an_input_error(coarse):
     partial = FishMesh(points=coarse.points, cells=coarse.cells, source="partial",
                        regions={"head": coarse.regions["head"]})
-    with pytest.raises(InputError, match="partial: no cells tagged left_muscle, right_muscle"):
+    with pytest.raises(InputError, match=r"^mesh partial: no region 'left_muscle' \(\[regions\] muscles\); its regions "
+                                         r"are 'head'$"):
         tag_fish(partial)
+    with pytest.raises(InputError, match=r"^mesh block level 1 .*: no region 'nose' \(\[regions\] head\); its regions "
+                                         r"are 'head', 'left_muscle', 'right_muscle'$"):
+        tag_fish(coarse, head="nose")
 
 
 def test_every_segment_has_a_dorsal_node_above_its_rear_node(coarse, coarse_tags):
@@ -419,23 +429,23 @@ def test_corrupt_inp_is_an_input_error(tmp_path):
     with pytest.raises(InputError, match="garbage.inp: no \\*Node section"):
         read_mesh(path)
     path.write_text("*Node\n1, 0., 0., zero\n*Element, type=C3D4\n1, 1, 1, 1, 1\n")
-    with pytest.raises(InputError, match="garbage.inp, line 2: cannot read"):
+    with pytest.raises(InputError, match="garbage.inp: meshio cannot read it .*float: ' zero'"):
         read_mesh(path)
-    path.write_text("*Node\n1, 0., 0.,\n")
-    with pytest.raises(InputError, match="garbage.inp: the file ends inside a record"):
+    path.write_text("*Node\n1, 0., 0., 0.\n*Element, type=C3D4\n1, 1, 1, 1\n")
+    with pytest.raises(InputError, match="garbage.inp: meshio cannot read it .*number of data items"):
         read_mesh(path)
     path.write_bytes(b"\xff\xfe\x00garbage")
-    with pytest.raises(InputError, match="garbage.inp: cannot read it as text"):
+    with pytest.raises(InputError, match="garbage.inp: meshio cannot read it"):
         read_mesh(path)
 
 
 def test_inp_without_tetrahedra_or_with_undefined_nodes_is_an_input_error(tmp_path):
     path = tmp_path / "bricks.inp"
     path.write_text("*Node\n1, 0., 0., 0.\n*Element, type=C3D8\n1, 1, 1, 1, 1, 1, 1, 1, 1\n")
-    with pytest.raises(InputError, match="bricks.inp: no \\*Element, type=C3D4 section"):
+    with pytest.raises(InputError, match="bricks.inp: no \\*Element, type=C3D4 section \\(elements found: hexahedron"):
         read_mesh(path)
     path.write_text("*Node\n1, 0., 0., 0.\n*Element, type=C3D4\n1, 1, 2, 3, 4\n")
-    with pytest.raises(InputError, match="bricks.inp: an element refers to the undefined node"):
+    with pytest.raises(InputError, match="bricks.inp: .* refers to the undefined label 2"):
         read_mesh(path)
 
 

@@ -5,6 +5,7 @@ import itertools
 import json
 import math
 import textwrap
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -295,10 +296,43 @@ def test_a_key_added_later_keeps_the_hash_of_the_scenes_before_it_at_its_legacy_
     rear = scene.replace("fluid", spine_rule="rear")
     data = rear.to_dict()
     del data["fluid"]["spine_rule"]
+    for section, key in (("mesh", "head_end"), ("regions", "head"), ("regions", "muscles")):   # later keys at their legacy values
+        del data[section][key]
     assert rear.hash == rear._digest(data)
     assert scene.hash != rear.hash and scene.fom_hash != rear.fom_hash
     assert 'spine_rule = "rear"' in rear.to_toml()          # a written scene still names it
     assert Scene.load("co").hash == scene.hash
+
+
+def test_the_region_and_head_end_keys_keep_the_hashes_of_the_scenes_before_them():
+    """[regions] head, muscles and [mesh] head_end came after scenes were hashed: at the block's names
+    and "+x", written out or not, the hash is the one without them; other values change it."""
+    from aquarom_fenics.io.scene_sections import MeshSection, RegionsSection, legacy_values
+
+    assert legacy_values(RegionsSection) == {"head": "head", "muscles": ("left_muscle", "right_muscle")}
+    assert legacy_values(MeshSection) == {"head_end": "+x"}
+    scene = Scene.load("nominal")
+    data = scene.to_dict()
+    for section, key in (("mesh", "head_end"), ("regions", "head"), ("regions", "muscles")):
+        del data[section][key]
+    assert scene.hash == scene._digest(data)
+    written = scene_from_dict(tomllib.loads(scene.to_toml()), source=scene.source, base_dir=scene.base_dir)
+    assert written.hash == scene.hash and written.regions.muscles == ("left_muscle", "right_muscle")
+    for section, values in (("regions", {"head": "nose"}), ("regions", {"muscles": ["right_muscle", "left_muscle"]}),
+                            ("mesh", {"head_end": "-x"})):
+        changed = scene.replace(section, **values)
+        assert changed.hash != scene.hash and changed.fom_hash != scene.fom_hash
+
+
+@pytest.mark.parametrize("table, message", [
+    ({"regions": {"muscles": ["left_muscle"]}}, r"\[regions\] muscles must name two different regions"),
+    ({"regions": {"muscles": ["a", "a"]}}, r"\[regions\] muscles must name two different regions"),
+    ({"regions": {"head": ""}}, r"\[regions\] head must be the name of a region"),
+    ({"mesh": {"head_end": "+y"}}, r"\[mesh\] head_end = '\+y' must be one of '\+x', '-x'"),
+])
+def test_bad_region_names_and_head_ends_are_one_line(table, message):
+    with pytest.raises(InputError, match=message):
+        scene_from_dict(table, source="bad.toml")
 
 
 def test_hash_follows_the_content_of_the_mesh_file(tmp_path):
@@ -431,12 +465,12 @@ def test_bad_scene_is_one_line_and_exit_code_2(case, tmp_path, capfd):
 
 @pytest.mark.parametrize("content, names", [
     ("this is not\na mesh at all\n", ["garbage.inp", "*Node"]),
-    ("*Node\n1, 0.0, zero, 0.0\n", ["garbage.inp", "line 2"]),
+    ("*Node\n1, 0.0, zero, 0.0\n", ["garbage.inp", "meshio cannot read it", "zero"]),
     ("*Node\n1, 0, 0, 0\n2, 1, 0, 0\n3, 0, 1, 0\n4, 0, 0, 1\n*Element, type=C3D4\n1, 1, 2, 3, 9\n",
-     ["garbage.inp", "undefined node 9"]),
+     ["garbage.inp", "undefined label 9"]),
     ("*Node\n1, 0, 0, 0\n2, 1, 0, 0\n3, 2, 0, 0\n4, 0, 0, 1\n*Element, type=C3D4\n1, 1, 2, 3, 4\n",
      ["garbage.inp", "zero volume"]),
-    ("*Node\n1, 0, 0, 0\n2, 1, 0\n", ["garbage.inp", "ends inside a record"]),
+    ("*Node\n1, 0, 0, 0\n2, 1, 0\n", ["garbage.inp", "meshio cannot read it"]),
 ])
 def test_corrupt_mesh_file_is_one_line_and_exit_code_2(content, names, tmp_path, capfd):
     (tmp_path / "garbage.inp").write_text(content)
