@@ -14,7 +14,7 @@ from __future__ import annotations
 
 LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("base", ("", "errors", "layers")),
-    ("parallel", ("parallel", "executors")),
+    ("parallel", ("parallel",)),
     ("forms", ("forms", "scenes", "meshes")),
     ("shape catalogue", ("geometry.shapes",)),
     ("io", ("io",)),

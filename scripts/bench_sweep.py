@@ -72,7 +72,7 @@ def main() -> int:
     from distributed import LocalCluster
 
     from aquarom_fenics.dynamics.simulate import simulate_fom
-    from aquarom_fenics.executors import ClusterSettings, DaskCluster, InProcess, LocalProcesses
+    from aquarom_fenics.parallel.pools import ClusterSettings, DaskCluster, InProcess, LocalProcesses
     from aquarom_fenics.io.outputs import software_versions
     from aquarom_fenics.io.persistence import write_json_atomic
     from aquarom_fenics.io.scene import scene_from_dict

@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.executors import choose_cluster, open_pool
+from aquarom_fenics.parallel.pools import choose_cluster, open_pool
 
 from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.io.outputs import holds_file, software_versions

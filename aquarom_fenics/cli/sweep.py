@@ -43,7 +43,7 @@ def earlier_rows(args, scene, designs, target: Path) -> dict:
 
 
 def run_sweep(args) -> int:
-    from aquarom_fenics.executors import choose_cluster, open_pool, shutting_down
+    from aquarom_fenics.parallel.pools import choose_cluster, open_pool, shutting_down
     from aquarom_fenics.optimization import sweep
 
     if MPI.COMM_WORLD.size > 1:
@@ -85,7 +85,7 @@ def run_sweep(args) -> int:
 
 
 def describe_backend(pool, cluster) -> str:
-    from aquarom_fenics.executors import DaskCluster, InProcess
+    from aquarom_fenics.parallel.pools import DaskCluster, InProcess
 
     if isinstance(pool, DaskCluster):
         return f"on {pool.workers} Dask worker(s) of the {cluster.describe().removeprefix('Dask ')}"

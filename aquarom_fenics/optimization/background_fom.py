@@ -2,7 +2,7 @@
 
 The FOM check after an optimisation needs two FOM runs, the start design's and the
 optimum's. The start design's is known before the optimisation starts: on a single MPI rank with a
-spare core, a worker of the executor layer (:mod:`aquarom_fenics.executors`: one local process,
+spare core, a worker of the executor layer (:mod:`aquarom_fenics.parallel.pools`: one local process,
 or a Dask cluster's worker) runs it meanwhile and stores its distance in the FOM cache
 (``study.fom_distance``), where the check finds it. If the run fails or is still running when the
 check has finished the optimum's run and waited as long again, the check runs it itself.
@@ -17,7 +17,7 @@ import time
 
 from mpi4py import MPI
 
-from aquarom_fenics.executors import LocalProcesses, in_worker
+from aquarom_fenics.parallel.pools import LocalProcesses, in_worker
 from aquarom_fenics.io.scene import Scene
 
 log = logging.getLogger("aquarom")
@@ -39,7 +39,7 @@ def start_fom(scene: Scene, design: dict[str, float], amplitude: float | None) -
 class BackgroundFom:
     """A worker computing ``fom_distance(scene, fish, design, amplitude)`` into the FOM cache.
 
-    ``pool``: a backend of :mod:`aquarom_fenics.executors` to run it on (left open); None: a local
+    ``pool``: a backend of :mod:`aquarom_fenics.parallel.pools` to run it on (left open); None: a local
     worker process of its own, ended by :meth:`finish` or :meth:`stop`.
     """
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from aquarom_fenics.cli import main
-from aquarom_fenics.executors import ClusterSettings, DaskCluster
+from aquarom_fenics.parallel.pools import ClusterSettings, DaskCluster
 from aquarom_fenics.io.scene import Scene, scene_from_dict
 from aquarom_fenics.optimization import sweep
 
@@ -210,7 +210,7 @@ def test_a_worker_killed_mid_sweep_loses_no_design(tmp_path, monkeypatch, cluste
 
 def test_a_local_worker_killed_mid_sweep_loses_no_design(tmp_path, monkeypatch):
     """The local backend replaces its broken pool and submits the unfinished designs again."""
-    from aquarom_fenics.executors import LocalProcesses
+    from aquarom_fenics.parallel.pools import LocalProcesses
 
     monkeypatch.setenv("AQUAROM_CACHE", str(tmp_path / "cache"))
     scene = Scene.load(write_scene(tmp_path, duration=0.6))

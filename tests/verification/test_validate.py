@@ -136,7 +136,7 @@ def test_missing_cases_computed_in_parallel_workers(tmp_path):
 
 def test_cases_computed_on_dask_equal_those_of_local_workers(tmp_path, dask_cluster):
     """`make validate --scheduler`: the missing cases on a LocalCluster's workers, the same records."""
-    from aquarom_fenics.executors import ClusterSettings, DaskCluster
+    from aquarom_fenics.parallel.pools import ClusterSettings, DaskCluster
 
     scene = stress_scene("reference").replace("solver", duration=0.2)
     cases = [reduced_case("ROM", scene, parametric=False),

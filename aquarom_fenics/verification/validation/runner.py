@@ -1,5 +1,5 @@
 """Running validation cases once: cache, progress lines, a time limit per case, parallel workers
-(local processes or a Dask cluster, :mod:`aquarom_fenics.executors`)."""
+(local processes or a Dask cluster, :mod:`aquarom_fenics.parallel.pools`)."""
 from __future__ import annotations
 
 import json
@@ -15,7 +15,7 @@ from functools import partial
 from pathlib import Path
 
 from aquarom_fenics import __version__
-from aquarom_fenics.executors import DaskCluster, LocalProcesses, run_all
+from aquarom_fenics.parallel.pools import DaskCluster, LocalProcesses, run_all
 from aquarom_fenics.io.persistence import get_or_compute, read_intact, write_json_atomic
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.verification.validation.cases import CACHED_STATUSES, Case, describe, read_record
@@ -218,7 +218,7 @@ def compute_case(settings: tuple, case: Case) -> tuple[dict, float]:
 
 def compute_in_parallel(runner: Runner, cases: list[Case], jobs: int, pool=None) -> int:
     """Compute the missing (non-MPI) cases on ``jobs`` local worker processes, or on ``pool`` (an
-    open backend of :mod:`aquarom_fenics.executors`, e.g. a Dask cluster; left open), longest first.
+    open backend of :mod:`aquarom_fenics.parallel.pools`, e.g. a Dask cluster; left open), longest first.
 
     Local workers are fresh interpreters (spawn), each with one BLAS thread; their records are
     written to the cache as usual (on a cluster ``runner.out`` must be on a shared file system),

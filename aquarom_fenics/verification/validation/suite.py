@@ -13,7 +13,7 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
-from aquarom_fenics.executors import ClusterSettings, DaskCluster
+from aquarom_fenics.parallel.pools import ClusterSettings, DaskCluster
 from aquarom_fenics.io.outputs import software_versions
 
 from aquarom_fenics.io.persistence import write_json_atomic
