@@ -16,7 +16,6 @@ from aquarom_fenics.layers import LAYERS, PACKAGE, layer_name, layer_of
 REPOSITORY = Path(__file__).resolve().parents[1]
 
 KNOWN_UPWARD = {
-    ("parallel.pools", "dynamics.simulate"), ("parallel.pools", "geometry.gmsh_session"), ("parallel.pools", "io.paths"),
     ("fem.fom", "dynamics.integrator"), ("io.outputs", "dynamics.trajectory"), ("io.readback", "dynamics.trajectory"),
     ("physics.drag", "reduction.projection"), ("physics.elastic", "reduction.projection"),
     ("physics.inertia", "reduction.projection"), ("physics.muscle", "reduction.projection"),
@@ -25,8 +24,6 @@ KNOWN_UPWARD = {
 fails on any other, and on one listed here that is gone (so that the list only shrinks)."""
 
 KNOWN_CYCLES = [
-    ["dynamics.diagnostics", "dynamics.simulate", "fem.fom", "geometry.fish", "io.scene", "parallel.pools",
-     "reduction.basis"],
     ["io.outputs", "io.persistence", "io.readback"],
     ["optimization.background_fom", "optimization.study"],
     ["verification.validation.compute", "verification.validation.runner"],
@@ -166,3 +163,11 @@ def test_the_graph_sees_imports_inside_functions_and_relative_ones(tmp_path):
     assert imported_modules(f"{PACKAGE}.a", tmp_path / "a.py", modules) == {f"{PACKAGE}.b", f"{PACKAGE}.c"}
     assert import_cycles({"x": {"y"}, "y": {"z"}, "z": {"x"}, "w": {"x"}}) == [["x", "y", "z"]]
     assert [name for name, _ in LAYERS][0] == "base"
+
+
+def test_the_pools_import_nothing_of_the_application_but_its_errors():
+    """aquarom_fenics.parallel knows futures, processes and Dask; the caller hands it a WorkerSetup."""
+    graph = import_graph()
+    outside = {f"{module} imports {target}" for module, targets in graph.items() if module.startswith(f"{PACKAGE}.parallel")
+               for target in targets if not target.startswith(f"{PACKAGE}.parallel") and target != f"{PACKAGE}.errors"}
+    assert not outside, sorted(outside)

@@ -16,7 +16,7 @@ from mpi4py import MPI
 from aquarom_fenics.optimization.background_fom import BackgroundFom, start_if_useful
 from aquarom_fenics.optimization.cost import CostWeights, design_space
 from aquarom_fenics.errors import InputError, Interrupted, SolverError
-from aquarom_fenics.parallel.pools import worker_threads
+from aquarom_fenics.parallel import worker_threads
 from aquarom_fenics.geometry.fish import Fish, load_fish
 from aquarom_fenics.optimization.history import Checkpoint, history_columns
 from aquarom_fenics.optimization.optimize import (DEFAULT_MAX_TIME, OptimizationResult, optimization_space, optimize,
@@ -180,7 +180,7 @@ def run_multistart(scene: Scene, out_dir: Path, resume: bool = False, weights: C
     cache), each FOM-checked; summary.json lists every local optimum and is the summary of the
     best FOM-verified one (the best PROM distance when no FOM check finished).
 
-    ``pool``: a backend of :mod:`aquarom_fenics.parallel.pools` running one start per task; None runs
+    ``pool``: a backend of :mod:`aquarom_fenics.parallel` running one start per task; None runs
     them one after the other here. ``resume``: a start with a checkpoint continues from it, one
     without (not begun when the run stopped) runs from the start."""
     out_dir = Path(out_dir)
@@ -192,7 +192,7 @@ def run_multistart(scene: Scene, out_dir: Path, resume: bool = False, weights: C
         with worker_threads():
             runs = [start_run(scene, out_dir, resume, weights, max_time, (k, z), fish) for k, z in enumerate(starts)]
     else:
-        from aquarom_fenics.parallel.pools import run_all
+        from aquarom_fenics.parallel import run_all
 
         task = partial(start_run, scene, str(out_dir.resolve()), resume, weights, max_time)
         found = {}
@@ -345,7 +345,7 @@ def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None, pool=Non
 
     A point whose FOM check does not complete is no optimum of the model: it is marked
     ``fom_check = infeasible`` with the FOM's stop reason, and left off the front.
-    ``pool``: a backend of :mod:`aquarom_fenics.parallel.pools` (local worker processes or a Dask
+    ``pool``: a backend of :mod:`aquarom_fenics.parallel` (local worker processes or a Dask
     cluster) running one weight per task; None runs them one after the other here (under MPI too).
     ``resume``: a weight whose run completed is read back from its summary.json, one with a
     checkpoint continues from it, and the others run from the start (:func:`pareto_point`).
@@ -355,7 +355,7 @@ def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None, pool=Non
         with worker_threads():
             points = [pareto_point(scene, out_dir, w1, fish, resume) for w1 in scene.cooptimization.weights]
     else:
-        from aquarom_fenics.parallel.pools import run_all
+        from aquarom_fenics.parallel import run_all
 
         found = {}
         for w1, point, error in run_all(pool, partial(pareto_point, scene, str(Path(out_dir).resolve()), resume=resume),
