@@ -74,7 +74,7 @@ def main() -> int:
     from aquarom_fenics.dynamics.simulate import simulate_fom
     from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
     from aquarom_fenics.parallel import ClusterSettings, DaskCluster, InProcess, LocalProcesses
-    from aquarom_fenics.io.outputs import software_versions
+    from aquarom_fenics.io.versions import software_versions
     from aquarom_fenics.io.persistence import write_json_atomic
     from aquarom_fenics.io.scene import scene_from_dict
     from aquarom_fenics.optimization.sweep import grid_designs

@@ -23,7 +23,8 @@ from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
 from aquarom_fenics.parallel import choose_cluster, open_pool
 
 from aquarom_fenics.geometry.fish import load_fish
-from aquarom_fenics.io.outputs import holds_file, software_versions
+from aquarom_fenics.io.outputs import holds_file
+from aquarom_fenics.io.versions import software_versions
 from aquarom_fenics.io.persistence import write_text_atomic
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.optimization.study import checkpoint_pattern, completed_summary, pareto_sweep, run_optimization

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from aquarom_fenics.cli import main
-from aquarom_fenics.io.outputs import read_trajectory_csv
+from aquarom_fenics.io.readback import read_trajectory_csv
 
 SHORT_SCENE = """
 [mesh]

@@ -22,7 +22,9 @@ from aquarom_fenics.optimization.history import Checkpoint, history_columns
 from aquarom_fenics.optimization.optimize import (DEFAULT_MAX_TIME, OptimizationResult, optimization_space, optimize,
                                                   start_points)
 from aquarom_fenics.optimization.prom_builder import PromBuilder
-from aquarom_fenics.io.outputs import IncrementalCSV, holds_file, software_versions
+from aquarom_fenics.io.outputs import holds_file
+from aquarom_fenics.io.tables import IncrementalCSV
+from aquarom_fenics.io.versions import software_versions
 from aquarom_fenics.io.paths import cache_root
 from aquarom_fenics.io.persistence import (entry_key, get_or_compute, require_cache_writable, write_json_atomic,
                                            write_text_atomic)

@@ -284,7 +284,7 @@ class SweepCSV:
     its rows for --resume)."""
 
     def __init__(self, path: Path, scene: Scene, earlier: list[dict]):
-        from aquarom_fenics.io.outputs import IncrementalCSV
+        from aquarom_fenics.io.tables import IncrementalCSV
 
         self.header = columns(scene)
         self.table = IncrementalCSV(path, self.header)

@@ -161,7 +161,7 @@ def compute_reduced(runner: Runner, case: Case) -> dict:
 
 def compute_mpi(runner: Runner, case: Case) -> dict:
     """``mpirun -n R aquarom simulate`` on the case's scene; the summary and trajectory it writes."""
-    from aquarom_fenics.io.outputs import read_trajectory_csv
+    from aquarom_fenics.io.readback import read_trajectory_csv
     from aquarom_fenics.io.persistence import write_text_atomic
 
     ranks = case.options["ranks"]

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
 from aquarom_fenics.parallel import ClusterSettings, DaskCluster
-from aquarom_fenics.io.outputs import software_versions
+from aquarom_fenics.io.versions import software_versions
 
 from aquarom_fenics.io.persistence import write_json_atomic
 from aquarom_fenics.verification.validation.accuracy import study_a, study_b, study_c
