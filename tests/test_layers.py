@@ -16,7 +16,6 @@ from aquarom_fenics.layers import LAYERS, PACKAGE, layer_name, layer_of
 REPOSITORY = Path(__file__).resolve().parents[1]
 
 KNOWN_UPWARD = {
-    ("fem.fom", "dynamics.integrator"),
     ("physics.drag", "reduction.projection"), ("physics.elastic", "reduction.projection"),
     ("physics.inertia", "reduction.projection"), ("physics.muscle", "reduction.projection"),
 }

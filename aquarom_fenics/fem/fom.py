@@ -22,7 +22,7 @@ from ufl.algorithms import extract_coefficients
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.geometry.fish import Fish, quadrature_degrees
-from aquarom_fenics.dynamics.integrator import TimeScheme
+from aquarom_fenics.fem.time_scheme import TimeScheme
 from aquarom_fenics.errors import SolverError
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.physics.drag import DragTerm
