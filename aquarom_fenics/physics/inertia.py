@@ -17,7 +17,7 @@ from petsc4py import PETSc
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.forms.inertia import mass_density, mass_form, mass_moment_x, total_mass
-from aquarom_fenics.reduction.projection import Taylor
+from aquarom_fenics.physics.taylor import Taylor
 
 
 def linear_combination(a: float, x, b: float, y):
