@@ -15,21 +15,6 @@ from aquarom_fenics.layers import LAYERS, PACKAGE, layer_name, layer_of
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 
-KNOWN_UPWARD: set[tuple[str, str]] = set()
-"""Upward imports found when the layering was first checked, each to be removed (issue 40); the test
-fails on any other, and on one listed here that is gone (so that the list only shrinks)."""
-
-KNOWN_CYCLES = [
-    ["optimization.background_fom", "optimization.study"],
-    ["verification.validation.compute", "verification.validation.runner"],
-]
-"""The import cycles found when the layering was first checked, likewise to be removed."""
-
-
-def short(module: str) -> str:
-    return module[len(PACKAGE) + 1:]
-
-
 def package_folders() -> dict[str, Path]:
     """Package name → folder: aquarom_fenics and the folders pyproject.toml maps into it (forms/, ...)."""
     settings = tomllib.loads((REPOSITORY / "pyproject.toml").read_text())["tool"]["setuptools"]
@@ -133,20 +118,13 @@ def test_every_module_is_in_a_layer():
 
 
 def test_no_import_runs_upward():
-    graph = import_graph()
-    upward = [line for line in upward_imports(graph)
-              if (short(line.split()[0]), short(line.split()[3])) not in KNOWN_UPWARD]
+    upward = upward_imports(import_graph())
     assert not upward, "imports that run upward (aquarom_fenics/layers.py gives the order):\n" + "\n".join(upward)
-    gone = sorted(pair for pair in KNOWN_UPWARD if f"{PACKAGE}.{pair[1]}" not in graph.get(f"{PACKAGE}.{pair[0]}", ()))
-    assert not gone, f"no longer imported upward, remove from KNOWN_UPWARD: {gone}"
 
 
 def test_no_import_cycle_between_modules():
-    cycles = [[short(module) for module in cycle] for cycle in import_cycles(import_graph())]
-    new = [cycle for cycle in cycles if cycle not in KNOWN_CYCLES]
-    assert not new, "import cycles:\n" + "\n".join(" ↔ ".join(cycle) for cycle in new)
-    gone = [cycle for cycle in KNOWN_CYCLES if cycle not in cycles]
-    assert not gone, f"cycles broken or changed, update KNOWN_CYCLES: {gone}"
+    cycles = import_cycles(import_graph())
+    assert not cycles, "import cycles:\n" + "\n".join(" ↔ ".join(cycle) for cycle in cycles)
 
 
 def test_the_graph_sees_imports_inside_functions_and_relative_ones(tmp_path):

@@ -4,7 +4,7 @@ The FOM check after an optimisation needs two FOM runs, the start design's and t
 optimum's. The start design's is known before the optimisation starts: on a single MPI rank with a
 spare core, a worker of the pool layer (:mod:`aquarom_fenics.parallel`: one local process,
 or a Dask cluster's worker) runs it meanwhile and stores its distance in the FOM cache
-(``study.fom_distance``), where the check finds it. If the run fails or is still running when the
+(``fom_cache.fom_distance``), where the check finds it. If the run fails or is still running when the
 check has finished the optimum's run and waited as long again, the check runs it itself.
 """
 from __future__ import annotations
@@ -31,7 +31,7 @@ def start_fom(scene: Scene, design: dict[str, float], amplitude: float | None) -
     """``fom_distance`` at the design, stored in the FOM cache (what the worker runs; its progress
     bar and log lines are discarded)."""
     from aquarom_fenics.geometry.fish import load_fish
-    from aquarom_fenics.optimization.study import fom_distance
+    from aquarom_fenics.optimization.fom_cache import fom_distance
 
     with open(os.devnull, "w") as sink, contextlib.redirect_stderr(sink), contextlib.redirect_stdout(sink):
         return fom_distance(scene, load_fish(scene), design, amplitude)

@@ -14,13 +14,24 @@ import sys
 import time
 from dataclasses import asdict
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 if TYPE_CHECKING:
     from aquarom_fenics.verification.validation.cases import Case
-    from aquarom_fenics.verification.validation.runner import Runner
+
+
+class Runner(Protocol):
+    """What a computation asks of the runner that calls it (``runner.Runner``): the fish of a scene
+    (cached), the warm-up before a timed run, the output folder and the time limit [s]."""
+
+    out: Path
+    time_limit: float
+
+    def fish(self, scene): ...
+
+    def warm_up(self, scene, parametric) -> None: ...
 
 SOLVE_REPEATS = 3
 """Reduced solves are repeated and the shortest time kept (they last ~0.1 s: one slow run in a
