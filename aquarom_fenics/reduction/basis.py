@@ -28,7 +28,8 @@ from petsc4py import PETSc
 from slepc4py import SLEPc
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
-from aquarom_fenics.fem.fom import FullOrderModel, direct_solver, upper_triangle_copy
+from aquarom_fenics.fem.fom import FullOrderModel
+from aquarom_fenics.fem.linear_solver import direct_solver, upper_triangle_copy
 from aquarom_fenics.physics.muscle import ANTAGONIST_PATTERN
 
 log = logging.getLogger("aquarom")

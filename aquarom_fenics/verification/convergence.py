@@ -22,7 +22,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from aquarom_fenics.fem.fom import FullOrderModel, direct_solver
+from aquarom_fenics.fem.fom import FullOrderModel
+from aquarom_fenics.fem.linear_solver import direct_solver
 from aquarom_fenics.reduction.basis import clamped_stiffness, unit_tail_force, vibration_modes
 from aquarom_fenics.geometry.fish import Fish, load_fish
 from aquarom_fenics.io.scene import Scene

@@ -10,7 +10,8 @@ from petsc4py import PETSc
 from aquarom_fenics.dynamics.diagnostics import newton_failure_hints, scene_warnings
 from aquarom_fenics.errors import InputError, SolverError
 from aquarom_fenics.geometry.fish import load_fish
-from aquarom_fenics.fem.fom import FullOrderModel, describe_linear_solve, direct_solver
+from aquarom_fenics.fem.fom import FullOrderModel
+from aquarom_fenics.fem.linear_solver import describe_linear_solve, direct_solver
 from aquarom_fenics.dynamics.integrator import NewtonSettings, TimeScheme, integrate
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.geometry.design_check import cell_region, check_design

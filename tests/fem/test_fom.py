@@ -106,7 +106,7 @@ def test_the_symmetric_newton_matrix_is_factorised_by_ldlt(stations, spine_rule)
     LDLᵀ and solves as LU does; the nodal model's S (thrust and drag Jacobians) is not symmetric and
     keeps LU."""
     from petsc4py import PETSc
-    from aquarom_fenics.fem.fom import direct_solver
+    from aquarom_fenics.fem.linear_solver import direct_solver
 
     scene = coarse_scene(fluid={"stations": stations, "spine_rule": spine_rule}, shapes=SHAPES)
     model = FullOrderModel(scene, load_fish(scene), DESIGN)
