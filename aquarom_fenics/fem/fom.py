@@ -21,8 +21,8 @@ from petsc4py import PETSc
 from ufl.algorithms import extract_coefficients
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
-from aquarom_fenics.fem.linear_solver import (ExactNewtonOperator, coupled_solver, describe_linear_solve,
-                                              direct_solver, upper_triangle_copy)
+from aquarom_fenics.fem.linear_solver import (ExactNewtonOperator, describe_linear_solve, mumps_solver,
+                                              upper_triangle_copy)
 from aquarom_fenics.geometry.fish import Fish, quadrature_degrees
 from aquarom_fenics.fem.time_scheme import TimeScheme
 from aquarom_fenics.errors import SolverError
@@ -416,8 +416,7 @@ class FullOrderModel:
         if self._solver is None or (correction is not None) != self._krylov:
             if self._solver is not None:
                 self._solver.destroy()
-            self._solver = (direct_solver(self.comm, symmetric) if correction is None
-                            else coupled_solver(self.comm, symmetric))
+            self._solver = mumps_solver(self.comm, symmetric, krylov=correction is not None)
             self._krylov = correction is not None
         factored = matrix
         if symmetric:
@@ -467,7 +466,7 @@ class FullOrderModel:
                         max_iterations: int = 30) -> np.ndarray:
         """u solving f_int(u) = f_act(u) for fixed activations, head clamped (full Newton)."""
         self.muscle.set_activations((left, right))
-        solver = direct_solver(self.comm)
+        solver = mumps_solver(self.comm)
         u = np.zeros(self.n_owned_dofs)
         try:
             for _ in range(max_iterations):

@@ -8,11 +8,17 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 
-def direct_solver(comm: MPI.Comm, symmetric: bool = False) -> PETSc.KSP:
-    """LU with MUMPS, or with ``symmetric`` MUMPS's LDLᵀ (SYM = 2, pivoting: indefinite matrices
-    too) of an SBAIJ matrix; the factors are kept until the operator changes."""
+def mumps_solver(comm: MPI.Comm, symmetric: bool = False, krylov: bool = False) -> PETSc.KSP:
+    """A MUMPS factorisation, kept until its matrix changes: LU, or with ``symmetric`` MUMPS's LDLᵀ
+    (SYM = 2, pivoting: indefinite matrices too) of an SBAIJ matrix. It is the whole solve
+    ("preonly"), or with ``krylov`` the preconditioner of GMRES (relative tolerance 1e-10, at most
+    100 iterations) for an operator that is not the factored matrix."""
     solver = PETSc.KSP().create(comm)
-    solver.setType("preonly")
+    if krylov:
+        solver.setType("gmres")
+        solver.setTolerances(rtol=1e-10, atol=0.0, max_it=100)
+    else:
+        solver.setType("preonly")
     preconditioner = solver.getPC()
     preconditioner.setType("cholesky" if symmetric else "lu")
     preconditioner.setFactorSolverType("mumps")
@@ -46,19 +52,6 @@ def describe_linear_solve(solver: PETSc.KSP) -> str:
     except PETSc.Error:
         return text
     return f"{text}, MUMPS INFOG(1) = {info}" + (f": {MUMPS_ERRORS[info]}" if info in MUMPS_ERRORS else "")
-
-
-def coupled_solver(comm: MPI.Comm, symmetric: bool = False) -> PETSc.KSP:
-    """GMRES preconditioned by an LU (or with ``symmetric`` an LDLᵀ) with MUMPS of the preconditioning
-    matrix, whose factors are kept until that matrix changes; relative tolerance 1e-10, at most 100
-    iterations."""
-    solver = PETSc.KSP().create(comm)
-    solver.setType("gmres")
-    solver.setTolerances(rtol=1e-10, atol=0.0, max_it=100)
-    preconditioner = solver.getPC()
-    preconditioner.setType("cholesky" if symmetric else "lu")
-    preconditioner.setFactorSolverType("mumps")
-    return solver
 
 
 class ExactNewtonOperator:
