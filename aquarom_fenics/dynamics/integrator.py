@@ -69,8 +69,8 @@ class NewtonSettings:
     def secant_settings(self) -> "NewtonSettings":
         """These settings with Broyden updates, factors refreshed after 20 iterations of a step or an
         iteration contracting the residual by less than 0.7 (Broyden's residuals need not decrease
-        monotonically). On the default FOM (21k dofs, factorisation ≈ 20 solves) this takes 0.5
-        factorisations and 5.4 iterations per step instead of 0.9 and 4.1 (docs/devlog.md, "FOM speed")."""
+        monotonically): fewer factorisations for somewhat more iterations per step (docs/devlog.md,
+        "FOM speed")."""
         return dataclasses.replace(self, secant_updates=True, contraction_to_refactor=0.7,
                                    iterations_per_factorization=20)
 

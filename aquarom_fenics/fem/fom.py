@@ -121,7 +121,7 @@ class FullOrderModel:
 
     def shape_direction_gradient(self, family: str, k: int) -> np.ndarray:
         """∇U_k at the points of the ``family``'s quadrature rule, (n, 3, 3); computed once per model
-        (a PROM build sets each direction a few dozen times: 14 ms each on degree 2, level 3)."""
+        (a PROM build sets each direction a few dozen times)."""
         key = (family, k)
         if key not in self._direction_gradients:
             points = self.quadrature_points[family].reshape(-1, 3)
@@ -487,8 +487,8 @@ class FullOrderModel:
 
     def destroy(self) -> None:
         """Free the PETSc matrices, vectors and solvers of the model and its terms. petsc4py does not
-        free them when the Python objects go (measured: 29 MB per degree-2, level-1 model, 67 MB after a
-        factorisation), so whoever is done with a model calls this; the model is unusable afterwards."""
+        free them when the Python objects go, so whoever is done with a model calls this; the model is
+        unusable afterwards."""
         if self._exact_operator is not None:
             self._exact_operator.destroy()
         owners = [self, *(term for term in (self.elastic, self.muscle, self.inertia, self.drag, self.thrust) if term)]
