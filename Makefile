@@ -13,7 +13,7 @@ demo: setup
 	$(PYTHON) scripts/demo.py --out $(OUT)
 
 test: setup
-	$(PYTHON) -m pytest -q -ra tests
+	$(PYTHON) -m pytest -q -ra -n 2 --dist loadfile tests
 
 bench: setup
 	$(PYTHON) scripts/bench_fom.py

@@ -2,7 +2,7 @@
 
 ``scene_keys.rst``: every key of every scene section with its default (as TOML), its check and
 its meaning, from the schema in ``aquarom_fenics.io.scene_sections`` and, for ``[cluster]``,
-``aquarom_fenics.executors.ClusterSettings``. ``cli.rst``: the ``--help``
+``aquarom_fenics.parallel.settings.ClusterSettings``. ``cli.rst``: the ``--help``
 of ``aquarom`` and of every sub-command. ``report.md``: the validation report
 ``results/REPORT.md`` of ``make validate`` when it exists, otherwise how to make it. The measured
 tables of the README and of the pages in ``measured.PAGES``, rewritten between their markers from
@@ -36,12 +36,12 @@ CLUSTER_KEYS_MEANING = {
     "connect_timeout": "seconds to wait for the scheduler (or for its file to appear) before the command ends "
                        "with exit code 2",
 }
-"""Meaning of each key of a scene's [cluster] table (``aquarom_fenics.executors.ClusterSettings``)."""
+"""Meaning of each key of a scene's [cluster] table (``aquarom_fenics.parallel.settings.ClusterSettings``)."""
 
 
 def key_tables() -> dict:
     """Every table of a scene file: the sections of the scene schema, then [cluster]."""
-    from aquarom_fenics.executors import ClusterSettings
+    from aquarom_fenics.parallel.settings import ClusterSettings
     from aquarom_fenics.io.scene import SECTIONS
 
     return {**SECTIONS, "cluster": ClusterSettings}

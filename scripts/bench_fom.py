@@ -17,7 +17,7 @@ import sys
 import time
 from pathlib import Path
 
-from aquarom_fenics.io.outputs import software_versions
+from aquarom_fenics.io.versions import software_versions
 from aquarom_fenics.io.persistence import write_json_atomic
 from aquarom_fenics.io.scene import Scene
 

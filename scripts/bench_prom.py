@@ -20,7 +20,7 @@ from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
 from aquarom_fenics.dynamics.simulate import simulate_fom
 from aquarom_fenics.fem import dolfinx_adapter as adapter
 from aquarom_fenics.geometry.fish import load_fish
-from aquarom_fenics.io.outputs import software_versions
+from aquarom_fenics.io.versions import software_versions
 from aquarom_fenics.io.persistence import write_json_atomic
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.reduction.basis import KEPT_FACTORS

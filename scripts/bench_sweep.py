@@ -72,8 +72,9 @@ def main() -> int:
     from distributed import LocalCluster
 
     from aquarom_fenics.dynamics.simulate import simulate_fom
-    from aquarom_fenics.executors import ClusterSettings, DaskCluster, InProcess, LocalProcesses
-    from aquarom_fenics.io.outputs import software_versions
+    from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
+    from aquarom_fenics.parallel import ClusterSettings, DaskCluster, InProcess, LocalProcesses
+    from aquarom_fenics.io.versions import software_versions
     from aquarom_fenics.io.persistence import write_json_atomic
     from aquarom_fenics.io.scene import scene_from_dict
     from aquarom_fenics.optimization.sweep import grid_designs
@@ -91,7 +92,7 @@ def main() -> int:
         serial = timed_sweep(scene, designs, InProcess(), scratch / "serial")
         runs.append(summary("serial (this process)", 1, serial, None))
         print(f"serial: {serial['wall_time']:.1f} s", flush=True)
-        local = LocalProcesses(2)
+        local = LocalProcesses(2, SWIMMER_WORKERS)
         try:
             result = timed_sweep(scene, designs, local, scratch / "local")
         finally:
@@ -102,7 +103,7 @@ def main() -> int:
         with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, protocol="tcp://",
                           dashboard_address=None, silence_logs=logging.ERROR) as cluster:
             cluster_start = time.perf_counter() - started
-            pool = DaskCluster(ClusterSettings(scheduler=cluster.scheduler_address))
+            pool = DaskCluster(ClusterSettings(scheduler=cluster.scheduler_address), SWIMMER_WORKERS)
             try:
                 dask = timed_sweep(scene, designs, pool, scratch / "dask")
             finally:

@@ -9,7 +9,7 @@ import argparse
 from pathlib import Path
 
 from aquarom_fenics.api import Scene, build_prom, simulate
-from aquarom_fenics.io.outputs import software_versions
+from aquarom_fenics.io.versions import software_versions
 from aquarom_fenics.io.persistence import write_json_atomic
 from aquarom_fenics.verification.compare import model_errors
 

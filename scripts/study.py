@@ -19,10 +19,12 @@ import time
 from pathlib import Path
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.executors import choose_cluster, open_pool
+from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
+from aquarom_fenics.parallel import choose_cluster, open_pool
 
 from aquarom_fenics.geometry.fish import load_fish
-from aquarom_fenics.io.outputs import holds_file, software_versions
+from aquarom_fenics.io.outputs import holds_file
+from aquarom_fenics.io.versions import software_versions
 from aquarom_fenics.io.persistence import write_text_atomic
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.optimization.study import checkpoint_pattern, completed_summary, pareto_sweep, run_optimization
@@ -52,7 +54,7 @@ def main():
     args = parser.parse_args()
     try:
         cluster = choose_cluster(args.scheduler, args.scheduler_file)
-        pool = open_pool(args.workers, cluster) if cluster.distributed or args.workers > 1 else None
+        pool = open_pool(args.workers, cluster, SWIMMER_WORKERS) if cluster.distributed or args.workers > 1 else None
     except InputError as error:
         print(f"study: error: {error}", file=sys.stderr)
         return InputError.exit_code

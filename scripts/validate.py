@@ -43,7 +43,7 @@ import sys
 from pathlib import Path
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.executors import choose_cluster
+from aquarom_fenics.parallel import choose_cluster
 from aquarom_fenics.verification.validation.figures import make_figures
 from aquarom_fenics.verification.validation.report import write_report
 from aquarom_fenics.verification.validation.settings import FULL, QUICK

@@ -9,7 +9,7 @@ within 5% in distance.
 import argparse
 from pathlib import Path
 
-from aquarom_fenics.io.outputs import software_versions
+from aquarom_fenics.io.versions import software_versions
 from aquarom_fenics.io.persistence import write_json_atomic, write_text_atomic
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.verification.validity import validity_study, validity_table

@@ -1,4 +1,10 @@
-"""Shared fixtures: the coarsest mesh level and short horizons keep the suite fast."""
+"""Shared fixtures: the coarsest mesh level and short horizons keep the suite fast.
+
+`make test` runs the files on two pytest-xdist workers (``--dist loadfile``: a file stays on one
+worker, so its module-scoped meshes, FOM runs and PROMs are built once). Each worker has its own
+session, hence its own result cache; the tests marked ``mpi`` take turns (:func:`one_mpirun_at_a_time`).
+"""
+import fcntl
 import os
 
 import pytest
@@ -7,12 +13,29 @@ from aquarom_fenics.io.scene import scene_from_dict
 
 os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
 os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+os.environ.setdefault("OMPI_MCA_mpi_yield_when_idle", "1")   # a waiting rank yields its core to the other worker
 
 
 @pytest.fixture(autouse=True, scope="session")
 def isolated_cache(tmp_path_factory):
     """FOM-check results are cached per test session, never in the repository."""
     os.environ["AQUAROM_CACHE"] = str(tmp_path_factory.mktemp("cache"))
+
+
+@pytest.fixture(autouse=True)
+def one_mpirun_at_a_time(request, tmp_path_factory):
+    """A test marked ``mpi`` (``mpirun -n 2`` as a subprocess) holds an exclusive lock shared by the
+    xdist workers of this run, so that two such tests never run at once on the two cores."""
+    if request.node.get_closest_marker("mpi") is None or "PYTEST_XDIST_WORKER" not in os.environ:
+        yield
+        return
+    lock = tmp_path_factory.getbasetemp().parent / "mpirun.lock"      # the run's folder, above each worker's
+    with open(lock, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 

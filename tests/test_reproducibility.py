@@ -10,7 +10,7 @@ REPOSITORY = Path(__file__).resolve().parents[1]
 
 import pytest
 
-from aquarom_fenics.io.outputs import git_commit
+from aquarom_fenics.io.versions import git_commit
 
 
 DRIVER = REPOSITORY / "scripts" / "docker_test.py"

@@ -12,7 +12,7 @@ import pytest
 
 from aquarom_fenics.cli import main
 from aquarom_fenics.geometry.block import block_mesh
-from aquarom_fenics.io.outputs import read_trajectory_csv
+from aquarom_fenics.io.readback import read_trajectory_csv
 
 SHORT_SCENE = """
 [mesh]

@@ -11,7 +11,7 @@ from aquarom_fenics.cli.outputs import claim_output, claim_output_file, shown
 from aquarom_fenics.cli.runs import run_build, run_compare, run_simulate
 from aquarom_fenics.cli.sweep import run_sweep
 from aquarom_fenics.errors import InputError, SolverError
-from aquarom_fenics.executors import shutting_down
+from aquarom_fenics.parallel import shutting_down
 
 
 def run_dry(args) -> int:
@@ -121,7 +121,8 @@ def open_work_pool(args, scene, tasks: int, default_workers: int):
     refused (InputError)."""
     from mpi4py import MPI
 
-    from aquarom_fenics.executors import choose_cluster, open_pool
+    from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
+    from aquarom_fenics.parallel import choose_cluster, open_pool
 
     if tasks <= 1:
         return None
@@ -134,7 +135,7 @@ def open_work_pool(args, scene, tasks: int, default_workers: int):
     if MPI.COMM_WORLD.size > 1:
         raise InputError(f"aquarom {args.command} under mpirun runs its tasks one after the other; "
                          "drop --workers / --scheduler (or [cluster]) or run it without mpirun")
-    return open_pool(min(workers, tasks), cluster)
+    return open_pool(min(workers, tasks), cluster, SWIMMER_WORKERS)
 
 
 def run_animate(args) -> int:

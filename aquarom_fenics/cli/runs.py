@@ -127,7 +127,7 @@ def run_build(args) -> int:
 
 def run_compare(args) -> int:
     from aquarom_fenics.verification.compare import model_errors
-    from aquarom_fenics.io.outputs import plot_comparison
+    from aquarom_fenics.io.plots import plot_comparison
     from aquarom_fenics.io.persistence import write_json_atomic
     from aquarom_fenics.dynamics.simulate import simulate_fom
 

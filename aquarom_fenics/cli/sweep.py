@@ -43,7 +43,8 @@ def earlier_rows(args, scene, designs, target: Path) -> dict:
 
 
 def run_sweep(args) -> int:
-    from aquarom_fenics.executors import choose_cluster, open_pool, shutting_down
+    from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
+    from aquarom_fenics.parallel import choose_cluster, open_pool, shutting_down
     from aquarom_fenics.optimization import sweep
 
     if MPI.COMM_WORLD.size > 1:
@@ -62,7 +63,7 @@ def run_sweep(args) -> int:
         return dry_run(args, scene, designs, source, kept, cluster, workers)
     started = time.perf_counter()
     # an unreachable scheduler is refused before any output; Ctrl-C or a refused output stops the workers at once
-    with shutting_down(open_pool(workers, cluster)) as pool:
+    with shutting_down(open_pool(workers, cluster, SWIMMER_WORKERS)) as pool:
         out = claim_output(args, target, resume=args.resume, resume_file="sweep.csv")
         backend = describe_backend(pool, cluster)
         say(f"sweep of {scene.name}: {len(designs)} designs ({source}), model {args.model}, {missing} to run "
@@ -86,7 +87,7 @@ def run_sweep(args) -> int:
 
 
 def describe_backend(pool, cluster) -> str:
-    from aquarom_fenics.executors import DaskCluster, InProcess
+    from aquarom_fenics.parallel import DaskCluster, InProcess
 
     if isinstance(pool, DaskCluster):
         return f"on {pool.workers} Dask worker(s) of the {cluster.describe().removeprefix('Dask ')}"

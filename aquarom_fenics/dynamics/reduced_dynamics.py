@@ -16,7 +16,8 @@ import numpy as np
 import scipy.linalg
 from threadpoolctl import ThreadpoolController
 
-from aquarom_fenics.dynamics.integrator import IntegrationStopped, NewtonSettings, StepReport, TimeScheme, between, integrate
+from aquarom_fenics.dynamics.integrator import IntegrationStopped, NewtonSettings, StepReport, TimeScheme, integrate
+from aquarom_fenics.fem.time_scheme import between
 from aquarom_fenics.reduction.prom import ReducedModel
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.dynamics.trajectory import (Trajectory, swimming_distance, tail_amplitude, window_mask,

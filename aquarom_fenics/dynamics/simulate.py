@@ -16,7 +16,7 @@ from aquarom_fenics.errors import InputError, Terminated
 from aquarom_fenics.geometry.fish import Fish, load_fish
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.dynamics.integrator import IntegrationStopped, NewtonSettings, StepReport, integrate
-from aquarom_fenics.io.outputs import TrajectoryCSV
+from aquarom_fenics.io.tables import TrajectoryCSV
 from aquarom_fenics.io.stop_signals import stop_between_steps, stop_for
 from aquarom_fenics.io.run_outputs import write_run_outputs
 from aquarom_fenics.io.xdmf import cell_regions

@@ -5,9 +5,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from aquarom_fenics.io.tables import TRAJECTORY_COLUMNS as COLUMNS
+
 DISTANCE_WINDOW = 0.1    # s, the centre-of-mass x is averaged over the last 0.1 s
 AMPLITUDE_WINDOW = 1.0   # s, the tail amplitude is the max |y_tail| over the last second
-COLUMNS = ("time", "head_x", "tail_y", "com_x", "newton_iterations")
 
 
 @dataclass

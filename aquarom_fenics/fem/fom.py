@@ -21,8 +21,10 @@ from petsc4py import PETSc
 from ufl.algorithms import extract_coefficients
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
+from aquarom_fenics.fem.linear_solver import (ExactNewtonOperator, describe_linear_solve, mumps_solver,
+                                              upper_triangle_copy)
 from aquarom_fenics.geometry.fish import Fish, quadrature_degrees
-from aquarom_fenics.dynamics.integrator import TimeScheme
+from aquarom_fenics.fem.time_scheme import TimeScheme
 from aquarom_fenics.errors import SolverError
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.physics.drag import DragTerm
@@ -55,46 +57,6 @@ class TangentFactors:
     stiffness_factor: float
     velocity_factor: float
     acceleration_factor: float
-
-
-def direct_solver(comm: MPI.Comm, symmetric: bool = False) -> PETSc.KSP:
-    """LU with MUMPS, or with ``symmetric`` MUMPS's LDLᵀ (SYM = 2, pivoting: indefinite matrices
-    too) of an SBAIJ matrix; the factors are kept until the operator changes."""
-    solver = PETSc.KSP().create(comm)
-    solver.setType("preonly")
-    preconditioner = solver.getPC()
-    preconditioner.setType("cholesky" if symmetric else "lu")
-    preconditioner.setFactorSolverType("mumps")
-    return solver
-
-
-def upper_triangle_copy(matrix: PETSc.Mat, out: PETSc.Mat | None) -> PETSc.Mat:
-    """``matrix`` (BAIJ, symmetric) as SBAIJ, the upper triangle of its blocks; ``out`` from an earlier
-    call is refilled in place (same pattern, so MUMPS keeps its analysis)."""
-    matrix.setOption(PETSc.Mat.Option.SYMMETRIC, True)
-    if out is None:
-        return matrix.convert("sbaij", PETSc.Mat())
-    matrix.convert("sbaij", out)
-    return out
-
-
-MUMPS_ERRORS = {-6: "structurally singular matrix", -9: "work array too small",
-                -10: "numerically singular matrix", -13: "out of memory"}
-"""Meaning of the negative INFOG(1) codes of a failed MUMPS factorisation."""
-
-
-def describe_linear_solve(solver: PETSc.KSP) -> str:
-    """KSP converged reason of the last solve and, for MUMPS, INFOG(1) of its factorisation."""
-    reasons = {value: name for name, value in vars(PETSc.KSP.ConvergedReason).items() if name.isupper()}
-    reason = solver.getConvergedReason()
-    text = f"KSP {reasons.get(reason, reason)}"
-    if solver.getPC().getFactorSolverType() != "mumps":
-        return text
-    try:
-        info = solver.getPC().getFactorMatrix().getMumpsInfog(1)
-    except PETSc.Error:
-        return text
-    return f"{text}, MUMPS INFOG(1) = {info}" + (f": {MUMPS_ERRORS[info]}" if info in MUMPS_ERRORS else "")
 
 
 class FullOrderModel:
@@ -159,7 +121,7 @@ class FullOrderModel:
 
     def shape_direction_gradient(self, family: str, k: int) -> np.ndarray:
         """∇U_k at the points of the ``family``'s quadrature rule, (n, 3, 3); computed once per model
-        (a PROM build sets each direction a few dozen times: 14 ms each on degree 2, level 3)."""
+        (a PROM build sets each direction a few dozen times)."""
         key = (family, k)
         if key not in self._direction_gradients:
             points = self.quadrature_points[family].reshape(-1, 3)
@@ -454,8 +416,7 @@ class FullOrderModel:
         if self._solver is None or (correction is not None) != self._krylov:
             if self._solver is not None:
                 self._solver.destroy()
-            self._solver = (direct_solver(self.comm, symmetric) if correction is None
-                            else coupled_solver(self.comm, symmetric))
+            self._solver = mumps_solver(self.comm, symmetric, krylov=correction is not None)
             self._krylov = correction is not None
         factored = matrix
         if symmetric:
@@ -464,7 +425,7 @@ class FullOrderModel:
             self._solver.setOperators(factored)
         else:
             if self._exact_operator is None:
-                self._exact_operator = PETSc.Mat().createPython(matrix.getSizes(), _ExactNewtonOperator(),
+                self._exact_operator = PETSc.Mat().createPython(matrix.getSizes(), ExactNewtonOperator(),
                                                                 comm=self.comm)
                 self._exact_operator.setUp()
             self._exact_operator.getPythonContext().set(matrix, correction, self.fixed_dofs)
@@ -505,7 +466,7 @@ class FullOrderModel:
                         max_iterations: int = 30) -> np.ndarray:
         """u solving f_int(u) = f_act(u) for fixed activations, head clamped (full Newton)."""
         self.muscle.set_activations((left, right))
-        solver = direct_solver(self.comm)
+        solver = mumps_solver(self.comm)
         u = np.zeros(self.n_owned_dofs)
         try:
             for _ in range(max_iterations):
@@ -526,8 +487,8 @@ class FullOrderModel:
 
     def destroy(self) -> None:
         """Free the PETSc matrices, vectors and solvers of the model and its terms. petsc4py does not
-        free them when the Python objects go (measured: 29 MB per degree-2, level-1 model, 67 MB after a
-        factorisation), so whoever is done with a model calls this; the model is unusable afterwards."""
+        free them when the Python objects go, so whoever is done with a model calls this; the model is
+        unusable afterwards."""
         if self._exact_operator is not None:
             self._exact_operator.destroy()
         owners = [self, *(term for term in (self.elastic, self.muscle, self.inertia, self.drag, self.thrust) if term)]
@@ -583,35 +544,6 @@ class FullOrderModel:
         nodal = np.zeros((self.fish.nodes.points.shape[0], 3))
         nodal[self.layout.owned_nodes] = u.reshape(-1, 3)
         return self.comm.allreduce(nodal, op=MPI.SUM)
-
-
-def coupled_solver(comm: MPI.Comm, symmetric: bool = False) -> PETSc.KSP:
-    """GMRES preconditioned by an LU (or with ``symmetric`` an LDLᵀ) with MUMPS of the preconditioning
-    matrix, whose factors are kept until that matrix changes; relative tolerance 1e-10, at most 100
-    iterations."""
-    solver = PETSc.KSP().create(comm)
-    solver.setType("gmres")
-    solver.setTolerances(rtol=1e-10, atol=0.0, max_it=100)
-    preconditioner = solver.getPC()
-    preconditioner.setType("cholesky" if symmetric else "lu")
-    preconditioner.setFactorSolverType("mumps")
-    return solver
-
-
-class _ExactNewtonOperator:
-    """PETSc Python matrix y = S x + c(x): the assembled Newton matrix S plus the coupling c outside
-    it (zero on the fixed dofs, whose rows and columns of S are the identity)."""
-
-    def set(self, matrix: PETSc.Mat, correction, fixed_dofs: np.ndarray) -> None:
-        self.matrix, self.correction, self.fixed_dofs = matrix, correction, fixed_dofs
-
-    def mult(self, operator, x: PETSc.Vec, y: PETSc.Vec) -> None:
-        self.matrix.mult(x, y)
-        values = x.array_r.copy()
-        values[self.fixed_dofs] = 0.0
-        extra = self.correction(values)
-        extra[self.fixed_dofs] = 0.0
-        y.array[:] += extra
 
 
 _AVERAGES: dict[tuple[int, int, str], StationAverages] = {}

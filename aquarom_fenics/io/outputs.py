@@ -1,151 +1,22 @@
-"""Files a run leaves behind: incremental CSV, versions, plots, output folders (atomic writes: ``persistence``)."""
+"""Output folders: claimed before a run (never over another's files), listed in a manifest, published
+when the run is done (CSV tables: ``tables``, versions: ``versions``, plots: ``plots``, atomic
+writes: ``persistence``)."""
 from __future__ import annotations
 
-import csv
 import ctypes
 import json
 import os
-import platform
 import shutil
-import subprocess
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.dynamics.trajectory import COLUMNS
 from aquarom_fenics.io.output_lock import lock_output, release_output_locks
 from aquarom_fenics.io.persistence import require_writable, write_json_atomic
+from aquarom_fenics.io.versions import git_commit, software_versions
 
 log = logging.getLogger("aquarom")
-
-
-class IncrementalCSV:
-    """A CSV file written one row at a time and flushed at once, so that the rows already written
-    survive a run that stops later."""
-
-    def __init__(self, path: Path, header: list[str]):
-        path.parent.mkdir(parents=True, exist_ok=True)
-        self._stream = open(path, "w", newline="")
-        self._writer = csv.writer(self._stream)
-        self.rows = 0
-        self._writer.writerow(header)
-        self._stream.flush()
-
-    def write_row(self, values: list) -> None:
-        self._writer.writerow(values)
-        self._stream.flush()
-        self.rows += 1
-
-    def close(self) -> None:
-        self._stream.close()
-
-
-TRAJECTORY_FILE_COLUMNS = {"time": "time_s", "head_x": "head_x_m", "tail_y": "tail_y_m", "com_x": "com_x_m",
-                           "newton_iterations": "newton_iterations"}
-"""trajectory.csv's header: every column named with its SI unit (time [s], positions [m])."""
-
-
-class TrajectoryCSV(IncrementalCSV):
-    """trajectory.csv, one row per converged step (kept if a later step fails): time_s, head_x_m,
-    tail_y_m, com_x_m (head and centre-of-mass x, tail y, all [m]) and newton_iterations."""
-
-    def __init__(self, path: Path):
-        super().__init__(path, [TRAJECTORY_FILE_COLUMNS[name] for name in COLUMNS])
-
-    def write(self, time, head_x, tail_y, com_x, iterations) -> None:
-        self.write_row([f"{time:.10g}", f"{head_x:.17g}", f"{tail_y:.17g}", f"{com_x:.17g}", iterations])
-
-
-def write_trajectory_csv(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    """A whole trajectory at once (reduced runs are fast enough not to stream)."""
-    table = TrajectoryCSV(path)
-    for row in zip(*(arrays[name] for name in COLUMNS)):
-        table.write(*row[:4], int(row[4]))
-    table.close()
-
-
-def read_trajectory_csv(path: Path) -> dict[str, np.ndarray]:
-    """The arrays of a trajectory.csv by the names of ``Trajectory`` (time [s], head_x, tail_y, com_x [m]),
-    checked by its loader (:func:`aquarom_fenics.io.readback.load_trajectory`)."""
-    from aquarom_fenics.io.readback import load_trajectory
-
-    return load_trajectory(path)
-
-
-def software_versions() -> dict[str, str]:
-    import dolfinx
-    import petsc4py
-    import ufl
-
-    from aquarom_fenics import __version__
-
-    return {"aquarom_fenics": __version__, "dolfinx": dolfinx.__version__, "petsc4py": petsc4py.__version__,
-            "ufl": ufl.__version__, "numpy": np.__version__, "python": platform.python_version()}
-
-
-def git_commit(repository: Path) -> str:
-    """The commit checked out in `repository`, else $AQUAROM_GIT_COMMIT, else "unknown".
-
-    Only a checkout whose top level is `repository` itself counts (not one that merely contains a
-    copy of it); an image built without the history is given the commit in AQUAROM_GIT_COMMIT.
-    """
-    try:
-        answer = subprocess.run(["git", "-C", str(repository), "rev-parse", "--show-toplevel", "HEAD"],
-                                capture_output=True, text=True, timeout=30)
-    except (OSError, subprocess.TimeoutExpired):   # no git, or git hangs
-        answer = None
-    lines = answer.stdout.splitlines() if answer is not None and answer.returncode == 0 else []
-    if len(lines) == 2 and Path(lines[0]).resolve() == Path(repository).resolve():
-        return lines[1]
-    return os.environ.get("AQUAROM_GIT_COMMIT") or "unknown"
-
-
-def plot_comparison(path: Path, runs: dict[str, dict[str, np.ndarray]], title: str) -> None:
-    """Overlay of head x, centre-of-mass x and tail y [cm] of several models."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figure, axes = plt.subplots(3, 1, figsize=(7, 7), sharex=True)
-    for (label, arrays), style in zip(runs.items(), ("-", "--", ":", "-.")):
-        for axis, name in zip(axes, ("head_x", "com_x", "tail_y")):
-            axis.plot(arrays["time"], 100 * arrays[name], style, label=label)
-    for axis, label in zip(axes, ("head x [cm]", "centre of mass x [cm]", "tail y [cm]")):
-        axis.set_ylabel(label)
-        axis.grid(alpha=0.3)
-    axes[0].legend(loc="upper left")
-    axes[-1].set_xlabel("time [s]")
-    axes[0].set_title(title)
-    figure.tight_layout()
-    figure.savefig(path, dpi=120)
-    plt.close(figure)
-
-
-def plot_trajectory(path: Path, arrays: dict[str, np.ndarray], title: str) -> None:
-    """Head x and tail y [cm] over time, and the centre-of-mass x."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figure, (top, bottom) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
-    top.plot(arrays["time"], 100 * arrays["head_x"], label="head x")
-    top.plot(arrays["time"], 100 * arrays["com_x"], label="centre of mass x", linestyle="--")
-    top.set_ylabel("displacement x [cm]")
-    top.legend(loc="upper left")
-    bottom.plot(arrays["time"], 100 * arrays["tail_y"], color="tab:red")
-    bottom.set_ylabel("tail y [cm]")
-    bottom.set_xlabel("time [s]")
-    for axis in (top, bottom):
-        axis.grid(alpha=0.3)
-    top.set_title(title)
-    figure.tight_layout()
-    figure.savefig(path, dpi=120)
-    plt.close(figure)
 
 
 # ---------------------------------------------------------------------- output locations

@@ -108,7 +108,7 @@ def require_writable(folder: Path, what: str = "output") -> None:
 # ---------------------------------------------------------------------- checksummed cache entries
 def entry_key(*parts) -> str:
     """SHA-256 (24 hex digits) of the JSON of what an entry depends on, plus the software versions."""
-    from aquarom_fenics.io.outputs import software_versions
+    from aquarom_fenics.io.versions import software_versions
 
     text = json.dumps([parts, software_versions()], sort_keys=True, default=_plain)
     return hashlib.sha256(text.encode()).hexdigest()[:24]

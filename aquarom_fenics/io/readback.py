@@ -20,6 +20,7 @@ from typing import Callable
 import numpy as np
 
 from aquarom_fenics.errors import InputError
+from aquarom_fenics.io.tables import TRAJECTORY_COLUMNS, TRAJECTORY_FILE_COLUMNS
 
 MAX_JSON_BYTES = 256 * 1024 * 1024
 """Largest JSON file read back [bytes] (a checkpoint of a long optimisation is a few MB)."""
@@ -272,15 +273,18 @@ def load_csv_table(path: Path, columns: tuple[str, ...] | list[str], kind: str, 
 def load_trajectory(path: Path) -> dict[str, np.ndarray]:
     """trajectory.csv of a run: time [s], head x, tail y, centre-of-mass x [m], Newton iterations;
     finite values, times increasing."""
-    from aquarom_fenics.dynamics.trajectory import COLUMNS
-    from aquarom_fenics.io.outputs import TRAJECTORY_FILE_COLUMNS
-
     remedy = "rerun `aquarom simulate` into this folder with --force"
-    file_columns = [TRAJECTORY_FILE_COLUMNS[name] for name in COLUMNS]
+    file_columns = [TRAJECTORY_FILE_COLUMNS[name] for name in TRAJECTORY_COLUMNS]
     table = load_csv_table(path, file_columns, "trajectory", remedy)
     for name, values in table.items():
         if not np.all(np.isfinite(values)):
             raise InputError(f"trajectory {path}: column {name} holds empty or non-finite values; {remedy}")
     if np.any(np.diff(table[TRAJECTORY_FILE_COLUMNS["time"]]) <= 0):
         raise InputError(f"trajectory {path}: the times do not increase; {remedy}")
-    return {name: table[TRAJECTORY_FILE_COLUMNS[name]] for name in COLUMNS}
+    return {name: table[TRAJECTORY_FILE_COLUMNS[name]] for name in TRAJECTORY_COLUMNS}
+
+
+def read_trajectory_csv(path: Path) -> dict[str, np.ndarray]:
+    """The arrays of a trajectory.csv by the names of ``Trajectory`` (time [s], head_x, tail_y, com_x [m]),
+    checked by :func:`load_trajectory`."""
+    return load_trajectory(path)

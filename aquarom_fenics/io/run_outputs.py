@@ -14,7 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.io.outputs import plot_trajectory, software_versions, write_trajectory_csv
+from aquarom_fenics.io.plots import plot_trajectory
+from aquarom_fenics.io.tables import write_trajectory_csv
+from aquarom_fenics.io.versions import software_versions
 from aquarom_fenics.io.persistence import write_json_atomic, write_npz_atomic
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.executors import ClusterSettings, cluster_from_table
+from aquarom_fenics.parallel.settings import ClusterSettings, cluster_from_table
 from aquarom_fenics.io.paths import shipped_meshes, shipped_scenes
 from aquarom_fenics.io.scene_sections import (SECTIONS, ActuationSection, CooptimizationSection, FluidSection,
                                               LinearConstraint, MaterialSection, MeshSection, OptimizerSection,

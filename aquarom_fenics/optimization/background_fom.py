@@ -2,9 +2,9 @@
 
 The FOM check after an optimisation needs two FOM runs, the start design's and the
 optimum's. The start design's is known before the optimisation starts: on a single MPI rank with a
-spare core, a worker of the executor layer (:mod:`aquarom_fenics.executors`: one local process,
+spare core, a worker of the pool layer (:mod:`aquarom_fenics.parallel`: one local process,
 or a Dask cluster's worker) runs it meanwhile and stores its distance in the FOM cache
-(``study.fom_distance``), where the check finds it. If the run fails or is still running when the
+(``fom_cache.fom_distance``), where the check finds it. If the run fails or is still running when the
 check has finished the optimum's run and waited as long again, the check runs it itself.
 """
 from __future__ import annotations
@@ -17,7 +17,8 @@ import time
 
 from mpi4py import MPI
 
-from aquarom_fenics.executors import LocalProcesses, in_worker
+from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
+from aquarom_fenics.parallel import LocalProcesses, in_worker
 from aquarom_fenics.io.scene import Scene
 
 log = logging.getLogger("aquarom")
@@ -30,7 +31,7 @@ def start_fom(scene: Scene, design: dict[str, float], amplitude: float | None) -
     """``fom_distance`` at the design, stored in the FOM cache (what the worker runs; its progress
     bar and log lines are discarded)."""
     from aquarom_fenics.geometry.fish import load_fish
-    from aquarom_fenics.optimization.study import fom_distance
+    from aquarom_fenics.optimization.fom_cache import fom_distance
 
     with open(os.devnull, "w") as sink, contextlib.redirect_stderr(sink), contextlib.redirect_stdout(sink):
         return fom_distance(scene, load_fish(scene), design, amplitude)
@@ -39,13 +40,13 @@ def start_fom(scene: Scene, design: dict[str, float], amplitude: float | None) -
 class BackgroundFom:
     """A worker computing ``fom_distance(scene, fish, design, amplitude)`` into the FOM cache.
 
-    ``pool``: a backend of :mod:`aquarom_fenics.executors` to run it on (left open); None: a local
+    ``pool``: a backend of :mod:`aquarom_fenics.parallel` to run it on (left open); None: a local
     worker process of its own, ended by :meth:`finish` or :meth:`stop`.
     """
 
     def __init__(self, scene: Scene, design: dict[str, float], amplitude: float | None, pool=None):
         self.own_pool = pool is None
-        self.pool = LocalProcesses(1) if pool is None else pool
+        self.pool = LocalProcesses(1, SWIMMER_WORKERS) if pool is None else pool
         self.started = time.perf_counter()
         self.future = self.pool.submit(start_fom, scene, design, amplitude)
         log.info("FOM check: the start design's FOM runs in a background worker during the optimisation")

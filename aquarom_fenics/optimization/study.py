@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import logging
 import time
 from dataclasses import dataclass
@@ -14,20 +13,20 @@ import numpy as np
 from mpi4py import MPI
 
 from aquarom_fenics.optimization.background_fom import BackgroundFom, start_if_useful
+from aquarom_fenics.optimization.fom_cache import fom_cache_path, fom_distance  # noqa: F401 — fom_cache_path: sweep's entries
 from aquarom_fenics.optimization.cost import CostWeights, design_space
 from aquarom_fenics.errors import InputError, Interrupted, SolverError
-from aquarom_fenics.executors import worker_threads
+from aquarom_fenics.parallel import worker_threads
 from aquarom_fenics.geometry.fish import Fish, load_fish
 from aquarom_fenics.optimization.history import Checkpoint, history_columns
 from aquarom_fenics.optimization.optimize import (DEFAULT_MAX_TIME, OptimizationResult, optimization_space, optimize,
                                                   start_points)
 from aquarom_fenics.optimization.prom_builder import PromBuilder
-from aquarom_fenics.io.outputs import IncrementalCSV, holds_file, software_versions
-from aquarom_fenics.io.paths import cache_root
-from aquarom_fenics.io.persistence import (entry_key, get_or_compute, require_cache_writable, write_json_atomic,
-                                           write_text_atomic)
+from aquarom_fenics.io.outputs import holds_file
+from aquarom_fenics.io.tables import IncrementalCSV
+from aquarom_fenics.io.versions import software_versions
+from aquarom_fenics.io.persistence import require_cache_writable, write_json_atomic, write_text_atomic
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.dynamics.simulate import simulate_fom
 
 log = logging.getLogger("aquarom")
 
@@ -52,35 +51,6 @@ class FomCheck:
         if self.start_distance is None or self.optimal_distance is None:
             return None
         return self.optimal_distance / self.start_distance
-
-
-def fom_cache_path(scene: Scene, design: dict[str, float], amplitude: float | None) -> Path:
-    """The FOM cache entry of a design's distance (``Scene.fom_hash``, design and amplitude): scenes
-    that differ only in what a FOM run does not read (optimiser, reduction, bounds) share it."""
-    if amplitude is not None:
-        scene = scene.replace("actuation", amplitude=amplitude)
-    return cache_root() / "fom" / f"{entry_key('fom', scene.fom_hash, sorted(design.items()))}.json"
-
-
-def fom_distance(scene: Scene, fish: Fish, design: dict[str, float], amplitude: float | None) -> float:
-    """Swimming distance of the FOM at a design, cached by ``Scene.fom_hash``, design and amplitude."""
-    if amplitude is not None:
-        scene = scene.replace("actuation", amplitude=amplitude)
-    path = fom_cache_path(scene, design, None)
-
-    def simulate() -> float:
-        require_cache_writable("fom")
-        result = simulate_fom(scene, design, fish=fish, progress=MPI.COMM_WORLD.rank == 0)
-        if not result.completed:
-            raise SolverError(f"FOM at {design} stopped: {result.error}")
-        return result.distance
-
-    def save(distance: float, path: Path) -> None:
-        write_json_atomic(path, {"design": design, "scene_hash": scene.hash, "fom_hash": scene.fom_hash,
-                                 "distance": distance})
-
-    return get_or_compute(path, simulate, save, load=lambda path: json.loads(path.read_text())["distance"],
-                          comm=MPI.COMM_WORLD, label=f"FOM at {design}")
 
 
 def design_and_amplitude(space, z: np.ndarray) -> tuple[dict[str, float], float | None]:
@@ -180,7 +150,7 @@ def run_multistart(scene: Scene, out_dir: Path, resume: bool = False, weights: C
     cache), each FOM-checked; summary.json lists every local optimum and is the summary of the
     best FOM-verified one (the best PROM distance when no FOM check finished).
 
-    ``pool``: a backend of :mod:`aquarom_fenics.executors` running one start per task; None runs
+    ``pool``: a backend of :mod:`aquarom_fenics.parallel` running one start per task; None runs
     them one after the other here. ``resume``: a start with a checkpoint continues from it, one
     without (not begun when the run stopped) runs from the start."""
     out_dir = Path(out_dir)
@@ -192,7 +162,7 @@ def run_multistart(scene: Scene, out_dir: Path, resume: bool = False, weights: C
         with worker_threads():
             runs = [start_run(scene, out_dir, resume, weights, max_time, (k, z), fish) for k, z in enumerate(starts)]
     else:
-        from aquarom_fenics.executors import run_all
+        from aquarom_fenics.parallel import run_all
 
         task = partial(start_run, scene, str(out_dir.resolve()), resume, weights, max_time)
         found = {}
@@ -345,7 +315,7 @@ def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None, pool=Non
 
     A point whose FOM check does not complete is no optimum of the model: it is marked
     ``fom_check = infeasible`` with the FOM's stop reason, and left off the front.
-    ``pool``: a backend of :mod:`aquarom_fenics.executors` (local worker processes or a Dask
+    ``pool``: a backend of :mod:`aquarom_fenics.parallel` (local worker processes or a Dask
     cluster) running one weight per task; None runs them one after the other here (under MPI too).
     ``resume``: a weight whose run completed is read back from its summary.json, one with a
     checkpoint continues from it, and the others run from the start (:func:`pareto_point`).
@@ -355,7 +325,7 @@ def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None, pool=Non
         with worker_threads():
             points = [pareto_point(scene, out_dir, w1, fish, resume) for w1 in scene.cooptimization.weights]
     else:
-        from aquarom_fenics.executors import run_all
+        from aquarom_fenics.parallel import run_all
 
         found = {}
         for w1, point, error in run_all(pool, partial(pareto_point, scene, str(Path(out_dir).resolve()), resume=resume),

@@ -2,7 +2,7 @@
 
 Designs come from a CSV file (one column per shape name), a grid (``name=lo:hi:n`` per shape) or
 a seeded Latin hypercube over the scene's bounds; a shape a source does not set keeps its start
-value. Each design is one task (:func:`evaluate`) on a backend of :mod:`aquarom_fenics.executors`;
+value. Each design is one task (:func:`evaluate`) on a backend of :mod:`aquarom_fenics.parallel`;
 its row is written to ``sweep.csv`` as it finishes. The FOM's answer at a design is cached in the
 FOM cache (:func:`aquarom_fenics.optimization.study.fom_cache_path`, shared with the optimiser's
 FOM checks), so a re-run computes only what is missing; ``--resume`` keeps the rows already in
@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.executors import run_all, worker_name
+from aquarom_fenics.parallel import run_all, worker_name
 from aquarom_fenics.io.scene import Scene, parse_number
 
 
@@ -284,7 +284,7 @@ class SweepCSV:
     its rows for --resume)."""
 
     def __init__(self, path: Path, scene: Scene, earlier: list[dict]):
-        from aquarom_fenics.io.outputs import IncrementalCSV
+        from aquarom_fenics.io.tables import IncrementalCSV
 
         self.header = columns(scene)
         self.table = IncrementalCSV(path, self.header)

@@ -16,7 +16,7 @@ from petsc4py import PETSc
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.forms.drag import drag_direction_form
-from aquarom_fenics.reduction.projection import Taylor
+from aquarom_fenics.physics.taylor import Taylor
 
 
 def drag_force(direction: np.ndarray, head_velocity_x: float) -> np.ndarray:

@@ -17,7 +17,7 @@ from petsc4py import PETSc
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.fem.cellwise import CellSampler, internal_force_taylor
 from aquarom_fenics.forms.elasticity import strain_energy
-from aquarom_fenics.reduction.projection import Taylor
+from aquarom_fenics.physics.taylor import Taylor
 
 
 class ElasticTerm:

@@ -19,7 +19,7 @@ from mpi4py import MPI
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.forms.muscle import muscle_energy, muscle_energy_density
-from aquarom_fenics.reduction.projection import Taylor, stack_taylor, taylor_of
+from aquarom_fenics.physics.taylor import Taylor, stack_taylor, taylor_of
 
 LEFT, RIGHT = 1, 2
 """Region numbers of the muscles' cells in the forms' measure."""

@@ -19,11 +19,10 @@ from mpi4py import MPI
 
 from aquarom_fenics.geometry.shapes import shape_displacement
 from aquarom_fenics.physics.stations import dorsal_profile
-from aquarom_fenics.physics.thrust import (SegmentBlocks, SegmentState, SpineGeometry, derivative_weights,
-                                           segment_difference, segment_state, segment_state_of,
-                                           segment_weighted_force, thrust_force,
-                                           thrust_force_of_state, thrust_jacobian_blocks, thrust_jacobians,
-                                           virtual_mass, virtual_mass_gradient)
+from aquarom_fenics.physics.thrust import (SegmentState, SpineGeometry, derivative_weights, segment_difference,
+                                           segment_state, segment_state_of, segment_weighted_force, thrust_force,
+                                           thrust_force_of_state, virtual_mass, virtual_mass_gradient)
+from aquarom_fenics.physics.thrust_jacobians import SegmentBlocks, thrust_jacobian_blocks, thrust_jacobians
 
 
 def shape_rows(fish) -> np.ndarray:

@@ -28,7 +28,8 @@ from petsc4py import PETSc
 from slepc4py import SLEPc
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
-from aquarom_fenics.fem.fom import FullOrderModel, direct_solver, upper_triangle_copy
+from aquarom_fenics.fem.fom import FullOrderModel
+from aquarom_fenics.fem.linear_solver import mumps_solver, upper_triangle_copy
 from aquarom_fenics.physics.muscle import ANTAGONIST_PATTERN
 
 log = logging.getLogger("aquarom")
@@ -195,7 +196,7 @@ class KeptFactors:
         self.matrix = upper_triangle_copy(clamped, None)
         self.matrix.setOption(PETSc.Mat.Option.SPD, True)
         clamped.destroy()
-        self.solver = direct_solver(fom.comm, symmetric=True)
+        self.solver = mumps_solver(fom.comm, symmetric=True)
         self.solver.setOperators(self.matrix)
         self.key = key
         return self.matrix, self.solver

@@ -27,7 +27,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from aquarom_fenics.fem.fom import FullOrderModel, direct_solver
+from aquarom_fenics.fem.fom import FullOrderModel
+from aquarom_fenics.fem.linear_solver import mumps_solver
 from aquarom_fenics.reduction.basis import clamped_stiffness, unit_tail_force, vibration_modes
 from aquarom_fenics.geometry.fish import Fish, load_fish
 from aquarom_fenics.io.scene import Scene
@@ -84,7 +85,7 @@ def tail_compliances(model: FullOrderModel) -> dict[str, float]:
     """Static x-compliance [m/N] at rest, head clamped, under a unit x-force: ``node`` of the tail node
     (e_tail,xᵀ K_0⁻¹ e_tail,x) and, with stations, ``station`` of the tail station (B_0 K_0⁻¹ B_0ᵀ e_x)."""
     stiffness = clamped_stiffness(model)
-    solver = direct_solver(model.comm)
+    solver = mumps_solver(model.comm)
     solver.setOperators(stiffness)
     forces = {"node": unit_tail_force(model, nodal=True)}
     if model.station_averages is not None and model.thrust is not None:

@@ -34,7 +34,7 @@ from aquarom_fenics.dynamics.reduced_dynamics import Stability, simulate_reduced
 from aquarom_fenics.dynamics.simulate import check_time_grid
 from aquarom_fenics.dynamics.trajectory import last_stroke_start
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.executors import in_worker, worker_threads
+from aquarom_fenics.parallel import in_worker, worker_threads
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.geometry.fish import Fish
 from aquarom_fenics.io.scene import Scene

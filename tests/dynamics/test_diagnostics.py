@@ -10,7 +10,8 @@ from petsc4py import PETSc
 from aquarom_fenics.dynamics.diagnostics import newton_failure_hints, scene_warnings
 from aquarom_fenics.errors import InputError, SolverError
 from aquarom_fenics.geometry.fish import load_fish
-from aquarom_fenics.fem.fom import FullOrderModel, describe_linear_solve, direct_solver
+from aquarom_fenics.fem.fom import FullOrderModel
+from aquarom_fenics.fem.linear_solver import describe_linear_solve, mumps_solver
 from aquarom_fenics.dynamics.integrator import NewtonSettings, TimeScheme, integrate
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.geometry.design_check import cell_region, check_design
@@ -137,7 +138,7 @@ def test_failed_factorisation_is_a_solver_error_naming_mumps(fish):
     model = FullOrderModel(coarse_scene(), fish, comm=MPI.COMM_WORLD)
     singular = model.mass_matrix.copy()
     singular.zeroRows(model.global_dofs(np.arange(3)), diag=0.0)
-    solver = direct_solver(model.comm)
+    solver = mumps_solver(model.comm)
     solver.setOperators(singular)
     with pytest.raises(SolverError, match=r"linear solve failed \(KSP DIVERGED_PCSETUP_FAILED, "
                                           r"MUMPS INFOG\(1\) = -10: numerically singular matrix\)"):

@@ -106,7 +106,7 @@ def test_the_symmetric_newton_matrix_is_factorised_by_ldlt(stations, spine_rule)
     LDLᵀ and solves as LU does; the nodal model's S (thrust and drag Jacobians) is not symmetric and
     keeps LU."""
     from petsc4py import PETSc
-    from aquarom_fenics.fem.fom import direct_solver
+    from aquarom_fenics.fem.linear_solver import mumps_solver
 
     scene = coarse_scene(fluid={"stations": stations, "spine_rule": spine_rule}, shapes=SHAPES)
     model = FullOrderModel(scene, load_fish(scene), DESIGN)
@@ -118,7 +118,7 @@ def test_the_symmetric_newton_matrix_is_factorised_by_ldlt(stations, spine_rule)
     assert scalar_rows.isSymmetric(1e-10) == (stations != "nodes") == model.newton_matrix_is_symmetric
     rhs = rng.standard_normal(model.n_owned_dofs)
     model.factorize(0.3, u, v, a)
-    lu = direct_solver(model.comm)
+    lu = mumps_solver(model.comm)
     lu.setOperators(model.assemble_newton_matrix(0.3, u, v, a))
     assert model._solver.getPC().getType() == ("cholesky" if stations != "nodes" else "lu")
     assert relative_error(model.solve(rhs), model.solve_with(lu, rhs)) < 1e-9

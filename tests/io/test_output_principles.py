@@ -14,6 +14,7 @@ import pytest
 
 from aquarom_fenics.cli import main
 from aquarom_fenics.io import outputs as outputs_module
+from aquarom_fenics.io import tables as tables_module
 from aquarom_fenics.io.output_lock import LOCK_SUFFIX, lock_file_of
 
 from conftest import SHORT_SCENE as SHORT
@@ -167,13 +168,13 @@ def test_a_file_added_during_a_forced_run_is_kept_with_the_earlier_run(scenes, t
     out = tmp_path / "run"
     assert main(["simulate", scenes["short"], "--out", str(out), "--no-progress"]) == 0
     earlier = snapshot(out)
-    original = outputs_module.TrajectoryCSV.write
+    original = tables_module.TrajectoryCSV.write
 
     def write_and_add_a_user_file(self, *args):
         original(self, *args)
         (out / "notes.txt").write_text("mine")
 
-    monkeypatch.setattr(outputs_module.TrajectoryCSV, "write", write_and_add_a_user_file)
+    monkeypatch.setattr(tables_module.TrajectoryCSV, "write", write_and_add_a_user_file)
     capsys.readouterr()
     assert main(["simulate", scenes["short"], "--out", str(out), "--no-progress", "--force"]) == 2
     message = one_line(capsys)

@@ -12,6 +12,7 @@ import pytest
 
 from aquarom_fenics.optimization import history
 from aquarom_fenics.io import outputs as outputs_module
+from aquarom_fenics.io import tables as tables_module
 from aquarom_fenics.io import persistence as persistence_module
 from aquarom_fenics.cli import main
 
@@ -204,7 +205,7 @@ def test_interrupted_optimisation_exits_130_and_resumes_with_the_fresh_column_or
 # ---------------------------------------------------------------------- Ctrl-C in a simulation
 def test_ctrl_c_writes_the_summary_and_exits_130(tmp_path, capsys, monkeypatch):
     scene = write_scene(tmp_path)
-    original = outputs_module.TrajectoryCSV.write
+    original = tables_module.TrajectoryCSV.write
     rows = []
 
     def write_then_interrupt(self, *args):
@@ -213,7 +214,7 @@ def test_ctrl_c_writes_the_summary_and_exits_130(tmp_path, capsys, monkeypatch):
         if len(rows) == 4:       # Ctrl-C while the sample at t = 0.06 s is being recorded
             signal.raise_signal(signal.SIGINT)   # to this (main) thread; its handler runs before this returns
 
-    monkeypatch.setattr(outputs_module.TrajectoryCSV, "write", write_then_interrupt)
+    monkeypatch.setattr(tables_module.TrajectoryCSV, "write", write_then_interrupt)
     # As in an interactive process: a shell starts background jobs with SIGINT ignored, and a
     # simulation rightly leaves an ignored Ctrl-C ignored.
     interactive = signal.signal(signal.SIGINT, signal.default_int_handler)
@@ -259,7 +260,7 @@ def test_full_disk_during_a_run_is_one_line(tmp_path, capsys, monkeypatch):
     def disk_full(self, *args):
         raise OSError(errno.ENOSPC, "No space left on device", str(tmp_path / "run" / "trajectory.csv"))
 
-    monkeypatch.setattr(outputs_module.TrajectoryCSV, "write", disk_full)
+    monkeypatch.setattr(tables_module.TrajectoryCSV, "write", disk_full)
     assert simulate(scene, tmp_path / "run") == 2
     assert "trajectory.csv: No space left on device" in one_line(capsys)
 
@@ -372,14 +373,14 @@ import sys
 
 from mpi4py import MPI
 
-from aquarom_fenics.io import outputs
+from aquarom_fenics.io import tables
 from aquarom_fenics.cli import main
 
 if MPI.COMM_WORLD.rank == 0:
     def disk_full(self, *args):
         raise OSError(errno.ENOSPC, "No space left on device", "trajectory.csv")
 
-    outputs.TrajectoryCSV.write = disk_full
+    tables.TrajectoryCSV.write = disk_full
 sys.exit(main(sys.argv[1:]))
 """
 

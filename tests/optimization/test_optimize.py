@@ -230,16 +230,16 @@ def test_prom_build_failing_mid_run_keeps_history_and_checkpoint(tmp_path, toy_f
 
 
 def test_fom_check_that_stops_is_reported_and_the_outputs_are_kept(tmp_path, capsys, monkeypatch):
-    from aquarom_fenics.optimization import study
+    from aquarom_fenics.optimization import fom_cache, study
 
-    original = study.simulate_fom
+    original = fom_cache.simulate_fom
 
     def diverging(scene, design, **options):
         result = original(scene.replace("actuation", stiffness=1e6), design, **options)
         assert not result.completed
         return result
 
-    monkeypatch.setattr(study, "simulate_fom", diverging)
+    monkeypatch.setattr(fom_cache, "simulate_fom", diverging)
     monkeypatch.setattr(study, "start_if_useful", lambda *args, **options: None)   # no unpatched FOM in a child
     scene = tmp_path / "toy.toml"
     scene.write_text('[mesh]\nlevel = 1\n[solver]\nduration = 1.0\n[optimizer]\nmax_iterations = 2\n'

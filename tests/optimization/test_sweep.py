@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from aquarom_fenics.cli import main
-from aquarom_fenics.executors import ClusterSettings, DaskCluster
+from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
+from aquarom_fenics.parallel import ClusterSettings, DaskCluster
 from aquarom_fenics.io.scene import Scene, scene_from_dict
 from aquarom_fenics.optimization import sweep
 
@@ -185,7 +186,7 @@ def test_a_worker_killed_mid_sweep_loses_no_design(tmp_path, monkeypatch, cluste
     monkeypatch.setenv("AQUAROM_CACHE", str(tmp_path / "cache"))
     scene = Scene.load(write_scene(tmp_path, duration=0.6))
     designs = sweep.grid_designs(["z_tail=-0.2:0.2:3", "y_thin=0:0.1:2"], scene)
-    pool = DaskCluster(ClusterSettings(scheduler=cluster.scheduler_address))
+    pool = DaskCluster(ClusterSettings(scheduler=cluster.scheduler_address), SWIMMER_WORKERS)
     killed = []
 
     def kill_a_busy_worker(row):
@@ -210,12 +211,12 @@ def test_a_worker_killed_mid_sweep_loses_no_design(tmp_path, monkeypatch, cluste
 
 def test_a_local_worker_killed_mid_sweep_loses_no_design(tmp_path, monkeypatch):
     """The local backend replaces its broken pool and submits the unfinished designs again."""
-    from aquarom_fenics.executors import LocalProcesses
+    from aquarom_fenics.parallel import LocalProcesses
 
     monkeypatch.setenv("AQUAROM_CACHE", str(tmp_path / "cache"))
     scene = Scene.load(write_scene(tmp_path, duration=0.6))
     designs = sweep.grid_designs(["z_tail=-0.2:0.2:4"], scene)
-    pool = LocalProcesses(2)
+    pool = LocalProcesses(2, SWIMMER_WORKERS)
     killed = []
 
     def kill_a_worker(row):

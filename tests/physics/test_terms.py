@@ -14,7 +14,7 @@ from aquarom_fenics.physics.elastic import ElasticTensors
 from aquarom_fenics.physics.inertia import InertiaTensors, rayleigh_damping
 from aquarom_fenics.physics.muscle import MuscleTensors, activations, unit_activations
 from aquarom_fenics.physics.thrust_term import ThrustData
-from aquarom_fenics.reduction.projection import Taylor
+from aquarom_fenics.physics.taylor import Taylor
 
 PACKAGE_ROOTS = [Path(aquarom_fenics.__file__).parent, Path(aquarom_fenics.forms.__file__).parent]
 

@@ -12,9 +12,9 @@ from aquarom_fenics.physics.thrust import (
     segment_weighted_force,
     thrust_force,
     thrust_force_per_virtual_mass,
-    thrust_jacobians,
     virtual_mass,
 )
+from aquarom_fenics.physics.thrust_jacobians import thrust_jacobians
 
 N_NODES = 12
 FISH_LENGTH = 0.2

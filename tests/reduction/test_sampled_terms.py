@@ -7,7 +7,8 @@ from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.physics.inertia import sampled_inertia
 from aquarom_fenics.physics.muscle import MuscleTensors
 from aquarom_fenics.reduction.basis import build_basis
-from aquarom_fenics.reduction.projection import Projector, stack_taylor
+from aquarom_fenics.physics.taylor import stack_taylor
+from aquarom_fenics.reduction.projection import Projector
 from conftest import coarse_scene
 from prom_checks import SO1_SHAPES
 

@@ -269,6 +269,7 @@ def test_threaded_eigenvalues_give_the_screen_of_one_state_after_the_other(swimm
     assert screens[0].states < rates.size
 
 
+@pytest.mark.mpi
 def test_ranks_share_the_tail_screens_states_and_answer_as_one_rank(swimming_prom, tmp_path):
     """Under mpirun -n 2 each rank linearises every other state; the fastest mode, its time and the
     states counted up to the first one over the limit are those of the serial screen."""

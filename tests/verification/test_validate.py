@@ -136,7 +136,8 @@ def test_missing_cases_computed_in_parallel_workers(tmp_path):
 
 def test_cases_computed_on_dask_equal_those_of_local_workers(tmp_path, dask_cluster):
     """`make validate --scheduler`: the missing cases on a LocalCluster's workers, the same records."""
-    from aquarom_fenics.executors import ClusterSettings, DaskCluster
+    from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
+    from aquarom_fenics.parallel import ClusterSettings, DaskCluster
 
     scene = stress_scene("reference").replace("solver", duration=0.2)
     cases = [reduced_case("ROM", scene, parametric=False),
@@ -144,7 +145,7 @@ def test_cases_computed_on_dask_equal_those_of_local_workers(tmp_path, dask_clus
     records = {}
     for backend in ("local", "dask"):
         runner = Runner(tmp_path / backend, time_limit=TIME_LIMIT, stream=open("/dev/null", "w"))
-        pool = DaskCluster(ClusterSettings(scheduler=dask_cluster.scheduler_address)) if backend == "dask" else None
+        pool = DaskCluster(ClusterSettings(scheduler=dask_cluster.scheduler_address), SWIMMER_WORKERS) if backend == "dask" else None
         try:
             assert compute_in_parallel(runner, cases, jobs=2, pool=pool) == 2
         finally:

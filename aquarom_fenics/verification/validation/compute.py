@@ -14,13 +14,24 @@ import sys
 import time
 from dataclasses import asdict
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 if TYPE_CHECKING:
     from aquarom_fenics.verification.validation.cases import Case
-    from aquarom_fenics.verification.validation.runner import Runner
+
+
+class Runner(Protocol):
+    """What a computation asks of the runner that calls it (``runner.Runner``): the fish of a scene
+    (cached), the warm-up before a timed run, the output folder and the time limit [s]."""
+
+    out: Path
+    time_limit: float
+
+    def fish(self, scene): ...
+
+    def warm_up(self, scene, parametric) -> None: ...
 
 SOLVE_REPEATS = 3
 """Reduced solves are repeated and the shortest time kept (they last ~0.1 s: one slow run in a
@@ -161,7 +172,7 @@ def compute_reduced(runner: Runner, case: Case) -> dict:
 
 def compute_mpi(runner: Runner, case: Case) -> dict:
     """``mpirun -n R aquarom simulate`` on the case's scene; the summary and trajectory it writes."""
-    from aquarom_fenics.io.outputs import read_trajectory_csv
+    from aquarom_fenics.io.readback import read_trajectory_csv
     from aquarom_fenics.io.persistence import write_text_atomic
 
     ranks = case.options["ranks"]

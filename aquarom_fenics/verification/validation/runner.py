@@ -1,5 +1,5 @@
 """Running validation cases once: cache, progress lines, a time limit per case, parallel workers
-(local processes or a Dask cluster, :mod:`aquarom_fenics.executors`)."""
+(local processes or a Dask cluster, :mod:`aquarom_fenics.parallel`)."""
 from __future__ import annotations
 
 import json
@@ -15,7 +15,8 @@ from functools import partial
 from pathlib import Path
 
 from aquarom_fenics import __version__
-from aquarom_fenics.executors import DaskCluster, LocalProcesses, run_all
+from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
+from aquarom_fenics.parallel import DaskCluster, LocalProcesses, run_all
 from aquarom_fenics.io.persistence import get_or_compute, read_intact, write_json_atomic
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.verification.validation.cases import CACHED_STATUSES, Case, describe, read_record
@@ -218,7 +219,7 @@ def compute_case(settings: tuple, case: Case) -> tuple[dict, float]:
 
 def compute_in_parallel(runner: Runner, cases: list[Case], jobs: int, pool=None) -> int:
     """Compute the missing (non-MPI) cases on ``jobs`` local worker processes, or on ``pool`` (an
-    open backend of :mod:`aquarom_fenics.executors`, e.g. a Dask cluster; left open), longest first.
+    open backend of :mod:`aquarom_fenics.parallel`, e.g. a Dask cluster; left open), longest first.
 
     Local workers are fresh interpreters (spawn), each with one BLAS thread; their records are
     written to the cache as usual (on a cluster ``runner.out`` must be on a shared file system),
@@ -233,7 +234,7 @@ def compute_in_parallel(runner: Runner, cases: list[Case], jobs: int, pool=None)
         return 0
     order = sorted(pending.values(), key=estimated_cost, reverse=True)
     own_pool = pool is None
-    pool = LocalProcesses(jobs) if own_pool else pool
+    pool = LocalProcesses(jobs, SWIMMER_WORKERS) if own_pool else pool
     where = (f"on {pool.workers} workers of the {pool.settings.describe()}" if isinstance(pool, DaskCluster)
              else f"with {pool.workers} parallel workers")
     print(f"== computing {len(order)} missing cases {where} (longest first) ==", file=runner.stream, flush=True)

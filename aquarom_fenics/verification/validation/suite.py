@@ -13,8 +13,9 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
-from aquarom_fenics.executors import ClusterSettings, DaskCluster
-from aquarom_fenics.io.outputs import software_versions
+from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
+from aquarom_fenics.parallel import ClusterSettings, DaskCluster
+from aquarom_fenics.io.versions import software_versions
 
 from aquarom_fenics.io.persistence import write_json_atomic
 from aquarom_fenics.verification.validation.accuracy import study_a, study_b, study_c
@@ -41,7 +42,7 @@ def run(settings: Settings, out: Path, report_path: Path, studies=STUDIES, recom
     """
     started = time.perf_counter()
     time_limit = time_limit or settings.time_limit
-    pool = DaskCluster(cluster) if cluster is not None and cluster.distributed else None
+    pool = DaskCluster(cluster, SWIMMER_WORKERS) if cluster is not None and cluster.distributed else None
     try:
         runner = Runner(out, time_limit, recompute_failed=recompute_failed, stream=stream, concurrent_jobs=1)
         parallel = 0

@@ -1,0 +1,108 @@
+"""The workers of a running Dask distributed scheduler, given by address or scheduler file.
+
+A worker that dies mid-task has its task run again on another worker by the scheduler.
+"""
+from __future__ import annotations
+
+import time
+from concurrent.futures import Future
+from pathlib import Path
+from typing import Callable
+
+from aquarom_fenics.errors import InputError
+from aquarom_fenics.parallel.interface import WorkerSetup, run_task
+from aquarom_fenics.parallel.settings import ClusterSettings
+
+
+class StartOnMainThread:
+    """A Dask worker plugin: the caller's ``on_start`` when a worker starts (and restarts), on its
+    main thread (Dask runs tasks in a thread pool; some imports install signal handlers, which
+    Python allows on the main thread only)."""
+
+    def __init__(self, on_start: Callable[[], None], name: str):
+        self.on_start = on_start
+        self.name = name
+
+    def setup(self, worker) -> None:
+        self.on_start()
+
+
+class DaskCluster:
+    """The workers of a Dask distributed scheduler, through ``Client.get_executor``; ``setup``'s
+    start function runs on each worker, its variables reach every task."""
+
+    name = "dask"
+
+    def __init__(self, settings: ClusterSettings, setup: WorkerSetup | None = None):
+        self.settings = settings
+        self.setup = setup or WorkerSetup()
+        self.client = connect(settings)
+        if self.setup.on_start is not None:
+            try:
+                self.client.register_worker_plugin(StartOnMainThread(self.setup.on_start, self.setup.name),
+                                                   name=self.setup.name)
+            except Exception as error:        # raised on a worker, handed back by the scheduler
+                self.client.close()
+                raise worker_import_error(settings, error) from None
+        self._executor = self.client.get_executor(pure=False)
+
+    @property
+    def workers(self) -> int:
+        return max(1, len(self.client.scheduler_info().get("workers", {})))
+
+    def submit(self, function: Callable, *args) -> Future:
+        return self._executor.submit(run_task, self.setup.variables(), function, args)
+
+    def shutdown(self, cancel: bool = False) -> None:
+        """Close the connection (the scheduler and its workers keep running); ``cancel`` first
+        cancels this client's pending tasks."""
+        self._executor.shutdown(wait=not cancel)
+        self.client.close()
+
+
+def worker_import_error(settings: ClusterSettings, error: Exception) -> Exception:
+    """InputError (one line, with the fix) when the workers cannot import what their start-up needs
+    (the toolkit); otherwise ``error`` itself (a bug)."""
+    text = str(error)
+    if isinstance(error, ImportError) or "ModuleNotFoundError" in text or "No module named" in text:
+        reason = text.splitlines()[0] if text else type(error).__name__
+        return InputError(f"the workers of the {settings.describe().removeprefix('Dask ')} cannot import the toolkit "
+                          f"({reason}): start them with the Python of a checkout's .venv, "
+                          "`.venv/bin/python -m distributed.cli.dask_worker ADDRESS --nthreads 1` "
+                          "(docs/user/cluster.rst)")
+    return error
+
+
+def connect(settings: ClusterSettings):
+    """A ``dask.distributed.Client`` of the scheduler; InputError (one line) when it cannot be
+    reached within ``settings.connect_timeout`` seconds, or its scheduler file does not appear
+    within that time."""
+    try:
+        from distributed import Client
+    except ImportError:
+        raise InputError("Dask distributed is not installed (Debian package python3-distributed; "
+                         "`make setup` installs it)") from None
+    if settings.scheduler_file and not _appears(Path(settings.scheduler_file), settings.connect_timeout):
+        raise InputError(f"scheduler file {settings.scheduler_file}: not found within {settings.connect_timeout:g} s "
+                         "(written by `dask scheduler --scheduler-file FILE` when the scheduler starts)")
+    timeout = f"{settings.connect_timeout:g}s"
+    try:
+        if settings.scheduler_file:
+            return Client(scheduler_file=settings.scheduler_file, timeout=timeout, set_as_default=False)
+        return Client(settings.scheduler, timeout=timeout, set_as_default=False)
+    except (OSError, TimeoutError, ValueError) as error:
+        where = settings.scheduler or f"of {settings.scheduler_file}"
+        reason = str(error).splitlines()[0] if str(error) else type(error).__name__
+        raise InputError(f"Dask scheduler {where}: not reachable within {settings.connect_timeout:g} s "
+                         f"({reason}); start it or check the address") from None
+
+
+def _appears(path: Path, seconds: float) -> bool:
+    """Whether ``path`` exists now or within ``seconds`` (a scheduler started in the same job
+    script writes its file a moment later)."""
+    deadline = time.monotonic() + seconds
+    while not path.is_file():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.2)
+    return True

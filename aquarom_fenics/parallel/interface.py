@@ -1,0 +1,86 @@
+"""What every pool offers, and what a task may ask about the worker it runs on.
+
+A pool is ``concurrent.futures``-shaped: ``submit(function, *args) -> Future``, ``shutdown(cancel)``,
+a ``name`` and a number of ``workers``. The caller says how a worker is made ready for its tasks
+(:class:`WorkerSetup`): environment variables handed to every task, and a function run once when
+a long-lived worker starts. The pools know nothing else of what their tasks compute.
+"""
+from __future__ import annotations
+
+import os
+import socket
+import sys
+from concurrent.futures import Future
+from dataclasses import dataclass
+from typing import Callable, Protocol
+
+
+class Pool(Protocol):
+    """Workers that run plain functions: a ``concurrent.futures`` executor with a name and a size."""
+
+    name: str
+
+    @property
+    def workers(self) -> int: ...
+
+    def submit(self, function: Callable, *args) -> Future: ...
+
+    def shutdown(self, cancel: bool = False) -> None: ...
+
+
+@dataclass(frozen=True)
+class WorkerSetup:
+    """How the caller readies a worker: ``environment()`` gives variables set in the worker before
+    each task (read in the submitting process at submission), ``on_start()`` runs once on a
+    long-lived worker's main thread when it starts (a Dask worker), ``name`` identifies it there."""
+
+    environment: Callable[[], dict[str, str]] | None = None
+    on_start: Callable[[], None] | None = None
+    name: str = "worker-setup"
+
+    def variables(self) -> dict[str, str]:
+        return dict(self.environment()) if self.environment is not None else {}
+
+
+def run_task(variables: dict[str, str], function: Callable, args: tuple):
+    """``function(*args)`` in a worker after setting the submitter's ``variables`` (what every
+    backend but the in-process one runs)."""
+    os.environ.update(variables)
+    return function(*args)
+
+
+def in_worker() -> bool:
+    """True inside a task of a worker (a daemonic local worker process, or a Dask worker), where
+    starting more worker processes is not allowed or would compete for the worker's core."""
+    import multiprocessing
+
+    if multiprocessing.current_process().daemon:
+        return True
+    return dask_worker() is not None
+
+
+def dask_worker():
+    """The Dask worker running this task, else None (without importing Dask where it is not loaded)."""
+    if "distributed" not in sys.modules:
+        return None
+    from distributed import get_worker
+
+    try:
+        return get_worker()
+    except ValueError:
+        return None
+
+
+def worker_name() -> str:
+    """Who ran a task: the Dask worker's address, else host:pid."""
+    worker = dask_worker()
+    return worker.address if worker is not None else f"{socket.gethostname()}:{os.getpid()}"
+
+
+def worker_threads():
+    """A context with one BLAS and OpenMP thread in this process, as in every worker of a many-run job
+    (local workers and Dask's get THREAD_VARIABLES = 1): a threaded BLAS sums in another order, so
+    tasks run here would otherwise differ in the last digits from the same tasks on a worker."""
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1)
