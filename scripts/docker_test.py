@@ -211,6 +211,7 @@ def study(reuse_layers: bool) -> dict:
     report = {"image": IMAGE, "base_image": BASE_IMAGE, "build": build_image(reuse_layers), "host_cores": os.cpu_count()}
     print("docker-test: make test in the container", flush=True)
     tests, seconds = timed(lambda: in_container("test", entrypoint="make", check=False).stdout)
+    (container.parent / "make-test.log").write_text(tests)      # what failed, when something did
     report["tests"] = pytest_counts(tests) | {"seconds": round(seconds, 1)}
     print("docker-test: make demo in the container", flush=True)
     _, seconds = timed(lambda: in_container("demo", "OUT=/tmp/demo", entrypoint="make"))
