@@ -45,14 +45,16 @@ def test_dry_run_prints_a_plan_and_writes_nothing(tmp_path, capsys):
 def test_dry_run_says_whether_the_tail_screen_runs_and_adds_its_time(capsys):
     from aquarom_fenics.optimization.plan import TAIL_SCREEN_SECONDS_PER_STATE, tail_screen_seconds
 
-    main(["optimize", "co", "--dry-run"])
+    main(["optimize", "co", "--dry-run", "--set", "optimizer.tail_screen=true"])   # off in the shipped CO scene
     text = capsys.readouterr().out
     screen = 51 * TAIL_SCREEN_SECONDS_PER_STATE         # the last stroke at h = 0.02 s: 51 states
     assert "then the tail screen (the FOM's tail region within 0.015 m" in text
     assert f"~{screen:.0f} s per screen" in text
     main(["optimize", "so1", "--dry-run"])
     assert "tail screen skipped ([optimizer] tail_screen = false)" in capsys.readouterr().out
-    co = Scene.load("co")
+    main(["optimize", "co", "--dry-run"])
+    assert "tail screen skipped ([optimizer] tail_screen = false)" in capsys.readouterr().out
+    co = Scene.load("co").replace("optimizer", tail_screen=True)
     assert tail_screen_seconds(co) == pytest.approx(screen)
     assert tail_screen_seconds(co.replace("solver", time_step=0.01)) == pytest.approx(screen)   # every 0.02 s
     assert tail_screen_seconds(co.replace("solver", duration=1.0)) == 0.0                      # one stroke: not judged

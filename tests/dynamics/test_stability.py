@@ -50,8 +50,9 @@ def test_the_nominal_gait_is_stable(fish):
 
 
 def test_a_gait_that_completes_can_still_be_unstable(fish):
-    """E / 20 completes the 2 s PROM run, yet one stroke multiplies a perturbation by more than 1.5."""
-    scene = coarse_scene(material={"young_modulus": 13e3})
+    """E = 16 kPa (E / 16) completes the 2 s PROM run, yet one stroke multiplies a perturbation by more than
+    1.5 (on the conforming level-1 mesh; 13 kPa did on the centroid-region mesh, and stops on this one)."""
+    scene = coarse_scene(material={"young_modulus": 16e3})
     prom = build_prom(scene, fish=fish)
     assert simulate_reduced(prom, scene).completed
     stable, reason = reduced_stability(prom, scene)

@@ -44,7 +44,9 @@ def test_build_simulate_and_compare(built, tmp_path, capsys):
     summary = json.loads((tmp_path / "prom" / "summary.json").read_text())
     assert summary["model"] == "prom" and summary["completed"] and summary["xi"]["y_thin"] == 0.05
     assert summary["reduced_size"] == len(summary["basis"]) and summary["basis_dropped"] == ["xi_1_2"]
-    assert main(["compare", str(scene), "--prom", str(prom_file), "--xi", "y_thin=0.05", "--out",
+    # within y_thin's shipped validity radius (0.025), where SPEC §8 asks the PROM for 5 % (at 0.05, outside
+    # it, this degree-1 PROM was within 5 % on the centroid-region mesh and 5.5 % off on the conforming one)
+    assert main(["compare", str(scene), "--prom", str(prom_file), "--xi", "y_thin=0.025", "--out",
                  str(tmp_path / "compare"), "--no-progress"]) == 0
     comparison = json.loads((tmp_path / "compare" / "compare.json").read_text())
     assert abs(comparison["errors"]["distance_relative"]) < 0.05
