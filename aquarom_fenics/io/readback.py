@@ -215,13 +215,29 @@ def load_optimization_summary(path: Path, names: list[str]) -> dict:
                      "run without --resume into another --out")
 
 
+def is_inside_name(name) -> bool:
+    """A name of a file inside a folder: relative, without ``.``, ``..`` or empty parts, no NUL
+    (a trailing ``/`` marks an empty folder)."""
+    if not isinstance(name, str) or not name or "\0" in name or name.startswith("/"):
+        return False
+    parts = name[:-1].split("/") if name.endswith("/") else name.split("/")
+    return all(part not in ("", ".", "..") for part in parts)
+
+
+INSIDE_NAME = _scalar("a relative name inside the folder (no '..', not absolute)", is_inside_name)
+
+
 def manifest_schema() -> record:
-    """manifest.json of an output folder: the files the toolkit wrote there, and how."""
-    return record({}, {"files": list_of(TEXT), "command": TEXT})
+    """manifest.json of an output folder: the files the toolkit wrote there (relative names inside
+    the folder), and how."""
+    return record({}, {"files": list_of(INSIDE_NAME), "command": TEXT})
 
 
 def load_manifest(path: Path) -> dict:
-    """manifest.json, checked (``files`` a list of names)."""
+    """manifest.json, checked (``files`` a list of relative names inside its folder); a manifest
+    that is a link is refused (it is never followed)."""
+    if Path(path).is_symlink():
+        raise InputError(f"manifest {path}: a symbolic link, not a file the toolkit wrote")
     return load_json(path, manifest_schema(), "manifest")
 
 
