@@ -135,3 +135,60 @@ def test_a_lock_file_that_is_a_hard_link_or_a_fifo_is_refused(tmp_path):
     with pytest.raises(InputError, match="not a regular file"):
         lock_output(tmp_path / "b")
     release_output_locks()
+
+
+# ---------------------------------------------------------------------- PROM files
+@pytest.fixture(scope="module")
+def prom_file(tmp_path_factory):
+    directory = tmp_path_factory.mktemp("prom")
+    scene = write_scene(directory)
+    assert main(["build", scene, "--out", str(directory / "p.npz")]) == 0
+    return scene, directory / "p.npz"
+
+
+def rewrite_prom(source: Path, target: Path, edit_header=None, drop: str | None = None) -> Path:
+    import numpy as np
+
+    with np.load(source) as data:
+        arrays = {key: data[key] for key in data.files}
+    header = json.loads(arrays["header"].tobytes().decode())
+    if edit_header is not None:
+        header = edit_header(header)
+    arrays["header"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
+    if drop is not None:
+        arrays.pop(drop)
+    np.savez(target, **arrays)
+    return target
+
+
+def drop_y_thin(header):
+    header["shape_names"] = ["z_tail"]
+    header["design_point"].pop("y_thin")
+    return header
+
+
+def without(key):
+    def edit(header):
+        header.pop(key)
+        return header
+    return edit
+
+
+@pytest.mark.parametrize("edit, drop, named", [
+    (drop_y_thin, None, "shape_names"),
+    (lambda header: [header], None, "header"),
+    (without("scene_hash"), None, "scene_hash"),
+    (without("labels"), None, "labels"),
+    (None, "basis", "basis"),
+    (None, "elastic.cubic.first", "elastic.cubic.first"),
+    (lambda header: header | {"labels": header["labels"][:-1]}, None, "labels"),
+])
+def test_a_prom_header_is_checked_against_its_arrays(prom_file, tmp_path, capsys, edit, drop, named):
+    scene, source = prom_file
+    damaged = rewrite_prom(source, tmp_path / "damaged.npz", edit, drop)
+    code = main(["simulate", scene, "--model", "prom", "--prom", str(damaged), "--xi", "y_thin=0.02",
+                 "--out", str(tmp_path / "run")])
+    assert code == 2
+    message = one_line(capsys)
+    assert "PROM file" in message and named in message
+    assert not (tmp_path / "run").exists()
