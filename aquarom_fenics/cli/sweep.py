@@ -10,6 +10,7 @@ from mpi4py import MPI
 from aquarom_fenics.cli.inputs import check_inputs, load_scene, say
 from aquarom_fenics.cli.outputs import claim_output, shown
 from aquarom_fenics.errors import InputError
+from aquarom_fenics.io.outputs import check_run_record, write_run_record
 
 
 def sweep_designs(args, scene) -> tuple[list[dict], str]:
@@ -39,7 +40,14 @@ def earlier_rows(args, scene, designs, target: Path) -> dict:
     path = target / "sweep.csv"
     if not path.is_file():
         raise InputError(f"--resume: no sweep.csv in {target}; run without --resume")
+    check_run_record(target, run_record(args, scene))
     return resumed_rows(path, scene, designs)
+
+
+def run_record(args, scene) -> dict:
+    """What makes a sweep's rows (compared by --resume): the scene's hash (its file, --set, --level,
+    --degree) and the model; the designs are compared row by row."""
+    return {"command": "sweep", "scene_hash": scene.hash, "model": args.model}
 
 
 def run_sweep(args) -> int:
@@ -64,6 +72,7 @@ def run_sweep(args) -> int:
     # an unreachable scheduler is refused before any output; Ctrl-C or a refused output stops the workers at once
     with shutting_down(open_pool(workers, cluster)) as pool:
         out = claim_output(args, target, resume=args.resume, resume_file="sweep.csv")
+        write_run_record(out, run_record(args, scene))
         backend = describe_backend(pool, cluster)
         say(f"sweep of {scene.name}: {len(designs)} designs ({source}), model {args.model}, {missing} to run "
             f"{backend}" + (f", {len(kept)} kept from sweep.csv" if kept else ""))

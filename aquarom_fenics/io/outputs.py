@@ -164,6 +164,7 @@ class OutputLocation:
     replacing: bool        # ``target`` holds an earlier run of the toolkit, replaced on success
     made: list[Path] = field(default_factory=list)      # parent folders this run created (deepest first)
     foreign: list[str] = field(default_factory=list)    # files in ``working`` at the claim not of the toolkit
+    foreign_stats: dict = field(default_factory=dict)   # their (inode, mtime, size) at the claim
 
 
 def holds_file(folder: Path, pattern: str) -> bool:
@@ -188,7 +189,9 @@ def claim_folder(path: Path, force: bool, resume: bool, resume_file: str = "chec
             raise InputError(f"--resume: no {resume_file} in {path}; run without --resume")
         lock_output(path)
         require_writable(path)
-        return OutputLocation(path, path, created=False, replacing=False, foreign=foreign_files(path))
+        foreign = foreign_files(path)
+        return OutputLocation(path, path, created=False, replacing=False, foreign=foreign,
+                              foreign_stats={name: _stat_key(path / name) for name in foreign})
     made = _make_parents(path)
     try:
         return _claim_unlocked(path, force, made)
@@ -304,14 +307,66 @@ def foreign_files(folder: Path) -> list[str]:
     return [name for name in present if name != MANIFEST and name not in listed]
 
 
-def list_outputs(folder: Path, foreign: list[str] = ()) -> None:
+def _stat_key(path: Path) -> tuple | None:
+    """(inode, mtime [ns], size) of a file or link (not followed), None when it is gone."""
+    try:
+        details = os.lstat(path)
+    except OSError:
+        return None
+    return details.st_ino, details.st_mtime_ns, details.st_size
+
+
+def list_outputs(folder: Path, foreign: list[str] = (), foreign_stats: dict | None = None) -> None:
     """Add the list of files of a run to its manifest.json (what --force may replace): every file
-    in the folder except ``foreign`` (files that were there, not the toolkit's, when the run began)."""
+    in the folder except ``foreign`` (files that were there, not the toolkit's, when the run began).
+
+    With ``foreign_stats`` (a resumed run) a file of ``foreign`` that this run rewrote (another
+    inode, mtime or size than at the claim: a killed run's ``sweep.csv`` or ``history.csv``,
+    unlisted since that run wrote no manifest) is listed as the toolkit's."""
     manifest = Path(folder) / MANIFEST
     data = json.loads(manifest.read_text())
-    excluded = set(foreign) | {MANIFEST}
+    stats = foreign_stats or {}
+    excluded = {name for name in foreign
+                if foreign_stats is None or _stat_key(Path(folder) / name) == stats.get(name)} | {MANIFEST}
     data["files"] = [name for name in files_in(folder) if name not in excluded]
     write_json_atomic(manifest, data)
+
+
+RUN_RECORD = "run.json"
+"""What makes a resumable run's answers (scene hash, command, model, options), written when it starts."""
+
+RECORD_NAMES = {"scene_hash": "scene hash (the scene file, --set, --level, --degree)", "model": "--model",
+                "method": "method (--method)", "cost_weights": "cost weights (--weight)", "start": "start point",
+                "command": "command"}
+
+
+def write_run_record(folder: Path, record: dict) -> None:
+    """run.json in a resumable output folder (see :func:`check_run_record`)."""
+    write_json_atomic(Path(folder) / RUN_RECORD, record)
+
+
+def check_run_record(folder: Path, record: dict) -> None:
+    """Refuse (InputError naming the first difference) to resume a folder whose run.json records
+    another run: another scene hash, command, model or option that changes the answers. A folder
+    of an older version without run.json is resumed with a warning."""
+    from aquarom_fenics.io.readback import load_run_record
+
+    path = Path(folder) / RUN_RECORD
+    if not path.exists() and not path.is_symlink():
+        log.warning("--resume: %s has no %s (written by an older version): cannot check that it holds the same "
+                    "run (scene, model, options)", folder, RUN_RECORD)
+        return
+    saved = load_run_record(path)
+    for key, value in record.items():
+        written = json.loads(json.dumps(saved.get(key)))
+        if written != json.loads(json.dumps(value)):
+            raise InputError(f"--resume: {folder} holds a run with {RECORD_NAMES.get(key, key)} {_shown(written)}, "
+                             f"this run has {_shown(value)}; resume with the same options, or run without --resume "
+                             "into another --out")
+
+
+def _shown(value) -> str:
+    return "none" if value is None else (value if isinstance(value, str) else json.dumps(value))
 
 
 def record_outputs(folder: Path, paths: list[Path]) -> None:

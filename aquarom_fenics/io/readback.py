@@ -241,6 +241,17 @@ def load_manifest(path: Path) -> dict:
     return load_json(path, manifest_schema(), "manifest")
 
 
+def run_record_schema() -> record:
+    """run.json of a resumable output folder: what makes its answers (scene hash, command, model,
+    options), written when the run starts and compared by ``--resume``."""
+    return record({"command": TEXT, "scene_hash": TEXT})
+
+
+def load_run_record(path: Path) -> dict:
+    """run.json, checked (a command and a scene hash at least)."""
+    return load_json(path, run_record_schema(), "run record", "run without --resume into another --out")
+
+
 def load_csv_table(path: Path, columns: tuple[str, ...] | list[str], kind: str, remedy: str = "",
                    text_columns: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
     """A CSV file with a header holding ``columns`` (others allowed) and at least one row; numbers

@@ -16,6 +16,7 @@ from __future__ import annotations
 import csv
 import itertools
 import json
+import logging
 import math
 import time
 from dataclasses import dataclass
@@ -28,6 +29,8 @@ from aquarom_fenics.errors import InputError
 from aquarom_fenics.executors import run_all, worker_name
 from aquarom_fenics.io.scene import Scene, parse_number
 
+
+log = logging.getLogger("aquarom")
 
 MODELS = ("fom", "rom", "prom")
 STATUSES = ("completed", "refused", "stopped", "error")
@@ -246,22 +249,86 @@ def _cell(value) -> str:
     return str(value)
 
 
+MAX_SWEEP_FILE_BYTES = 256 * 1024 * 1024
+"""Largest sweep.csv read back by --resume [bytes]."""
+
+
 def read_rows(path: Path, scene: Scene) -> list[dict]:
-    """The rows of a sweep.csv (numbers as floats, empty cells None)."""
-    with open(path, newline="") as stream:
-        reader = csv.DictReader(stream)
-        if reader.fieldnames != columns(scene):
-            raise InputError(f"--resume: {path} has the columns {reader.fieldnames}, not those of scene "
-                             f"{scene.name}'s sweep; run without --resume")
-        rows = []
-        for row in reader:
-            parsed = dict(row)
-            parsed["design"] = int(row["design"])
-            for name in (*scene.shape_names, "distance_m", "tail_amplitude_m", "wall_time_s"):
-                parsed[name] = float(row[name]) if row[name] != "" else None
-            parsed["cached"] = row["cached"] == "True"
-            rows.append(parsed)
-    return rows
+    """The rows of a sweep.csv, schema-checked (numbers as floats, empty cells None): a whole
+    design number, finite shape values, a known status, a completed row's distance and amplitude.
+    A last line cut short (a run killed while writing it) is dropped with a note; anything else
+    damaged is an InputError naming the line and column."""
+    remedy = "run without --resume, or into another --out"
+    where = f"--resume: {path}"
+    text = _sweep_text(path, where, remedy)
+    lines = text.splitlines(keepends=True)
+    if len(lines) > 1 and not lines[-1].endswith(("\n", "\r")):
+        log.warning("--resume: %s: partial last line %d dropped (a run stopped while writing it); its design "
+                    "runs again", path, len(lines))
+        lines = lines[:-1]
+    try:
+        table = list(csv.reader(lines))
+    except csv.Error as error:
+        raise InputError(f"{where}: not a CSV file ({error}); {remedy}") from None
+    header = table[0] if table else []
+    if header != columns(scene):
+        raise InputError(f"{where} has the columns {header}, not those of scene {scene.name}'s sweep; {remedy}")
+    return [_parsed_row(dict(zip(header, cells)), number, scene, f"{where} line {number}", remedy)
+            for number, cells in enumerate(table[1:], start=2) if cells and _cell_count(cells, header, number,
+                                                                                      where, remedy)]
+
+
+def _sweep_text(path: Path, where: str, remedy: str) -> str:
+    try:
+        if path.stat().st_size > MAX_SWEEP_FILE_BYTES:
+            raise InputError(f"{where}: larger than {MAX_SWEEP_FILE_BYTES // 2**20} MB; {remedy}")
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError:
+        raise InputError(f"{where}: not UTF-8 text (binary bytes); {remedy}") from None
+    except OSError as error:
+        raise InputError(f"{where}: cannot be read ({error.strerror}); {remedy}") from None
+    if "\0" in text:
+        raise InputError(f"{where}: holds NUL bytes, not a CSV text file; {remedy}")
+    return text
+
+
+def _cell_count(cells: list[str], header: list[str], number: int, where: str, remedy: str) -> bool:
+    if len(cells) != len(header):
+        raise InputError(f"{where} line {number} has {len(cells)} cells, not {len(header)}; {remedy}")
+    return True
+
+
+def _parsed_row(row: dict, number: int, scene: Scene, where: str, remedy: str) -> dict:
+    """One row of sweep.csv with its values checked and converted."""
+    def refuse(column: str, expected: str):
+        raise InputError(f"{where}, column {column}: {row[column][:30]!r} is not {expected}; {remedy}")
+
+    parsed = dict(row)
+    if not row["design"].isdigit():
+        refuse("design", "a whole number ≥ 0")
+    parsed["design"] = int(row["design"])
+    for name in (*scene.shape_names, "distance_m", "tail_amplitude_m", "wall_time_s"):
+        optional = name not in scene.shape_names
+        if row[name] == "" and optional:
+            parsed[name] = None
+            continue
+        try:
+            value = float(row[name])
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value):
+            refuse(name, "a finite number" + (" or empty" if optional else ""))
+        parsed[name] = value
+    if row["status"] not in STATUSES:
+        refuse("status", f"one of {', '.join(STATUSES)}")
+    if row["status"] == "completed":
+        for name in ("distance_m", "tail_amplitude_m"):
+            if parsed[name] is None:
+                refuse(name, "empty in a completed row (a number)")
+    if row["cached"] not in ("True", "False"):
+        refuse("cached", "True or False")
+    parsed["cached"] = row["cached"] == "True"
+    return parsed
 
 
 def resumed_rows(path: Path, scene: Scene, designs: list[dict]) -> dict[int, dict]:
@@ -323,6 +390,8 @@ def run_sweep(scene: Scene, designs: list[dict], model: str, out: Path, pool, re
     rows = dict(earlier)
     try:
         for task, row, error in run_all(pool, evaluate, tasks, key=lambda task: task.index):
+            if isinstance(error, OSError):      # a cache or output write that failed: the sweep stops
+                raise error
             if error is not None:
                 row = {"design": task.index, **task.design, "status": "error", "cached": False, "worker": "",
                        "reason": f"{type(error).__name__}: {error}".splitlines()[0]}

@@ -192,3 +192,114 @@ def test_a_prom_header_is_checked_against_its_arrays(prom_file, tmp_path, capsys
     message = one_line(capsys)
     assert "PROM file" in message and named in message
     assert not (tmp_path / "run").exists()
+
+
+# ---------------------------------------------------------------------- sweeps: resume, damaged sweep.csv, full disk
+GRID = ["--grid", "z_tail=-0.1:0.1:3"]
+
+
+def sweep(scene, out, *extra) -> int:
+    return main(["sweep", scene, *GRID, "--workers", "1", "--out", str(out), *extra])
+
+
+@pytest.fixture(scope="module")
+def swept(tmp_path_factory):
+    directory = tmp_path_factory.mktemp("swept")
+    scene = write_scene(directory)
+    assert sweep(scene, directory / "s") == 0
+    return directory, scene, directory / "s"
+
+
+def copy_of(folder: Path, target: Path) -> Path:
+    import shutil
+
+    shutil.copytree(folder, target)
+    return target
+
+
+@pytest.mark.parametrize("options, named", [
+    (["--model", "rom"], "--model"),
+    (["--set", "solver.duration=0.3"], "scene"),
+])
+def test_sweep_resume_refuses_another_run(swept, tmp_path, capsys, options, named):
+    directory, scene, out = swept
+    copy = copy_of(out, tmp_path / "s")
+    before = (copy / "sweep.csv").read_text()
+    assert sweep(scene, copy, "--resume", *options) == 2
+    message = one_line(capsys)
+    assert "--resume" in message and named in message
+    assert (copy / "sweep.csv").read_text() == before
+
+
+def test_sweep_resume_after_kill_lists_every_file(swept, tmp_path):
+    directory, scene, out = swept
+    copy = copy_of(out, tmp_path / "s")
+    (copy / "manifest.json").unlink()               # killed outright: no manifest was written
+    lines = (copy / "sweep.csv").read_text().splitlines()
+    (copy / "sweep.csv").write_text("\n".join(lines[:2]) + "\n")
+    assert sweep(scene, copy, "--resume") == 0
+    listed = json.loads((copy / "manifest.json").read_text())["files"]
+    assert "sweep.csv" in listed and "sweep.png" in listed
+
+
+@pytest.mark.parametrize("damage, named", [
+    (lambda text: text.replace(",completed,", ",done,", 1), "status"),
+    (lambda text: text.replace("\n0,", "\n0.0,", 1), "design"),
+    (lambda text: text.replace("\n1,-0.1,", "\n1,abc,", 1) if "\n1,-0.1," in text else text.replace("\n1,", "\n1x,", 1),
+     "line 3"),
+    (lambda text: text + "\x00\xff\n", "sweep.csv"),
+])
+def test_a_damaged_sweep_csv_is_one_line_on_resume(swept, tmp_path, capsys, damage, named):
+    directory, scene, out = swept
+    copy = copy_of(out, tmp_path / "s")
+    text = damage((copy / "sweep.csv").read_text())
+    (copy / "sweep.csv").write_bytes(text.encode("utf-8", errors="surrogateescape"))
+    assert sweep(scene, copy, "--resume") == 2
+    message = one_line(capsys)
+    assert "sweep.csv" in message and named in message
+
+
+def test_an_empty_distance_of_a_completed_row_is_refused(swept, tmp_path, capsys):
+    directory, scene, out = swept
+    copy = copy_of(out, tmp_path / "s")
+    lines = (copy / "sweep.csv").read_text().splitlines()
+    cells = lines[1].split(",")
+    cells[4] = ""
+    lines[1] = ",".join(cells)
+    (copy / "sweep.csv").write_text("\n".join(lines) + "\n")
+    assert sweep(scene, copy, "--resume") == 2
+    assert "distance_m" in one_line(capsys)
+
+
+def test_a_partial_last_line_of_sweep_csv_is_dropped_with_a_note(swept, tmp_path, capsys, caplog):
+    directory, scene, out = swept
+    copy = copy_of(out, tmp_path / "s")
+    text = (copy / "sweep.csv").read_text()
+    (copy / "sweep.csv").write_text(text[:-25])       # killed while the last row was written
+    assert sweep(scene, copy, "--resume") == 0
+    assert "partial last line" in caplog.text
+    rows = (copy / "sweep.csv").read_text().splitlines()
+    assert len(rows) == 4 and rows[:3] == text.splitlines()[:3]
+
+
+def test_a_full_cache_stops_the_sweep_with_the_rows_before_kept(tmp_path, capsys, monkeypatch):
+    from aquarom_fenics.io import persistence
+
+    scene = write_scene(tmp_path)
+    original = persistence.write_json_atomic
+    stored = []
+
+    def full_after_one(path, data):
+        if "fom" in Path(path).parts:
+            if stored:
+                raise OSError(errno.ENOSPC, "No space left on device", str(path))
+            stored.append(path)
+        return original(path, data)
+
+    monkeypatch.setattr(persistence, "write_json_atomic", full_after_one)
+    monkeypatch.setenv("AQUAROM_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "s"
+    assert sweep(scene, out) == 2
+    assert "No space left on device" in one_line(capsys)
+    rows = (out / "sweep.csv").read_text().splitlines()
+    assert len(rows) == 2 and ",completed," in rows[1]
