@@ -89,6 +89,10 @@ def check_inputs(args, scene):
             raise InputError(f"--max-time {args.max_time}: must be a positive number of seconds")
     if args.command == "pareto" and not scene.cooptimization.enabled:
         raise InputError(f"scene {scene.source}: [cooptimization] enabled = true is needed for a Pareto sweep")
+    if args.command == "pareto":
+        from aquarom_fenics.optimization.study import require_distinct_weights
+
+        require_distinct_weights(scene.cooptimization.weights, f"scene {scene.source}")
     if args.command in ("optimize", "pareto"):
         space = design_space(scene)
         if scene.optimizer.method == "paper":

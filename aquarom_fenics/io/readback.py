@@ -175,14 +175,17 @@ def checkpoint_schema(dimension: int, method: str, shapes: int | None = None) ->
     basis centre is a shape."""
     vector = list_of(FINITE, dimension)
     shape = list_of(FINITE, dimension if shapes is None else shapes)
+    finished = record({"optimum": vector, "cost": FINITE, "gradient": vector, "distance": FINITE,
+                       "distance_gradient": vector, "prom_size": INTEGER, "reason": TEXT})
     if method == "paper":
         state = record({"z": vector, "iteration": INTEGER, "scaling": vector, "previous_gradient": optional(vector),
                         "since_build": INTEGER,
                         "center": optional(record({"z": vector, "distance": FINITE, "distance_gradient": vector},
                                                   {"prom_z": vector}))},
-                       {"confirm": ANYTHING, "restarted": ANYTHING})
+                       {"confirm": ANYTHING, "restarted": ANYTHING, "finished": finished})
     else:
-        state = record({"center": vector, "radius": FINITE, "iteration": INTEGER}, {"cuts": list_of(vector)})
+        state = record({"center": vector, "radius": FINITE, "iteration": INTEGER},
+                       {"cuts": list_of(vector), "finished": finished})
     row = record({"iteration": INTEGER, "wall_time": FINITE})
     return record({"scene_hash": TEXT, "method": TEXT, "state": state, "history": list_of(row),
                    "builds": INTEGER, "build_time": FINITE, "solve_time": FINITE},

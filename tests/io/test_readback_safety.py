@@ -303,3 +303,98 @@ def test_a_full_cache_stops_the_sweep_with_the_rows_before_kept(tmp_path, capsys
     assert "No space left on device" in one_line(capsys)
     rows = (out / "sweep.csv").read_text().splitlines()
     assert len(rows) == 2 and ",completed," in rows[1]
+
+
+# ---------------------------------------------------------------------- optimisations: resume only the same run
+OPTIMIZE = """
+[mesh]
+level = 1
+[solver]
+duration = 0.4
+[fluid]
+drag = false
+[optimizer]
+max_iterations = 3
+[shapes]
+z_tail = { bounds = [-0.2, 0.2] }
+y_thin = { bounds = [-0.1, 0.1] }
+"""
+
+CO = OPTIMIZE + """
+[actuation]
+amplitude = 0.2
+[cooptimization]
+enabled = true
+amplitude_bounds = [0.05, 0.4]
+weights = [0.5, 0.9]
+"""
+
+
+@pytest.fixture(scope="module")
+def optimized(tmp_path_factory):
+    directory = tmp_path_factory.mktemp("optimized")
+    scene = directory / "o.toml"      # first-order optimal at the start: the run stops after its first row
+    scene.write_text(OPTIMIZE.replace("max_iterations = 3", "max_iterations = 3\noptimality_tolerance = 0.845"))
+    out = directory / "o1"
+    assert main(["optimize", str(scene), "--out", str(out)]) == 0
+    return directory, str(scene), out
+
+
+def test_optimize_resume_refuses_another_weight(tmp_path, capsys):
+    scene = tmp_path / "co.toml"
+    scene.write_text(CO)
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "checkpoint.json").write_text("{}")
+    from aquarom_fenics.io.outputs import write_run_record
+    from aquarom_fenics.io.scene import Scene
+    from aquarom_fenics.optimization.cost import CostWeights
+    from aquarom_fenics.optimization.study import optimization_record
+
+    loaded = Scene.load(str(scene))
+    write_run_record(out, optimization_record(loaded, CostWeights(0.5, 0.5, loaded.cooptimization.energy_weight), None))
+    before = sorted(os.listdir(out))
+    assert main(["optimize", str(scene), "--out", str(out), "--resume", "--weight", "0.7"]) == 2
+    message = one_line(capsys)
+    assert "--weight" in message and "--resume" in message
+    assert sorted(os.listdir(out)) == before
+
+
+def test_a_resume_after_an_interrupt_in_the_fom_check_repeats_no_iteration(optimized, tmp_path, capsys, monkeypatch):
+    from aquarom_fenics.optimization import study
+
+    _, scene, fresh = optimized
+    original = study.fom_check
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(study, "fom_check", interrupted)
+    out = tmp_path / "o"
+    assert main(["optimize", scene, "--out", str(out)]) == 130
+    monkeypatch.setattr(study, "fom_check", original)
+    assert main(["optimize", scene, "--out", str(out), "--resume"]) == 0
+    resumed = (out / "history.csv").read_text().splitlines()
+    straight = (fresh / "history.csv").read_text().splitlines()
+    assert len(resumed) == len(straight)
+    iterations = [line.split(",")[0] for line in resumed[1:]]
+    assert len(set(iterations)) == len(iterations)
+    summaries = [json.loads((folder / "summary.json").read_text()) for folder in (out, fresh)]
+    assert summaries[0]["optimum"] == summaries[1]["optimum"]
+    assert summaries[0]["prom_builds"] == summaries[1]["prom_builds"]
+
+
+# ---------------------------------------------------------------------- Pareto weights: one folder per exact value
+def test_pareto_weights_that_print_alike_get_their_own_folders():
+    from aquarom_fenics.optimization.study import weight_folder
+
+    assert weight_folder(0.9) == "w1_0.9" and weight_folder(0.25) == "w1_0.25"
+    assert weight_folder(0.9000001) != weight_folder(0.9)
+    assert float(weight_folder(0.9000001)[3:]) == 0.9000001
+
+
+def test_a_pareto_weight_given_twice_is_refused(tmp_path, capsys):
+    scene = tmp_path / "co.toml"
+    scene.write_text(CO.replace("weights = [0.5, 0.9]", "weights = [0.5, 0.9, 0.5]"))
+    assert main(["pareto", str(scene), "--out", str(tmp_path / "p"), "--dry-run"]) == 2
+    assert "twice" in one_line(capsys)
