@@ -361,7 +361,7 @@ def check_run_record(folder: Path, record: dict) -> None:
         written = json.loads(json.dumps(saved.get(key)))
         if written != json.loads(json.dumps(value)):
             raise InputError(f"--resume: {folder} holds a run with {RECORD_NAMES.get(key, key)} {_shown(written)}, "
-                             f"this run has {_shown(value)}; resume with the same options, or run without --resume "
+                             f"this run has {_shown(value)}; resume with the same options, or start without --resume "
                              "into another --out")
 
 
