@@ -17,6 +17,7 @@ content-addressed cache when it lies on a shared file system.
 """
 from __future__ import annotations
 
+import atexit
 import math
 import os
 import socket
@@ -92,13 +93,55 @@ def choose_cluster(scheduler: str | None, scheduler_file: Path | None,
     """The command line's --scheduler / --scheduler-file, else the configured ``[cluster]``, else local."""
     if scheduler and scheduler_file:
         raise InputError("--scheduler and --scheduler-file: give one of them")
+    if scheduler is not None and not scheduler.strip():
+        raise InputError(f"--scheduler {scheduler!r}: an empty address; give one such as tcp://head-node:8786, "
+                         "or leave --scheduler out to run on local worker processes")
+    if scheduler_file is not None and not str(scheduler_file).strip():
+        raise InputError("--scheduler-file '': an empty file name; give the file `dask scheduler --scheduler-file` writes")
     base = configured or ClusterSettings()
     timeout = base.connect_timeout if connect_timeout is None else connect_timeout
-    if not timeout > 0:
-        raise InputError(f"--connect-timeout {timeout}: must be a positive number of seconds")
+    if not (timeout > 0 and math.isfinite(timeout)):
+        raise InputError(f"--connect-timeout {timeout}: must be a positive, finite number of seconds")
+    if scheduler:
+        check_address(scheduler, f"--scheduler {scheduler}")
     if scheduler or scheduler_file:
         return ClusterSettings(scheduler or "", str(scheduler_file or ""), timeout)
     return ClusterSettings(base.scheduler, base.scheduler_file, timeout)
+
+
+SCHEMES = ("tcp", "tls")
+"""Dask protocols the toolkit connects with (ucx:// needs packages it does not install)."""
+MAX_SCHEDULER_FILE_BYTES = 1024 * 1024
+
+
+def check_address(address: str, where: str) -> str:
+    """A Dask scheduler address ``[tcp://|tls://]host[:port]``, checked before any connection is
+    made (a malformed one would fail inside ``Client`` and print a traceback from its finaliser)."""
+    if not isinstance(address, str) or not address.strip() or any(c.isspace() or ord(c) < 32 for c in address):
+        raise InputError(f"{where}: not a scheduler address; give one such as tcp://head-node:8786")
+    scheme, separator, rest = address.partition("://")
+    if not separator:
+        scheme, rest = "tcp", address
+    if scheme not in SCHEMES:
+        raise InputError(f"{where}: the protocol {scheme}:// is not supported; use "
+                         f"{' or '.join(s + '://' for s in SCHEMES)}, e.g. tcp://head-node:8786")
+    host, colon, port = rest.rpartition(":") if not rest.endswith("]") else (rest, "", "")
+    if not colon:
+        host, port = rest, ""
+    if not host or "/" in host or (colon and not (port.isdigit() and 0 < int(port) < 65536)):
+        raise InputError(f"{where}: expected {scheme}://HOST:PORT with a port in 1 … 65535, e.g. tcp://head-node:8786")
+    return address if separator else f"tcp://{address}"
+
+
+def scheduler_file_address(path: Path) -> str:
+    """The scheduler address in a ``dask scheduler --scheduler-file`` JSON file, checked (a regular
+    file, JSON, an ``address`` string that :func:`check_address` accepts)."""
+    from aquarom_fenics.io.readback import TEXT, load_json, record, require_regular_file
+
+    require_regular_file(path, "scheduler file", MAX_SCHEDULER_FILE_BYTES)
+    data = load_json(path, record({"address": TEXT}), "scheduler file",
+                     "give the file `dask scheduler --scheduler-file FILE` writes")
+    return check_address(data["address"], f"scheduler file {path}: address {data['address']!r}")
 
 
 # ---------------------------------------------------------------------- running a task anywhere
@@ -108,12 +151,28 @@ def run_task(cache: str, function: Callable, args: tuple):
     return function(*args)
 
 
+_IN_LOCAL_WORKER = False
+"""Set in a worker process of :class:`LocalProcesses` when it starts (:func:`_local_worker_started`)."""
+
+
+def _local_worker_started() -> None:
+    """What a local worker process does first: it knows it is a worker (Python 3.9+ pool workers
+    are not daemonic, so ``in_worker`` cannot tell from that), and it ignores Ctrl-C, which the
+    terminal sends to the whole process group: the submitting process alone handles it and ends
+    its workers (no worker traceback, none left running)."""
+    import signal
+
+    global _IN_LOCAL_WORKER
+    _IN_LOCAL_WORKER = True
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def in_worker() -> bool:
-    """True inside a task of a worker (a daemonic local worker process, or a Dask worker), where
-    starting more worker processes is not allowed or would compete for the worker's core."""
+    """True inside a task of a worker (a local worker process, or a Dask worker), where starting
+    more worker processes is not allowed or would compete for the worker's core: one pool level only."""
     import multiprocessing
 
-    if multiprocessing.current_process().daemon:
+    if _IN_LOCAL_WORKER or multiprocessing.current_process().daemon:
         return True
     return _dask_worker() is not None
 
@@ -192,7 +251,9 @@ class LocalProcesses:
         if self._pool is None:
             for variable in THREAD_VARIABLES:
                 os.environ[variable] = "1"     # the spawned workers inherit it
-            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"))
+            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
+                                             initializer=_local_worker_started)
+            _open_pools.add(self)
         return self._pool
 
     def submit(self, function: Callable, *args) -> Future:
@@ -206,13 +267,33 @@ class LocalProcesses:
         """Stop the workers: after their running tasks, or at once with ``cancel`` (running tasks
         are ended with SIGTERM)."""
         pool, self._pool = self._pool, None
+        _open_pools.discard(self)
         if pool is None:
             return
         if cancel:
-            for process in list((getattr(pool, "_processes", None) or {}).values()):
+            processes = list((getattr(pool, "_processes", None) or {}).values())
+            for process in processes:
                 if process.is_alive():
                     process.terminate()
+            for process in processes:          # a worker that does not end on SIGTERM is killed
+                process.join(timeout=STOP_GRACE)
+                if process.is_alive():
+                    process.kill()
+                    process.join(timeout=STOP_GRACE)
         pool.shutdown(wait=True, cancel_futures=cancel)
+
+
+STOP_GRACE = 5.0
+"""Seconds a local worker is given to end on SIGTERM before it is killed."""
+
+_open_pools: set = set()
+"""Local pools with worker processes, ended when the interpreter exits (whatever ended the command)."""
+
+
+@atexit.register
+def _end_open_pools() -> None:
+    for pool in list(_open_pools):
+        pool.shutdown(cancel=True)
 
 
 class MainThreadImports:
@@ -239,7 +320,12 @@ class DaskCluster:
     def __init__(self, settings: ClusterSettings):
         self.settings = settings
         self.client = connect(settings)
-        self.client.register_worker_plugin(MainThreadImports(), name=MainThreadImports.name)
+        try:
+            usable_workers(self.client, settings)
+            self.client.register_worker_plugin(MainThreadImports(), name=MainThreadImports.name)
+        except BaseException:
+            self.client.close()
+            raise
         self._executor = self.client.get_executor(pure=False)
 
     @property
@@ -256,6 +342,34 @@ class DaskCluster:
         self.client.close()
 
 
+def _import_probe() -> str:
+    """What a worker runs first: the package imports (a worker without it fails here)."""
+    import aquarom_fenics
+
+    return aquarom_fenics.__version__
+
+
+def usable_workers(client, settings: ClusterSettings) -> None:
+    """Wait at most ``settings.connect_timeout`` seconds for a worker of the cluster to run a task of
+    the package; InputError (one line) when none does (no worker, or workers that cannot import
+    aquarom_fenics), never a wait without end."""
+    where = settings.scheduler or f"of {settings.scheduler_file}"
+    timeout = settings.connect_timeout
+    try:
+        client.wait_for_workers(1, timeout=timeout)
+    except (TimeoutError, OSError) as error:
+        raise InputError(f"Dask scheduler {where}: no worker within {timeout:g} s ({type(error).__name__}); "
+                         "start workers (`dask worker ADDRESS`) or check the scheduler") from None
+    probe = client.submit(_import_probe, pure=False)
+    try:
+        probe.result(timeout=timeout)
+    except Exception as error:  # noqa: BLE001 — any failure of the probe is the cluster's
+        probe.cancel()
+        reason = str(error).splitlines()[0] if str(error) else type(error).__name__
+        raise InputError(f"Dask scheduler {where}: no worker could run a task of aquarom_fenics within {timeout:g} s "
+                         f"({reason[:120]}); install the package on the workers or check them") from None
+
+
 def connect(settings: ClusterSettings):
     """A ``dask.distributed.Client`` of the scheduler; InputError (one line) when it cannot be
     reached within ``settings.connect_timeout`` seconds, or its scheduler file does not appear
@@ -269,10 +383,10 @@ def connect(settings: ClusterSettings):
         raise InputError(f"scheduler file {settings.scheduler_file}: not found within {settings.connect_timeout:g} s "
                          "(written by `dask scheduler --scheduler-file FILE` when the scheduler starts)")
     timeout = f"{settings.connect_timeout:g}s"
+    address = (scheduler_file_address(Path(settings.scheduler_file)) if settings.scheduler_file
+               else check_address(settings.scheduler, f"Dask scheduler {settings.scheduler}"))
     try:
-        if settings.scheduler_file:
-            return Client(scheduler_file=settings.scheduler_file, timeout=timeout, set_as_default=False)
-        return Client(settings.scheduler, timeout=timeout, set_as_default=False)
+        return Client(address, timeout=timeout, set_as_default=False)
     except (OSError, TimeoutError, ValueError) as error:
         where = settings.scheduler or f"of {settings.scheduler_file}"
         reason = str(error).splitlines()[0] if str(error) else type(error).__name__

@@ -21,9 +21,11 @@ def load_scene(args):
     if args.degree is not None:
         scene = scene.replace("mesh", degree=args.degree)
     if not getattr(args, "allow_large", False):
-        from aquarom_fenics.optimization.plan import check_mesh_bounds
+        from aquarom_fenics.optimization.plan import check_mesh_bounds, check_plan_bounds
 
         check_mesh_bounds(scene)
+        if args.command in ("basis", "check"):
+            check_plan_bounds(args.command, scene)
     args.scene_used = scene
     return scene
 
@@ -97,6 +99,11 @@ def check_inputs(args, scene):
         space = design_space(scene)
         if scene.optimizer.method == "paper":
             require_interior(space, scene)
+    if args.command in ("simulate", "compare", "optimize", "pareto", "build", "sweep") \
+            and not getattr(args, "allow_large", False):
+        from aquarom_fenics.optimization.plan import check_plan_bounds
+
+        check_plan_bounds(args.command, scene, getattr(args, "model", None))
     return scene, xi
 
 

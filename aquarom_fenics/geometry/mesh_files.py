@@ -102,6 +102,14 @@ def _abaqus_records(path: Path, text: str):
         raise InputError(f"mesh file {path}: the file ends inside a record ({', '.join(pending)})")
 
 
+def _label(text: str) -> int:
+    """A node or element label: a whole number in [0, 2^62] (ValueError otherwise)."""
+    label = int(text)
+    if not 0 <= label <= MAX_LABEL:
+        raise ValueError(text)
+    return label
+
+
 def _parse_abaqus(path: Path, text: str):
     """(node labels, node coordinates, tetrahedra as node labels) of an Abaqus input file."""
     node_labels, node_coordinates, tetrahedra = [], [], []
@@ -110,10 +118,10 @@ def _parse_abaqus(path: Path, text: str):
             if len(values) != _ABAQUS_RECORD_LENGTH[section]:
                 raise ValueError
             if section == "node":
-                node_labels.append(int(values[0]))
+                node_labels.append(_label(values[0]))
                 node_coordinates.append([float(value) for value in values[1:]])
             else:
-                tetrahedra.append([int(value) for value in values[1:]])
+                tetrahedra.append([_label(value) for value in values[1:]])
         except ValueError:
             kind = "'label, x, y, z'" if section == "node" else "'label, n1, n2, n3, n4'"
             raise InputError(
@@ -125,6 +133,12 @@ def _parse_abaqus(path: Path, text: str):
         np.array(node_coordinates, dtype=float).reshape(-1, 3),
         np.array(tetrahedra, dtype=np.int64).reshape(-1, 4),
     )
+
+
+MAX_MESH_FILE_BYTES = 2 * 1024 ** 3
+"""Largest mesh file read [bytes]."""
+MAX_LABEL = 2 ** 62
+"""Largest node or element label of an Abaqus file (they are stored as 64-bit integers)."""
 
 
 def _read_abaqus(path: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -170,8 +184,9 @@ def read_mesh(path, scale: float = 1.0, translate=(0.0, 0.0, 0.0)) -> FishMesh:
             f"mesh file {path}: unsupported suffix {path.suffix!r}; use a gmsh .msh or an "
             "Abaqus .inp file"
         )
-    if not path.is_file():
-        raise InputError(f"mesh file {path}: not found")
+    from aquarom_fenics.io.readback import require_regular_file
+
+    require_regular_file(path, "mesh file", MAX_MESH_FILE_BYTES)
     points, cells = reader(path)
     points = points * factor + shift
     if not np.all(np.isfinite(points)):

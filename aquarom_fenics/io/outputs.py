@@ -184,6 +184,9 @@ def claim_folder(path: Path, force: bool, resume: bool, resume_file: str = "chec
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise InputError(f"output {path} is a file, not a folder; choose another --out")
+    absolute = path.resolve()
+    if absolute == Path(absolute.anchor):
+        raise InputError(f"output {path} is the root folder; give a folder of its own to --out")
     if resume:
         if not holds_file(path, resume_file):
             raise InputError(f"--resume: no {resume_file} in {path}; run without --resume")

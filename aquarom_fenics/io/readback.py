@@ -13,6 +13,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -94,6 +95,25 @@ class record:
                 check(value[key], f"{where}.{key}".lstrip("."))
 
 
+def require_regular_file(path: Path, what: str, max_bytes: int) -> None:
+    """Refuse (InputError, one line) anything but a regular file of at most ``max_bytes``: a FIFO,
+    a device such as /dev/zero, a folder or a symbolic-link loop is refused before it is opened
+    (a FIFO would block the reader, a device never ends)."""
+    try:
+        details = Path(path).stat()
+    except FileNotFoundError:
+        raise InputError(f"{what} {path}: not found") from None
+    except OSError as error:
+        raise InputError(f"{what} {path}: cannot be read ({error.strerror})") from None
+    if stat.S_ISDIR(details.st_mode):
+        raise InputError(f"{what} {path}: a folder, not a file")
+    if not stat.S_ISREG(details.st_mode):
+        raise InputError(f"{what} {path}: not a regular file (a FIFO, socket or device); give a file")
+    if details.st_size > max_bytes:
+        raise InputError(f"{what} {path}: {details.st_size / 2**20:.0f} MB, larger than the "
+                         f"{max_bytes / 2**20:.0f} MB such a file may have")
+
+
 def load_json(path: Path, schema: Check, kind: str, remedy: str = "") -> dict:
     """The JSON file ``path`` checked against ``schema``; InputError "KIND PATH: what; remedy"."""
     path = Path(path)
@@ -108,7 +128,10 @@ def load_json(path: Path, schema: Check, kind: str, remedy: str = "") -> dict:
 
 def _read_json(path: Path, kind: str, remedy: str):
     try:
-        if path.stat().st_size > MAX_JSON_BYTES:
+        details = path.stat()
+        if stat.S_ISREG(details.st_mode) is False and not stat.S_ISDIR(details.st_mode):
+            raise InputError(f"{kind} {path}: not a regular file (a FIFO, socket or device){remedy}")
+        if details.st_size > MAX_JSON_BYTES:
             raise InputError(f"{kind} {path}: larger than {MAX_JSON_BYTES // 2**20} MB{remedy}")
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:

@@ -32,6 +32,11 @@ from aquarom_fenics.io.scene import Scene, parse_number
 
 log = logging.getLogger("aquarom")
 
+MAX_DESIGNS = 100_000
+"""Most designs of one sweep (a grid's product or --samples), checked before any is made."""
+MAX_DESIGN_FILE_BYTES = 64 * 1024 * 1024
+"""Largest --designs file [bytes]."""
+
 MODELS = ("fom", "rom", "prom")
 STATUSES = ("completed", "refused", "stopped", "error")
 """completed: the model ran to the horizon; refused: the design check (or the PROM's validity
@@ -74,6 +79,10 @@ def grid_designs(specs: list[str], scene: Scene) -> list[dict[str, float]]:
             raise InputError(f"{where}: n = {count} must be ≥ 1")
         if count == 1 and low != high:
             raise InputError(f"{where}: one value (n = 1) needs lo = hi")
+        total = count * math.prod(len(values) for values in axes.values())
+        if total > MAX_DESIGNS:
+            raise InputError(f"{where}: the grid would hold {total:,} designs, more than {MAX_DESIGNS:,}; "
+                             "use fewer values per axis, or split the sweep")
         axes[name] = np.linspace(low, high, count).tolist()
     names = list(axes)
     return [_complete(scene, dict(zip(names, values))) for values in itertools.product(*axes.values())]
@@ -81,12 +90,17 @@ def grid_designs(specs: list[str], scene: Scene) -> list[dict[str, float]]:
 
 def csv_designs(path: Path, scene: Scene) -> list[dict[str, float]]:
     """The rows of a CSV file whose header names shapes of the scene (each at most once)."""
+    from aquarom_fenics.io.readback import require_regular_file
+
     _require_shapes(scene)
+    require_regular_file(path, "--designs", MAX_DESIGN_FILE_BYTES)
     try:
-        with open(path, newline="") as stream:
+        with open(path, newline="", encoding="utf-8-sig") as stream:      # a byte-order mark is allowed
             rows = list(csv.reader(stream))
     except UnicodeDecodeError:
         raise InputError(f"--designs {path}: not a UTF-8 text file") from None
+    except csv.Error as error:
+        raise InputError(f"--designs {path}: not a CSV file ({error})") from None
     except OSError as error:
         raise InputError(f"--designs {path}: cannot be read ({error.strerror})") from None
     rows = [row for row in rows if any(cell.strip() for cell in row)]
@@ -113,8 +127,8 @@ def latin_hypercube(scene: Scene, samples: int, seed: int) -> list[dict[str, flo
     of the ``samples`` equal strata holds one design (uniform inside its stratum); numpy's PCG64
     generator seeded with ``seed``."""
     _require_shapes(scene)
-    if samples < 1:
-        raise InputError(f"--samples {samples}: must be ≥ 1")
+    if not 1 <= samples <= MAX_DESIGNS:
+        raise InputError(f"--samples {samples}: must be in [1, {MAX_DESIGNS:,}]")
     if seed < 0:
         raise InputError(f"--seed {seed}: must be ≥ 0")
     generator = np.random.default_rng(seed)

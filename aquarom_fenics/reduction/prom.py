@@ -26,6 +26,8 @@ from aquarom_fenics.physics.thrust_term import ThrustData
 FORMAT_VERSION = 3
 """2: the tensors grouped per force term (elastic, muscle, inertia, drag, thrust, observation);
 3: the thrust's kinematic rows (stations) and the drag's reference-velocity row."""
+MAX_PROM_FILE_BYTES = 16 * 1024 ** 3
+"""Largest PROM file read [bytes]."""
 ZIP_MAGIC = b"PK\x03\x04"       # first bytes of a .npz (zip) archive
 
 
@@ -110,7 +112,11 @@ class ReducedModel:
         """Read a PROM file; refuses another scene's, another format's or another version's file, naming the difference."""
         from aquarom_fenics import __version__
 
+        from aquarom_fenics.io.readback import require_regular_file
+
         path = Path(path)
+        if path.exists() or path.is_symlink():
+            require_regular_file(path, "PROM file", MAX_PROM_FILE_BYTES)      # no FIFO, device or link loop
         if path.is_file() and _first_bytes(path, 4) != ZIP_MAGIC:
             content = "an empty file" if path.stat().st_size == 0 else "not a .npz archive"
             raise InputError(f"PROM file {path}: {content}, not a PROM file (write one with `aquarom build SCENE`)")

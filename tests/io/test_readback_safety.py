@@ -398,3 +398,135 @@ def test_a_pareto_weight_given_twice_is_refused(tmp_path, capsys):
     scene.write_text(CO.replace("weights = [0.5, 0.9]", "weights = [0.5, 0.9, 0.5]"))
     assert main(["pareto", str(scene), "--out", str(tmp_path / "p"), "--dry-run"]) == 2
     assert "twice" in one_line(capsys)
+
+
+# ---------------------------------------------------------------------- bounds before allocation, odd files
+@pytest.mark.parametrize("options, named", [
+    (["--grid", "z_tail=0:1:999999999999"], "designs"),
+    (["--grid", "z_tail=0:0.1:1000", "--grid", "y_thin=0:0.1:1000"], "designs"),
+    (["--samples", "1000000000000"], "--samples"),
+])
+def test_sweep_sizes_are_bounded_before_allocation(tmp_path, capsys, options, named):
+    scene = write_scene(tmp_path)
+    assert main(["sweep", scene, *options, "--dry-run"]) == 2
+    assert named in one_line(capsys)
+
+
+@pytest.mark.parametrize("setting, named", [
+    ("solver.time_step=5e-324", "time_step"),
+    ("solver.duration=1e300", "duration"),
+    ("reduction.vibration_modes=2000", "vibration_modes"),
+    ("reduction.vibration_modes=40", "--allow-large"),
+])
+def test_scene_values_that_would_allocate_without_bound_are_refused(tmp_path, capsys, setting, named):
+    scene = write_scene(tmp_path)
+    assert main(["build", scene, "--set", setting, "--dry-run"]) == 2
+    assert named in one_line(capsys)
+
+
+def test_a_plan_over_an_hour_needs_allow_large(tmp_path, capsys):
+    scene = write_scene(tmp_path)
+    assert main(["simulate", scene, "--level", "5", "--degree", "2", "--set", "solver.duration=60", "--dry-run"]) == 2
+    message = one_line(capsys)
+    assert "--allow-large" in message and " h " in message
+
+
+def test_the_dry_run_estimate_covers_the_eigensolves(tmp_path, capsys):
+    scene = write_scene(tmp_path)
+    estimates = []
+    for modes in (1, 6):
+        assert main(["build", scene, "--set", f"reduction.vibration_modes={modes}", "--dry-run"]) == 0
+        out = capsys.readouterr().out
+        assert "vibration mode(s)" in out
+        estimates.append(float(out.split("estimate: ~")[1].split(" s")[0]))
+    assert estimates[1] > 2 * estimates[0]
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device", "loop"])
+@pytest.mark.parametrize("option", ["--designs", "--prom", "mesh"])
+def test_odd_files_are_refused_without_hanging(tmp_path, capsys, kind, option):
+    odd = tmp_path / ("odd.inp" if option == "mesh" else "odd.csv" if option == "--designs" else "odd.npz")
+    if kind == "fifo":
+        os.mkfifo(odd)
+    elif kind == "device":
+        odd = Path("/dev/zero")
+    else:
+        os.symlink(tmp_path / "loop", tmp_path / "loop")
+        os.symlink(tmp_path / "loop", odd)
+    if option == "mesh":
+        scene = tmp_path / "m.toml"
+        scene.write_text(f'[mesh]\nfile = "{odd}"\n')
+        argv = ["mesh", str(scene)]
+    elif option == "--designs":
+        argv = ["sweep", write_scene(tmp_path), "--designs", str(odd), "--dry-run"]
+    else:
+        argv = ["simulate", write_scene(tmp_path), "--model", "prom", "--prom", str(odd), "--out", str(tmp_path / "r")]
+    assert main(argv) == 2
+    message = one_line(capsys)
+    assert str(odd) in message
+
+
+def test_a_design_csv_with_a_byte_order_mark_is_read(tmp_path, capsys):
+    scene = write_scene(tmp_path)
+    (tmp_path / "d.csv").write_bytes("\ufeffz_tail,y_thin\n0.1,0.0\n".encode("utf-8"))
+    assert main(["sweep", scene, "--designs", str(tmp_path / "d.csv"), "--dry-run"]) == 0
+    assert "designs: 1" in capsys.readouterr().out
+
+
+def test_a_design_csv_field_over_the_csv_limit_is_one_line(tmp_path, capsys):
+    scene = write_scene(tmp_path)
+    (tmp_path / "d.csv").write_text("z_tail\n" + "1" * 200_000 + "\n")
+    assert main(["sweep", scene, "--designs", str(tmp_path / "d.csv"), "--dry-run"]) == 2
+    assert "--designs" in one_line(capsys)
+
+
+def test_an_abaqus_label_beyond_64_bits_is_one_line(tmp_path, capsys):
+    mesh = tmp_path / "big.inp"
+    mesh.write_text("*Node\n100000000000000000000, 0, 0, 0\n2, 1, 0, 0\n3, 0, 1, 0\n4, 0, 0, 1\n"
+                    "*Element, type=C3D4\n1, 100000000000000000000, 2, 3, 4\n")
+    scene = tmp_path / "m.toml"
+    scene.write_text(f'[mesh]\nfile = "{mesh}"\n')
+    assert main(["mesh", str(scene)]) == 2
+    assert "big.inp" in one_line(capsys)
+
+
+@pytest.mark.parametrize("options, named", [
+    (["--scheduler", ""], "--scheduler"),
+    (["--scheduler", "ucx://127.0.0.1:8786"], "ucx://"),
+    (["--scheduler", "tcp://host:99999"], "port"),
+    (["--scheduler", "tcp://127.0.0.1:1", "--connect-timeout", "inf"], "--connect-timeout"),
+])
+def test_cluster_options_are_checked_in_one_line(tmp_path, capsys, options, named):
+    scene = write_scene(tmp_path)
+    assert main(["sweep", scene, "--samples", "2", *options, "--dry-run"]) == 2
+    assert named in one_line(capsys)
+
+
+@pytest.mark.parametrize("content, named", [
+    ("", "scheduler file"), ('{"address": ', "scheduler file"), ("garbage", "scheduler file"),
+    ('{"address": 8786}', "address"), ('{"address": "ucx://127.0.0.1:1"}', "ucx://"),
+])
+def test_damaged_scheduler_files_are_one_line(tmp_path, capsys, content, named):
+    scene = write_scene(tmp_path)
+    (tmp_path / "scheduler.json").write_text(content)
+    assert main(["sweep", scene, "--samples", "2", "--scheduler-file", str(tmp_path / "scheduler.json"),
+                 "--connect-timeout", "1", "--out", str(tmp_path / "s")]) == 2
+    assert named in one_line(capsys)
+    assert not (tmp_path / "s").exists()
+
+
+def test_the_root_folder_is_no_output(tmp_path, capsys):
+    scene = write_scene(tmp_path)
+    assert simulate(scene, "/") == 2
+    assert "root folder" in one_line(capsys)
+
+
+def test_local_pool_workers_know_they_are_workers():
+    from aquarom_fenics.executors import LocalProcesses, in_worker
+
+    pool = LocalProcesses(1)
+    try:
+        assert pool.submit(in_worker).result(timeout=120) is True
+    finally:
+        pool.shutdown()
+    assert in_worker() is False
