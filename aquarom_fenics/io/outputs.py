@@ -348,15 +348,17 @@ def write_run_record(folder: Path, record: dict) -> None:
     write_json_atomic(Path(folder) / RUN_RECORD, record)
 
 
-def check_run_record(folder: Path, record: dict) -> None:
+def check_run_record(folder: Path, record: dict, warn_if_missing: bool = True) -> None:
     """Refuse (InputError naming the first difference) to resume a folder whose run.json records
     another run: another scene hash, command, model or option that changes the answers. A folder
-    of an older version without run.json is resumed with a warning."""
+    of an older version without run.json is resumed (with a warning, if ``warn_if_missing``)."""
     from aquarom_fenics.io.readback import load_run_record
 
     path = Path(folder) / RUN_RECORD
     if not path.exists() and not path.is_symlink():
-        log.warning("--resume: %s has no %s (written by an older version): cannot check that it holds the same "
+        if not warn_if_missing:
+            return
+        log.warning("warning: --resume: %s has no %s (written by an older version): cannot check that it holds the same "
                     "run (scene, model, options)", folder, RUN_RECORD)
         return
     saved = load_run_record(path)

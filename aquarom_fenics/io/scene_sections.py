@@ -132,7 +132,7 @@ class LinearConstraint:
 
 @dataclass(frozen=True)
 class SolverSection:
-    time_step: float = _spec(0.02, lambda v: None if 1e-9 <= v <= 10.0 else "must be in [1e-9, 10] s", "time step h [s]")
+    time_step: float = _spec(0.02, lambda v: "must be > 0" if not v > 0 else None if 1e-9 <= v <= 10.0 else "must be > 0 and in [1e-9, 10] s", "time step h [s]")
     duration: float = _spec(2.0, lambda v: None if 0.1 <= v <= 1e5 else "must be in [0.1, 1e5] s (the distance averages the last 0.1 s)", "horizon T [s]")
     integrator: str = _spec("generalized-alpha", _one_of("generalized-alpha", "newmark"), "time scheme (SPEC §6)")
     rho_infinity: float = _spec(0.8, lambda v: None if 0 <= v <= 1 else "must be in [0, 1]", "ρ∞ of generalized-α: spectral radius at h ω → ∞ (docs/theory/time-scheme.md: how it was chosen)")

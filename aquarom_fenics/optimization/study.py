@@ -139,9 +139,11 @@ def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights:
     if resume and not checkpoint.exists():
         raise InputError(f"--resume: no checkpoint in {out_dir}; run without --resume")
     record = optimization_record(scene, weights, start)
-    if resume:
-        check_run_record(out_dir, record)
+    if resume:                 # another run's folder is refused before its checkpoint is read ...
+        check_run_record(out_dir, record, warn_if_missing=False)
     saved = Checkpoint(checkpoint, scene, scene.optimizer.method).load() if resume else None
+    if resume:                 # ... and an older version's (no run.json) is resumed with a warning
+        check_run_record(out_dir, record)
     require_cache_writable()
     fish = fish or load_fish(scene)
     if is_writer:
