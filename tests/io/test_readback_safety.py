@@ -530,3 +530,44 @@ def test_local_pool_workers_know_they_are_workers():
     finally:
         pool.shutdown()
     assert in_worker() is False
+
+
+# ---------------------------------------------------------------------- every process it starts, it stops
+def test_ctrl_c_of_a_pareto_sweep_on_two_workers_leaves_no_process(tmp_path):
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    psutil = pytest.importorskip("psutil")
+    scene = tmp_path / "co.toml"
+    scene.write_text(CO.replace("duration = 0.4", "duration = 2.0"))
+    command = [str(Path(sys.executable).with_name("aquarom")), "pareto", str(scene), "--workers", "2",
+               "--out", str(tmp_path / "p")]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True, env=os.environ | {"AQUAROM_CACHE": str(tmp_path / "cache")})
+    parent = psutil.Process(process.pid)
+    everything = []
+    try:
+        deadline = time.monotonic() + 240
+        workers = []
+        while time.monotonic() < deadline and process.poll() is None:
+            workers = [child for child in parent.children(recursive=True) if "python" in child.name()]
+            if len(workers) >= 2:
+                break
+            time.sleep(0.5)
+        assert len(workers) >= 2, "the two workers did not start"
+        time.sleep(5)                                   # inside their tasks
+        everything = parent.children(recursive=True)
+        os.killpg(process.pid, signal.SIGINT)           # Ctrl-C reaches the whole process group
+        _, err = process.communicate(timeout=120)
+        assert process.returncode == 130, err
+        assert "Traceback" not in err and len([line for line in err.splitlines() if line.strip()]) == 1, err
+        gone, alive = psutil.wait_procs(everything, timeout=15)
+        assert not alive, [p.cmdline() for p in alive]
+    finally:                                            # whatever failed, this test leaves nothing running
+        for leftover in [parent, *everything]:
+            try:
+                leftover.kill()
+            except psutil.Error:
+                pass
