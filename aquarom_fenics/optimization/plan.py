@@ -121,6 +121,10 @@ def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
     cells = LEVEL_TARGET_CELLS.get(scene.mesh.level, 0) if not scene.mesh.file else None
     lines = [f"scene {scene.name} (hash {scene.hash})"]
     if scene.mesh_file:
+        from aquarom_fenics.geometry.mesh_files import MAX_MESH_FILE_BYTES
+        from aquarom_fenics.io.readback import require_regular_file
+
+        require_regular_file(scene.mesh_file, "mesh file", MAX_MESH_FILE_BYTES)    # a dry run refuses what the run would
         lines.append(f"mesh: read {scene.mesh_file} (scale {scene.mesh.scale:g})")
         cells = cells or REFERENCE_CELLS
     else:

@@ -571,3 +571,11 @@ def test_ctrl_c_of_a_pareto_sweep_on_two_workers_leaves_no_process(tmp_path):
                 leftover.kill()
             except psutil.Error:
                 pass
+
+
+def test_a_dry_run_refuses_a_missing_mesh_file(tmp_path, capsys):
+    scene = tmp_path / "m.toml"
+    scene.write_text('[mesh]\nfile = "nope.inp"\n[solver]\nduration = 0.2\n')
+    assert main(["simulate", str(scene), "--dry-run"]) == 2
+    message = one_line(capsys)
+    assert "nope.inp" in message and "not found" in message
