@@ -266,7 +266,8 @@ REDUCED_COMMANDS = ("build", "optimize", "pareto", "basis", "check")
 
 def check_plan_bounds(command: str, scene: Scene, model: str | None = None) -> None:
     """Refuse (InputError naming --allow-large) a reduced basis whose tensors would not fit in memory,
-    and a plan estimated over :data:`MAX_PLAN_SECONDS`, before anything is allocated."""
+    and a run estimated over :data:`MAX_PLAN_SECONDS` (one simulation, build or optimisation; a
+    Pareto sweep's weights each), before anything is allocated."""
     reduced = command in REDUCED_COMMANDS or model in ("rom", "prom")
     if reduced:
         parametric = model != "rom"
@@ -277,9 +278,10 @@ def check_plan_bounds(command: str, scene: Scene, model: str | None = None) -> N
                              f"makes a basis of up to {size} vectors, whose reduced tensors would take "
                              f"~{needed / 1e9:.3g} GB (limit {MAX_TENSOR_BYTES / 1e9:g} GB); use fewer modes or "
                              f"pass {OVERRIDE}")
-    seconds = plan_seconds(command, scene, model)
+    runs = len(scene.cooptimization.weights) if command == "pareto" else 1
+    seconds = plan_seconds(command, scene, model) / runs      # one run: a simulation, a build, one weight's optimisation
     if seconds > MAX_PLAN_SECONDS:
-        raise InputError(f"scene {scene.source}: `aquarom {command}` is estimated at ~{seconds / 3600:.1f} h "
+        raise InputError(f"scene {scene.source}: one run of `aquarom {command}` is estimated at ~{seconds / 3600:.1f} h "
                          f"(over {MAX_PLAN_SECONDS / 3600:g} h; see --dry-run); use a coarser level, a shorter "
                          f"duration or pass {OVERRIDE}")
 
