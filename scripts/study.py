@@ -27,7 +27,8 @@ from aquarom_fenics.io.outputs import holds_file
 from aquarom_fenics.io.versions import software_versions
 from aquarom_fenics.io.persistence import write_text_atomic
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.optimization.study import checkpoint_pattern, completed_summary, pareto_sweep, run_optimization
+from aquarom_fenics.optimization.study import (checkpoint_pattern, completed_summary, pareto_sweep, run_optimization,
+                                              weight_folder)
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 
@@ -78,7 +79,7 @@ def run_cases(args, pool) -> None:
         fish = load_fish(scene)
         if scene.cooptimization.enabled:
             points = pareto_sweep(scene, args.out / case, fish=fish, pool=pool, resume=args.resume)
-            summaries = [(f"{case} w1={point['w1']:g}", args.out / case / f"w1_{point['w1']:g}" / "summary.json")
+            summaries = [(f"{case} w1={point['w1']:g}", args.out / case / weight_folder(point['w1']) / "summary.json")
                          for point in points]
         else:
             if not (args.resume and completed_summary(args.out / case, scene)):

@@ -110,10 +110,13 @@ def describe_failure(args, error: BaseException) -> tuple[int, str]:
         return InputError.exit_code, f"error: {error}"
     if isinstance(error, SolverError):
         return SolverError.exit_code, f"solver stopped: {error}"
-    if isinstance(error, OSError):
+    if isinstance(error, OSError):          # a write that failed (full disk, quota, permissions): a failure
         location = getattr(args, "output", None)
         unnamed = f"writing in {location.working}/" if location is not None else "a file"
-        return InputError.exit_code, f"error: {os_error_text(error, unnamed)}"
+        written = location is not None and location.working.is_dir() and any(location.working.iterdir())
+        args.failed_write = True
+        kept = f"; what was written before is kept in {location.working}/" if written else ""
+        return InputError.exit_code, f"error: {os_error_text(error, unnamed)}{kept}"
     if MPI.COMM_WORLD.size == 1:
         raise error
     traceback.print_exc()

@@ -25,9 +25,11 @@ def load_scene(args):
     if args.degree is not None:
         scene = scene.replace("mesh", degree=args.degree)
     if not getattr(args, "allow_large", False):
-        from aquarom_fenics.optimization.plan import check_mesh_bounds
+        from aquarom_fenics.optimization.plan import check_mesh_bounds, check_plan_bounds
 
         check_mesh_bounds(scene)
+        if args.command in ("basis", "check"):
+            check_plan_bounds(args.command, scene)
     args.scene_used = scene
     return scene
 
@@ -93,10 +95,19 @@ def check_inputs(args, scene):
             raise InputError(f"--max-time {args.max_time}: must be a positive number of seconds")
     if args.command == "pareto" and not scene.cooptimization.enabled:
         raise InputError(f"scene {scene.source}: [cooptimization] enabled = true is needed for a Pareto sweep")
+    if args.command == "pareto":
+        from aquarom_fenics.optimization.study import require_distinct_weights
+
+        require_distinct_weights(scene.cooptimization.weights, f"scene {scene.source}")
     if args.command in ("optimize", "pareto"):
         space = design_space(scene)
         if scene.optimizer.method == "paper":
             require_interior(space, scene)
+    if args.command in ("simulate", "compare", "optimize", "pareto", "build", "sweep") \
+            and not getattr(args, "allow_large", False):
+        from aquarom_fenics.optimization.plan import check_plan_bounds
+
+        check_plan_bounds(args.command, scene, getattr(args, "model", None))
     return scene, xi
 
 

@@ -76,11 +76,12 @@ def settle_output(args, code: int, wall_time: float) -> None:
     if location is None or MPI.COMM_WORLD.rank != 0:
         return
     written = location.working.is_dir() and any(location.working.iterdir())
-    if code in (0, SolverError.exit_code) or (code in STOP_CODES and written):
+    failed_write = getattr(args, "failed_write", False) and written     # keeps what was written before
+    if code in (0, SolverError.exit_code) or (code in STOP_CODES and written) or failed_write:
         if location.working.is_dir():
             write_manifest(args, wall_time)
-            list_outputs(location.working, location.foreign)
-        if code != SolverError.exit_code:
+            list_outputs(location.working, location.foreign, location.foreign_stats)
+        if code != SolverError.exit_code and not failed_write:
             publish(location)
     else:
         discard(location)
@@ -97,6 +98,6 @@ def write_manifest(args, wall_time: float) -> None:
 
     command = "aquarom " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("aquarom") else args.command
     arguments = {k: v for k, v in vars(args).items()
-                 if k not in ("scene_used", "timings", "output_dir", "manifest_extra")}
+                 if k not in ("scene_used", "timings", "output_dir", "manifest_extra", "failed_write")}
     write_folder_manifest(args.output_dir, command, arguments, getattr(args, "scene_used", None),
                           {"total": wall_time} | getattr(args, "timings", {}), getattr(args, "manifest_extra", {}))

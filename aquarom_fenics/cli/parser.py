@@ -62,7 +62,8 @@ def build_parser() -> argparse.ArgumentParser:
         sub.add_argument("--dry-run", action="store_true",
                          help="print what would be built, reused and skipped, and a time estimate; write nothing")
         sub.add_argument("--allow-large", action="store_true",
-                         help="run a plan beyond the size limits (mesh far outside its level, steps × dofs)")
+                         help="run a plan beyond the size limits (mesh far outside its level, steps × dofs, reduced "
+                              "tensors, an estimate over 1 h)")
         sub.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", dest="settings",
                          help="override one scene value, validated like the file (repeatable), "
                               "e.g. --set solver.duration=0.5 or --set shapes.z_tail.start=0.1")

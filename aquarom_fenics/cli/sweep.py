@@ -10,11 +10,12 @@ from mpi4py import MPI
 from aquarom_fenics.cli.inputs import check_inputs, load_scene, say
 from aquarom_fenics.cli.outputs import claim_output, shown
 from aquarom_fenics.errors import InputError
+from aquarom_fenics.io.run_record import check_run_record, write_run_record
 
 
 def sweep_designs(args, scene) -> tuple[list[dict], str]:
     """The designs of --designs, --grid or --samples (exactly one of them) and a description."""
-    from aquarom_fenics.optimization import sweep
+    from aquarom_fenics.optimization import sweep_designs as sources
 
     given = [name for name, value in (("--designs", args.designs), ("--grid", args.grid),
                                       ("--samples", args.samples)) if value is not None]
@@ -22,12 +23,12 @@ def sweep_designs(args, scene) -> tuple[list[dict], str]:
         raise InputError("give the designs with one of --designs FILE.csv, --grid NAME=LO:HI:N (repeatable) "
                          f"or --samples N{f' (got {chr(32).join(given)})' if given else ''}")
     if args.designs is not None:
-        return sweep.csv_designs(args.designs, scene), f"{args.designs}"
+        return sources.csv_designs(args.designs, scene), f"{args.designs}"
     if args.grid is not None:
-        designs = sweep.grid_designs(args.grid, scene)
+        designs = sources.grid_designs(args.grid, scene)
         return designs, "grid " + " × ".join(spec.partition("=")[0] + "(" + spec.rsplit(":", 1)[-1] + ")"
                                              for spec in args.grid)
-    return sweep.latin_hypercube(scene, args.samples, args.seed), f"Latin hypercube, seed {args.seed}"
+    return sources.latin_hypercube(scene, args.samples, args.seed), f"Latin hypercube, seed {args.seed}"
 
 
 def earlier_rows(args, scene, designs, target: Path) -> dict:
@@ -39,7 +40,14 @@ def earlier_rows(args, scene, designs, target: Path) -> dict:
     path = target / "sweep.csv"
     if not path.is_file():
         raise InputError(f"--resume: no sweep.csv in {target}; run without --resume")
+    check_run_record(target, run_record(args, scene))
     return resumed_rows(path, scene, designs)
+
+
+def run_record(args, scene) -> dict:
+    """What makes a sweep's rows (compared by --resume): the scene's hash (its file, --set, --level,
+    --degree) and the model; the designs are compared row by row."""
+    return {"command": "sweep", "scene_hash": scene.hash, "model": args.model}
 
 
 def run_sweep(args) -> int:
@@ -65,6 +73,7 @@ def run_sweep(args) -> int:
     # an unreachable scheduler is refused before any output; Ctrl-C or a refused output stops the workers at once
     with shutting_down(open_pool(workers, cluster, SWIMMER_WORKERS)) as pool:
         out = claim_output(args, target, resume=args.resume, resume_file="sweep.csv")
+        write_run_record(out, run_record(args, scene))
         backend = describe_backend(pool, cluster)
         say(f"sweep of {scene.name}: {len(designs)} designs ({source}), model {args.model}, {missing} to run "
             f"{backend}" + (f", {len(kept)} kept from sweep.csv" if kept else ""))

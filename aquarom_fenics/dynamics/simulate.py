@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import logging
 import signal
+import threading
 import time as clock
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -21,6 +22,7 @@ from aquarom_fenics.io.stop_signals import stop_between_steps, stop_for
 from aquarom_fenics.io.run_outputs import write_run_outputs
 from aquarom_fenics.io.xdmf import cell_regions
 from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.parallel import in_worker
 from aquarom_fenics.dynamics.trajectory import DISTANCE_WINDOW, Trajectory, swimming_distance, tail_amplitude
 
 log = logging.getLogger("aquarom")
@@ -186,9 +188,18 @@ def progress_bars(shown: bool):
         PROGRESS_BARS["shown"] = before
 
 
+WORKER_BAR_LOCK = threading.RLock()
+"""The lock of progress bars drawn in a worker process. tqdm's default also makes a multiprocessing
+lock (a named semaphore), which in a spawned worker coordinates with no other process and, when
+the worker is ended with SIGTERM (Ctrl-C of the command), is reported as leaked at exit."""
+
+
 def _progress_bar(total: int, label: str, enabled: bool):
     if not (enabled and PROGRESS_BARS["shown"]):
         return None
     from tqdm import tqdm
 
+    if in_worker():
+        tqdm.set_lock(WORKER_BAR_LOCK)
     return tqdm(total=total, desc=label, unit="step", leave=False, disable=None)
+

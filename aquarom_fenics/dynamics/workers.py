@@ -28,6 +28,14 @@ def main_thread_imports() -> None:
     import aquarom_fenics.dynamics.simulate  # noqa: F401 — dolfinx, petsc4py, the FOM
 
 
+def import_probe() -> str:
+    """The first task a Dask cluster runs before it is used: the package's version, so a worker
+    whose Python cannot import the package fails here, in one line, not inside a design's task."""
+    import aquarom_fenics
+
+    return aquarom_fenics.__version__
+
+
 SWIMMER_WORKERS = WorkerSetup(environment=task_variables, on_start=main_thread_imports,
-                              name="aquarom-main-thread-imports")
+                              name="aquarom-main-thread-imports", probe=import_probe)
 """The set-up of every pool the toolkit opens."""

@@ -11,6 +11,7 @@ from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.gmsh_session import GMSH_TETRAHEDRON, gmsh_model, points_and_cells_from_gmsh
 from aquarom_fenics.geometry.mesh import (FishMesh, mean_edge_length, oriented_positively, signed_cell_volumes,
                                            used_nodes_only)
+from aquarom_fenics.io.readback import MAX_MESH_FILE_BYTES, require_regular_file
 
 
 _GMSH_READ_OPTIONS = {"General.Terminal": 0, "General.NumThreads": 1}
@@ -169,8 +170,7 @@ def read_mesh(path, scale: float = 1.0, translate=(0.0, 0.0, 0.0)) -> FishMesh:
             f"mesh file {path}: unsupported suffix {path.suffix!r}; use a gmsh .msh or an "
             "Abaqus .inp file"
         )
-    if not path.is_file():
-        raise InputError(f"mesh file {path}: not found")
+    require_regular_file(path, "mesh file", MAX_MESH_FILE_BYTES)     # no FIFO, device or link loop
     points, cells, regions = reader(path)
     cells, regions = _unique_cells(cells, regions)
     if points.ndim != 2 or points.shape[1] != 3:

@@ -16,6 +16,7 @@ import atexit
 import errno
 import fcntl
 import os
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -56,12 +57,17 @@ def lock_output(target: Path) -> OutputLock:
             return held
     while True:
         try:
-            descriptor = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+            descriptor = _open_lock_file(path)
         except OSError as error:
             if Path(target).is_dir() and error.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
                 return _lock_folder_itself(Path(target))
+            if error.errno == errno.ELOOP:
+                raise InputError(f"output {target}: its lock file {path} is a symbolic link, never followed; "
+                                 "remove it (it is not the toolkit's) or choose another --out") from None
             raise InputError(f"output {target}: cannot create its lock file {path} ({error.strerror}); "
                              "choose a writable location for --out") from None
+        if descriptor is None:
+            continue                  # created and removed by another run meanwhile: try again
         try:
             fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -77,6 +83,28 @@ def lock_output(target: Path) -> OutputLock:
     lock = OutputLock(target, path, descriptor)
     _held.append(lock)
     return lock
+
+
+def _open_lock_file(path: Path) -> int | None:
+    """A descriptor of the lock file, never through a link: created new (O_CREAT | O_EXCL), or the
+    existing one opened with O_NOFOLLOW, which must be a regular file with one link (a hard link
+    to another file, a FIFO or a device is refused: the lock's PID would be written into it).
+    None when the file vanished between the two opens."""
+    flags = os.O_RDWR | os.O_CLOEXEC | os.O_NOFOLLOW | os.O_NONBLOCK
+    try:
+        return os.open(path, flags | os.O_CREAT | os.O_EXCL, 0o644)
+    except FileExistsError:
+        pass
+    try:
+        descriptor = os.open(path, flags)
+    except FileNotFoundError:
+        return None
+    details = os.fstat(descriptor)
+    if not stat.S_ISREG(details.st_mode) or details.st_nlink != 1:
+        os.close(descriptor)
+        what = "not a regular file" if not stat.S_ISREG(details.st_mode) else "a hard link to another file"
+        raise InputError(f"lock file {path} is {what}; it is not the toolkit's: remove it or choose another --out")
+    return descriptor
 
 
 def _lock_folder_itself(target: Path) -> OutputLock:
@@ -121,7 +149,7 @@ def is_locked_by_another(target: Path) -> str | None:
     if holds_lock(target) or not path.exists():
         return None
     try:
-        descriptor = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
+        descriptor = os.open(path, os.O_RDONLY | os.O_CLOEXEC | os.O_NOFOLLOW | os.O_NONBLOCK)
     except OSError:
         return None
     try:

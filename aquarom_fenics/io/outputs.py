@@ -7,6 +7,7 @@ import ctypes
 import json
 import os
 import shutil
+import stat
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +35,7 @@ class OutputLocation:
     replacing: bool        # ``target`` holds an earlier run of the toolkit, replaced on success
     made: list[Path] = field(default_factory=list)      # parent folders this run created (deepest first)
     foreign: list[str] = field(default_factory=list)    # files in ``working`` at the claim not of the toolkit
+    foreign_stats: dict = field(default_factory=dict)   # their (inode, mtime, size) at the claim
 
 
 def holds_file(folder: Path, pattern: str) -> bool:
@@ -53,12 +55,17 @@ def claim_folder(path: Path, force: bool, resume: bool, resume_file: str = "chec
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise InputError(f"output {path} is a file, not a folder; choose another --out")
+    absolute = path.resolve()
+    if absolute == Path(absolute.anchor):
+        raise InputError(f"output {path} is the root folder; give a folder of its own to --out")
     if resume:
         if not holds_file(path, resume_file):
             raise InputError(f"--resume: no {resume_file} in {path}; run without --resume")
         lock_output(path)
         require_writable(path)
-        return OutputLocation(path, path, created=False, replacing=False, foreign=foreign_files(path))
+        foreign = foreign_files(path)
+        return OutputLocation(path, path, created=False, replacing=False, foreign=foreign,
+                              foreign_stats={name: _stat_key(path / name) for name in foreign})
     made = _make_parents(path)
     try:
         return _claim_unlocked(path, force, made)
@@ -89,12 +96,18 @@ def _mention_leftovers(path: Path) -> None:
     absolute = Path(path).resolve()
     for folder in sorted(absolute.parent.glob(f"{absolute.name}.new-*")):
         pid = folder.name.rsplit("-", 1)[-1]
-        if folder.is_dir() and pid.isdigit() and not Path(f"/proc/{pid}").exists():
-            log.warning("output %s: %s/ holds the partial results of a run that was killed (PID %s); "
-                        "remove it when you no longer need it", path, folder, pid)
+        if folder.is_symlink() or not folder.is_dir() or not pid.isdigit() or Path(f"/proc/{pid}").exists():
+            continue
+        how = "stopped by its solver" if manifest_files(folder) is not None else "that was killed"
+        log.warning("output %s: %s/ holds the partial results of a run %s (PID %s); "
+                    "remove it when you no longer need it", path, folder, how, pid)
 
 
 def _refuse_foreign(path: Path, verb: str, kept: str = "") -> None:
+    problem = manifest_problem(path)
+    if problem:
+        raise InputError(f"output {path}: {problem}; so it cannot tell the files the toolkit did not write: "
+                         f"{kept or 'look at the folder, or choose another --out'}")
     foreign = foreign_files(path)
     if foreign:
         raise InputError(f"output {path} {verb} files the toolkit did not write ({', '.join(foreign[:3])}"
@@ -112,9 +125,50 @@ def manifest_files(folder: Path) -> list[str] | None:
         return None
 
 
+def manifest_problem(folder: Path) -> str | None:
+    """Why a folder's manifest.json cannot be trusted (a link, damaged, or naming files outside the
+    folder), or None (no manifest, or a valid one)."""
+    from aquarom_fenics.io.readback import load_manifest
+
+    path = Path(folder) / MANIFEST
+    if not path.exists() and not path.is_symlink():
+        return None
+    try:
+        load_manifest(path)
+    except InputError as error:
+        return str(error)
+    return None
+
+
 def files_in(folder: Path) -> list[str]:
-    """Every file below ``folder`` (relative names, sorted)."""
-    return sorted(str(p.relative_to(folder)) for p in Path(folder).rglob("*") if not p.is_dir())
+    """Everything below ``folder`` but its folders: files and links (never followed), and each
+    empty folder as ``NAME/`` (relative names, sorted)."""
+    found: list[str] = []
+
+    def walk(directory: str, prefix: str) -> None:
+        try:
+            entries = list(os.scandir(directory))
+        except OSError:
+            return
+        for entry in entries:
+            name = prefix + entry.name
+            if entry.is_dir(follow_symlinks=False):
+                before = len(found)
+                walk(entry.path, name + "/")
+                if len(found) == before and not any(True for _ in _entries(entry.path)):
+                    found.append(name + "/")
+            else:
+                found.append(name)
+
+    walk(str(folder), "")
+    return sorted(found)
+
+
+def _entries(directory: str):
+    try:
+        return os.scandir(directory)
+    except OSError:
+        return iter(())
 
 
 def foreign_files(folder: Path) -> list[str]:
@@ -127,12 +181,27 @@ def foreign_files(folder: Path) -> list[str]:
     return [name for name in present if name != MANIFEST and name not in listed]
 
 
-def list_outputs(folder: Path, foreign: list[str] = ()) -> None:
+def _stat_key(path: Path) -> tuple | None:
+    """(inode, mtime [ns], size) of a file or link (not followed), None when it is gone."""
+    try:
+        details = os.lstat(path)
+    except OSError:
+        return None
+    return details.st_ino, details.st_mtime_ns, details.st_size
+
+
+def list_outputs(folder: Path, foreign: list[str] = (), foreign_stats: dict | None = None) -> None:
     """Add the list of files of a run to its manifest.json (what --force may replace): every file
-    in the folder except ``foreign`` (files that were there, not the toolkit's, when the run began)."""
+    in the folder except ``foreign`` (files that were there, not the toolkit's, when the run began).
+
+    With ``foreign_stats`` (a resumed run) a file of ``foreign`` that this run rewrote (another
+    inode, mtime or size than at the claim: a killed run's ``sweep.csv`` or ``history.csv``,
+    unlisted since that run wrote no manifest) is listed as the toolkit's."""
     manifest = Path(folder) / MANIFEST
     data = json.loads(manifest.read_text())
-    excluded = set(foreign) | {MANIFEST}
+    stats = foreign_stats or {}
+    excluded = {name for name in foreign
+                if foreign_stats is None or _stat_key(Path(folder) / name) == stats.get(name)} | {MANIFEST}
     data["files"] = [name for name in files_in(folder) if name not in excluded]
     write_json_atomic(manifest, data)
 
@@ -187,25 +256,46 @@ def publish(location: OutputLocation) -> Path:
         location.working = previous
     left = remove_run_folder(location.working)
     if left:
+        kept = _kept_name(target)
+        try:
+            os.rename(location.working, kept)
+        except OSError:
+            kept = location.working
         log.warning("output %s: files added during the swap were kept in %s/ (%s)", location.target,
-                    location.working, ", ".join(left[:3]))
+                    kept, ", ".join(left[:3]))
     location.working = location.target
     return location.target
 
 
 def remove_run_folder(folder: Path) -> list[str]:
-    """Remove the files a run folder's manifest lists, the manifest and the emptied folders; return
-    the files left (not the toolkit's: the folder then stays)."""
+    """Remove the files a run folder's manifest lists, the manifest and the folders these leave
+    empty; return what is left (not the toolkit's: the folder then stays).
+
+    Only names inside the folder are removed (relative, no ``..``), never through a link: a link
+    itself is removed, not what it points to, and a folder is removed only when it is empty and
+    the manifest lists it or a file in it."""
     folder = Path(folder)
-    for name in (manifest_files(folder) or []) + [MANIFEST]:
-        victim = folder / name
-        if victim.is_file() or victim.is_symlink():
-            victim.unlink()
-    for sub in sorted((p for p in folder.rglob("*") if p.is_dir()), key=lambda p: len(p.parts), reverse=True):
-        try:
-            sub.rmdir()
-        except OSError:
-            pass
+    listed = manifest_files(folder) or []
+    for name in listed + [MANIFEST]:
+        victim = _inside(folder, name)
+        if victim is not None and not name.endswith("/"):
+            try:
+                mode = os.lstat(victim).st_mode
+            except OSError:
+                continue
+            if stat.S_ISREG(mode) or stat.S_ISLNK(mode):
+                victim.unlink()
+    emptied = set()
+    for name in listed:
+        parts = name.rstrip("/").split("/")
+        emptied.update("/".join(parts[:k]) for k in range(1, len(parts) + (1 if name.endswith("/") else 0)))
+    for name in sorted(emptied, key=lambda name: name.count("/"), reverse=True):
+        sub = _inside(folder, name)
+        if sub is not None and sub.is_dir() and not sub.is_symlink():
+            try:
+                sub.rmdir()
+            except OSError:
+                pass
     left = files_in(folder)
     if not left:
         try:
@@ -215,11 +305,41 @@ def remove_run_folder(folder: Path) -> list[str]:
     return left
 
 
+def _inside(folder: Path, name: str) -> Path | None:
+    """``folder / name`` when ``name`` is a relative name inside ``folder`` whose parent folders are
+    real folders (no link on the way), else None."""
+    from aquarom_fenics.io.readback import is_inside_name
+
+    if not is_inside_name(name):
+        return None
+    parts = name.rstrip("/").split("/")
+    here = Path(folder)
+    for part in parts[:-1]:
+        here = here / part
+        try:
+            if not stat.S_ISDIR(os.lstat(here).st_mode):
+                return None
+        except OSError:
+            return None
+    return here / parts[-1]
+
+
 def discard(location: OutputLocation) -> None:
     """Remove what a refused run wrote (only folders it created itself)."""
     if location.created and location.working.is_dir():
         shutil.rmtree(location.working)
     remove_if_empty(location.made)
+
+
+def _kept_name(target: Path) -> Path:
+    """``NAME.kept-PID[-k]``: a folder of files that were not the toolkit's, left after a swap (never
+    a ``NAME.new-PID/`` that the next run would take for a killed run's partial results)."""
+    candidate = target.with_name(f"{target.name}.kept-{os.getpid()}")
+    k = 1
+    while candidate.exists() or candidate.is_symlink():
+        k += 1
+        candidate = target.with_name(f"{target.name}.kept-{os.getpid()}-{k}")
+    return candidate
 
 
 def _exchange(first: Path, second: Path) -> bool:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -26,6 +27,8 @@ MAX_JSON_BYTES = 256 * 1024 * 1024
 """Largest JSON file read back [bytes] (a checkpoint of a long optimisation is a few MB)."""
 MAX_JSON_DEPTH = 64
 """Deepest nesting of arrays and objects accepted in a JSON file read back."""
+MAX_MESH_FILE_BYTES = 2 * 1024 ** 3
+"""Largest mesh file read (.msh or .inp) [bytes]: checked by the reader and by the scene's hash."""
 
 
 class SchemaError(ValueError):
@@ -95,6 +98,25 @@ class record:
                 check(value[key], f"{where}.{key}".lstrip("."))
 
 
+def require_regular_file(path: Path, what: str, max_bytes: int) -> None:
+    """Refuse (InputError, one line) anything but a regular file of at most ``max_bytes``: a FIFO,
+    a device such as /dev/zero, a folder or a symbolic-link loop is refused before it is opened
+    (a FIFO would block the reader, a device never ends)."""
+    try:
+        details = Path(path).stat()
+    except FileNotFoundError:
+        raise InputError(f"{what} {path}: not found") from None
+    except OSError as error:
+        raise InputError(f"{what} {path}: cannot be read ({error.strerror})") from None
+    if stat.S_ISDIR(details.st_mode):
+        raise InputError(f"{what} {path}: a folder, not a file")
+    if not stat.S_ISREG(details.st_mode):
+        raise InputError(f"{what} {path}: not a regular file (a FIFO, socket or device); give a file")
+    if details.st_size > max_bytes:
+        raise InputError(f"{what} {path}: {details.st_size / 2**20:.0f} MB, larger than the "
+                         f"{max_bytes / 2**20:.0f} MB such a file may have")
+
+
 def load_json(path: Path, schema: Check, kind: str, remedy: str = "") -> dict:
     """The JSON file ``path`` checked against ``schema``; InputError "KIND PATH: what; remedy"."""
     path = Path(path)
@@ -109,7 +131,10 @@ def load_json(path: Path, schema: Check, kind: str, remedy: str = "") -> dict:
 
 def _read_json(path: Path, kind: str, remedy: str):
     try:
-        if path.stat().st_size > MAX_JSON_BYTES:
+        details = path.stat()
+        if stat.S_ISREG(details.st_mode) is False and not stat.S_ISDIR(details.st_mode):
+            raise InputError(f"{kind} {path}: not a regular file (a FIFO, socket or device){remedy}")
+        if details.st_size > MAX_JSON_BYTES:
             raise InputError(f"{kind} {path}: larger than {MAX_JSON_BYTES // 2**20} MB{remedy}")
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -176,14 +201,17 @@ def checkpoint_schema(dimension: int, method: str, shapes: int | None = None) ->
     basis centre is a shape."""
     vector = list_of(FINITE, dimension)
     shape = list_of(FINITE, dimension if shapes is None else shapes)
+    finished = record({"optimum": vector, "cost": FINITE, "gradient": vector, "distance": FINITE,
+                       "distance_gradient": vector, "prom_size": INTEGER, "reason": TEXT})
     if method == "paper":
         state = record({"z": vector, "iteration": INTEGER, "scaling": vector, "previous_gradient": optional(vector),
                         "since_build": INTEGER,
                         "center": optional(record({"z": vector, "distance": FINITE, "distance_gradient": vector},
                                                   {"prom_z": vector}))},
-                       {"confirm": ANYTHING, "restarted": ANYTHING})
+                       {"confirm": ANYTHING, "restarted": ANYTHING, "finished": finished})
     else:
-        state = record({"center": vector, "radius": FINITE, "iteration": INTEGER}, {"cuts": list_of(vector)})
+        state = record({"center": vector, "radius": FINITE, "iteration": INTEGER},
+                       {"cuts": list_of(vector), "finished": finished})
     row = record({"iteration": INTEGER, "wall_time": FINITE})
     return record({"scene_hash": TEXT, "method": TEXT, "state": state, "history": list_of(row),
                    "builds": INTEGER, "build_time": FINITE, "solve_time": FINITE},
@@ -216,14 +244,41 @@ def load_optimization_summary(path: Path, names: list[str]) -> dict:
                      "run without --resume into another --out")
 
 
+def is_inside_name(name) -> bool:
+    """A name of a file inside a folder: relative, without ``.``, ``..`` or empty parts, no NUL
+    (a trailing ``/`` marks an empty folder)."""
+    if not isinstance(name, str) or not name or "\0" in name or name.startswith("/"):
+        return False
+    parts = name[:-1].split("/") if name.endswith("/") else name.split("/")
+    return all(part not in ("", ".", "..") for part in parts)
+
+
+INSIDE_NAME = _scalar("a relative name inside the folder (no '..', not absolute)", is_inside_name)
+
+
 def manifest_schema() -> record:
-    """manifest.json of an output folder: the files the toolkit wrote there, and how."""
-    return record({}, {"files": list_of(TEXT), "command": TEXT})
+    """manifest.json of an output folder: the files the toolkit wrote there (relative names inside
+    the folder), and how."""
+    return record({}, {"files": list_of(INSIDE_NAME), "command": TEXT})
 
 
 def load_manifest(path: Path) -> dict:
-    """manifest.json, checked (``files`` a list of names)."""
+    """manifest.json, checked (``files`` a list of relative names inside its folder); a manifest
+    that is a link is refused (it is never followed)."""
+    if Path(path).is_symlink():
+        raise InputError(f"manifest {path}: a symbolic link, not a file the toolkit wrote")
     return load_json(path, manifest_schema(), "manifest")
+
+
+def run_record_schema() -> record:
+    """run.json of a resumable output folder: what makes its answers (scene hash, command, model,
+    options), written when the run starts and compared by ``--resume``."""
+    return record({"command": TEXT, "scene_hash": TEXT})
+
+
+def load_run_record(path: Path) -> dict:
+    """run.json, checked (a command and a scene hash at least)."""
+    return load_json(path, run_record_schema(), "run record", "run without --resume into another --out")
 
 
 def load_csv_table(path: Path, columns: tuple[str, ...] | list[str], kind: str, remedy: str = "",

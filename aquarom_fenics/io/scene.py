@@ -87,7 +87,11 @@ class Scene:
     def mesh_file(self) -> Path | None:
         if not self.mesh.file:
             return None
-        return (Path(self.base_dir) / self.mesh.file).resolve()
+        path = Path(self.base_dir) / self.mesh.file
+        try:
+            return path.resolve()
+        except (RuntimeError, OSError):        # a symbolic-link loop: kept as given, refused when read
+            return path.absolute()
 
     @property
     def n_steps(self) -> int:
@@ -131,7 +135,10 @@ class Scene:
         digest = hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode())
         if self.mesh_file is None:
             digest.update((shipped_meshes() / "block.toml").read_bytes())  # the block's meshing recipe
-        elif self.mesh_file.exists():
+        elif self.mesh_file.exists() or self.mesh_file.is_symlink():
+            from aquarom_fenics.io.readback import MAX_MESH_FILE_BYTES, require_regular_file
+
+            require_regular_file(self.mesh_file, "mesh file", MAX_MESH_FILE_BYTES)   # no FIFO, device or link loop
             digest.update(self.mesh_file.read_bytes())
         return digest.hexdigest()[:16]
 

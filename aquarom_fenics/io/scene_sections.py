@@ -10,6 +10,11 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 
+MAX_VIBRATION_MODES = 50
+"""Most vibration modes of a basis (with modal derivatives 50 modes make 1326 vectors, whose cubic
+tensor alone would take 25 TB; the plan check refuses far fewer with its memory estimate)."""
+
+
 def _positive(value) -> str | None:
     return None if value > 0 else "must be > 0"
 
@@ -150,8 +155,8 @@ class LinearConstraint:
 
 @dataclass(frozen=True)
 class SolverSection:
-    time_step: float = _spec(0.02, _positive, "time step h [s]")
-    duration: float = _spec(2.0, lambda v: None if v >= 0.1 else "must be ≥ 0.1 s (the distance averages the last 0.1 s)", "horizon T [s]")
+    time_step: float = _spec(0.02, lambda v: "must be > 0" if not v > 0 else None if 1e-9 <= v <= 10.0 else "must be > 0 and in [1e-9, 10] s", "time step h [s]")
+    duration: float = _spec(2.0, lambda v: None if 0.1 <= v <= 1e5 else "must be in [0.1, 1e5] s (the distance averages the last 0.1 s)", "horizon T [s]")
     integrator: str = _spec("generalized-alpha", _one_of("generalized-alpha", "newmark"), "time scheme (SPEC §6)")
     rho_infinity: float = _spec(0.8, lambda v: None if 0 <= v <= 1 else "must be in [0, 1]", "ρ∞ of generalized-α: spectral radius at h ω → ∞ (docs/theory/time-scheme.md: how it was chosen)")
     # SPEC §6 gives α_N = 0.005 for the source's Newmark; with it a high-frequency oscillation of the
@@ -167,7 +172,7 @@ class SolverSection:
 @dataclass(frozen=True)
 class ReductionSection:
     basis: str = _spec("default", _one_of("default", "paper"), "'paper' drops the actuation modes ψ, θ_ψ")
-    vibration_modes: int = _spec(1, _positive, "number of vibration modes n_vm")
+    vibration_modes: int = _spec(1, lambda v: None if 1 <= v <= MAX_VIBRATION_MODES else f"must be in [1, {MAX_VIBRATION_MODES}]", "number of vibration modes n_vm")
     modal_derivatives: bool = _spec(True, None, "static modal derivatives θ_ij")
     response_vectors: bool = _spec(True, None, "with basis = 'default': the static responses ψ_m to the muscles' stiffness on ψ and, with stations = \"nodes\", τ to the thrust's tail-node force")
     taylor_order: int = _spec(1, _one_of(1, 2), "order of the PROM's Taylor expansion in ξ")

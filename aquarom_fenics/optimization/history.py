@@ -48,8 +48,24 @@ class Checkpoint:
     def __init__(self, path: Path | None, scene: Scene, method: str, write: bool = True):
         self.path, self.scene_hash, self.method, self.write = path, scene.hash, method, write
         self.scene = scene
+        self.state: dict | None = None          # the last state saved (or loaded)
+
+    def finish(self, optimum, evaluation, reason: str, history: list[dict], builder: PromBuilder) -> None:
+        """The last checkpoint of an optimisation that has stopped: its state with ``finished`` (the
+        optimum's evaluation, the PROM size and the stop reason) and the whole history, so that a
+        run interrupted after it (in the FOM check) resumes with the same optimum and history rows,
+        none repeated."""
+        if self.state is None:
+            return
+        finished = {"optimum": np.asarray(optimum, dtype=float).tolist(), "cost": float(evaluation.cost),
+                    "gradient": np.asarray(evaluation.gradient, dtype=float).tolist(),
+                    "distance": float(evaluation.distance),
+                    "distance_gradient": np.asarray(evaluation.distance_gradient, dtype=float).tolist(),
+                    "prom_size": int(builder.last_size), "reason": reason}
+        self.save(dict(self.state) | {"finished": finished}, history, builder)
 
     def save(self, state: dict, history: list[dict], builder: PromBuilder) -> None:
+        self.state = state
         if self.path is None or not self.write:
             return
         write_json_atomic(self.path, {"scene_hash": self.scene_hash, "method": self.method, "state": state,
@@ -73,6 +89,7 @@ class Checkpoint:
             raise InputError(f"checkpoint {self.path}: written for scene hash {data['scene_hash']} with "
                              f"method {data['method']}, not this scene ({self.scene_hash}, {self.method}); "
                              "start without --resume")
+        self.state = data["state"]
         return data
 
 

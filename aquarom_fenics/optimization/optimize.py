@@ -128,10 +128,17 @@ def optimize(scene: Scene, fish: Fish | None = None, weights: CostWeights | None
     algorithm = {"paper": paper_method, "trust-region": trust_region}[method]
     log.info("stability of the designs: %s", stability_plan(scene))
     safeguard = Safeguard(started, max_time)
+    finished = saved["state"].get("finished") if saved else None
     try:
-        optimum, evaluation, reason = algorithm(scene, space, builder, weights, history, checkpoint,
-                                                saved["state"] if saved else None, safeguard,
-                                                on_iteration or (lambda row: None))
+        if finished is not None:      # stopped before (interrupted in the FOM check): the same optimum, no new rows
+            evaluation = Evaluation(np.array(finished["optimum"]), finished["cost"], np.array(finished["gradient"]),
+                                    finished["distance"], np.array(finished["distance_gradient"]))
+            optimum, reason, builder.last_size = evaluation.z, finished["reason"], finished["prom_size"]
+        else:
+            optimum, evaluation, reason = algorithm(scene, space, builder, weights, history, checkpoint,
+                                                    saved["state"] if saved else None, safeguard,
+                                                    on_iteration or (lambda row: None))
+            checkpoint.finish(optimum, evaluation, reason, history, builder)
     finally:
         KEPT_FACTORS.release()      # the builds' K_0 factorisation: not needed by the FOM check that follows
     timings = {"prom_builds": builder.build_time, "prom_solves": builder.solve_time,

@@ -67,6 +67,35 @@ def prom_build_seconds(cells: int, parameters: int, degree: int = 1) -> float:
     return QUADRATIC_COST_FACTOR[degree] * (0.5 + 0.33 * parameters) * cells / REFERENCE_CELLS
 
 
+EIGEN_SECONDS_PER_MODE = 0.02
+"""SLEPc's generalised eigensolve per vibration mode at level 1, degree 1 (1232 cells: 0.019 s for one)."""
+STATIC_SOLVE_SECONDS = 0.01
+"""One static solve of a modal derivative at level 1, degree 1 (1232 cells)."""
+TENSOR_SECONDS = 0.1
+"""The internal-force tensors of an 8-vector basis at level 1, degree 1; they grow as m⁴ and with the cells."""
+LEVEL_1_CELLS = 1232
+
+
+def basis_seconds(scene: Scene, cells: float, parametric: bool) -> float:
+    """Estimated time [s] of the steps of a PROM build that grow with the basis: the eigensolve of the
+    n_vm vibration modes (∝ n_vm × cells), the static solves of the modal derivatives (∝ their
+    count × cells) and the cubic internal-force tensors (∝ m⁴ × cells), all from level-1 figures."""
+    modes = scene.reduction.vibration_modes
+    size = len(expected_basis(scene, parametric))
+    derivatives = modes * (modes + 1) // 2 if scene.reduction.modal_derivatives else 0
+    scale = QUADRATIC_COST_FACTOR[scene.mesh.degree] * cells / LEVEL_1_CELLS
+    return scale * (EIGEN_SECONDS_PER_MODE * modes + STATIC_SOLVE_SECONDS * derivatives
+                    + TENSOR_SECONDS * (size / 8) ** 4)
+
+
+def reduced_tensor_bytes(scene: Scene, parametric: bool = True) -> float:
+    """Memory of the reduced internal-force tensor [bytes]: 8 m⁴ for its cubic part, times 1 + p
+    for its first ξ-derivatives (and + p² at Taylor order 2), m the candidate basis size."""
+    size = len(expected_basis(scene, parametric))
+    p = len(scene.shapes) if parametric else 0
+    return 8.0 * size ** 4 * (1 + p + (p * p if scene.reduction.taylor_order == 2 else 0))
+
+
 def _bench_runs(name: str, keep) -> list[dict]:
     folder = bench_results()
     path = folder / name if folder else None
@@ -94,6 +123,10 @@ def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
     cells = LEVEL_TARGET_CELLS.get(scene.mesh.level, 0) if not scene.mesh.file else None
     lines = [f"scene {scene.name} (hash {scene.hash})"]
     if scene.mesh_file:
+        from aquarom_fenics.geometry.mesh_files import MAX_MESH_FILE_BYTES
+        from aquarom_fenics.io.readback import require_regular_file
+
+        require_regular_file(scene.mesh_file, "mesh file", MAX_MESH_FILE_BYTES)    # a dry run refuses what the run would
         lines.append(f"mesh: read {scene.mesh_file} (scale {scene.mesh.scale:g})")
     else:
         cached = block_cache_path(scene.mesh.level, scene.mesh.length, scene.mesh.width, scene.mesh.height,
@@ -128,8 +161,10 @@ def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
             skipped.append("ξ-terms")
         lines.append("tensors: " + ", ".join(tensors))
         lines.append("skipped: " + (", ".join(skipped) or "nothing"))
-        build_time = prom_build_seconds(cells, p, degree)
-        lines.append(f"PROM: from the PROM cache when an identical one was built before, else ~{build_time:.1f} s")
+        build_time = prom_build_seconds(cells, p, degree) + basis_seconds(scene, cells, parametric)
+        lines.append(f"PROM: from the PROM cache when an identical one was built before, else ~{build_time:.1f} s "
+                     f"({scene.reduction.vibration_modes} vibration mode(s) by SLEPc, "
+                     f"~{reduced_tensor_bytes(scene, parametric) / 1e6:.1f} MB of reduced tensors)")
     if command == "simulate" and model == "fom" or command == "compare":
         lines.append(f"FOM: {steps} steps of {scene.solver.time_step:g} s, ~{fom_time:.0f} s")
     if command in ("simulate", "compare") and reduced:
@@ -143,16 +178,35 @@ def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
         screen = tail_screen_seconds(scene)
         lines.append(f"stability: {stability_plan(scene)}" + (f", ~{screen:.0f} s per screen" if screen else ""))
         lines.append(f"FOM checks: start and optimal design per run (~{fom_time:.0f} s each; the start is cached)")
-        total = runs * (builds * (prom_build_seconds(cells, len(scene.shapes), degree) + 0.2 + screen)
-                        + 2 * fom_time)
-        lines.append(f"estimate: ~{total:.0f} s")
+    if command in ("optimize", "pareto"):
+        lines.append(f"estimate: ~{plan_seconds(command, scene, model):.0f} s")
     elif command == "build":
-        lines.append(f"estimate: ~{prom_build_seconds(cells, len(scene.shapes), degree):.1f} s")
+        lines.append(f"estimate: ~{plan_seconds(command, scene, model):.1f} s")
     elif command in ("simulate", "compare"):
-        fom_part = fom_time if model == "fom" or command == "compare" else 0
-        prom_part = prom_build_seconds(cells, len(scene.shapes), degree) if reduced else 0
-        lines.append(f"estimate: ~{fom_part + prom_part:.0f} s")
+        lines.append(f"estimate: ~{plan_seconds(command, scene, model):.0f} s")
     return lines
+
+
+def plan_seconds(command: str, scene: Scene, model: str | None = None) -> float:
+    """Estimated wall time [s] of ``command``: FOM runs, PROM builds (the basis steps that grow with
+    the vibration modes included), tail screens and reduced solves, as :func:`plan` lists them."""
+    cells = (LEVEL_TARGET_CELLS.get(scene.mesh.level, 0) if not scene.mesh.file else None) or REFERENCE_CELLS
+    degree = scene.mesh.degree
+    fom_time = fom_seconds(cells, scene.n_steps, degree)
+    parametric = model != "rom"
+    build = (prom_build_seconds(cells, len(scene.shapes) if parametric else 0, degree)
+             + basis_seconds(scene, cells, parametric))
+    if command in ("optimize", "pareto"):
+        settings = scene.optimizer
+        runs = len(scene.cooptimization.weights) if command == "pareto" else 1
+        builds = max(2, settings.max_iterations // max(settings.n_rebuild, 1)) if settings.method == "paper" else 8
+        return runs * (builds * (build + 0.2 + tail_screen_seconds(scene)) + 2 * fom_time)
+    if command in ("build", "basis", "check"):
+        return build
+    if command in ("simulate", "compare"):
+        reduced = model in ("rom", "prom")
+        return (fom_time if model == "fom" or command == "compare" else 0.0) + (build + 0.2 if reduced else 0.0)
+    return 0.0
 
 
 # ---------------------------------------------------------------------- bounded plans
@@ -208,6 +262,35 @@ def check_mesh_bounds(scene: Scene) -> None:
         raise InputError(f"scene {scene.source}: [mesh] block {box} m at level {mesh.level} is far outside the "
                          f"level's range (about {cells:,.0f} cells against ~{target:,}, thinnest/longest side "
                          f"{aspect:.2g}, at least {MIN_BLOCK_ASPECT:g}); change the block or pass {OVERRIDE}")
+
+
+MAX_PLAN_SECONDS = 3600.0
+"""A plan estimated longer than this [s] needs --allow-large."""
+MAX_TENSOR_BYTES = 4e9
+"""Largest reduced internal-force tensor of a PROM build [bytes]."""
+REDUCED_COMMANDS = ("build", "optimize", "pareto", "basis", "check")
+
+
+def check_plan_bounds(command: str, scene: Scene, model: str | None = None) -> None:
+    """Refuse (InputError naming --allow-large) a reduced basis whose tensors would not fit in memory,
+    and a run estimated over :data:`MAX_PLAN_SECONDS` (one simulation, build or optimisation; a
+    Pareto sweep's weights each), before anything is allocated."""
+    reduced = command in REDUCED_COMMANDS or model in ("rom", "prom")
+    if reduced:
+        parametric = model != "rom"
+        needed = reduced_tensor_bytes(scene, parametric)
+        if needed > MAX_TENSOR_BYTES:
+            size = len(expected_basis(scene, parametric))
+            raise InputError(f"scene {scene.source}: [reduction] vibration_modes = {scene.reduction.vibration_modes} "
+                             f"makes a basis of up to {size} vectors, whose reduced tensors would take "
+                             f"~{needed / 1e9:.3g} GB (limit {MAX_TENSOR_BYTES / 1e9:g} GB); use fewer modes or "
+                             f"pass {OVERRIDE}")
+    runs = len(scene.cooptimization.weights) if command == "pareto" else 1
+    seconds = plan_seconds(command, scene, model) / runs      # one run: a simulation, a build, one weight's optimisation
+    if seconds > MAX_PLAN_SECONDS:
+        raise InputError(f"scene {scene.source}: one run of `aquarom {command}` is estimated at ~{seconds / 3600:.1f} h "
+                         f"(over {MAX_PLAN_SECONDS / 3600:g} h; see --dry-run); use a coarser level, a shorter "
+                         f"duration or pass {OVERRIDE}")
 
 
 def check_run_bounds(scene: Scene) -> None:

@@ -23,6 +23,7 @@ from aquarom_fenics.optimization.optimize import (DEFAULT_MAX_TIME, Optimization
                                                   start_points)
 from aquarom_fenics.optimization.prom_builder import PromBuilder
 from aquarom_fenics.io.outputs import holds_file
+from aquarom_fenics.io.run_record import check_run_record, write_run_record
 from aquarom_fenics.io.tables import IncrementalCSV
 from aquarom_fenics.io.versions import software_versions
 from aquarom_fenics.io.persistence import require_cache_writable, write_json_atomic, write_text_atomic
@@ -107,11 +108,17 @@ def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights:
     checkpoint = out_dir / "checkpoint.json"
     if resume and not checkpoint.exists():
         raise InputError(f"--resume: no checkpoint in {out_dir}; run without --resume")
+    record = optimization_record(scene, weights, start)
+    if resume:                 # another run's folder is refused before its checkpoint is read ...
+        check_run_record(out_dir, record, warn_if_missing=False)
     saved = Checkpoint(checkpoint, scene, scene.optimizer.method).load() if resume else None
+    if resume:                 # ... and an older version's (no run.json) is resumed with a warning
+        check_run_record(out_dir, record)
     require_cache_writable()
     fish = fish or load_fish(scene)
     if is_writer:
         out_dir.mkdir(parents=True, exist_ok=True)
+        write_run_record(out_dir, record)
     history_file = out_dir / "history.csv"
     writer = HistoryWriter(history_file, history_columns(space), saved["history"] if saved else []) if is_writer else None
     start_design = design_and_amplitude(space, space.start)
@@ -141,6 +148,15 @@ def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights:
         _write_summary(out_dir, scene, result, check, weights or CostWeights())
     _write_figures(out_dir, scene, fish, result, render)
     return result, check
+
+
+def optimization_record(scene: Scene, weights: CostWeights | None, start: np.ndarray | None) -> dict:
+    """What makes an optimisation's answers, compared by --resume (run.json): the scene's hash,
+    the method, the cost weights (w_1, w_2, α) and the start point of a multi-start's run."""
+    weights = weights or CostWeights()
+    return {"command": "optimize", "scene_hash": scene.hash, "method": scene.optimizer.method,
+            "cost_weights": [weights.distance, weights.energy, weights.alpha],
+            "start": None if start is None else np.asarray(start, dtype=float).tolist()}
 
 
 def run_multistart(scene: Scene, out_dir: Path, resume: bool = False, weights: CostWeights | None = None,
@@ -320,6 +336,7 @@ def pareto_sweep(scene: Scene, out_dir: Path, fish: Fish | None = None, pool=Non
     ``resume``: a weight whose run completed is read back from its summary.json, one with a
     checkpoint continues from it, and the others run from the start (:func:`pareto_point`).
     """
+    require_distinct_weights(scene.cooptimization.weights, f"scene {scene.source}")
     if pool is None:
         fish = fish or load_fish(scene)
         with worker_threads():
@@ -354,7 +371,7 @@ def pareto_point(scene: Scene, out_dir: Path, w1: float, fish: Fish | None = Non
     """
     co = scene.cooptimization
     weights = CostWeights(distance=w1, energy=1.0 - w1, alpha=co.energy_weight)
-    folder = Path(out_dir) / f"w1_{w1:g}"
+    folder = Path(out_dir) / weight_folder(w1)
     summary = completed_summary(folder, scene, weights) if resume else None
     if summary is not None:
         check, space = summary["fom_check"], design_space(scene)
@@ -364,6 +381,23 @@ def pareto_point(scene: Scene, out_dir: Path, w1: float, fish: Fish | None = Non
                                      weights=weights, fish=fish or load_fish(scene), render=False)
     return _pareto_row(w1, weights, result.space, result.optimum, result.evaluation.distance,
                        check.optimal_distance, check.error)
+
+
+def weight_folder(w1: float) -> str:
+    """``w1_<w1>``, unique by the weight's exact value: the short form (``w1_0.9``) when it reads
+    back as the same number, else every digit (``w1_0.9000001``), so that two weights never share
+    a folder."""
+    short = f"{w1:g}"
+    return f"w1_{short}" if float(short) == w1 else f"w1_{float(w1)!r}"
+
+
+def require_distinct_weights(weights, where: str) -> None:
+    """Refuse (InputError) a Pareto sweep that names a weight twice: both runs would share a folder."""
+    seen = set()
+    for w1 in weights:
+        if float(w1) in seen:
+            raise InputError(f"{where}: [cooptimization] weights names w1 = {w1!r} twice; give each weight once")
+        seen.add(float(w1))
 
 
 def completed_summary(folder: Path, scene: Scene, weights: CostWeights | None = None) -> dict | None:

@@ -14,8 +14,8 @@ that fails is a row with its status and reason, never the end of the sweep.
 from __future__ import annotations
 
 import csv
-import itertools
 import json
+import logging
 import math
 import time
 from dataclasses import dataclass
@@ -26,102 +26,17 @@ import numpy as np
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.parallel import run_all, worker_name
-from aquarom_fenics.io.scene import Scene, parse_number
+from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.optimization.sweep_designs import (  # noqa: F401 — the design sources, also imported from here
+    MAX_DESIGN_FILE_BYTES, MAX_DESIGNS, csv_designs, grid_designs, latin_hypercube)
 
+
+log = logging.getLogger("aquarom")
 
 MODELS = ("fom", "rom", "prom")
 STATUSES = ("completed", "refused", "stopped", "error")
 """completed: the model ran to the horizon; refused: the design check (or the PROM's validity
 radius) refused the design; stopped: the solver stopped early; error: the task failed otherwise."""
-
-
-# ---------------------------------------------------------------------- designs
-def _require_shapes(scene: Scene) -> None:
-    if not scene.shapes:
-        raise InputError(f"scene {scene.source} has no [shapes]: there is no design space to sweep")
-
-
-def _complete(scene: Scene, values: dict[str, float]) -> dict[str, float]:
-    """Every shape of the scene, in its order: the given values, else the start values."""
-    return {shape.name: float(values.get(shape.name, shape.start)) for shape in scene.shapes}
-
-
-def grid_designs(specs: list[str], scene: Scene) -> list[dict[str, float]]:
-    """The Cartesian product of ``name=lo:hi:n`` axes (n evenly spaced values from lo to hi)."""
-    _require_shapes(scene)
-    axes = {}
-    for spec in specs:
-        where = f"--grid {spec}"
-        name, sep, interval = spec.partition("=")
-        parts = interval.split(":")
-        if not sep or len(parts) != 3:
-            raise InputError(f"{where}: expected name=lo:hi:n, e.g. --grid z_tail=-0.5:0.5:5")
-        name = name.strip()
-        if name not in scene.shape_names:
-            raise InputError(f"{where}: '{name}' is not a shape variation of scene {scene.name} "
-                             f"(valid: {', '.join(scene.shape_names)})")
-        if name in axes:
-            raise InputError(f"{where}: {name} is given twice; give each shape one --grid")
-        low, high = parse_number(parts[0], where), parse_number(parts[1], where)
-        try:
-            count = int(parts[2])
-        except ValueError:
-            raise InputError(f"{where}: n = '{parts[2]}' must be a whole number of values ≥ 1") from None
-        if count < 1:
-            raise InputError(f"{where}: n = {count} must be ≥ 1")
-        if count == 1 and low != high:
-            raise InputError(f"{where}: one value (n = 1) needs lo = hi")
-        axes[name] = np.linspace(low, high, count).tolist()
-    names = list(axes)
-    return [_complete(scene, dict(zip(names, values))) for values in itertools.product(*axes.values())]
-
-
-def csv_designs(path: Path, scene: Scene) -> list[dict[str, float]]:
-    """The rows of a CSV file whose header names shapes of the scene (each at most once)."""
-    _require_shapes(scene)
-    try:
-        with open(path, newline="") as stream:
-            rows = list(csv.reader(stream))
-    except UnicodeDecodeError:
-        raise InputError(f"--designs {path}: not a UTF-8 text file") from None
-    except OSError as error:
-        raise InputError(f"--designs {path}: cannot be read ({error.strerror})") from None
-    rows = [row for row in rows if any(cell.strip() for cell in row)]
-    if len(rows) < 2:
-        raise InputError(f"--designs {path}: needs a header of shape names and at least one row of values")
-    header = [cell.strip() for cell in rows[0]]
-    for name in header:
-        if name not in scene.shape_names:
-            raise InputError(f"--designs {path}: column '{name}' is not a shape variation of scene {scene.name} "
-                             f"(valid: {', '.join(scene.shape_names)})")
-        if header.count(name) > 1:
-            raise InputError(f"--designs {path}: column '{name}' appears twice")
-    designs = []
-    for number, row in enumerate(rows[1:], start=2):
-        if len(row) != len(header):
-            raise InputError(f"--designs {path}: line {number} has {len(row)} values for {len(header)} columns")
-        designs.append(_complete(scene, {name: parse_number(cell.strip(), f"--designs {path} line {number} column {name}")
-                                         for name, cell in zip(header, row)}))
-    return designs
-
-
-def latin_hypercube(scene: Scene, samples: int, seed: int) -> list[dict[str, float]]:
-    """``samples`` designs of a Latin hypercube over the scene's bounds: in every shape's range each
-    of the ``samples`` equal strata holds one design (uniform inside its stratum); numpy's PCG64
-    generator seeded with ``seed``."""
-    _require_shapes(scene)
-    if samples < 1:
-        raise InputError(f"--samples {samples}: must be ≥ 1")
-    if seed < 0:
-        raise InputError(f"--seed {seed}: must be ≥ 0")
-    generator = np.random.default_rng(seed)
-    columns = []
-    for shape in scene.shapes:
-        strata = generator.permutation(samples)
-        unit = (strata + generator.random(samples)) / samples
-        columns.append(shape.lower + unit * (shape.upper - shape.lower))
-    return [_complete(scene, {shape.name: float(column[k]) for shape, column in zip(scene.shapes, columns)})
-            for k in range(samples)]
 
 
 # ---------------------------------------------------------------------- one design
@@ -246,22 +161,86 @@ def _cell(value) -> str:
     return str(value)
 
 
+MAX_SWEEP_FILE_BYTES = 256 * 1024 * 1024
+"""Largest sweep.csv read back by --resume [bytes]."""
+
+
 def read_rows(path: Path, scene: Scene) -> list[dict]:
-    """The rows of a sweep.csv (numbers as floats, empty cells None)."""
-    with open(path, newline="") as stream:
-        reader = csv.DictReader(stream)
-        if reader.fieldnames != columns(scene):
-            raise InputError(f"--resume: {path} has the columns {reader.fieldnames}, not those of scene "
-                             f"{scene.name}'s sweep; run without --resume")
-        rows = []
-        for row in reader:
-            parsed = dict(row)
-            parsed["design"] = int(row["design"])
-            for name in (*scene.shape_names, "distance_m", "tail_amplitude_m", "wall_time_s"):
-                parsed[name] = float(row[name]) if row[name] != "" else None
-            parsed["cached"] = row["cached"] == "True"
-            rows.append(parsed)
-    return rows
+    """The rows of a sweep.csv, schema-checked (numbers as floats, empty cells None): a whole
+    design number, finite shape values, a known status, a completed row's distance and amplitude.
+    A last line cut short (a run killed while writing it) is dropped with a note; anything else
+    damaged is an InputError naming the line and column."""
+    remedy = "run without --resume, or into another --out"
+    where = f"--resume: {path}"
+    text = _sweep_text(path, where, remedy)
+    lines = text.splitlines(keepends=True)
+    if len(lines) > 1 and not lines[-1].endswith(("\n", "\r")):
+        log.warning("--resume: %s: partial last line %d dropped (a run stopped while writing it); its design "
+                    "runs again", path, len(lines))
+        lines = lines[:-1]
+    try:
+        table = list(csv.reader(lines))
+    except csv.Error as error:
+        raise InputError(f"{where}: not a CSV file ({error}); {remedy}") from None
+    header = table[0] if table else []
+    if header != columns(scene):
+        raise InputError(f"{where} has the columns {header}, not those of scene {scene.name}'s sweep; {remedy}")
+    return [_parsed_row(dict(zip(header, cells)), number, scene, f"{where} line {number}", remedy)
+            for number, cells in enumerate(table[1:], start=2) if cells and _cell_count(cells, header, number,
+                                                                                      where, remedy)]
+
+
+def _sweep_text(path: Path, where: str, remedy: str) -> str:
+    try:
+        if path.stat().st_size > MAX_SWEEP_FILE_BYTES:
+            raise InputError(f"{where}: larger than {MAX_SWEEP_FILE_BYTES // 2**20} MB; {remedy}")
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError:
+        raise InputError(f"{where}: not UTF-8 text (binary bytes); {remedy}") from None
+    except OSError as error:
+        raise InputError(f"{where}: cannot be read ({error.strerror}); {remedy}") from None
+    if "\0" in text:
+        raise InputError(f"{where}: holds NUL bytes, not a CSV text file; {remedy}")
+    return text
+
+
+def _cell_count(cells: list[str], header: list[str], number: int, where: str, remedy: str) -> bool:
+    if len(cells) != len(header):
+        raise InputError(f"{where} line {number} has {len(cells)} cells, not {len(header)}; {remedy}")
+    return True
+
+
+def _parsed_row(row: dict, number: int, scene: Scene, where: str, remedy: str) -> dict:
+    """One row of sweep.csv with its values checked and converted."""
+    def refuse(column: str, expected: str):
+        raise InputError(f"{where}, column {column}: {row[column][:30]!r} is not {expected}; {remedy}")
+
+    parsed = dict(row)
+    if not row["design"].isdigit():
+        refuse("design", "a whole number ≥ 0")
+    parsed["design"] = int(row["design"])
+    for name in (*scene.shape_names, "distance_m", "tail_amplitude_m", "wall_time_s"):
+        optional = name not in scene.shape_names
+        if row[name] == "" and optional:
+            parsed[name] = None
+            continue
+        try:
+            value = float(row[name])
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value):
+            refuse(name, "a finite number" + (" or empty" if optional else ""))
+        parsed[name] = value
+    if row["status"] not in STATUSES:
+        refuse("status", f"one of {', '.join(STATUSES)}")
+    if row["status"] == "completed":
+        for name in ("distance_m", "tail_amplitude_m"):
+            if parsed[name] is None:
+                refuse(name, "empty in a completed row (a number)")
+    if row["cached"] not in ("True", "False"):
+        refuse("cached", "True or False")
+    parsed["cached"] = row["cached"] == "True"
+    return parsed
 
 
 def resumed_rows(path: Path, scene: Scene, designs: list[dict]) -> dict[int, dict]:
@@ -323,6 +302,8 @@ def run_sweep(scene: Scene, designs: list[dict], model: str, out: Path, pool, re
     rows = dict(earlier)
     try:
         for task, row, error in run_all(pool, evaluate, tasks, key=lambda task: task.index):
+            if isinstance(error, OSError):      # a cache or output write that failed: the sweep stops
+                raise error
             if error is not None:
                 row = {"design": task.index, **task.design, "status": "error", "cached": False, "worker": "",
                        "reason": f"{type(error).__name__}: {error}".splitlines()[0]}

@@ -1,6 +1,9 @@
 """The workers of a running Dask distributed scheduler, given by address or scheduler file.
 
-A worker that dies mid-task has its task run again on another worker by the scheduler.
+A worker that dies mid-task has its task run again on another worker by the scheduler. A cluster
+is used only once a worker has run the caller's probe task (:func:`usable_workers`): no worker, or
+workers that cannot import the caller's code, are one line after the connect timeout, never a
+wait without end.
 """
 from __future__ import annotations
 
@@ -10,6 +13,7 @@ from pathlib import Path
 from typing import Callable
 
 from aquarom_fenics.errors import InputError
+from aquarom_fenics.parallel.addresses import check_address, scheduler_file_address
 from aquarom_fenics.parallel.interface import WorkerSetup, run_task
 from aquarom_fenics.parallel.settings import ClusterSettings
 
@@ -37,13 +41,17 @@ class DaskCluster:
         self.settings = settings
         self.setup = setup or WorkerSetup()
         self.client = connect(settings)
-        if self.setup.on_start is not None:
-            try:
-                self.client.register_worker_plugin(StartOnMainThread(self.setup.on_start, self.setup.name),
-                                                   name=self.setup.name)
-            except Exception as error:        # raised on a worker, handed back by the scheduler
-                self.client.close()
-                raise worker_import_error(settings, error) from None
+        try:
+            usable_workers(self.client, settings, self.setup.probe)
+            if self.setup.on_start is not None:
+                try:
+                    self.client.register_worker_plugin(StartOnMainThread(self.setup.on_start, self.setup.name),
+                                                       name=self.setup.name)
+                except Exception as error:    # raised on a worker, handed back by the scheduler
+                    raise worker_import_error(settings, error) from None
+        except BaseException:                 # refused, or Ctrl-C while waiting: no client left open
+            self.client.close()
+            raise
         self._executor = self.client.get_executor(pure=False)
 
     @property
@@ -73,6 +81,33 @@ def worker_import_error(settings: ClusterSettings, error: Exception) -> Exceptio
     return error
 
 
+def usable_workers(client, settings: ClusterSettings, probe: Callable[[], object] | None = None) -> None:
+    """Wait at most ``settings.connect_timeout`` seconds for a worker of the cluster and, with a
+    ``probe`` (:attr:`WorkerSetup.probe`), for a worker to run it; InputError (one line) when none
+    does: no worker, workers that cannot import the caller's code (:func:`worker_import_error`), or
+    a probe that fails or does not finish in time."""
+    where = settings.describe()
+    timeout = settings.connect_timeout
+    try:
+        client.wait_for_workers(1, timeout=timeout)
+    except (TimeoutError, OSError) as error:
+        raise InputError(f"{where}: no worker within {timeout:g} s ({type(error).__name__}); "
+                         "start workers (`dask worker ADDRESS`) or check the scheduler") from None
+    if probe is None:
+        return
+    future = client.submit(probe, pure=False)
+    try:
+        future.result(timeout=timeout)
+    except Exception as error:  # noqa: BLE001 — any failure of the probe is the cluster's
+        future.cancel()
+        refusal = worker_import_error(settings, error)
+        if refusal is not error:
+            raise refusal from None
+        reason = str(error).splitlines()[0] if str(error) else type(error).__name__
+        raise InputError(f"{where}: no worker could run a task of the toolkit within {timeout:g} s "
+                         f"({reason[:120]}); install the toolkit on the workers or check them") from None
+
+
 def connect(settings: ClusterSettings):
     """A ``dask.distributed.Client`` of the scheduler; InputError (one line) when it cannot be
     reached within ``settings.connect_timeout`` seconds, or its scheduler file does not appear
@@ -86,10 +121,10 @@ def connect(settings: ClusterSettings):
         raise InputError(f"scheduler file {settings.scheduler_file}: not found within {settings.connect_timeout:g} s "
                          "(written by `dask scheduler --scheduler-file FILE` when the scheduler starts)")
     timeout = f"{settings.connect_timeout:g}s"
+    address = (scheduler_file_address(Path(settings.scheduler_file)) if settings.scheduler_file
+               else check_address(settings.scheduler, settings.describe()))
     try:
-        if settings.scheduler_file:
-            return Client(scheduler_file=settings.scheduler_file, timeout=timeout, set_as_default=False)
-        return Client(settings.scheduler, timeout=timeout, set_as_default=False)
+        return Client(address, timeout=timeout, set_as_default=False)
     except (OSError, TimeoutError, ValueError) as error:
         where = settings.scheduler or f"of {settings.scheduler_file}"
         reason = str(error).splitlines()[0] if str(error) else type(error).__name__

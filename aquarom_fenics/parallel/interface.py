@@ -32,11 +32,15 @@ class Pool(Protocol):
 class WorkerSetup:
     """How the caller readies a worker: ``environment()`` gives variables set in the worker before
     each task (read in the submitting process at submission), ``on_start()`` runs once on a
-    long-lived worker's main thread when it starts (a Dask worker), ``name`` identifies it there."""
+    long-lived worker's main thread when it starts (a Dask worker), ``name`` identifies it there.
+    ``probe()`` is the first task sent to a cluster before it is used: it fails on a worker that
+    cannot run the caller's tasks (one that cannot import them), so that such a cluster is refused
+    after the connect timeout instead of taking tasks it never finishes."""
 
     environment: Callable[[], dict[str, str]] | None = None
     on_start: Callable[[], None] | None = None
     name: str = "worker-setup"
+    probe: Callable[[], object] | None = None
 
     def variables(self) -> dict[str, str]:
         return dict(self.environment()) if self.environment is not None else {}
@@ -49,12 +53,28 @@ def run_task(variables: dict[str, str], function: Callable, args: tuple):
     return function(*args)
 
 
+_IN_LOCAL_WORKER = False
+"""Set in a worker process of a local pool when it starts (:func:`local_worker_started`)."""
+
+
+def local_worker_started() -> None:
+    """What a local worker process does first (the pool's initializer): it knows it is a worker
+    (Python 3.9+ pool workers are not daemonic, so :func:`in_worker` cannot tell from that), and
+    it ignores Ctrl-C, which the terminal sends to the whole process group: the submitting process
+    alone handles it and ends its workers (no worker traceback, none left running)."""
+    import signal
+
+    global _IN_LOCAL_WORKER
+    _IN_LOCAL_WORKER = True
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def in_worker() -> bool:
-    """True inside a task of a worker (a daemonic local worker process, or a Dask worker), where
-    starting more worker processes is not allowed or would compete for the worker's core."""
+    """True inside a task of a worker (a local worker process, or a Dask worker), where starting
+    more worker processes is not allowed or would compete for the worker's core: one pool level only."""
     import multiprocessing
 
-    if multiprocessing.current_process().daemon:
+    if _IN_LOCAL_WORKER or multiprocessing.current_process().daemon:
         return True
     return dask_worker() is not None
 

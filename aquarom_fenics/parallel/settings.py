@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from aquarom_fenics.errors import InputError
+from aquarom_fenics.parallel.addresses import check_address
 
 DEFAULT_CONNECT_TIMEOUT = 10.0
 """Seconds to wait for a Dask scheduler before the command is refused."""
@@ -63,10 +64,17 @@ def choose_cluster(scheduler: str | None, scheduler_file: Path | None,
     """The command line's --scheduler / --scheduler-file, else the configured ``[cluster]``, else local."""
     if scheduler and scheduler_file:
         raise InputError("--scheduler and --scheduler-file: give one of them")
+    if scheduler is not None and not scheduler.strip():
+        raise InputError(f"--scheduler {scheduler!r}: an empty address; give one such as tcp://head-node:8786, "
+                         "or leave --scheduler out to run on local worker processes")
+    if scheduler_file is not None and not str(scheduler_file).strip():
+        raise InputError("--scheduler-file '': an empty file name; give the file `dask scheduler --scheduler-file` writes")
     base = configured or ClusterSettings()
     timeout = base.connect_timeout if connect_timeout is None else connect_timeout
-    if not timeout > 0:
-        raise InputError(f"--connect-timeout {timeout}: must be a positive number of seconds")
+    if not (timeout > 0 and math.isfinite(timeout)):
+        raise InputError(f"--connect-timeout {timeout}: must be a positive, finite number of seconds")
+    if scheduler:
+        check_address(scheduler, f"--scheduler {scheduler}")
     if scheduler or scheduler_file:
         return ClusterSettings(scheduler or "", str(scheduler_file or ""), timeout)
     return ClusterSettings(base.scheduler, base.scheduler_file, timeout)

@@ -26,6 +26,8 @@ from aquarom_fenics.physics.thrust_term import ThrustData
 FORMAT_VERSION = 3
 """2: the tensors grouped per force term (elastic, muscle, inertia, drag, thrust, observation);
 3: the thrust's kinematic rows (stations) and the drag's reference-velocity row."""
+MAX_PROM_FILE_BYTES = 16 * 1024 ** 3
+"""Largest PROM file read [bytes]."""
 ZIP_MAGIC = b"PK\x03\x04"       # first bytes of a .npz (zip) archive
 
 
@@ -110,7 +112,11 @@ class ReducedModel:
         """Read a PROM file; refuses another scene's, another format's or another version's file, naming the difference."""
         from aquarom_fenics import __version__
 
+        from aquarom_fenics.io.readback import require_regular_file
+
         path = Path(path)
+        if path.exists() or path.is_symlink():
+            require_regular_file(path, "PROM file", MAX_PROM_FILE_BYTES)      # no FIFO, device or link loop
         if path.is_file() and _first_bytes(path, 4) != ZIP_MAGIC:
             content = "an empty file" if path.stat().st_size == 0 else "not a .npz archive"
             raise InputError(f"PROM file {path}: {content}, not a PROM file (write one with `aquarom build SCENE`)")
@@ -122,6 +128,9 @@ class ReducedModel:
             raise InputError(f"PROM file {path}: not found (build one with `aquarom build SCENE`)") from None
         except Exception as error:  # zip, JSON and key errors of a damaged file
             raise InputError(f"PROM file {path}: unreadable ({type(error).__name__}: {error})") from None
+        problem = _header_problem(header)
+        if problem:
+            raise InputError(f"PROM file {path}: damaged header ({problem}); rebuild it with `aquarom build SCENE`")
         if header.get("format_version") != FORMAT_VERSION:
             raise InputError(f"PROM file {path}: format version {header.get('format_version')} (aquarom_fenics "
                              f"{header.get('software_version')}), this version reads format {FORMAT_VERSION}; "
@@ -133,9 +142,67 @@ class ReducedModel:
             raise InputError(f"PROM file {path}: built for scene hash {header['scene_hash']}, the scene's hash is "
                              f"{scene_hash} (a different scene or changed values); rebuild it")
         try:
-            return _unflatten(cls, "", arrays, header)
-        except KeyError as missing:
-            raise InputError(f"PROM file {path}: unreadable (missing {missing})") from None
+            model = _unflatten(cls, "", arrays, header)
+        except (KeyError, TypeError, ValueError) as missing:
+            raise InputError(f"PROM file {path}: unreadable (missing array or value {missing}); "
+                             "rebuild it with `aquarom build SCENE`") from None
+        problem = _array_problem(model, arrays)
+        if problem:
+            raise InputError(f"PROM file {path}: the header does not match its arrays ({problem}); "
+                             "rebuild it with `aquarom build SCENE`")
+        return model
+
+
+HEADER_TEXT_LISTS = ("shape_names", "labels", "dropped")
+"""Header keys that are lists of names."""
+
+
+def _header_problem(header) -> str:
+    """What makes a PROM header unusable (not an object, a name list or the scene hash missing or of
+    the wrong type), or an empty string."""
+    if not isinstance(header, dict):
+        return f"a JSON object is needed, got {type(header).__name__}"
+    if not isinstance(header.get("scene_hash"), str):
+        return f"scene_hash must be a string, got {header.get('scene_hash')!r:.40}"
+    for key in HEADER_TEXT_LISTS:
+        value = header.get(key)
+        if not isinstance(value, list) or not all(isinstance(name, str) for name in value):
+            return f"{key} must be a list of names, got {value!r:.40}"
+    if len(set(header["shape_names"])) != len(header["shape_names"]):
+        return "shape_names names a parameter twice"
+    if not isinstance(header.get("design_point"), dict):
+        return f"design_point must be an object, got {header.get('design_point')!r:.40}"
+    return ""
+
+
+def _array_problem(model: "ReducedModel", arrays: dict) -> str:
+    """How the header's counts disagree with the arrays (p = len(shape_names) parameters, m =
+    len(labels) basis vectors), or an empty string: ξ_c and the radii have p entries, V is
+    (n, 3, m), every Taylor term's first and second derivatives are (p, …) and (p, p, …) of its
+    constant, every ξ-gradient of the thrust ends in p."""
+    p, m = len(model.shape_names), len(model.labels)
+    for name in ("xi_center", "validity_radius"):
+        value = np.asarray(getattr(model, name))
+        if value.shape != (p,):
+            return f"{name} has shape {value.shape}, shape_names {p} parameter(s)"
+    basis = np.asarray(model.basis)
+    if basis.ndim != 3 or basis.shape[1:] != (3, m):
+        return f"basis has shape {basis.shape}, labels {m} vector(s)"
+    for key, value in arrays.items():
+        if not isinstance(value, np.ndarray):
+            continue
+        stem, _, kind = key.rpartition(".")
+        constant = arrays.get(f"{stem}.constant")
+        if kind == "first" and constant is not None and value.shape != (p, *constant.shape):
+            return f"{key} has shape {value.shape}, expected {(p, *constant.shape)} for shape_names {p}"
+        if kind == "second" and constant is not None and value.shape != (p, p, *constant.shape):
+            return f"{key} has shape {value.shape}, expected {(p, p, *constant.shape)}"
+        if key.endswith("_gradient") and (value.ndim == 0 or value.shape[-1] != p):
+            return f"{key} has shape {value.shape}, its last axis must be shape_names' {p}"
+    mass = np.asarray(model.inertia.mass.constant)
+    if mass.shape != (m, m):
+        return f"inertia.mass.constant has shape {mass.shape}, labels {m} vector(s)"
+    return ""
 
 
 def _flatten(record, prefix: str, arrays: dict, header: dict) -> None:
@@ -161,14 +228,19 @@ def _unflatten(cls, prefix: str, arrays: dict, header: dict):
         elif name in header:
             values[item.name] = header[name]
         else:
-            values[item.name] = _unflatten(_record_type(hints[item.name]), name + ".", arrays, header)
+            record_type = _record_type(hints[item.name])
+            if record_type is None:          # an array (or value) the file lacks
+                raise KeyError(name)
+            values[item.name] = _unflatten(record_type, name + ".", arrays, header)
     return cls(**values)
 
 
 def _record_type(hint):
     """The dataclass of a field annotated ``Record`` or ``Record | None``."""
     arguments = get_args(hint)
-    return next(arg for arg in arguments if is_dataclass(arg)) if arguments else hint
+    if not arguments:
+        return hint if is_dataclass(hint) else None
+    return next((arg for arg in arguments if is_dataclass(arg)), None)
 
 
 def _first_bytes(path: Path, count: int) -> bytes:

@@ -195,7 +195,7 @@ def test_a_file_added_at_the_swap_is_not_deleted(scenes, tmp_path, capsys, monke
 
     monkeypatch.setattr(outputs_module, "_exchange", add_then_exchange)
     assert main(["simulate", scenes["short"], "--out", str(out), "--no-progress", "--force"]) == 0
-    kept = [p for p in tmp_path.iterdir() if p.name.startswith("run.new-")]
+    kept = [p for p in tmp_path.iterdir() if p.name.startswith("run.kept-")]      # not taken for a killed run
     assert len(kept) == 1 and (kept[0] / "late.txt").read_text() == "mine"
     assert sorted(os.listdir(kept[0])) == ["late.txt"]          # the earlier run's own files are gone
     assert "late.txt" not in os.listdir(out) and (out / "manifest.json").exists()

@@ -1,0 +1,115 @@
+"""The designs of a sweep: the rows of a CSV file, a grid or a seeded Latin hypercube over the scene's
+bounds, each a value per shape of the scene (a shape a source does not set keeps its start value).
+At most :data:`MAX_DESIGNS` designs, checked before any is made."""
+from __future__ import annotations
+
+import csv
+import itertools
+import math
+from pathlib import Path
+
+import numpy as np
+
+from aquarom_fenics.errors import InputError
+from aquarom_fenics.io.readback import require_regular_file
+from aquarom_fenics.io.scene import Scene, parse_number
+
+MAX_DESIGNS = 100_000
+"""Most designs of one sweep (a grid's product or --samples), checked before any is made."""
+MAX_DESIGN_FILE_BYTES = 64 * 1024 * 1024
+"""Largest --designs file [bytes]."""
+
+
+def _require_shapes(scene: Scene) -> None:
+    if not scene.shapes:
+        raise InputError(f"scene {scene.source} has no [shapes]: there is no design space to sweep")
+
+
+def _complete(scene: Scene, values: dict[str, float]) -> dict[str, float]:
+    """Every shape of the scene, in its order: the given values, else the start values."""
+    return {shape.name: float(values.get(shape.name, shape.start)) for shape in scene.shapes}
+
+
+def grid_designs(specs: list[str], scene: Scene) -> list[dict[str, float]]:
+    """The Cartesian product of ``name=lo:hi:n`` axes (n evenly spaced values from lo to hi)."""
+    _require_shapes(scene)
+    axes = {}
+    for spec in specs:
+        where = f"--grid {spec}"
+        name, sep, interval = spec.partition("=")
+        parts = interval.split(":")
+        if not sep or len(parts) != 3:
+            raise InputError(f"{where}: expected name=lo:hi:n, e.g. --grid z_tail=-0.5:0.5:5")
+        name = name.strip()
+        if name not in scene.shape_names:
+            raise InputError(f"{where}: '{name}' is not a shape variation of scene {scene.name} "
+                             f"(valid: {', '.join(scene.shape_names)})")
+        if name in axes:
+            raise InputError(f"{where}: {name} is given twice; give each shape one --grid")
+        low, high = parse_number(parts[0], where), parse_number(parts[1], where)
+        try:
+            count = int(parts[2])
+        except ValueError:
+            raise InputError(f"{where}: n = '{parts[2]}' must be a whole number of values ≥ 1") from None
+        if count < 1:
+            raise InputError(f"{where}: n = {count} must be ≥ 1")
+        if count == 1 and low != high:
+            raise InputError(f"{where}: one value (n = 1) needs lo = hi")
+        total = count * math.prod(len(values) for values in axes.values())
+        if total > MAX_DESIGNS:
+            raise InputError(f"{where}: the grid would hold {total:,} designs, more than {MAX_DESIGNS:,}; "
+                             "use fewer values per axis, or split the sweep")
+        axes[name] = np.linspace(low, high, count).tolist()
+    names = list(axes)
+    return [_complete(scene, dict(zip(names, values))) for values in itertools.product(*axes.values())]
+
+
+def csv_designs(path: Path, scene: Scene) -> list[dict[str, float]]:
+    """The rows of a CSV file whose header names shapes of the scene (each at most once)."""
+    _require_shapes(scene)
+    require_regular_file(path, "--designs", MAX_DESIGN_FILE_BYTES)
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as stream:      # a byte-order mark is allowed
+            rows = list(csv.reader(stream))
+    except UnicodeDecodeError:
+        raise InputError(f"--designs {path}: not a UTF-8 text file") from None
+    except csv.Error as error:
+        raise InputError(f"--designs {path}: not a CSV file ({error})") from None
+    except OSError as error:
+        raise InputError(f"--designs {path}: cannot be read ({error.strerror})") from None
+    rows = [row for row in rows if any(cell.strip() for cell in row)]
+    if len(rows) < 2:
+        raise InputError(f"--designs {path}: needs a header of shape names and at least one row of values")
+    header = [cell.strip() for cell in rows[0]]
+    for name in header:
+        if name not in scene.shape_names:
+            raise InputError(f"--designs {path}: column '{name}' is not a shape variation of scene {scene.name} "
+                             f"(valid: {', '.join(scene.shape_names)})")
+        if header.count(name) > 1:
+            raise InputError(f"--designs {path}: column '{name}' appears twice")
+    designs = []
+    for number, row in enumerate(rows[1:], start=2):
+        if len(row) != len(header):
+            raise InputError(f"--designs {path}: line {number} has {len(row)} values for {len(header)} columns")
+        designs.append(_complete(scene, {name: parse_number(cell.strip(), f"--designs {path} line {number} column {name}")
+                                         for name, cell in zip(header, row)}))
+    return designs
+
+
+def latin_hypercube(scene: Scene, samples: int, seed: int) -> list[dict[str, float]]:
+    """``samples`` designs of a Latin hypercube over the scene's bounds: in every shape's range each
+    of the ``samples`` equal strata holds one design (uniform inside its stratum); numpy's PCG64
+    generator seeded with ``seed``."""
+    _require_shapes(scene)
+    if not 1 <= samples <= MAX_DESIGNS:
+        raise InputError(f"--samples {samples}: must be in [1, {MAX_DESIGNS:,}]")
+    if seed < 0:
+        raise InputError(f"--seed {seed}: must be ≥ 0")
+    generator = np.random.default_rng(seed)
+    columns = []
+    for shape in scene.shapes:
+        strata = generator.permutation(samples)
+        unit = (strata + generator.random(samples)) / samples
+        columns.append(shape.lower + unit * (shape.upper - shape.lower))
+    return [_complete(scene, {shape.name: float(column[k]) for shape, column in zip(scene.shapes, columns)})
+            for k in range(samples)]

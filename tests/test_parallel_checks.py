@@ -1,0 +1,86 @@
+"""The pool layer's own checks, without a real cluster: a local worker that ignores SIGTERM is
+killed when its pool is cancelled, and a Dask cluster without a usable worker is one line."""
+import os
+import signal
+import time
+
+import pytest
+
+from aquarom_fenics.errors import InputError
+from aquarom_fenics.parallel import ClusterSettings, LocalProcesses, STOP_GRACE, usable_workers
+
+
+def ignore_sigterm_and_wait() -> int:
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    time.sleep(120)
+    return os.getpid()
+
+
+def test_a_local_worker_that_ignores_sigterm_is_killed_on_cancel():
+    pool = LocalProcesses(1)
+    pool.submit(ignore_sigterm_and_wait)
+    deadline = time.monotonic() + 120
+    while not getattr(pool._pool, "_processes", None) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    processes = list(pool._pool._processes.values())
+    time.sleep(2)                                   # inside the task, SIGTERM ignored
+    started = time.monotonic()
+    pool.shutdown(cancel=True)
+    assert time.monotonic() - started < 3 * STOP_GRACE + 30
+    assert processes and not any(process.is_alive() for process in processes)
+
+
+class FakeFuture:
+    def __init__(self, error):
+        self.error = error
+        self.cancelled = False
+
+    def result(self, timeout):
+        raise self.error
+
+    def cancel(self):
+        self.cancelled = True
+
+
+class FakeClient:
+    """What usable_workers asks of a ``distributed.Client``."""
+
+    def __init__(self, workers: bool, probe_error: Exception | None = None):
+        self.workers = workers
+        self.probe_error = probe_error
+        self.futures = []
+
+    def wait_for_workers(self, count, timeout):
+        if not self.workers:
+            raise TimeoutError(f"only 0 of {count} workers after {timeout} s")
+
+    def submit(self, function, pure):
+        self.futures.append(FakeFuture(self.probe_error))
+        return self.futures[-1]
+
+
+SETTINGS = ClusterSettings(scheduler="tcp://head-node:8786", connect_timeout=1.0)
+
+
+def test_a_cluster_without_workers_is_one_line():
+    with pytest.raises(InputError) as refused:
+        usable_workers(FakeClient(workers=False), SETTINGS, probe=os.getpid)
+    message = str(refused.value)
+    assert "\n" not in message and "no worker within 1 s" in message and "tcp://head-node:8786" in message
+
+
+def test_workers_that_cannot_import_the_probe_are_the_import_line():
+    client = FakeClient(workers=True, probe_error=ModuleNotFoundError("No module named 'aquarom_fenics'"))
+    with pytest.raises(InputError) as refused:
+        usable_workers(client, SETTINGS, probe=os.getpid)
+    message = str(refused.value)
+    assert "cannot import the toolkit" in message and "No module named 'aquarom_fenics'" in message
+    assert client.futures[0].cancelled
+
+
+def test_a_probe_that_fails_otherwise_is_one_line():
+    client = FakeClient(workers=True, probe_error=TimeoutError("probe not done\nsecond line"))
+    with pytest.raises(InputError) as refused:
+        usable_workers(client, SETTINGS, probe=os.getpid)
+    message = str(refused.value)
+    assert "\n" not in message and "no worker could run a task" in message and "probe not done" in message
