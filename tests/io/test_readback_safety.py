@@ -541,7 +541,8 @@ def test_ctrl_c_of_a_pareto_sweep_on_two_workers_leaves_no_process(tmp_path):
 
     psutil = pytest.importorskip("psutil")
     scene = tmp_path / "co.toml"
-    scene.write_text(CO.replace("duration = 0.4", "duration = 2.0"))
+    # long enough that the interrupt always lands inside the weights' tasks, however fast the host
+    scene.write_text(CO.replace("duration = 0.4", "duration = 2.0").replace("max_iterations = 3", "max_iterations = 200"))
     command = [str(Path(sys.executable).with_name("aquarom")), "pareto", str(scene), "--workers", "2",
                "--out", str(tmp_path / "p")]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
