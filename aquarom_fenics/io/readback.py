@@ -21,6 +21,7 @@ from typing import Callable
 import numpy as np
 
 from aquarom_fenics.errors import InputError
+from aquarom_fenics.files import require_regular_file  # noqa: F401  (the readers below and their users)
 from aquarom_fenics.io.tables import TRAJECTORY_COLUMNS, TRAJECTORY_FILE_COLUMNS
 
 MAX_JSON_BYTES = 256 * 1024 * 1024
@@ -96,25 +97,6 @@ class record:
         for key, check in self.optional.items():
             if key in value:
                 check(value[key], f"{where}.{key}".lstrip("."))
-
-
-def require_regular_file(path: Path, what: str, max_bytes: int) -> None:
-    """Refuse (InputError, one line) anything but a regular file of at most ``max_bytes``: a FIFO,
-    a device such as /dev/zero, a folder or a symbolic-link loop is refused before it is opened
-    (a FIFO would block the reader, a device never ends)."""
-    try:
-        details = Path(path).stat()
-    except FileNotFoundError:
-        raise InputError(f"{what} {path}: not found") from None
-    except OSError as error:
-        raise InputError(f"{what} {path}: cannot be read ({error.strerror})") from None
-    if stat.S_ISDIR(details.st_mode):
-        raise InputError(f"{what} {path}: a folder, not a file")
-    if not stat.S_ISREG(details.st_mode):
-        raise InputError(f"{what} {path}: not a regular file (a FIFO, socket or device); give a file")
-    if details.st_size > max_bytes:
-        raise InputError(f"{what} {path}: {details.st_size / 2**20:.0f} MB, larger than the "
-                         f"{max_bytes / 2**20:.0f} MB such a file may have")
 
 
 def load_json(path: Path, schema: Check, kind: str, remedy: str = "") -> dict:

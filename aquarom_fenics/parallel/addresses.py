@@ -8,11 +8,10 @@ bounded size, UTF-8 JSON, an object whose ``address`` is a string this module ac
 from __future__ import annotations
 
 import json
-import os
-import stat
 from pathlib import Path
 
 from aquarom_fenics.errors import InputError
+from aquarom_fenics.files import require_regular_file
 
 SCHEMES = ("tcp", "tls")
 """Dask protocols connected with (ucx:// needs packages that are not installed)."""
@@ -58,18 +57,7 @@ def scheduler_file_address(path: Path) -> str:
 def _read_json(path: Path, where: str, remedy: str):
     """The JSON value of ``path``, read only if it is a regular file of bounded size (a FIFO would
     block the reader, a device such as /dev/zero never ends)."""
-    try:
-        details = os.stat(path)
-    except FileNotFoundError:
-        raise InputError(f"{where}: not found; {remedy}") from None
-    except OSError as error:          # a link loop, a name too long, no permission
-        raise InputError(f"{where}: cannot be read ({error.strerror}); {remedy}") from None
-    if stat.S_ISDIR(details.st_mode):
-        raise InputError(f"{where}: a folder, not a file; {remedy}")
-    if not stat.S_ISREG(details.st_mode):
-        raise InputError(f"{where}: not a regular file (a FIFO, socket or device); {remedy}")
-    if details.st_size > MAX_SCHEDULER_FILE_BYTES:
-        raise InputError(f"{where}: larger than {MAX_SCHEDULER_FILE_BYTES // 1024} KB; {remedy}")
+    require_regular_file(path, "scheduler file", MAX_SCHEDULER_FILE_BYTES, remedy)
     try:
         text = path.read_bytes().decode("utf-8")
     except UnicodeDecodeError:
