@@ -179,10 +179,12 @@ def default_station_count() -> int:
 def _reference_note(reference: dict, unit=None) -> str:
     """'value ± error (order used p, observed q or none, F_s)' of a grid-convergence reference."""
     unit = unit or cm
+    if reference.get("value") is None:
+        return f"none ({reference.get('reason', 'no order observed')})"
     observed = reference.get("observed_order")
     used = reference.get("order_used")
     how = (f"order {used:.2g} used, observed {observed:.2g}" if observed is not None
-           else f"no order observed: formal order {used:g}") if used is not None else (
+           else f"formal order {used:g}") if used is not None else (
            f"observed order {observed:.1f}" if observed is not None else "")
     safety = f", F_s = {reference['safety_factor']:g}" if reference.get("safety_factor") else ""
     return f"{unit(reference['value'])} ± {unit(reference['estimated_error'])}" + (f" ({how}{safety})" if how else "")
@@ -249,9 +251,8 @@ def accuracy_table(folder: Path = SNAPSHOT) -> str:
     rows.append([f"FOM on degree {degree}, level {level} against the mesh-converged reference (degree "
                  f"{series[0]['degree']}, levels {series[0]['level']}–{series[-1]['level']}: "
                  f"{', '.join(cm(row['distance']) for row in series)} cm; reference "
-                 f"{cm(reference['distance']['value'])} ± {cm(reference['distance']['estimated_error'])} cm, "
-                 f"tail amplitude {cm(reference['tail_amplitude']['value'])} ± "
-                 f"{cm(reference['tail_amplitude']['estimated_error'])} cm)",
+                 f"{_reference_note(reference['distance'])} cm, "
+                 f"tail amplitude {_reference_note(reference['tail_amplitude'])})",
                  percent(at_default["distance_error"]), percent(at_default.get("tail_amplitude_error")),
                  "`validation/mesh_convergence.json`"])
     count = default_station_count()

@@ -6,19 +6,21 @@ muscles at their peak (a_left = A, a_right = -A, head clamped, fully nonlinear) 
 station's static compliance under a unit x-force on it (head clamped, B_0 K_0⁻¹ B_0ᵀ: the
 quantity a point force has no mesh limit of, SPEC §5).
 
-The reference of each quantity is a Richardson extrapolation of the three finest cases of one
-series (one element degree), with the mesh size h = (cells)^(-1/3) (levels are not refined by
-a constant ratio), made safe in the manner of Roache's grid-convergence index:
+The reference of each quantity is a Richardson extrapolation of one series (one element degree),
+with the mesh size h = (cells)^(-1/3) (levels are not refined by a constant ratio), made safe in
+the manner of Roache's grid-convergence index. Three consecutive cases
 
     f_i = f* + C h_i^p,   i = 1, 2, 3 (coarse → fine),
 
-is solved for the observed order p_obs; the extrapolation uses p = min(p_obs, p_formal), never an
-order above the element's formal order for that quantity (FORMAL_ORDER), from the two finest cases:
+give the observed order p_obs; the extrapolation uses p = min(p_obs, p_formal), never an order
+above the element's formal order for that quantity (FORMAL_ORDER), from the finer two:
 
     f* = f_3 + (f_3 - f_2)/(r^p - 1),   r = h_2/h_3,
 
-and its error bar is F_s |f* - f_3| with the safety factor F_s = 1.25, or F_s = 3 with p = p_formal
-when no order is observed (differences changing sign, or no order in ORDER_RANGE fits).
+with the error bar F_s |f* - f_3|, F_s = 1.25. The three finest cases are used when they show an
+order; otherwise the next triple towards the coarse end, provided every finer case lies inside
+its error bar (the finer cases check the estimate). A series in which no triple shows an order,
+or whose finer cases fall outside the estimate, has no reference (value None, with the reason).
 """
 from __future__ import annotations
 
@@ -101,8 +103,8 @@ def tail_compliances(model: FullOrderModel) -> dict[str, float]:
     return compliances
 
 
-SAFETY_FACTOR = {"observed": 1.25, "formal": 3.0}
-"""F_s of the error bar: with an observed order (three cases in the asymptotic range), without one."""
+SAFETY_FACTOR = 1.25
+"""F_s of the error bar: three cases in the asymptotic range (an observed order)."""
 
 
 def formal_orders(degree: int) -> dict[str, float]:
@@ -137,25 +139,40 @@ def observed_order(h, f) -> float | None:
 
 
 def richardson(cells, values, formal_order: float) -> dict:
-    """Reference value, observed order, order used and error bar from the three finest cases.
+    """Reference value, observed order, order used and error bar of one series (the module's docstring).
 
-    ``cells`` and ``values`` per case of one series; h = cells^(-1/3). The order used is
-    min(observed, ``formal_order``), or ``formal_order`` when none is observed; the error bar is
-    F_s × |f* - f_finest| (SAFETY_FACTOR, see the module's docstring).
+    ``cells`` and ``values`` per case; h = cells^(-1/3). ``value`` is None when the series shows no
+    order that its finer cases confirm (``reason`` says why).
     """
-    order = np.argsort(cells)[-3:]
+    order = np.argsort(cells)
     h = np.asarray(cells, dtype=float)[order] ** (-1.0 / 3.0)
     f = np.asarray(values, dtype=float)[order]
-    series_cells = [int(c) for c in np.asarray(cells)[order]]
-    if len(f) < 2:
-        raise ValueError("a convergence series needs at least two cases")
-    observed = observed_order(h, f) if len(f) >= 3 else None
-    used = formal_order if observed is None else min(observed, formal_order)
-    safety = SAFETY_FACTOR["formal" if observed is None else "observed"]
-    correction = (f[-1] - f[-2]) / ((h[-2] / h[-1]) ** used - 1.0)
-    return {"value": float(f[-1] + correction), "observed_order": None if observed is None else float(observed),
-            "order_used": float(used), "formal_order": float(formal_order), "safety_factor": safety,
-            "estimated_error": float(safety * abs(correction)), "series_cells": series_cells}
+    ordered_cells = [int(c) for c in np.asarray(cells)[order]]
+    if len(f) < 3:
+        raise ValueError("a convergence series needs at least three cases")
+    for end in range(len(f), 2, -1):                  # the finest triple first
+        observed = observed_order(h[end - 3:end], f[end - 3:end])
+        if observed is None:
+            continue
+        used = min(observed, formal_order)
+        correction = (f[end - 1] - f[end - 2]) / ((h[end - 2] / h[end - 1]) ** used - 1.0)
+        value, error = f[end - 1] + correction, SAFETY_FACTOR * abs(correction)
+        outside = [int(c) for c, x in zip(ordered_cells[end:], f[end:]) if abs(x - value) > error]
+        if outside:
+            return _no_reference(formal_order, ordered_cells,
+                                 f"the estimate from {ordered_cells[end - 3:end]} cells, {value:.6g} ± {error:.2g}, "
+                                 f"misses the finer cases {outside}")
+        return {"value": float(value), "observed_order": float(observed), "order_used": float(used),
+                "formal_order": float(formal_order), "safety_factor": SAFETY_FACTOR,
+                "estimated_error": float(error), "series_cells": ordered_cells[end - 3:end],
+                "checked_against_cells": ordered_cells[end:]}
+    return _no_reference(formal_order, ordered_cells, "no three consecutive cases show an order (their differences "
+                         "change sign, or shrink more slowly than any power of h)")
+
+
+def _no_reference(formal_order: float, cells: list[int], reason: str) -> dict:
+    return {"value": None, "observed_order": None, "order_used": None, "formal_order": float(formal_order),
+            "safety_factor": None, "estimated_error": None, "series_cells": cells, "reason": reason}
 
 
 def reference_series(cases: list[MeshCase]) -> list[MeshCase]:
@@ -177,7 +194,8 @@ def mesh_convergence(cases: list[MeshCase], tolerance: float = DEFAULT_TOLERANCE
     for case in sorted(cases, key=lambda case: (case.degree, case.level)):
         row = asdict(case)
         for name in QUANTITIES:
-            row[f"{name}_error"] = getattr(case, name) / reference[name]["value"] - 1.0
+            limit = reference[name]["value"]
+            row[f"{name}_error"] = None if limit is None else getattr(case, name) / limit - 1.0
         row["relative_error_distance"] = row["distance_error"]
         rows.append(row)
     return {"reference": reference, "rows": rows, "default": cheapest_within(rows, tolerance),
@@ -186,7 +204,8 @@ def mesh_convergence(cases: list[MeshCase], tolerance: float = DEFAULT_TOLERANCE
 
 def cheapest_within(rows: list[dict], tolerance: float) -> dict | None:
     """(degree, level) of the fastest FOM whose distance is within ``tolerance`` of the reference, or None."""
-    within = [row for row in rows if abs(row["relative_error_distance"]) <= tolerance]
+    within = [row for row in rows if row["relative_error_distance"] is not None
+              and abs(row["relative_error_distance"]) <= tolerance]
     if not within:
         return None
     best = min(within, key=lambda row: row["wall_time"])

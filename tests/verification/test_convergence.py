@@ -15,6 +15,7 @@ def test_richardson_recovers_limit_and_order_of_an_exact_power_law():
     assert result["observed_order"] == pytest.approx(2.0, rel=1e-8)
     assert result["order_used"] == pytest.approx(2.0, rel=1e-8)
     assert result["estimated_error"] == pytest.approx(1.25 * 0.8 * h[-1] ** 2, rel=1e-8)
+    assert result["series_cells"] == CELLS and result["checked_against_cells"] == []
 
 
 def test_an_observed_order_above_the_formal_one_is_not_trusted():
@@ -31,17 +32,33 @@ def test_an_observed_order_above_the_formal_one_is_not_trusted():
     assert abs(result["value"] - 0.045) < result["estimated_error"]
 
 
-def test_richardson_uses_the_three_finest_cases_and_falls_back_on_oscillation():
+def test_richardson_uses_the_three_finest_cases_and_has_no_reference_without_an_order():
     h = np.asarray([800] + CELLS, dtype=float) ** (-1 / 3)
     values = 2.0 + 5.0 * h ** 1.5
     values[0] += 1.0       # the coarsest case is off the power law: it must not matter
     assert richardson([800] + CELLS, values, formal_order=2.0)["value"] == pytest.approx(2.0, rel=1e-10)
     oscillating = richardson(CELLS, [1.0, 1.2, 1.1], formal_order=2.0)
-    h = np.asarray(CELLS, dtype=float) ** (-1 / 3)
-    correction = -0.1 / ((h[1] / h[2]) ** 2 - 1.0)
-    assert oscillating["observed_order"] is None and oscillating["order_used"] == 2.0
-    assert oscillating["value"] == pytest.approx(1.1 + correction, rel=1e-12)
-    assert oscillating["estimated_error"] == pytest.approx(3.0 * abs(correction), rel=1e-12)
+    assert oscillating["value"] is None and oscillating["estimated_error"] is None
+    assert oscillating["observed_order"] is None and "no three consecutive cases show an order" in oscillating["reason"]
+
+
+FIVE = [1300, 4300, 8100, 16000, 25000]
+
+
+def test_a_finest_triple_without_an_order_falls_back_to_one_its_finer_case_confirms():
+    """Levels 2-4 converge at third order; level 5 adds a little noise, so the finest triple shows no
+    order: the reference comes from levels 2-4, and level 5 must lie inside its error bar."""
+    h = np.asarray(FIVE, dtype=float) ** (-1 / 3)
+    values = 0.047 - 2.0 * h ** 3
+    values[4] = values[3] + 0.8 * (values[3] - values[2])     # too large a last step for any order
+    result = richardson(FIVE, values, formal_order=3.0)
+    assert result["series_cells"] == FIVE[1:4] and result["checked_against_cells"] == [25000]
+    assert result["observed_order"] == pytest.approx(3.0, rel=1e-6) and result["order_used"] == pytest.approx(3.0)
+    assert result["value"] == pytest.approx(0.047, rel=1e-9)
+    assert abs(values[4] - result["value"]) <= result["estimated_error"]
+    values[4] = result["value"] + 2 * result["estimated_error"]          # a finer case outside the bar
+    missed = richardson(FIVE, values, formal_order=3.0)
+    assert missed["value"] is None and "misses the finer cases [25000]" in missed["reason"]
 
 
 def case(degree, level, cells, distance, wall_time):

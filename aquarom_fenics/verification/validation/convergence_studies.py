@@ -210,6 +210,6 @@ def study_stations(runner: Runner, settings: Settings) -> dict:
         formal = 2.0 if base_scene(settings).fluid.spine_rule == "trapezoid" else 1.0
         reference = {name: richardson(spacing_cells, [row[name] for row in completed], formal) for name in QUANTITIES}
         for row in rows:
-            if row["status"] == "completed":
+            if row["status"] == "completed" and reference["distance"]["value"] is not None:
                 row["distance_error"] = row["distance"] / reference["distance"]["value"] - 1.0
     return {"degree": degree, "level": level, "rows": rows, "reference": reference}

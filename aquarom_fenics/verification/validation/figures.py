@@ -71,8 +71,8 @@ def mesh_figure(study: dict, path: Path) -> Path:
     figure, axes = plt.subplots(1, len(MESH_QUANTITIES), figsize=(18, 5), sharey=True)
     for axis, (name, label) in zip(axes, MESH_QUANTITIES):
         for degree, marker in ((1, "o"), (2, "s")):
-            # The case that is its own reference (an oscillating series) has no error to draw.
-            rows = [row for row in study["rows"] if row["degree"] == degree and row[f"{name}_error"] != 0.0]
+            # a quantity without a reference (None) has no error to draw, nor a case that is the reference (0)
+            rows = [row for row in study["rows"] if row["degree"] == degree and row[f"{name}_error"]]
             if not rows:
                 continue
             errors = [abs(row[f"{name}_error"]) for row in rows]
