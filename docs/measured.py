@@ -176,11 +176,12 @@ def default_station_count() -> int:
 
 # ---------------------------------------------------------------- the tables
 
-def _reference_note(reference: dict, unit=None) -> str:
+def _reference_note(reference: dict, unit=None, short: bool = False) -> str:
     """'value ± error (order used p, observed q or none, F_s)' of a grid-convergence reference."""
     unit = unit or cm
     if reference.get("value") is None:
-        return f"none ({reference.get('reason', 'no order observed')})"
+        return "none (no order observed that the finest level confirms)" if short else (
+            f"none ({reference.get('reason', 'no order observed')})")
     observed = reference.get("observed_order")
     used = reference.get("order_used")
     how = (f"order {used:.2g} used, observed {observed:.2g}" if observed is not None
@@ -252,7 +253,7 @@ def accuracy_table(folder: Path = SNAPSHOT) -> str:
                  f"{series[0]['degree']}, levels {series[0]['level']}–{series[-1]['level']}: "
                  f"{', '.join(cm(row['distance']) for row in series)} cm; reference "
                  f"{_reference_note(reference['distance'])} cm, "
-                 f"tail amplitude {_reference_note(reference['tail_amplitude'])})",
+                 f"tail amplitude {_reference_note(reference['tail_amplitude'], short=True)})",
                  percent(at_default["distance_error"]), percent(at_default.get("tail_amplitude_error")),
                  "`validation/mesh_convergence.json`"])
     count = default_station_count()
