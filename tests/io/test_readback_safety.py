@@ -545,8 +545,11 @@ def test_ctrl_c_of_a_pareto_sweep_on_two_workers_leaves_no_process(tmp_path):
     scene.write_text(CO.replace("duration = 0.4", "duration = 2.0").replace("max_iterations = 3", "max_iterations = 200"))
     command = [str(Path(sys.executable).with_name("aquarom")), "pareto", str(scene), "--workers", "2",
                "--out", str(tmp_path / "p")]
+    # as in an interactive terminal: a shell starts background jobs (a background `make test`) with
+    # SIGINT ignored, which the command rightly keeps ignored; the child gets Ctrl-C's default back
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               start_new_session=True, env=os.environ | {"AQUAROM_CACHE": str(tmp_path / "cache")})
+                               start_new_session=True, env=os.environ | {"AQUAROM_CACHE": str(tmp_path / "cache")},
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     parent = psutil.Process(process.pid)
     everything = []
     try:
