@@ -12,8 +12,9 @@ setup:
 demo: setup
 	$(PYTHON) scripts/demo.py --out $(OUT)
 
+# One BLAS thread per test process: the two xdist workers already take both cores.
 test: setup
-	$(PYTHON) -m pytest -q -ra -n 2 --dist loadfile tests
+	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(PYTHON) -m pytest -q -ra -n 2 --dist loadfile tests
 
 bench: setup
 	$(PYTHON) scripts/bench_fom.py

@@ -7,9 +7,14 @@ session, hence its own result cache; the tests marked ``mpi`` take turns (:func:
 import fcntl
 import os
 
-import pytest
+# One BLAS thread per process, set before numpy loads OpenBLAS: the xdist workers (and the CLI
+# runs they start) already use both cores, and OpenBLAS threads waiting for a core spin in sched_yield.
+for _variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+    os.environ.setdefault(_variable, "1")
 
-from aquarom_fenics.io.scene import scene_from_dict
+import pytest  # noqa: E402
+
+from aquarom_fenics.io.scene import scene_from_dict  # noqa: E402
 
 os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
 os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
