@@ -6,12 +6,7 @@ panels of one sheet share a scale. Lengths are in metres, picture sizes in pixel
 """
 from __future__ import annotations
 
-import atexit
-import os
-import select
-import subprocess
 import textwrap
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,6 +15,7 @@ from mpi4py import MPI
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.io.xdmf import REGION_TAG_NAMES
+from aquarom_fenics.viz.display import ensure_display
 
 PANEL_SIZE = (350, 250)
 """Width and height [px] of one panel of the shape sheet."""
@@ -54,8 +50,6 @@ EDGE_OPACITY = 0.4
 """Colour and opacity of the design's skin edges."""
 REFUSED_COLOUR = "#b03030"
 """Colour of the text of a panel whose design is refused."""
-XVFB_START_TIMEOUT = 10.0
-"""Seconds to wait for a virtual X server to accept connections."""
 
 
 @dataclass(frozen=True)
@@ -236,69 +230,12 @@ def _plotter(shape: tuple[int, int], panel_size: tuple[int, int] = PANEL_SIZE):
     """Off-screen pyvista Plotter with ``shape`` (rows, columns) panels of ``panel_size`` pixels."""
     import pyvista
 
-    _ensure_display()
+    ensure_display()
     rows, columns = shape
     plotter = pyvista.Plotter(off_screen=True, shape=shape, border=False,
                               window_size=(columns * panel_size[0], rows * panel_size[1]))
     plotter.set_background("white")
     return plotter
-
-
-def _ensure_display() -> None:
-    """Start a virtual X server (Xvfb) once when the process has no display; it stops when the process exits.
-
-    The server gets none of this process's open files: an inherited pipe (MPI's singleton daemon
-    holds the process's stdout until every holder of its watch pipe is gone) would keep a caller
-    reading our output waiting for as long as the server lives. It picks a free display number
-    itself (``-displayfd``), so concurrent processes do not share or fight over one."""
-    if os.environ.get("DISPLAY"):
-        return
-    read_end, write_end = os.pipe()
-    try:
-        server = subprocess.Popen(["Xvfb", "-displayfd", str(write_end), "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
-                                  stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                  pass_fds=(write_end,), start_new_session=True)
-    except FileNotFoundError:
-        raise RuntimeError("no display: DISPLAY is not set and Xvfb is not installed (install xvfb)") from None
-    finally:
-        os.close(write_end)
-    try:
-        number = _read_display_number(read_end, XVFB_START_TIMEOUT)
-    finally:
-        os.close(read_end)
-    if number is None:
-        _stop_server(server)
-        raise RuntimeError(f"no display: Xvfb did not report a display within {XVFB_START_TIMEOUT:g} s "
-                           "(set DISPLAY, or install xvfb)")
-    atexit.register(_stop_server, server)
-    os.environ["DISPLAY"] = f":{number}"
-
-
-def _read_display_number(read_end: int, timeout: float) -> int | None:
-    """The display number Xvfb writes on ``read_end`` when it accepts connections, or None."""
-    deadline = time.monotonic() + timeout
-    text = b""
-    while not text.endswith(b"\n"):
-        remaining = deadline - time.monotonic()
-        if remaining <= 0 or not select.select([read_end], [], [], remaining)[0]:
-            return None
-        chunk = os.read(read_end, 16)
-        if not chunk:            # the server exited before it was ready
-            return None
-        text += chunk
-    return int(text)
-
-
-def _stop_server(server: subprocess.Popen) -> None:
-    """SIGTERM (the server removes its socket), SIGKILL after 5 s."""
-    if server.poll() is not None:
-        return
-    server.terminate()
-    try:
-        server.wait(timeout=5.0)
-    except subprocess.TimeoutExpired:
-        server.kill()
-        server.wait()
 
 
 def _save(plotter, path: Path) -> None:

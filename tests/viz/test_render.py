@@ -170,8 +170,8 @@ def test_the_virtual_display_holds_no_pipe_of_its_caller_and_stops_with_the_proc
     child = textwrap.dedent("""\
         import os
         from mpi4py import MPI
-        from aquarom_fenics.viz.render import _ensure_display
-        _ensure_display()
+        from aquarom_fenics.viz.display import ensure_display
+        ensure_display()
         print(os.environ["DISPLAY"])
         """)
     environment = {key: value for key, value in os.environ.items() if key != "DISPLAY"}
