@@ -6,7 +6,7 @@ The equations of motion are a sum of terms,
 
 one module per term: ``elastic`` (f_int, SVK), ``muscle`` (f_act), ``inertia`` (M ü + C u̇ with
 Rayleigh damping C = α M + β K_0), ``drag`` (f_drag = g v_x²) and ``thrust`` (Lighthill, with
-``thrust_term``). On the FOM a term assembles its part of r and of the Newton matrix
+``thrust_full_order``, ``thrust_reduced``). On the FOM a term assembles its part of r and of the Newton matrix
 S = k_u ∂r/∂u + k_v ∂r/∂u̇ + k_a ∂r/∂ü, and projects itself on a basis V into reduced tensors,
 Taylor polynomials in Δξ = ξ - ξ_c. The reduced model evaluates those tensors at a design ξ
 (``tensors.at(Δξ)``) into a :class:`ReducedTerm`.

@@ -110,7 +110,7 @@ def region_tangents(model, time: float, u, v, a, dofs: np.ndarray) -> tuple[np.n
     the slab coupling Bᵀ J B and the head-averaged drag restricted to the region are added."""
     region = np.ix_(dofs, dofs)
     blocks = [matrix[region].toarray() for matrix in tangents(model, time, u, v, a)]
-    coupling = model.tangent_coupling_blocks(time, u, v, a, dofs)
+    coupling = model.newton_matrix.coupling_blocks(time, u, v, a, dofs)
     if coupling is not None:
         blocks = [block + extra for block, extra in zip(blocks, coupling)]
     return tuple(blocks)
