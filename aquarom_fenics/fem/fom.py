@@ -4,9 +4,10 @@
 
 on a distributed linear tetrahedral mesh with a degree-1 or degree-2 Lagrange displacement and
 PETSc. Each force is a term of ``physics/`` (elastic, muscle, inertia with Rayleigh damping, drag,
-thrust): the model sums their residuals and Newton-matrix parts. A design ξ is either pulled back (forms on the
-nominal mesh with F_1 = I + ∇u_ξ, ∇u_ξ = Σ ξ_k ∇U_k of the exact shape fields at the quadrature
-points, SPEC §4) or meshed directly (``moved_mesh``, u_ξ = 0).
+thrust): the model sums their residuals, and its Newton system (``newton_system.py``) their
+Newton-matrix parts. A design ξ is either pulled back (forms on the nominal mesh with
+F_1 = I + ∇u_ξ, ∇u_ξ = Σ ξ_k ∇U_k of the exact shape fields at the quadrature points, SPEC §4) or
+meshed directly (``moved_mesh``, u_ξ = 0).
 """
 from __future__ import annotations
 
@@ -274,7 +275,8 @@ class FullOrderModel:
         self.newton_matrix.set_time_step(scheme)
 
     def tangents(self, time, u, v, a) -> Iterator[PETSc.Mat]:
-        """K_t = ∂r/∂u, C_t = ∂r/∂u̇ and M_t = ∂r/∂ü at (t, u, u̇, ü) (see ``NewtonMatrix.tangents``)."""
+        """K_t = ∂r/∂u, C_t = ∂r/∂u̇ and M_t = ∂r/∂ü at (t, u, u̇, ü), in the Newton matrix's storage
+        (see ``NewtonMatrix.tangents``)."""
         return self.newton_matrix.tangents(time, u, v, a)
 
     def factorize(self, time, u, v, a) -> None:

@@ -149,6 +149,33 @@ def test_a_new_time_step_frees_the_matrices_of_the_previous_one(shaped_model):
     assert [matrix.handle for matrix in previous] == [0, 0]
     model.set_time_step(TimeScheme.from_solver(coarse_scene().solver))
 
+def test_destroy_releases_every_petsc_object_of_the_model():
+    """After a factorisation with the exact coupling (GMRES operator, LDLᵀ copy), a solve and the
+    tangents, ``destroy`` leaves no live PETSc object on the model, its Newton system or its terms."""
+    from petsc4py import PETSc
+
+    scene = coarse_scene(solver={"newton_coupling": "krylov"}, shapes=SHAPES)
+    model = FullOrderModel(scene, load_fish(scene), DESIGN)
+    zero = np.zeros(model.n_owned_dofs)
+    model.factorize(0.0, zero, zero, zero)
+    model.solve(np.ones(model.n_owned_dofs))
+    list(model.tangents(0.0, zero, zero, zero))
+    owners = [model, model.newton_matrix, model.newton_solver, model.elastic, model.muscle, model.inertia,
+              model.drag, model.thrust]
+
+    def petsc_objects():
+        for owner in owners:
+            for value in vars(owner).values():
+                for item in value.values() if isinstance(value, dict) else (value,):
+                    if isinstance(item, PETSc.Object):
+                        yield item
+
+    kept = list(petsc_objects())
+    assert len(kept) >= 12 and any(isinstance(item, PETSc.KSP) for item in kept)
+    model.destroy()
+    assert [type(item).__name__ for item in kept if item.handle != 0] == []
+
+
 @pytest.mark.parametrize("degree", [1, 2])
 def test_design_pulled_back_equals_design_meshed_directly(degree):
     scene = coarse_scene(shapes=SHAPES, solver={"duration": 0.2}, mesh={"degree": degree})
