@@ -5,10 +5,9 @@ REPOSITORY = Path(__file__).resolve().parents[1]
 
 MAX_LINES = 450
 
-STILL_TOO_LONG = {"aquarom_fenics/fem/fom.py": 594}
-"""Modules over the limit, with their length when this was written: each may only shrink, and
-leaves the list once it is within the limit (fem/fom.py is to be split into the model's operators
-and its Newton system)."""
+STILL_TOO_LONG: dict[str, int] = {}
+"""Modules over the limit, with their length when listed: each may only shrink, and leaves the list
+once it is within the limit."""
 
 
 def module_lengths() -> dict[str, int]:

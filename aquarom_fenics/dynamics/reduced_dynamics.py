@@ -28,13 +28,13 @@ from aquarom_fenics.dynamics.trajectory import (Trajectory, swimming_distance, t
 @functools.cache
 def blas_thread_pools() -> ThreadpoolController:
     """The thread pools of the loaded libraries, inspected once (numpy's and scipy's BLAS are loaded on
-    import): ``threadpool_limits`` inspects them again on every call, about 0.5 ms."""
+    import): ``threadpool_limits`` would inspect them again on every call."""
     return ThreadpoolController()
 
 
 def one_blas_thread(function):
-    """Run ``function`` with one BLAS thread. The reduced systems are m × m with m ≈ 10: a threaded
-    BLAS spends about 2 ms per 13 × 13 solve on two busy cores, one thread 7 µs (measured)."""
+    """Run ``function`` with one BLAS thread. The reduced systems are m × m with m ≈ 10, far too
+    small for a threaded BLAS to gain: its threads' start-up and waits cost more than the solve."""
     @functools.wraps(function)
     def single_threaded(*args, **kwargs):
         with blas_thread_pools().limit(limits=1, user_api="blas"):

@@ -4,15 +4,15 @@
 
 on a distributed linear tetrahedral mesh with a degree-1 or degree-2 Lagrange displacement and
 PETSc. Each force is a term of ``physics/`` (elastic, muscle, inertia with Rayleigh damping, drag,
-thrust): the model sums their residuals and Newton-matrix parts. A design ξ is either pulled back (forms on the
-nominal mesh with F_1 = I + ∇u_ξ, ∇u_ξ = Σ ξ_k ∇U_k of the exact shape fields at the quadrature
-points, SPEC §4) or meshed directly (``moved_mesh``, u_ξ = 0).
+thrust): the model sums their residuals, and its Newton system (``newton_system.py``) their
+Newton-matrix parts. A design ξ is either pulled back (forms on the nominal mesh with
+F_1 = I + ∇u_ξ, ∇u_ξ = Σ ξ_k ∇U_k of the exact shape fields at the quadrature points, SPEC §4) or
+meshed directly (``moved_mesh``, u_ξ = 0).
 """
 from __future__ import annotations
 
 import time as clock
 from collections.abc import Iterator
-from dataclasses import dataclass, field
 
 import numpy as np
 import ufl
@@ -21,42 +21,18 @@ from petsc4py import PETSc
 from ufl.algorithms import extract_coefficients
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
-from aquarom_fenics.fem.linear_solver import (ExactNewtonOperator, describe_linear_solve, mumps_solver,
-                                              upper_triangle_copy)
-from aquarom_fenics.geometry.fish import Fish, quadrature_degrees
-from aquarom_fenics.fem.time_scheme import TimeScheme
 from aquarom_fenics.errors import SolverError
+from aquarom_fenics.fem.linear_solver import mumps_solver, solve_into
+from aquarom_fenics.fem.newton_system import NewtonMatrix, NewtonSolver, SolveProfile
+from aquarom_fenics.fem.time_scheme import TimeScheme
+from aquarom_fenics.geometry.fish import Fish, quadrature_degrees
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.physics.drag import DragTerm
 from aquarom_fenics.physics.elastic import ElasticTerm
 from aquarom_fenics.physics.inertia import InertiaTerm
 from aquarom_fenics.physics.muscle import MuscleTerm
 from aquarom_fenics.physics.stations import StationAverages, station_averages
-from aquarom_fenics.physics.thrust_term import StationThrustTerm, ThrustTerm
-
-
-@dataclass
-class SolveProfile:
-    """Wall time [s] of this rank in the parts of the Newton iterations (``FullOrderModel.profile``)."""
-
-    residuals: float = 0.0              # r(u, u̇, ü): forms, matrix products, thrust, drag
-    newton_matrix_assembly: float = 0.0  # S: tangent form, thrust and drag entries, M and C, fixed dofs
-    factorizations: float = 0.0         # MUMPS numerical factorisation (and the first analysis)
-    solves: float = 0.0                 # forward and back substitutions (GMRES with "krylov")
-    counts: dict = field(default_factory=lambda: {"residuals": 0, "factorizations": 0, "solves": 0})
-
-    def as_dict(self) -> dict:
-        return {"residuals": self.residuals, "newton_matrix_assembly": self.newton_matrix_assembly,
-                "factorizations": self.factorizations, "solves": self.solves, "counts": dict(self.counts)}
-
-
-@dataclass(frozen=True)
-class TangentFactors:
-    """Factors of S = k_u K_t + k_v C_t + k_a M_t that pick one tangent."""
-
-    stiffness_factor: float
-    velocity_factor: float
-    acceleration_factor: float
+from aquarom_fenics.physics.thrust_full_order import NodalThrustTerm, StationThrustTerm
 
 
 class FullOrderModel:
@@ -91,13 +67,8 @@ class FullOrderModel:
         self._build_terms(rest_points)
         self._work_in = PETSc.Vec().createMPI((self.n_owned_dofs, self.n_global_dofs), comm=comm)
         self._work_out = self._work_in.duplicate()
-        self._solver = None
-        self._krylov = False
-        self._upper_triangle = None     # the SBAIJ copy of the Newton matrix that the LDLᵀ factorises
-        self.profile = SolveProfile()
-        self._exact_operator = None
-        self._inertia_damping = None
-        self._on_newton_pattern: dict[str, PETSc.Mat] = {}
+        self.newton_matrix = NewtonMatrix(self)
+        self.newton_solver = NewtonSolver(self, self.newton_matrix)
         self.set_time_step(TimeScheme.from_solver(scene.solver))
 
     # ------------------------------------------------------------------ set-up
@@ -146,32 +117,20 @@ class FullOrderModel:
         return sum(terms[1:], terms[0])
 
     def _build_terms(self, rest_points: np.ndarray) -> None:
-        """The force terms; the Newton matrix's tangent form sums the elastic and muscle tangents."""
+        """The force terms; the tangent form K_t sums the elastic and muscle tangents (the thrust's and
+        the drag's enter the Newton matrix as entries)."""
         fluid = self.scene.fluid
         self.elastic = ElasticTerm(self)
         self.muscle = MuscleTerm(self)
         self.rest_stiffness = self.elastic.rest_stiffness()
         self.inertia = InertiaTerm(self, self.rest_stiffness)
         self.drag = DragTerm(self) if fluid.drag else None
-        thrust_term = ThrustTerm if self.station_averages is None else StationThrustTerm
+        thrust_term = NodalThrustTerm if self.station_averages is None else StationThrustTerm
         self.thrust = thrust_term(self, rest_points) if fluid.thrust else None
         tangent = self.elastic.tangent_form
         if self.muscle.on:
             tangent = tangent + self.muscle.tangent_form
-        self._tangent = fx.compile_form(tangent)
-        self._tangent_matrix = None
-
-    @property
-    def tangent_matrix(self) -> PETSc.Mat:
-        """The Newton matrix's storage: the tangent's pattern with the thrust and drag Jacobians'
-        entries reserved (they lie outside it). Made at first use: a PROM build never needs it."""
-        if self._tangent_matrix is None:
-            entries = [np.zeros((2, 0), dtype=np.int64)] + [np.stack(term.newton_entries())
-                                                            for term in (self.thrust, self.drag) if term is not None]
-            rows, columns = np.concatenate(entries, axis=1)
-            self._tangent_matrix = fx.create_matrix_with_entries(self._tangent, rows, columns)
-            self._tangent_matrix.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-        return self._tangent_matrix
+        self.tangent_form = fx.compile_form(tangent)
 
     @property
     def mass_matrix(self) -> PETSc.Mat:
@@ -236,20 +195,13 @@ class FullOrderModel:
         """PETSc global indices of owned local dof indices."""
         return (3 * self.layout.global_block[owned_dofs // 3] + owned_dofs % 3).astype(np.int32)
 
-    def set_time_step(self, scheme: TimeScheme) -> None:
-        """The scheme's factors enter S = (1 - α_f) K_t + (1 - α_f)(γ/(βh)) C_t + ((1 - α_m)/(βh²)) M_t."""
-        self.scheme = scheme
-        for previous in (self._inertia_damping, self._on_newton_pattern.pop("inertia_damping", None)):
-            if previous is not None:        # petsc4py does not free them (see destroy)
-                previous.destroy()
-        self._inertia_damping = self.inertia.newton_block(scheme.acceleration_factor, scheme.velocity_factor)
-
     # ------------------------------------------------------------------ evaluations
     def set_displacement(self, u: np.ndarray) -> None:
         """u of the forms (owned dofs)."""
         fx.set_owned_values(self.displacement, u)
 
-    def _set_state(self, time: float, u: np.ndarray) -> None:
+    def set_state(self, time: float, u: np.ndarray) -> None:
+        """u and the activations at time t of the forms."""
         self.set_displacement(u)
         self.muscle.set_time(time)
 
@@ -282,7 +234,7 @@ class FullOrderModel:
 
     def actuation_force(self, time: float, u: np.ndarray) -> np.ndarray:
         """f_act(u, t) = -∂Π_act/∂u [N]."""
-        self._set_state(time, u)
+        self.set_state(time, u)
         return self.muscle.force()
 
     def thrust_force(self, u, v, a) -> np.ndarray:
@@ -296,7 +248,7 @@ class FullOrderModel:
     def residual(self, time, u, v, a):
         """r = M ü + C u̇ + f_int - f_act - f_thrust - f_drag (zero on fixed dofs), and the force scale."""
         started = clock.perf_counter()
-        self._set_state(time, u)
+        self.set_state(time, u)
         inertia = self.matvec(self.mass_matrix, a)
         internal = self.elastic.force()
         external = self.muscle.force() + self.thrust_force(u, v, a) + self.drag_force(v)
@@ -307,160 +259,41 @@ class FullOrderModel:
         self.profile.counts["residuals"] += 1
         return residual, scale
 
-    def assemble_newton_matrix(self, time, u, v, a) -> PETSc.Mat:
-        """S = ∂r_{n+1-α}/∂u_{n+1} = (1 - α_f) K_t + (1 - α_f)(γ/(βh)) C_t + ((1 - α_m)/(βh²)) M_t at the
-        evaluation point (t, u, u̇, ü), with the exact thrust and drag Jacobians."""
-        return self._combine_tangents(self.scheme, ("inertia_damping", self._inertia_damping), time, u, v, a)
-
-    def tangents(self, time, u, v, a) -> Iterator[PETSc.Mat]:
-        """K_t = ∂r/∂u, C_t = ∂r/∂u̇ and M_t = ∂r/∂ü at (t, u, u̇, ü), in that order, each in the Newton
-        matrix's storage and valid until the next one is made (fixed dofs: unit rows). For use between
-        runs: the Newton matrix of the scheme is made anew at its next assembly, and a solver still
-        holding factors of the old one would refactorise what the storage holds."""
-        yield self._combine_tangents(TangentFactors(1.0, 0.0, 0.0), None, time, u, v, a)
-        yield self._combine_tangents(TangentFactors(0.0, 1.0, 0.0), ("damping", self.damping_matrix), time, u, v, a)
-        yield self._combine_tangents(TangentFactors(0.0, 0.0, 1.0), ("mass", self.mass_matrix), time, u, v, a)
-
-    def _combine_tangents(self, factors, constant: tuple[str, PETSc.Mat] | None, time, u, v, a) -> PETSc.Mat:
-        """k_u K_t + k_v C_t + k_a M_t from the factors' k and ``constant`` = (name, k_a M + k_v C)."""
-        self._set_state(time, u)
-        matrix = self.tangent_matrix
-        if factors.stiffness_factor == 0.0:
-            matrix.zeroEntries()
-        else:
-            fx.assemble_matrix_into(matrix, self._tangent)
-            if factors.stiffness_factor != 1.0:
-                matrix.scale(factors.stiffness_factor)
-        if self.thrust is not None:
-            self.thrust.add_newton_matrix(matrix, factors, u, v, a)
-        if self.drag is not None:
-            self.drag.add_newton_matrix(matrix, factors.velocity_factor, v)
-        matrix.assemble()
-        if constant is not None:
-            matrix.axpy(1.0, self._stored_on_newton_pattern(*constant),
-                        structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-        matrix.zeroRowsColumns(self.global_dofs(self.fixed_dofs), diag=1.0)
-        return matrix
-
-    def _stored_on_newton_pattern(self, name: str, constant: PETSc.Mat) -> PETSc.Mat:
-        """A copy of ``constant`` (kept under ``name``) on the pattern of the Newton matrix (tangent,
-        thrust and drag entries), so that adding it is one pass over the values."""
-        if name not in self._on_newton_pattern:
-            padded = self.tangent_matrix.duplicate(copy=False)
-            padded.axpy(1.0, constant, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
-            self._on_newton_pattern[name] = padded
-        return self._on_newton_pattern[name]
-
-    def newton_correction(self, time, u, v, a):
-        """x ↦ (S_exact - S) x at the evaluation point, S the assembled Newton matrix: the stations'
-        coupling Bᵀ J B and the head-averaged drag, which stay out of the sparse matrix (None for the
-        nodal model, whose matrix is exact)."""
-        parts = []
-        if self.station_averages is not None and self.thrust is not None:
-            parts.append(self.thrust.newton_correction(self.scheme, u, v, a))
-        if self.drag is not None:
-            parts.append(self.drag.newton_correction(self.scheme.velocity_factor, v))
-        parts = [part for part in parts if part is not None]
-        if not parts:
-            return None
-        return lambda x: sum(part(x) for part in parts)
-
-    def tangent_coupling_blocks(self, time, u, v, a, dofs: np.ndarray) -> tuple[np.ndarray, ...] | None:
-        """The parts of (K_t, C_t, M_t)[dofs, dofs] that ``tangents`` leaves out of the matrices (the
-        stations' coupling less the lumped added mass, the head-averaged drag), dense, for a small region
-        of owned dofs; None for the nodal model."""
-        if self.station_averages is None:
-            return None
-        blocks = []
-        for factors in (TangentFactors(1.0, 0.0, 0.0), TangentFactors(0.0, 1.0, 0.0), TangentFactors(0.0, 0.0, 1.0)):
-            block = np.zeros((dofs.size, dofs.size))
-            if self.thrust is not None:
-                block += self.thrust.coupling_block(factors, u, v, a, dofs)
-            if self.drag is not None and factors.velocity_factor:
-                block += self.drag.coupling_block(factors.velocity_factor, v, dofs)
-            fixed = np.isin(dofs, self.fixed_dofs)
-            block[fixed, :] = 0.0
-            block[:, fixed] = 0.0
-            blocks.append(block)
-        return tuple(blocks)
-
-    def exact_newton_product(self, time, u, v, a, x: np.ndarray) -> np.ndarray:
-        """S_exact x = ∂r_{n+1-α}/∂u_{n+1} x, owned dofs (fixed dofs: identity)."""
-        product = self.matvec(self.assemble_newton_matrix(time, u, v, a), x)
-        correction = self.newton_correction(time, u, v, a)
-        if correction is not None:
-            free = x.copy()
-            free[self.fixed_dofs] = 0.0
-            extra = correction(free)
-            extra[self.fixed_dofs] = 0.0
-            product = product + extra
-        return product
+    # ------------------------------------------------------------------ Newton system (newton_system.py)
+    @property
+    def scheme(self) -> TimeScheme:
+        """The time scheme whose factors S holds."""
+        return self.newton_matrix.scheme
 
     @property
-    def newton_matrix_is_symmetric(self) -> bool:
-        """With stations the assembled S is symmetric: K_t and M, C are, the lumped added mass
-        Σ_i b_ij m̃ ℓ₀ n nᵀ is, and the unsymmetric thrust and drag couplings stay outside it. The nodal
-        model puts the thrust's and the drag's Jacobians (unsymmetric) into S."""
-        return self.station_averages is not None
+    def profile(self) -> SolveProfile:
+        """Wall times of the residuals, assemblies, factorisations and solves so far."""
+        return self.newton_solver.profile
+
+    def set_time_step(self, scheme: TimeScheme) -> None:
+        """The scheme's factors enter S = (1 - α_f) K_t + (1 - α_f)(γ/(βh)) C_t + ((1 - α_m)/(βh²)) M_t."""
+        self.newton_matrix.set_time_step(scheme)
+
+    def tangents(self, time, u, v, a) -> Iterator[PETSc.Mat]:
+        """K_t = ∂r/∂u, C_t = ∂r/∂u̇ and M_t = ∂r/∂ü at (t, u, u̇, ü), in the Newton matrix's storage
+        (see ``NewtonMatrix.tangents``)."""
+        return self.newton_matrix.tangents(time, u, v, a)
 
     def factorize(self, time, u, v, a) -> None:
-        """Factorise S at the evaluation point: LDLᵀ of its upper triangle when it is symmetric
-        (stations; about 0.6 of an LU's time), LU otherwise. With ``[solver] newton_coupling = "krylov"``
-        and a coupling outside the matrix (stations), later solves are GMRES on S_exact of this
-        point, preconditioned by the factors of S; with "lumped" they use the factors alone
-        (modified Newton)."""
-        started = clock.perf_counter()
-        matrix = self.assemble_newton_matrix(time, u, v, a)
-        correction = self.newton_correction(time, u, v, a) if self.scene.solver.newton_coupling == "krylov" else None
-        symmetric = self.newton_matrix_is_symmetric
-        if self._solver is None or (correction is not None) != self._krylov:
-            if self._solver is not None:
-                self._solver.destroy()
-            self._solver = mumps_solver(self.comm, symmetric, krylov=correction is not None)
-            self._krylov = correction is not None
-        factored = matrix
-        if symmetric:
-            factored = self._upper_triangle = upper_triangle_copy(matrix, self._upper_triangle)
-        if correction is None:
-            self._solver.setOperators(factored)
-        else:
-            if self._exact_operator is None:
-                self._exact_operator = PETSc.Mat().createPython(matrix.getSizes(), ExactNewtonOperator(),
-                                                                comm=self.comm)
-                self._exact_operator.setUp()
-            self._exact_operator.getPythonContext().set(matrix, correction, self.fixed_dofs)
-            self._solver.setOperators(self._exact_operator, factored)
-        assembled = clock.perf_counter()
-        self.profile.newton_matrix_assembly += assembled - started
-        try:
-            self._solver.setUp()
-        except PETSc.Error as error:
-            raise SolverError(f"linear solve failed in the factorisation (PETSc {error}; "
-                              f"{describe_linear_solve(self._solver)})") from None
-        self.profile.factorizations += clock.perf_counter() - assembled
-        self.profile.counts["factorizations"] += 1
+        """Assemble S at the evaluation point and factorise it (see ``NewtonSolver``)."""
+        self.newton_solver.factorize(time, u, v, a)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
-        started = clock.perf_counter()
-        solution = self.solve_with(self._solver, rhs)
-        self.profile.solves += clock.perf_counter() - started
-        self.profile.counts["solves"] += 1
-        return solution
-
-    def solve_with(self, solver: PETSc.KSP, rhs: np.ndarray) -> np.ndarray:
-        """solver⁻¹ rhs; SolverError if PETSc fails or the solve diverges (a failed factorisation)."""
-        self._work_in.array[:] = rhs
-        try:
-            solver.solve(self._work_in, self._work_out)
-        except PETSc.Error as error:
-            raise SolverError(f"linear solve failed (PETSc {error}; {describe_linear_solve(solver)})") from None
-        if solver.getConvergedReason() < 0:
-            raise SolverError(f"linear solve failed ({describe_linear_solve(solver)})")
-        return self._work_out.array.copy()
+        """S⁻¹ rhs with the current factors."""
+        return self.newton_solver.solve(rhs)
 
     def linear_solve_status(self) -> str:
         """KSP reason and MUMPS status of the Newton matrix's last solve ("" before the first)."""
-        return describe_linear_solve(self._solver) if self._solver is not None else ""
+        return self.newton_solver.status()
+
+    def solve_with(self, solver: PETSc.KSP, rhs: np.ndarray) -> np.ndarray:
+        """solver⁻¹ rhs; SolverError if PETSc fails or the solve diverges (a failed factorisation)."""
+        return solve_into(solver, rhs, self._work_in, self._work_out)
 
     def static_response(self, left: float, right: float, tolerance: float = 1e-10,
                         max_iterations: int = 30) -> np.ndarray:
@@ -476,7 +309,7 @@ class FullOrderModel:
                 residual[self.clamped_dofs] = 0.0
                 if self.norm(residual) <= tolerance * max(self.norm(internal), self.norm(actuation), 1e-30):
                     return u
-                tangent = fx.assemble_matrix_into(self.tangent_matrix, self._tangent)
+                tangent = fx.assemble_matrix_into(self.newton_matrix.storage, self.tangent_form)
                 tangent.zeroRowsColumns(self.global_dofs(self.clamped_dofs), diag=1.0)
                 solver.setOperators(tangent)
                 u = u - self.solve_with(solver, residual)
@@ -486,18 +319,15 @@ class FullOrderModel:
                           f"(activations left {left}, right {right})")
 
     def destroy(self) -> None:
-        """Free the PETSc matrices, vectors and solvers of the model and its terms. petsc4py does not
-        free them when the Python objects go, so whoever is done with a model calls this; the model is
-        unusable afterwards."""
-        if self._exact_operator is not None:
-            self._exact_operator.destroy()
-        owners = [self, *(term for term in (self.elastic, self.muscle, self.inertia, self.drag, self.thrust) if term)]
-        for owner in owners:
-            for value in list(vars(owner).values()):
-                for item in (value.values() if isinstance(value, dict) else value if isinstance(value, (list, tuple))
-                             else (value,)):
-                    if isinstance(item, PETSc.Object):
-                        item.destroy()
+        """Release the PETSc matrices, vectors and solvers of the model, its Newton system and its
+        terms. petsc4py does not free them when the Python objects go, so whoever is done with a model
+        calls this; the model is unusable afterwards."""
+        self.newton_solver.destroy()
+        self.newton_matrix.destroy()
+        for term in (self.elastic, self.muscle, self.inertia):
+            term.destroy()
+        for petsc_object in (self.rest_stiffness, self._work_in, self._work_out):
+            petsc_object.destroy()
 
     def norm(self, vector: np.ndarray) -> float:
         return float(np.sqrt(self.dot(vector, vector)))
@@ -546,25 +376,19 @@ class FullOrderModel:
         return self.comm.allreduce(nodal, op=MPI.SUM)
 
 
-_AVERAGES: dict[tuple[int, int, str], StationAverages] = {}
-
-
 def averages_of(fish: Fish, n_stations: int, tail_station: str = "face") -> StationAverages:
-    """The station averages of a fish's nominal mesh, computed once per fish, station count and tail
-    station ("slab": the half-hat over the last slab; "face": the end face x = -L)."""
-    import weakref
-
-    key = (id(fish), n_stations, tail_station)
-    if key not in _AVERAGES:
+    """The station averages of a fish's nominal mesh, computed once per fish (kept in ``fish.derived``),
+    station count and tail station ("slab": the half-hat over the last slab; "face": the end face x = -L)."""
+    key = ("station_averages", n_stations, tail_station)
+    if key not in fish.derived:
         tags = fish.tags
         face = None
         if tail_station == "face":
             on_tail = np.abs(tags.box.relative(fish.mesh.points)[:, 0] + tags.box.length) <= tags.tolerance
             face = tags.skin_facets[on_tail[tags.skin_facets].all(axis=1)]
-        _AVERAGES[key] = station_averages(fish.mesh.points, fish.mesh.cells, fish.nodes, tags.box, n_stations,
-                                          tags.head_cells, face)
-        weakref.finalize(fish, _AVERAGES.pop, key, None)
-    return _AVERAGES[key]
+        fish.derived[key] = station_averages(fish.mesh.points, fish.mesh.cells, fish.nodes, tags.box, n_stations,
+                                             tags.head_cells, face)
+    return fish.derived[key]
 
 
 class ShapeDirection:

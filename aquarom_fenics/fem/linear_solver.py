@@ -7,6 +7,8 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from aquarom_fenics.errors import SolverError
+
 
 def mumps_solver(comm: MPI.Comm, symmetric: bool = False, krylov: bool = False) -> PETSc.KSP:
     """A MUMPS factorisation, kept until its matrix changes: LU, or with ``symmetric`` MUMPS's LDLᵀ
@@ -68,3 +70,16 @@ class ExactNewtonOperator:
         extra = self.correction(values)
         extra[self.fixed_dofs] = 0.0
         y.array[:] += extra
+
+
+def solve_into(solver: PETSc.KSP, rhs: np.ndarray, work_in: PETSc.Vec, work_out: PETSc.Vec) -> np.ndarray:
+    """solver⁻¹ rhs through the work vectors (owned entries); SolverError if PETSc fails or the
+    solve diverges (a failed factorisation)."""
+    work_in.array[:] = rhs
+    try:
+        solver.solve(work_in, work_out)
+    except PETSc.Error as error:
+        raise SolverError(f"linear solve failed (PETSc {error}; {describe_linear_solve(solver)})") from None
+    if solver.getConvergedReason() < 0:
+        raise SolverError(f"linear solve failed ({describe_linear_solve(solver)})")
+    return work_out.array.copy()

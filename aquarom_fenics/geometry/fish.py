@@ -6,7 +6,7 @@ rank holds the same small numpy description; dolfinx distributes the cells after
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from mpi4py import MPI
@@ -51,6 +51,9 @@ class Fish:
     shape_names: tuple[str, ...]
     shape_matrix: np.ndarray     # U, (3 n_nodes, p), node-major, at the displacement nodes
     nodes: LagrangeNodes         # displacement nodes (vertices first, then edge midpoints at degree 2)
+    derived: dict = field(default_factory=dict, compare=False, repr=False)
+    """Quantities of this fish's nominal mesh that the layers above compute once and keep with it
+    (e.g. the FOM's station averages), keyed by what they are and their arguments."""
 
     @property
     def degree(self) -> int:

@@ -196,7 +196,7 @@ class OptimizerSection:
     active_tolerance: float = _spec(1e-2, _positive, "a bound or linear constraint is active when its slack is below this fraction of its range")
     starts: int = _spec(1, _positive, "optimisations from the start point and starts - 1 Latin-hypercube feasible points")
     seed: int = _spec(0, _non_negative, "seed of the Latin-hypercube starts")
-    tail_screen: bool = _spec(False, None, "refuse designs whose tail region the thrust destabilises: the FOM linearised at the PROM's last-stroke states (about 17 s per PROM build at the default mesh on one rank, shared by the ranks under mpirun)")
+    tail_screen: bool = _spec(False, None, "refuse designs whose tail region the thrust destabilises: the FOM linearised at the PROM's last-stroke states (a FOM linearisation and a dense eigenvalue problem per screened state at each PROM build, shared by the ranks under mpirun)")
     tail_growth_limit: float = _spec(100.0, _positive, "tail screen: largest growth rate Re λ of the tail region's modes accepted [1/s]")
     tail_region_radius: float = _spec(0.015, _positive, "tail screen: the region is the free nodes within this distance of the tail node [m]")
 

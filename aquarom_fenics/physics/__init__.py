@@ -1,2 +1,3 @@
 """The force terms, one module each (see ``term.py``): elastic, muscle, inertia with Rayleigh damping, drag
-and the Lighthill thrust (``thrust.py``, its full and reduced term in ``thrust_term.py``)."""
+and the Lighthill thrust (``thrust.py``, its FOM terms in ``thrust_full_order.py``, its reduced term in
+``thrust_reduced.py``)."""

@@ -39,6 +39,10 @@ class ElasticTerm:
         self._force = fx.compile_form(self.force_form)
         self._vector = fx.create_vector(self._force)
 
+    def destroy(self) -> None:
+        """Release the force's PETSc vector."""
+        self._vector.destroy()
+
     def force(self) -> np.ndarray:
         """f_int at the FOM's displacement, owned entries [N]."""
         return fx.assemble_vector_into(self._vector, self._force).copy()

@@ -76,6 +76,11 @@ class InertiaTerm:
         self.mass_moment_x = fx.assemble_vector_into(fx.create_vector(moment), moment).copy()
         self.total_mass = fx.assemble_scalar(fx.compile_form(self.total_mass_form), fom.comm)
 
+    def destroy(self) -> None:
+        """Release the mass and damping matrices."""
+        self.mass_matrix.destroy()
+        self.damping_matrix.destroy()
+
     def newton_block(self, acceleration_factor: float, velocity_factor: float) -> PETSc.Mat:
         """k_a M + k_v C, the inertia and damping part of the Newton matrix."""
         return petsc_linear_combination(acceleration_factor, self.mass_matrix, velocity_factor, self.damping_matrix)

@@ -71,6 +71,11 @@ class MuscleTerm:
             self._negative_force = fx.compile_form(self.negative_force_form)
             self._vector = fx.create_vector(self._negative_force)
 
+    def destroy(self) -> None:
+        """Release the force's PETSc vector (none when the muscles are off)."""
+        if self.on:
+            self._vector.destroy()
+
     def set_activations(self, values) -> None:
         """(a_left, a_right) of the forms."""
         for constant, value in zip(self._activations, values):

@@ -6,8 +6,9 @@ The equations of motion are a sum of terms,
 
 one module per term: ``elastic`` (f_int, SVK), ``muscle`` (f_act), ``inertia`` (M ü + C u̇ with
 Rayleigh damping C = α M + β K_0), ``drag`` (f_drag = g v_x²) and ``thrust`` (Lighthill, with
-``thrust_term``). On the FOM a term assembles its part of r and of the Newton matrix
-S = k_u ∂r/∂u + k_v ∂r/∂u̇ + k_a ∂r/∂ü, and projects itself on a basis V into reduced tensors,
+``thrust_full_order``, ``thrust_reduced``). On the FOM a term assembles its part of r and, where it
+has one, of the Newton matrix S = k_u ∂r/∂u + k_v ∂r/∂u̇ + k_a ∂r/∂ü (``add_newton_matrix``; the
+FOM sums them), and projects itself on a basis V into reduced tensors (``reduce(projector)``),
 Taylor polynomials in Δξ = ξ - ξ_c. The reduced model evaluates those tensors at a design ξ
 (``tensors.at(Δξ)``) into a :class:`ReducedTerm`.
 """
@@ -16,14 +17,6 @@ from __future__ import annotations
 from typing import Protocol
 
 import numpy as np
-
-
-class FullOrderTerm(Protocol):
-    """A term of the FOM. Each also assembles its force (or matrices) and, where it has one, its part of
-    the Newton matrix (``add_newton_matrix``); the FOM sums them."""
-
-    def reduce(self, projector):
-        """Its reduced tensors on the projector's basis V, Taylor in ξ (``reduction.projection.Projector``)."""
 
 
 class ReducedTerm(Protocol):

@@ -154,9 +154,8 @@ def response_labels(response_vectors: bool, actuation_modes: bool, thrust: bool)
 class KeptFactors:
     """The last Cholesky factorisation of a clamped K_0 in this process, kept with its matrix.
 
-    MUMPS spends about a third of a factorisation on its analysis (the ordering and the symbolic
-    factorisation: degree 2, level 3, 1.08 s against 0.69 s for the numeric part alone), which
-    depends only on the sparsity pattern. The builds of one optimisation share the nominal mesh,
+    MUMPS spends a good part of a factorisation on its analysis (the ordering and the symbolic
+    factorisation), which depends only on the sparsity pattern. The builds of one optimisation share the nominal mesh,
     hence the pattern: each build refills the kept matrix and refactorises numerically. The pattern
     is that of the dof map: the same cell-to-dof lists and ownership on the same communicator give
     the same matrix pattern. One factorisation is kept (a build's own memory); ``lock`` serialises

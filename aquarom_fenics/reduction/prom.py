@@ -21,7 +21,7 @@ from aquarom_fenics.physics.drag import DragTensors
 from aquarom_fenics.physics.elastic import ElasticTensors
 from aquarom_fenics.physics.inertia import InertiaTensors
 from aquarom_fenics.physics.muscle import MuscleTensors
-from aquarom_fenics.physics.thrust_term import ThrustData
+from aquarom_fenics.physics.thrust_reduced import ThrustTensors
 
 FORMAT_VERSION = 3
 """2: the tensors grouped per force term (elastic, muscle, inertia, drag, thrust, observation);
@@ -57,7 +57,7 @@ class ReducedModel:
     muscle: MuscleTensors                # f_act,r (zero tensors when the muscles are off)
     inertia: InertiaTensors              # M_r, C_r and the centre of mass
     drag: DragTensors | None             # f_drag,r, None when drag is off
-    thrust: ThrustData | None            # f_thrust,r, None when thrust is off
+    thrust: ThrustTensors | None            # f_thrust,r, None when thrust is off
     observation: Observation
     cells: int
     dofs: int

@@ -17,7 +17,7 @@ from aquarom_fenics import __version__
 from aquarom_fenics.reduction.basis import ReductionBasis, build_basis
 from aquarom_fenics.geometry.fish import Fish, load_fish
 from aquarom_fenics.fem.fom import FullOrderModel
-from aquarom_fenics.physics.thrust_term import check_spine_is_not_moved
+from aquarom_fenics.physics.thrust_full_order import check_spine_is_not_moved
 from aquarom_fenics.reduction.projection import Projector
 from aquarom_fenics.reduction.prom import Observation, ReducedModel
 from aquarom_fenics.io.scene import Scene

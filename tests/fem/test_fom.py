@@ -78,7 +78,7 @@ def test_newton_matrix_is_the_derivative_of_the_step_residual(shaped_model, inte
         step = 1e-7
         finite_difference = (model.residual(*point(u + step * direction))[0]
                              - model.residual(*point(u - step * direction))[0]) / (2 * step)
-        assert relative_error(model.exact_newton_product(*point(u), direction), finite_difference) < 1e-6
+        assert relative_error(model.newton_matrix.exact_product(*point(u), direction), finite_difference) < 1e-6
 
 
 @pytest.mark.parametrize("stations", [40, "nodes"])
@@ -91,10 +91,10 @@ def test_the_stations_coupling_stays_out_of_the_matrix(stations):
     rng = np.random.default_rng(3)
     u, v, a = (scale * rng.standard_normal(model.n_owned_dofs) * free for scale in (1e-3, 1e-1, 1.0))
     direction = rng.standard_normal(model.n_owned_dofs) * free
-    exact = model.exact_newton_product(0.3, u, v, a, direction)
-    assembled = model.matvec(model.assemble_newton_matrix(0.3, u, v, a), direction)
+    exact = model.newton_matrix.exact_product(0.3, u, v, a, direction)
+    assembled = model.matvec(model.newton_matrix.assemble(0.3, u, v, a), direction)
     if stations == "nodes":
-        assert model.newton_correction(0.3, u, v, a) is None and np.array_equal(exact, assembled)
+        assert model.newton_matrix.correction(0.3, u, v, a) is None and np.array_equal(exact, assembled)
     else:
         assert relative_error(assembled, exact) > 1e-6
 
@@ -113,14 +113,14 @@ def test_the_symmetric_newton_matrix_is_factorised_by_ldlt(stations, spine_rule)
     free = free_dofs_mask(model)
     rng = np.random.default_rng(4)
     u, v, a = (scale * rng.standard_normal(model.n_owned_dofs) * free for scale in (1e-3, 1e-1, 1.0))
-    matrix = model.assemble_newton_matrix(0.3, u, v, a)
+    matrix = model.newton_matrix.assemble(0.3, u, v, a)
     scalar_rows = matrix.convert("aij", PETSc.Mat())
-    assert scalar_rows.isSymmetric(1e-10) == (stations != "nodes") == model.newton_matrix_is_symmetric
+    assert scalar_rows.isSymmetric(1e-10) == (stations != "nodes") == model.newton_matrix.is_symmetric
     rhs = rng.standard_normal(model.n_owned_dofs)
     model.factorize(0.3, u, v, a)
     lu = mumps_solver(model.comm)
-    lu.setOperators(model.assemble_newton_matrix(0.3, u, v, a))
-    assert model._solver.getPC().getType() == ("cholesky" if stations != "nodes" else "lu")
+    lu.setOperators(model.newton_matrix.assemble(0.3, u, v, a))
+    assert model.newton_solver.ksp.getPC().getType() == ("cholesky" if stations != "nodes" else "lu")
     assert relative_error(model.solve(rhs), model.solve_with(lu, rhs)) < 1e-9
     lu.destroy()
     scalar_rows.destroy()
@@ -143,11 +143,38 @@ def test_a_new_time_step_frees_the_matrices_of_the_previous_one(shaped_model):
     """Step cuts and the tangent extraction change h many times per run: the Newton blocks of the old
     step are destroyed (petsc4py would keep them: tens of MB per change at degree 2, level 2)."""
     model = shaped_model
-    model.assemble_newton_matrix(0.0, *(np.zeros(model.n_owned_dofs),) * 3)
-    previous = (model._inertia_damping, model._on_newton_pattern["inertia_damping"])
+    model.newton_matrix.assemble(0.0, *(np.zeros(model.n_owned_dofs),) * 3)
+    previous = (model.newton_matrix._inertia_damping, model.newton_matrix._on_newton_pattern["inertia_damping"])
     model.set_time_step(TimeScheme.from_solver(coarse_scene(solver={"time_step": 0.01}).solver))
     assert [matrix.handle for matrix in previous] == [0, 0]
     model.set_time_step(TimeScheme.from_solver(coarse_scene().solver))
+
+def test_destroy_releases_every_petsc_object_of_the_model():
+    """After a factorisation with the exact coupling (GMRES operator, LDLᵀ copy), a solve and the
+    tangents, ``destroy`` leaves no live PETSc object on the model, its Newton system or its terms."""
+    from petsc4py import PETSc
+
+    scene = coarse_scene(solver={"newton_coupling": "krylov"}, shapes=SHAPES)
+    model = FullOrderModel(scene, load_fish(scene), DESIGN)
+    zero = np.zeros(model.n_owned_dofs)
+    model.factorize(0.0, zero, zero, zero)
+    model.solve(np.ones(model.n_owned_dofs))
+    list(model.tangents(0.0, zero, zero, zero))
+    owners = [model, model.newton_matrix, model.newton_solver, model.elastic, model.muscle, model.inertia,
+              model.drag, model.thrust]
+
+    def petsc_objects():
+        for owner in owners:
+            for value in vars(owner).values():
+                for item in value.values() if isinstance(value, dict) else (value,):
+                    if isinstance(item, PETSc.Object):
+                        yield item
+
+    kept = list(petsc_objects())
+    assert len(kept) >= 12 and any(isinstance(item, PETSc.KSP) for item in kept)
+    model.destroy()
+    assert [type(item).__name__ for item in kept if item.handle != 0] == []
+
 
 @pytest.mark.parametrize("degree", [1, 2])
 def test_design_pulled_back_equals_design_meshed_directly(degree):
@@ -239,14 +266,14 @@ def test_tangents_combine_to_the_newton_matrix(shaped_model):
     u[model.fixed_dofs] = v[model.fixed_dofs] = a[model.fixed_dofs] = 0.0
     direction = rng.normal(size=model.n_owned_dofs)
     direction[model.fixed_dofs] = 0.0
-    newton_product = model.matvec(model.assemble_newton_matrix(0.3, u, v, a), direction)
+    newton_product = model.matvec(model.newton_matrix.assemble(0.3, u, v, a), direction)
     scheme = model.scheme
     factors = (scheme.stiffness_factor, scheme.velocity_factor, scheme.acceleration_factor)
     combined = sum(factor * model.matvec(matrix, direction)
                    for factor, matrix in zip(factors, model.tangents(0.3, u, v, a)))
     free = free_dofs_mask(model)
     assert relative_error(combined[free], newton_product[free]) < 1e-12
-    assert relative_error(model.matvec(model.assemble_newton_matrix(0.3, u, v, a), direction), newton_product) < 1e-14
+    assert relative_error(model.matvec(model.newton_matrix.assemble(0.3, u, v, a), direction), newton_product) < 1e-14
 
 
 def test_a_smooth_start_converges_from_its_first_tiny_step():

@@ -13,7 +13,7 @@ from aquarom_fenics.physics.drag import DragTensors, drag_force, drag_velocity_j
 from aquarom_fenics.physics.elastic import ElasticTensors
 from aquarom_fenics.physics.inertia import InertiaTensors, rayleigh_damping
 from aquarom_fenics.physics.muscle import MuscleTensors, activations, unit_activations
-from aquarom_fenics.physics.thrust_term import ThrustData
+from aquarom_fenics.physics.thrust_reduced import ThrustTensors
 from aquarom_fenics.physics.taylor import Taylor
 
 PACKAGE_ROOTS = [Path(aquarom_fenics.__file__).parent, Path(aquarom_fenics.forms.__file__).parent]
@@ -187,7 +187,7 @@ def test_reduced_thrust_tangents_and_xi_derivative(rng, spine_force, rest_moves,
     rest_gradient = 0.005 * rng.standard_normal((n_spine, 2, P)) if rest_moves else np.zeros((n_spine, 2, P))
     front = {} if spine_rule == "rear" else {"front_dorsal_z": rng.uniform(0.02, 0.04, n_spine - 1),
                                              "front_dorsal_z_gradient": 0.01 * rng.standard_normal((n_spine - 1, P))}
-    data = ThrustData(rows=0.1 * rng.standard_normal((n_spine, 2, M)),
+    data = ThrustTensors(rows=0.1 * rng.standard_normal((n_spine, 2, M)),
                       rest_xy=np.column_stack([np.linspace(-0.2, 0.0, n_spine), np.zeros(n_spine)]),
                       rest_xy_gradient=rest_gradient,
                       dorsal_z=rng.uniform(0.02, 0.04, n_spine - 1),

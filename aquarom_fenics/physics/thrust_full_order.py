@@ -1,28 +1,23 @@
-"""The Lighthill thrust of ``thrust.py`` as a term of the full and the reduced model (SPEC §5, §8).
+"""The Lighthill thrust of ``thrust.py`` as a term of the FOM, on PETSc (SPEC §5).
 
-FOM, stations (the default, ``[fluid] stations = N_s``): the law on the station averages
-x̄ = B(X + u_ξ + u), v̄ = B u̇, ā = B ü, acting on the body by f = Bᵀ F (``StationThrustTerm``).
-FOM, ``stations = "nodes"`` (the source's model, for comparison): the law on the spine nodes, its
-exact Jacobians in the Newton matrix (``ThrustTerm``).
-Reduced: the same law, evaluated exactly on the reduced kinematics W η (W = B V, or V at the spine
-nodes); its virtual mass is quadratic in ξ (z_dorsal linear), the rest stations linear in ξ (B U).
+``StationThrustTerm`` (the default, ``[fluid] stations = N_s``): the law on the station averages
+x̄ = B(X + u_ξ + u), v̄ = B u̇, ā = B ü, acting on the body by f = Bᵀ F; the exact coupling Bᵀ J B
+stays out of the sparse Newton matrix. ``NodalThrustTerm`` (``stations = "nodes"``, the source's
+model, for comparison): the law on the spine nodes, its exact Jacobians in the Newton matrix.
+Each projects itself on a basis into the ``ThrustTensors`` of ``thrust_reduced.py``.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
+from mpi4py import MPI
 from petsc4py import PETSc
 
 from aquarom_fenics.errors import InputError
-from mpi4py import MPI
-
 from aquarom_fenics.geometry.shapes import shape_displacement
 from aquarom_fenics.physics.stations import dorsal_profile
-from aquarom_fenics.physics.thrust import (SegmentState, SpineGeometry, derivative_weights, segment_difference,
-                                           segment_state, segment_state_of, segment_weighted_force, thrust_force,
-                                           thrust_force_of_state, virtual_mass, virtual_mass_gradient)
-from aquarom_fenics.physics.thrust_jacobians import SegmentBlocks, thrust_jacobian_blocks, thrust_jacobians
+from aquarom_fenics.physics.thrust import SpineGeometry, thrust_force, virtual_mass
+from aquarom_fenics.physics.thrust_jacobians import thrust_jacobians
+from aquarom_fenics.physics.thrust_reduced import ThrustTensors
 
 
 def shape_rows(fish) -> np.ndarray:
@@ -41,9 +36,10 @@ def check_spine_is_not_moved(fish) -> None:
                          "PROM supports shape variations that vanish on the body axis (use stations = N_s)")
 
 
-class ThrustTerm:
-    """The thrust on one FOM's spine nodes (tail -> head), from the rest shape of its design: the
-    source's model, with its rear-node rule whatever ``[fluid] spine_rule`` says."""
+class NodalThrustTerm:
+    """The thrust on one FOM's spine nodes (tail -> head), from the rest shape of its design
+    (``[fluid] stations = "nodes"``, not the default): the source's model, with its rear-node rule
+    whatever ``[fluid] spine_rule`` says; its exact Jacobians go into the Newton matrix."""
 
     def __init__(self, fom, rest_points: np.ndarray):
         self.fom = fom
@@ -90,19 +86,19 @@ class ThrustTerm:
             values = block[np.ix_(2 * index + np.arange(2), (2 * neighbours[:, None] + np.arange(2)).ravel())]
             matrix.setValues(rows, columns, values, addv=PETSc.InsertMode.ADD_VALUES)
 
-    def reduce(self, projector) -> "ThrustData":
+    def reduce(self, projector) -> "ThrustTensors":
         """The spine rows of V, the rest spine and the dorsal heights with their exact ξ-gradient."""
         fom, tags = self.fom, self.fom.fish.tags
         spine_rows = np.stack([fom.rows_at(projector.vectors, node) for node in tags.spine_nodes])[:, :2]
         p = projector.n_parameters
-        return ThrustData(rows=spine_rows, rest_xy=self.spine.rest_xy,
+        return ThrustTensors(rows=spine_rows, rest_xy=self.spine.rest_xy,
                           rest_xy_gradient=np.zeros(self.spine.rest_xy.shape + (p,)), dorsal_z=self.dorsal_z,
                           dorsal_z_gradient=shape_rows(fom.fish)[tags.dorsal_nodes, 2, :p],
                           fluid_density=fom.scene.fluid.density)
 
 
 class StationThrustTerm:
-    """The thrust through the stations of one FOM (SPEC §5): station kinematics x̄ = B(X + u_ξ + u),
+    """The thrust through the stations of one FOM (SPEC §5; the default, ``[fluid] stations = N_s``): station kinematics x̄ = B(X + u_ξ + u),
     v̄ = B u̇, ā = B ü, the Lighthill law of ``thrust.py`` on them, and f_thrust = Σ_i B_iᵀ F_i.
 
     The exact Jacobian Bᵀ J B couples whole slabs and stays out of the sparse Newton matrix; the
@@ -216,7 +212,7 @@ class StationThrustTerm:
         force[:, 0] = self.owned_weights[0].toarray().ravel()
         return force.ravel()
 
-    def reduce(self, projector) -> "ThrustData":
+    def reduce(self, projector) -> "ThrustTensors":
         """B V (station kinematics exact in η and ξ), the rest stations with their exact ξ-gradient B U,
         and the dorsal heights with theirs."""
         fom = self.fom
@@ -227,7 +223,7 @@ class StationThrustTerm:
         rest_gradient = fom.station_averages.weights @ shape_xy
         front = {} if self.front_points is None else {
             "front_dorsal_z": self.front_dorsal_z, "front_dorsal_z_gradient": self.dorsal_gradient(p, self.front_points)}
-        return ThrustData(rows=rows, rest_xy=self.spine.rest_xy, rest_xy_gradient=np.asarray(rest_gradient).reshape(self.spine.n_nodes, 2, p),
+        return ThrustTensors(rows=rows, rest_xy=self.spine.rest_xy, rest_xy_gradient=np.asarray(rest_gradient).reshape(self.spine.n_nodes, 2, p),
                           dorsal_z=self.dorsal_z, dorsal_z_gradient=self.dorsal_gradient(p, self.rear_points),
                           fluid_density=fom.scene.fluid.density, **front)
 
@@ -246,147 +242,3 @@ def station_dorsal_points(fish, averages) -> np.ndarray:
     station_x = averages.stations - tags.box.x_head
     profile = dorsal_profile(x, highest)
     return np.column_stack([station_x, np.zeros_like(station_x), profile(station_x)])
-
-
-@dataclass
-class ThrustData:
-    """What the reduced thrust needs: f_thrust,r = Wᵀ f_thrust(W η, W η̇, W η̈; ξ) with W the x-y rows of
-    the kinematic points (B V for stations, V at the spine nodes for the nodal model)."""
-
-    rows: np.ndarray                     # (n_points, 2, m): W
-    rest_xy: np.ndarray                  # (n_points, 2) rest x-y at ξ_c [m]
-    rest_xy_gradient: np.ndarray         # (n_points, 2, p) ∂(rest x-y)/∂ξ: B U (exact; zero for the nodal model)
-    dorsal_z: np.ndarray                 # (n_segments,) z_dorsal - z_axis at ξ_c
-    dorsal_z_gradient: np.ndarray        # (n_segments, p) ∂z_dorsal/∂ξ (exact)
-    fluid_density: float                 # ρ_w [kg/m³]
-    front_dorsal_z: np.ndarray | None = None            # the same at the segments' front stations
-    front_dorsal_z_gradient: np.ndarray | None = None   # (trapezoid rule; None: rear rule)
-
-    def at(self, delta: np.ndarray, spine_force: str) -> "ReducedThrust":
-        return ReducedThrust(self, delta, spine_force)
-
-
-class ReducedThrust:
-    """The reduced thrust at one design ξ (a :class:`ReducedTerm`).
-
-    The Newton iterations evaluate the residual, the tangents and the ξ-derivative repeatedly at the same
-    point: the segment state of the last point and its Jacobian blocks are kept for the next call.
-    """
-
-    def __init__(self, data: ThrustData, delta: np.ndarray, spine_force: str):
-        self.data = data
-        moves = delta.size and np.any(data.rest_xy_gradient)
-        self.moving_rest = bool(moves)
-        self.dorsal_z = data.dorsal_z + data.dorsal_z_gradient @ delta if delta.size else data.dorsal_z
-        trapezoid = data.front_dorsal_z is not None
-        front_z = None
-        if trapezoid:
-            front_z = data.front_dorsal_z + data.front_dorsal_z_gradient @ delta if delta.size else data.front_dorsal_z
-        rest_xy = data.rest_xy + data.rest_xy_gradient @ delta if moves else data.rest_xy
-        self.spine = SpineGeometry(rest_xy, virtual_mass(self.dorsal_z, data.fluid_density), spine_force,
-                                   virtual_mass(front_z, data.fluid_density) if trapezoid else None)
-        m = data.rows.shape[-1]
-        self.rows = data.rows.reshape(-1, m)                         # (2 n_points, m): W
-        rear, front = data.rows[:-1], data.rows[1:]                  # (n_segments, 2, m): W_r, W_f
-        # the segment kinematics are linear in η: t = t_rest + T η, ṫ = T η̇, T = (W_f - W_r)/ℓ_0
-        length = self.spine.rest_length[:, None]
-        self.rest_tangent = segment_difference(self.spine.rest_xy) / length
-        tangent_rows, own_rows = (front - rear) / length[:, :, None], rear
-        self.half_rest_length, self.half_rest_tangent = self.spine.rest_length, self.rest_tangent
-        if trapezoid:       # the half-segments of SegmentState: the mirrored half has -t, -ṫ and the front node
-            self.half_rest_length = np.concatenate([self.spine.rest_length, self.spine.rest_length[::-1]])
-            self.half_rest_tangent = np.concatenate([self.rest_tangent, -self.rest_tangent[::-1]])
-            tangent_rows = np.concatenate([tangent_rows, -tangent_rows[::-1]])
-            own_rows = np.concatenate([rear, front[::-1]])
-        self.tangent_rows = tangent_rows.reshape(-1, m)
-        self.rear_rows = own_rows.reshape(-1, m)                     # each half-segment's own node
-        self.block_kinds = block_kinds(self.spine)
-        self.block_products = block_products(rear, front, rear, front, self.block_kinds)
-        mass_gradient = virtual_mass_gradient(self.dorsal_z, data.dorsal_z_gradient, data.fluid_density)
-        length_gradient = None
-        if self.moving_rest:
-            gradient = data.rest_xy_gradient                                 # (n, 2, p): B U
-            self.rest_products = block_products(rear, front, gradient[:-1], gradient[1:], self.block_kinds)
-            # ∂ℓ_0/∂ξ_k = ê·(B U_k,f - B U_k,r), ê = t_rest the unit chord
-            length_gradient = np.einsum("sc,sck->sk", self.rest_tangent, segment_difference(gradient))
-        front_gradient = (virtual_mass_gradient(front_z, data.front_dorsal_z_gradient, data.fluid_density)
-                          if trapezoid else None)
-        self.derivative_weights = derivative_weights(self.spine, mass_gradient, length_gradient, front_gradient)
-        self._point, self._state, self._blocks = None, None, None
-
-    def _segment_state(self, eta, eta_dot, eta_ddot) -> SegmentState:
-        """The segment state of the reduced kinematics (W η, W η̇, W η̈): t = t_rest + T η, ṫ = T η̇, the rear
-        nodes' W_r η̇ and W_r η̈ (for the trapezoid rule, of the half-segments: rows made once); kept for the
-        same point."""
-        point = (eta.tobytes(), eta_dot.tobytes(), eta_ddot.tobytes())
-        if point != self._point:
-            tangent = self.half_rest_tangent + (self.tangent_rows @ eta).reshape(-1, 2)
-            tangent_rate = (self.tangent_rows @ eta_dot).reshape(-1, 2)
-            self._state = segment_state_of(self.half_rest_length, tangent, tangent_rate,
-                                           (self.rear_rows @ eta_dot).reshape(-1, 2),
-                                           (self.rear_rows @ eta_ddot).reshape(-1, 2))
-            self._point, self._blocks = point, None
-        return self._state
-
-    def _jacobian_blocks(self, eta, eta_dot, eta_ddot) -> tuple[list[SegmentBlocks], ...]:
-        """The Jacobians' segment blocks at the point, kept with its segment state."""
-        state = self._segment_state(eta, eta_dot, eta_ddot)
-        if self._blocks is None:
-            self._blocks = thrust_jacobian_blocks(self.spine, state)
-        return self._blocks
-
-    def force(self, eta, eta_dot, eta_ddot) -> np.ndarray:
-        """Wᵀ f(W η, W η̇, W η̈)."""
-        return self.rows.T @ thrust_force_of_state(self.spine, self._segment_state(eta, eta_dot, eta_ddot)).ravel()
-
-    def tangents(self, time, eta, eta_dot, eta_ddot):
-        """-Wᵀ (∂f/∂u, ∂f/∂u̇, ∂f/∂ü) W, from the Jacobians' segment blocks."""
-        m = self.rows.shape[1]
-        projected = project_jacobians(self._jacobian_blocks(eta, eta_dot, eta_ddot), self.block_products,
-                                      self.block_kinds)
-        return tuple(-jacobian.reshape(m, m) for jacobian in projected)
-
-    def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
-        """-Wᵀ ∂f/∂ξ_k, shape (p, m): through the virtual masses, Σ_i (∂f/∂m̃_i) ∂m̃_i/∂ξ_k, and, where the
-        shape moves the rest points (x̄_rest = B(X + U ξ)), through the positions and rest lengths:
-        (∂f/∂u) B U_k + Σ_s (∂f/∂ℓ_0,s) ê_s·(B U_k,f - B U_k,r)."""
-        state = self._segment_state(eta, eta_dot, eta_ddot)
-        thrust_k = segment_weighted_force(self.spine, state, *self.derivative_weights)      # (p, n, 2)
-        p = thrust_k.shape[0]
-        derivative = -(thrust_k.reshape(p, -1) @ self.rows)
-        if self.moving_rest:
-            stiffness = self._jacobian_blocks(eta, eta_dot, eta_ddot)[0]
-            # Wᵀ (∂f/∂u) B U, (m, p)
-            derivative -= project_jacobians((stiffness,), self.rest_products, self.block_kinds)[0].reshape(-1, p).T
-        return derivative
-
-
-def block_products(left_rear: np.ndarray, left_front: np.ndarray, right_rear: np.ndarray,
-                   right_front: np.ndarray, kinds) -> np.ndarray:
-    """(n_kinds · 4 n_segments, k l) products L_sa,i R_sb,j of the rows L (n_segments, 2, k) and R (n_segments, 2, l)
-    at the segments' rear and front points, for the block ``kinds`` (indices into ``SegmentBlocks``: rear_rear,
-    rear_front, front_rear, front_front) in turn, rows (kind, s, a, b), columns (i, j):
-    Lᵀ J R = (J's blocks of those kinds as one vector) @ products."""
-    pairs = ((left_rear, right_rear), (left_rear, right_front), (left_front, right_rear), (left_front, right_front))
-    return np.vstack([np.einsum("sai,sbj->sabij", *pairs[kind]).reshape(4 * left_rear.shape[0], -1) for kind in kinds])
-
-
-def project_jacobians(jacobians, products: np.ndarray, kinds) -> np.ndarray:
-    """Lᵀ J R flattened, (n_jacobians, k l), of each Jacobian J = Σ parts (a list of ``SegmentBlocks`` with blocks
-    of the given ``kinds`` only) in ``jacobians``: Σ_s L_rᵀ J_rr R_r + L_rᵀ J_rf R_f + L_fᵀ J_fr R_r + L_fᵀ J_ff R_f,
-    one matrix product with the ``products`` of :func:`block_products` for those kinds."""
-    values = np.zeros((len(jacobians), len(kinds), products.shape[0] // len(kinds)))
-    for jacobian_values, parts in zip(values, jacobians):
-        for part in parts:
-            for kind_values, kind in zip(jacobian_values, kinds):
-                if part[kind] is not None:
-                    kind_values += part[kind].reshape(-1)
-    return values.reshape(len(jacobians), -1) @ products
-
-
-def block_kinds(spine: SpineGeometry) -> tuple[int, ...]:
-    """The kinds of segment blocks (indices into ``SegmentBlocks``) the thrust's Jacobians have on this spine:
-    rear rows only for the source's form, all four with the lagrangian term."""
-    at_rest = segment_state(spine, *np.zeros((3, spine.n_nodes, 2)))
-    return tuple(kind for kind in range(4) if any(part[kind] is not None for parts in
-                                                   thrust_jacobian_blocks(spine, at_rest) for part in parts))
