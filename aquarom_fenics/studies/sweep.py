@@ -4,7 +4,7 @@ Designs come from a CSV file (one column per shape name), a grid (``name=lo:hi:n
 a seeded Latin hypercube over the scene's bounds; a shape a source does not set keeps its start
 value. Each design is one task (:func:`evaluate`) on a backend of :mod:`aquarom_fenics.parallel`;
 its row is written to ``sweep.csv`` as it finishes. The FOM's answer at a design is cached in the
-FOM cache (:func:`aquarom_fenics.optimization.study.fom_cache_path`, shared with the optimiser's
+FOM cache (:func:`aquarom_fenics.studies.study.fom_cache_path`, shared with the optimiser's
 FOM checks), so a re-run computes only what is missing; ``--resume`` keeps the rows already in
 ``sweep.csv`` and runs the designs it lacks.
 
@@ -27,7 +27,7 @@ import numpy as np
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.parallel import run_all, worker_name
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.optimization.sweep_designs import (  # noqa: F401 — the design sources, also imported from here
+from aquarom_fenics.studies.sweep_designs import (  # noqa: F401 — the design sources, also imported from here
     MAX_DESIGN_FILE_BYTES, MAX_DESIGNS, csv_designs, grid_designs, latin_hypercube)
 
 
@@ -90,7 +90,7 @@ def _fom_answer(task: SweepTask) -> dict:
     """The FOM's distance and tail amplitude at the design, through the FOM cache."""
     from aquarom_fenics.dynamics.simulate import simulate_fom
     from aquarom_fenics.io.persistence import get_or_compute, write_json_atomic
-    from aquarom_fenics.optimization.study import fom_cache_path
+    from aquarom_fenics.studies.study import fom_cache_path
 
     scene, design = task.scene, task.design
     computed = []
@@ -333,7 +333,7 @@ def summary(rows: list[dict]) -> dict:
 def estimate(scene: Scene, missing: int, model: str, workers: int) -> float:
     """Estimated wall time [s] of the missing designs on ``workers`` workers (plan.py's cost figures)."""
     from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS
-    from aquarom_fenics.optimization.plan import REFERENCE_CELLS, fom_seconds, prom_build_seconds
+    from aquarom_fenics.studies.plan import REFERENCE_CELLS, fom_seconds, prom_build_seconds
 
     cells = LEVEL_TARGET_CELLS.get(scene.mesh.level, REFERENCE_CELLS) if not scene.mesh.file else REFERENCE_CELLS
     degree = scene.mesh.degree
@@ -350,7 +350,7 @@ def cached_designs(scene: Scene, designs: list[dict], model: str) -> int:
     """How many designs the FOM cache answers already (model fom; 0 for the reduced models)."""
     if model != "fom":
         return 0
-    from aquarom_fenics.optimization.study import fom_cache_path
+    from aquarom_fenics.studies.study import fom_cache_path
 
     def answered(design) -> bool:
         try:
