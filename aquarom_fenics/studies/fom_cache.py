@@ -32,7 +32,8 @@ from aquarom_fenics.dynamics.simulate import simulate_fom
 from aquarom_fenics.errors import SolverError
 from aquarom_fenics.geometry.fish import Fish
 from aquarom_fenics.io.paths import cache_root
-from aquarom_fenics.io.persistence import entry_key, get_or_compute, require_cache_writable, store, write_json_atomic
+from aquarom_fenics.io import persistence      # write_json_atomic looked up at each store (a full disk can be simulated)
+from aquarom_fenics.io.persistence import entry_key, get_or_compute, require_cache_writable, store
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.studies.fish_cache import shared_fish
 
@@ -129,7 +130,7 @@ def offer_answer(scene: Scene, design: dict[str, float], result) -> bool:
         return False
     answer = answer_of(result)
     try:
-        store(path, lambda target: write_json_atomic(target, entry_of(answer, scene, design)))
+        store(path, lambda target: persistence.write_json_atomic(target, entry_of(answer, scene, design)))
     except OSError as error:
         log.info("FOM cache: the answer at %s not stored (%s)", design, error)
         return False
@@ -144,7 +145,7 @@ def fom_answer(scene: Scene, design: dict[str, float], amplitude: float | None =
     if amplitude is not None:
         scene = scene.replace("actuation", amplitude=amplitude)
     return get_or_compute(fom_cache_path(scene, design, None), lambda: run_fom(scene, design, fish, progress),
-                          save=lambda value, path: write_json_atomic(path, entry_of(value, scene, design)),
+                          save=lambda value, path: persistence.write_json_atomic(path, entry_of(value, scene, design)),
                           load=lambda path: read_answer(path, need_tail), comm=comm, label=f"FOM at {design}",
                           store_if=lambda value: value.completed)
 
