@@ -11,8 +11,9 @@ An entry (JSON, checksummed by :mod:`aquarom_fenics.io.persistence`) holds::
     stop_reason                      "completed", or why the solver stopped
     computed_by                      model "fom", cells, dofs, steps, wall_time [s], versions
 
-A stopped run is returned with its reason but not stored (as before this format: a stop is retried
-next time, since it can come from the machine, e.g. MUMPS running out of memory).
+A stopped run is returned with its reason but not stored: as before this format, a stop is run
+again next time (``stop_reason`` is therefore "completed" in every entry this module writes; an
+entry with another reason would be read as a stopped answer).
 
 Older entries: the sweep's (distance, tail amplitude, wall time, cells, steps, no stop reason) are
 read as completed answers; the optimiser's (the distance only) are read by :func:`fom_distance`,
