@@ -28,7 +28,7 @@ from aquarom_fenics.reduction.reductor import build_prom as _build_prom
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.dynamics.simulate import SimulationResult, simulate_fom
 from aquarom_fenics.optimization.optimize import DEFAULT_MAX_TIME, OptimizationResult
-from aquarom_fenics.optimization.study import FomCheck, run_optimization
+from aquarom_fenics.studies.study import FomCheck, run_optimization
 from aquarom_fenics.errors import InputError, Interrupted, SolverError
 
 __all__ = ["Scene", "Fish", "load_fish", "simulate", "build_prom", "optimize", "start_design", "CostWeights",

@@ -28,8 +28,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("optimization", ("optimization",)),
     ("verification", ("verification",)),
     ("viz", ("viz",)),
-    ("studies", ("optimization.study", "optimization.background_fom", "optimization.sweep", "optimization.plan",
-                 "verification.validation")),
+    ("studies", ("studies", "verification.validation")),
     ("interface", ("cli", "api")),
 )
 """(layer, names) from the bottom up."""

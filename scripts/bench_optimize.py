@@ -28,7 +28,7 @@ from aquarom_fenics.io.versions import software_versions
 from aquarom_fenics.io.persistence import write_json_atomic
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.optimization.cost import design_space
-from aquarom_fenics.optimization.study import design_and_amplitude, fom_distance, run_optimization
+from aquarom_fenics.studies.study import design_and_amplitude, fom_distance, run_optimization
 from aquarom_fenics.io.paths import cache_root
 from aquarom_fenics.reduction.reductor import build_prom
 

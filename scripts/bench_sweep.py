@@ -36,7 +36,7 @@ GRID = ["z_tail=-0.3:0.3:4", "y_thin=0:0.1:4"]
 
 def timed_sweep(scene, designs, pool, folder: Path) -> dict:
     """One sweep from an empty cache on ``pool``: wall time, rows."""
-    from aquarom_fenics.optimization.sweep import run_sweep
+    from aquarom_fenics.studies.sweep import run_sweep
 
     os.environ["AQUAROM_CACHE"] = str(folder / "cache")
     started = time.perf_counter()
@@ -77,7 +77,7 @@ def main() -> int:
     from aquarom_fenics.io.versions import software_versions
     from aquarom_fenics.io.persistence import write_json_atomic
     from aquarom_fenics.io.scene import scene_from_dict
-    from aquarom_fenics.optimization.sweep import grid_designs
+    from aquarom_fenics.studies.sweep import grid_designs
     from aquarom_fenics.verification.validation.suite import machine
 
 

@@ -27,7 +27,7 @@ from aquarom_fenics.io.outputs import holds_file
 from aquarom_fenics.io.versions import software_versions
 from aquarom_fenics.io.persistence import write_text_atomic
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.optimization.study import (checkpoint_pattern, completed_summary, pareto_sweep, run_optimization,
+from aquarom_fenics.studies.study import (checkpoint_pattern, completed_summary, pareto_sweep, run_optimization,
                                               weight_folder)
 
 REPOSITORY = Path(__file__).resolve().parents[1]

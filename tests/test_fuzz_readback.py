@@ -132,7 +132,7 @@ CELLS = st.one_of(st.sampled_from(["0", "1", "1.0", "-0.1", "0.1", "nan", "inf",
        header=st.sampled_from([HEADER, HEADER.replace("design", "desing"), "", HEADER + ",extra"]),
        tail=st.binary(max_size=6))
 def test_a_hand_edited_sweep_csv_reads_or_is_one_line(tmp_path, rows, cut, header, tail):
-    from aquarom_fenics.optimization.sweep import read_rows, resumed_rows
+    from aquarom_fenics.studies.sweep import read_rows, resumed_rows
 
     path = tmp_path / "sweep.csv"
     text = header + "\n" + "".join(",".join(row) + "\n" for row in rows)
@@ -204,7 +204,7 @@ NUMBER = st.one_of(st.sampled_from(["0", "1", "-0.1", "nan", "inf", "1e400", "",
                       max_size=3),
        samples=st.integers(-5, 10 ** 13), seed=st.integers(-2, 2 ** 40))
 def test_sweep_design_options_give_bounded_designs_or_one_line(specs, samples, seed):
-    from aquarom_fenics.optimization.sweep import MAX_DESIGNS, grid_designs, latin_hypercube
+    from aquarom_fenics.studies.sweep import MAX_DESIGNS, grid_designs, latin_hypercube
 
     grid = [f"{name}{sep}{low}:{high}:{count}" for name, low, high, count, sep in specs]
     designs = expect_value_or_input_error(lambda: grid_designs(grid, SCENE))

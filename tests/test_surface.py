@@ -48,7 +48,7 @@ def test_simulate_fom_without_xi_runs_the_start_design(tmp_path):
 def test_the_fom_check_names_the_start_design_not_the_nominal_one():
     import dataclasses
 
-    from aquarom_fenics.optimization.study import FomCheck
+    from aquarom_fenics.studies.study import FomCheck
 
     names = {field.name for field in dataclasses.fields(FomCheck)}
     assert {"start_distance", "prom_start_distance"} <= names

@@ -43,7 +43,7 @@ def test_dry_run_prints_a_plan_and_writes_nothing(tmp_path, capsys):
 
 
 def test_dry_run_says_whether_the_tail_screen_runs_and_adds_its_time(capsys):
-    from aquarom_fenics.optimization.plan import TAIL_SCREEN_SECONDS_PER_STATE, tail_screen_seconds
+    from aquarom_fenics.studies.estimate import TAIL_SCREEN_SECONDS_PER_STATE, tail_screen_seconds
 
     main(["optimize", "co", "--dry-run", "--set", "optimizer.tail_screen=true"])   # off in the shipped CO scene
     text = capsys.readouterr().out

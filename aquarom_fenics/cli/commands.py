@@ -15,7 +15,7 @@ from aquarom_fenics.parallel import shutting_down
 
 
 def run_dry(args) -> int:
-    from aquarom_fenics.optimization.plan import plan
+    from aquarom_fenics.studies.plan import plan
 
     if args.command == "sweep":          # its plan needs the designs: the command makes it
         return run_sweep(args)
@@ -75,7 +75,7 @@ def run_optimize(args) -> int:
     from aquarom_fenics.cli.parser import DEFAULT_WEIGHT
     from aquarom_fenics.optimization.cost import CostWeights
     from aquarom_fenics.optimization.optimize import DEFAULT_MAX_TIME
-    from aquarom_fenics.optimization.study import checkpoint_pattern, run_optimization
+    from aquarom_fenics.studies.study import checkpoint_pattern, run_optimization
 
     scene, _ = check_inputs(args, load_scene(args))
     weights = CostWeights()
@@ -100,7 +100,7 @@ def run_optimize(args) -> int:
 
 
 def run_pareto(args) -> int:
-    from aquarom_fenics.optimization.study import checkpoint_pattern, pareto_sweep
+    from aquarom_fenics.studies.study import checkpoint_pattern, pareto_sweep
 
     scene, _ = check_inputs(args, load_scene(args))
     with shutting_down(open_work_pool(args, scene, len(scene.cooptimization.weights), default_workers=1)) as pool:

@@ -25,7 +25,7 @@ def load_scene(args):
     if args.degree is not None:
         scene = scene.replace("mesh", degree=args.degree)
     if not getattr(args, "allow_large", False):
-        from aquarom_fenics.optimization.plan import check_mesh_bounds, check_plan_bounds
+        from aquarom_fenics.studies.plan import check_mesh_bounds, check_plan_bounds
 
         check_mesh_bounds(scene)
         if args.command in ("basis", "check"):
@@ -78,7 +78,7 @@ def check_inputs(args, scene):
     if args.command in ("simulate", "compare", "optimize", "pareto", "sweep"):
         check_time_grid(scene)
         if not getattr(args, "allow_large", False):
-            from aquarom_fenics.optimization.plan import check_run_bounds
+            from aquarom_fenics.studies.plan import check_run_bounds
 
             check_run_bounds(scene)
     if args.command == "optimize":
@@ -96,7 +96,7 @@ def check_inputs(args, scene):
     if args.command == "pareto" and not scene.cooptimization.enabled:
         raise InputError(f"scene {scene.source}: [cooptimization] enabled = true is needed for a Pareto sweep")
     if args.command == "pareto":
-        from aquarom_fenics.optimization.study import require_distinct_weights
+        from aquarom_fenics.studies.study import require_distinct_weights
 
         require_distinct_weights(scene.cooptimization.weights, f"scene {scene.source}")
     if args.command in ("optimize", "pareto"):
@@ -105,7 +105,7 @@ def check_inputs(args, scene):
             require_interior(space, scene)
     if args.command in ("simulate", "compare", "optimize", "pareto", "build", "sweep") \
             and not getattr(args, "allow_large", False):
-        from aquarom_fenics.optimization.plan import check_plan_bounds
+        from aquarom_fenics.studies.plan import check_plan_bounds
 
         check_plan_bounds(args.command, scene, getattr(args, "model", None))
     return scene, xi

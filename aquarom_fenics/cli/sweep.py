@@ -15,7 +15,7 @@ from aquarom_fenics.io.run_record import check_run_record, write_run_record
 
 def sweep_designs(args, scene) -> tuple[list[dict], str]:
     """The designs of --designs, --grid or --samples (exactly one of them) and a description."""
-    from aquarom_fenics.optimization import sweep_designs as sources
+    from aquarom_fenics.studies import sweep_designs as sources
 
     given = [name for name, value in (("--designs", args.designs), ("--grid", args.grid),
                                       ("--samples", args.samples)) if value is not None]
@@ -33,7 +33,7 @@ def sweep_designs(args, scene) -> tuple[list[dict], str]:
 
 def earlier_rows(args, scene, designs, target: Path) -> dict:
     """The rows --resume keeps (none without it)."""
-    from aquarom_fenics.optimization.sweep import resumed_rows
+    from aquarom_fenics.studies.sweep import resumed_rows
 
     if not args.resume:
         return {}
@@ -53,7 +53,7 @@ def run_record(args, scene) -> dict:
 def run_sweep(args) -> int:
     from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
     from aquarom_fenics.parallel import choose_cluster, open_pool, shutting_down
-    from aquarom_fenics.optimization import sweep
+    from aquarom_fenics.studies import sweep
 
     if MPI.COMM_WORLD.size > 1:
         raise InputError("aquarom sweep spreads its designs over workers itself; run it without mpirun "
@@ -121,8 +121,8 @@ def progress_line(total: int, done: int, names: list[str]):
 
 
 def dry_run(args, scene, designs, source, kept, cluster, workers) -> int:
-    from aquarom_fenics.optimization.plan import plan
-    from aquarom_fenics.optimization.sweep import cached_designs, estimate
+    from aquarom_fenics.studies.plan import plan
+    from aquarom_fenics.studies.sweep import cached_designs, estimate
 
     todo = [design for k, design in enumerate(designs) if k not in kept]
     cached = cached_designs(scene, todo, args.model)

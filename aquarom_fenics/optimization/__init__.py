@@ -1,1 +1,2 @@
-"""Cost, optimisers, dry-run plans and optimisation studies."""
+"""The cost, the optimisers (paper method, trust region), their history and PROM builder; the
+studies of many runs above them are in :mod:`aquarom_fenics.studies`."""

@@ -349,7 +349,7 @@ def test_optimize_resume_refuses_another_weight(tmp_path, capsys):
     from aquarom_fenics.io.run_record import write_run_record
     from aquarom_fenics.io.scene import Scene
     from aquarom_fenics.optimization.cost import CostWeights
-    from aquarom_fenics.optimization.study import optimization_record
+    from aquarom_fenics.studies.study import optimization_record
 
     loaded = Scene.load(str(scene))
     write_run_record(out, optimization_record(loaded, CostWeights(0.5, 0.5, loaded.cooptimization.energy_weight), None))
@@ -361,7 +361,7 @@ def test_optimize_resume_refuses_another_weight(tmp_path, capsys):
 
 
 def test_a_resume_after_an_interrupt_in_the_fom_check_repeats_no_iteration(optimized, tmp_path, capsys, monkeypatch):
-    from aquarom_fenics.optimization import study
+    from aquarom_fenics.studies import study
 
     _, scene, fresh = optimized
     original = study.fom_check
@@ -386,7 +386,7 @@ def test_a_resume_after_an_interrupt_in_the_fom_check_repeats_no_iteration(optim
 
 # ---------------------------------------------------------------------- Pareto weights: one folder per exact value
 def test_pareto_weights_that_print_alike_get_their_own_folders():
-    from aquarom_fenics.optimization.study import weight_folder
+    from aquarom_fenics.studies.study import weight_folder
 
     assert weight_folder(0.9) == "w1_0.9" and weight_folder(0.25) == "w1_0.25"
     assert weight_folder(0.9000001) != weight_folder(0.9)

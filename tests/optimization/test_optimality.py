@@ -9,7 +9,7 @@ import pytest
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.optimization import optimize as optimize_module
-from aquarom_fenics.optimization import study
+from aquarom_fenics.studies import study
 from aquarom_fenics.optimization.cost import CostWeights, Evaluation, design_space, first_order
 from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.optimization.optimize import optimize, start_points

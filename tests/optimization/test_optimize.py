@@ -14,7 +14,7 @@ from aquarom_fenics.errors import InputError, SolverError
 from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.optimization.optimize import optimize
 from aquarom_fenics.reduction.reductor import build_prom
-from aquarom_fenics.optimization.study import run_optimization
+from aquarom_fenics.studies.study import run_optimization
 from conftest import coarse_scene
 
 TOY_SHAPES = {"z_tail": {"bounds": [-0.2, 0.2]}, "y_thin": {"bounds": [-0.1, 0.1]}}
@@ -230,7 +230,7 @@ def test_prom_build_failing_mid_run_keeps_history_and_checkpoint(tmp_path, toy_f
 
 
 def test_fom_check_that_stops_is_reported_and_the_outputs_are_kept(tmp_path, capsys, monkeypatch):
-    from aquarom_fenics.optimization import fom_cache, study
+    from aquarom_fenics.studies import fom_cache, study
 
     original = fom_cache.simulate_fom
 

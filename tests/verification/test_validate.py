@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aquarom_fenics.optimization.plan import power_law_fit
+from aquarom_fenics.studies.estimate import power_law_fit
 from aquarom_fenics.verification.validation.cases import fom_case, reduced_case
 from aquarom_fenics.verification.validation.figures import make_figures
 from aquarom_fenics.verification.validation.report import write_report

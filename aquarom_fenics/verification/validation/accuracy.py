@@ -2,7 +2,7 @@
 time against error (SPEC §11)."""
 from __future__ import annotations
 
-from aquarom_fenics.optimization.plan import power_law_fit
+from aquarom_fenics.studies.estimate import power_law_fit
 from aquarom_fenics.verification.compare import deviation
 from aquarom_fenics.verification.validation.cases import fom_case, reduced_case
 from aquarom_fenics.verification.validation.runner import Runner

@@ -2,7 +2,6 @@
 (local processes or a Dask cluster, :mod:`aquarom_fenics.parallel`)."""
 from __future__ import annotations
 
-import json
 import logging
 import os
 import resource
@@ -19,6 +18,8 @@ from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
 from aquarom_fenics.parallel import DaskCluster, LocalProcesses, run_all
 from aquarom_fenics.io.persistence import get_or_compute, read_intact, write_json_atomic
 from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.studies.estimate import case_seconds
+from aquarom_fenics.studies.fish_cache import shared_fish
 from aquarom_fenics.verification.validation.cases import CACHED_STATUSES, Case, describe, read_record
 from aquarom_fenics.verification.validation.compute import compute_fom, compute_mesh, compute_mpi, compute_reduced
 
@@ -54,7 +55,6 @@ class Runner:
         self.this_run: dict[str, dict] = {}      # records computed in this run (also the uncached ones)
         self.computed_elsewhere: set[str] = set()
         self.compute_time = 0.0
-        self._fish = {}
         self._warm = set()
         logging.getLogger("aquarom").setLevel(logging.ERROR)   # dropped vectors etc. are in the records
 
@@ -151,13 +151,9 @@ class Runner:
         return record
 
     def fish(self, scene: Scene):
-        """load_fish, shared by cases with the same mesh, regions and shape set."""
-        from aquarom_fenics.geometry.fish import load_fish
-
-        key = json.dumps([scene.to_dict()["mesh"], scene.to_dict()["regions"], scene.shape_names], sort_keys=True)
-        if key not in self._fish:
-            self._fish[key] = load_fish(scene)
-        return self._fish[key]
+        """load_fish, shared by cases with the same mesh, regions and shape set (and with a sweep's
+        designs in the same process: :func:`aquarom_fenics.studies.fish_cache.shared_fish`)."""
+        return shared_fish(scene)
 
     def warm_up(self, scene: Scene, parametric: bool | None) -> None:
         """Compile (or load from the JIT cache) the forms of a model kind and run it briefly on level 1.
@@ -188,23 +184,15 @@ class Runner:
         print(text, end=end, file=self.stream, flush=True)
 
 
-LEVEL_CELLS = {1: 1232, 2: 4176, 3: 7944, 4: 15392, 5: 25312}
-
 _WORKER: Runner | None = None
 """The Runner of a worker process, made by its first case and kept for the cases after it (the
 mesh and the warmed-up forms are reused)."""
 
 
 def estimated_cost(case: Case) -> float:
-    """A rough run time [s], to start the longest cases first."""
-    cells = LEVEL_CELLS.get(case.scene.mesh.level, 8000)
-    steps = case.scene.n_steps
-    if case.kind in ("fom", "mpi", "mesh"):
-        quadratic = 8.0 if case.scene.mesh.degree == 2 else 1.0   # measured: level 1, 16 s against 1.9 s
-        return quadratic * 7e-4 * cells ** 1.1 * steps / 100.0
-    p = len(case.scene.shapes) if case.options.get("parametric") else 0
-    order = case.scene.reduction.taylor_order if p else 0
-    return 1e-4 * cells * (1 + p) * (4 if order == 2 else 1) + 0.05 * steps / 100.0
+    """A rough run time [s] of a case (:func:`aquarom_fenics.studies.estimate.case_seconds`, on the
+    cells of the mesh recipe), to start the longest cases first."""
+    return case_seconds(case.kind, case.scene, bool(case.options.get("parametric")))
 
 
 def compute_case(settings: tuple, case: Case) -> tuple[dict, float]:

@@ -1,126 +1,28 @@
 """`--dry-run`: what a command would build or reuse, what it skips, and how long it should take.
 
-Time estimates come from the benchmark JSON files under results/bench/ when they exist (fitted
-power laws in the number of cells), otherwise from the reference figures measured on 2 cores.
+Time and memory estimates are those of :mod:`aquarom_fenics.studies.estimate` (cells per level from
+the mesh recipe, costs from the benchmarks or the reference figures).
 """
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
 
 from aquarom_fenics.errors import InputError
 
-from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS, block_cache_path
+from aquarom_fenics.geometry.block import block_cache_path
 from aquarom_fenics.geometry.fish import planned_body
-from aquarom_fenics.io.paths import bench_results
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.optimization.prom_builder import screens_tail, stability_plan
-from aquarom_fenics.verification.local_stability import tail_sample_steps
-from aquarom_fenics.reduction.basis import candidate_labels, response_labels
-
-# Reference costs at 7944 cells (level 3, 2 cores): FOM 2 s simulation, PROM build with p
-# parameters ≈ 0.5 + 0.33 p s, reduced solve ≈ 0.1 s (0.2 s with sensitivities).
-REFERENCE_CELLS = 7944
-REFERENCE_FOM_SECONDS = 10.3
-REFERENCE_FOM_EXPONENT = 1.1
-QUADRATIC_COST_FACTOR = {1: 1.0, 2: 8.6}
-"""Cost of a quadratic mesh against the linear one on the same cells (level 1 FOM: 16.4 s against 1.9 s)."""
-TAIL_SCREEN_SECONDS_PER_STATE = 0.33
-"""Tail screen per linearised state at the default mesh (degree 2, level 2: 16.5 s for 51 states)."""
-
-
-def power_law_fit(sizes, times) -> dict | None:
-    """Least squares of log t = log c + e log n over the positive, finite pairs: exponent e, prefactor c
-    and the number of points (None below two distinct sizes)."""
-    sizes, times = np.asarray(sizes, dtype=float), np.asarray(times, dtype=float)
-    keep = np.isfinite(sizes) & np.isfinite(times) & (sizes > 0) & (times > 0)
-    if np.unique(sizes[keep]).size < 2:
-        return None
-    exponent, intercept = np.polyfit(np.log(sizes[keep]), np.log(times[keep]), 1)
-    return {"exponent": float(exponent), "prefactor": float(np.exp(intercept)), "points": int(keep.sum())}
-
-
-def tail_screen_seconds(scene: Scene) -> float:
-    """Estimated time of one tail screen [s] (0 when the optimisers skip it): the states of the last
-    stroke at the default mesh's cost per state, whatever the mesh."""
-    return tail_sample_steps(scene).size * TAIL_SCREEN_SECONDS_PER_STATE if screens_tail(scene) else 0.0
-
-
-def fom_seconds(cells: int, steps: int, degree: int = 1) -> float:
-    """Estimated FOM wall time [s] for ``steps`` Newmark steps."""
-    runs = _bench_runs("fom.json", lambda r: r.get("ranks") == 1 and "failed" not in r
-                       and r.get("degree", 1) == degree)
-    fit = power_law_fit([r["cells"] for r in runs], [r["time_integration"] for r in runs])
-    if fit:
-        return fit["prefactor"] * cells ** fit["exponent"] * steps / 100
-    return (QUADRATIC_COST_FACTOR[degree] * REFERENCE_FOM_SECONDS * (cells / REFERENCE_CELLS) ** REFERENCE_FOM_EXPONENT
-            * steps / 100)
-
-
-def prom_build_seconds(cells: int, parameters: int, degree: int = 1) -> float:
-    runs = _bench_runs("prom.json", lambda r: r["parameters"] == parameters and r.get("degree", 1) == degree)
-    fit = power_law_fit([r["cells"] for r in runs], [r["build_time"] for r in runs])
-    if fit:
-        return fit["prefactor"] * cells ** fit["exponent"]
-    return QUADRATIC_COST_FACTOR[degree] * (0.5 + 0.33 * parameters) * cells / REFERENCE_CELLS
-
-
-EIGEN_SECONDS_PER_MODE = 0.02
-"""SLEPc's generalised eigensolve per vibration mode at level 1, degree 1 (1232 cells: 0.019 s for one)."""
-STATIC_SOLVE_SECONDS = 0.01
-"""One static solve of a modal derivative at level 1, degree 1 (1232 cells)."""
-TENSOR_SECONDS = 0.1
-"""The internal-force tensors of an 8-vector basis at level 1, degree 1; they grow as m⁴ and with the cells."""
-LEVEL_1_CELLS = 1232
-
-
-def basis_seconds(scene: Scene, cells: float, parametric: bool) -> float:
-    """Estimated time [s] of the steps of a PROM build that grow with the basis: the eigensolve of the
-    n_vm vibration modes (∝ n_vm × cells), the static solves of the modal derivatives (∝ their
-    count × cells) and the cubic internal-force tensors (∝ m⁴ × cells), all from level-1 figures."""
-    modes = scene.reduction.vibration_modes
-    size = len(expected_basis(scene, parametric))
-    derivatives = modes * (modes + 1) // 2 if scene.reduction.modal_derivatives else 0
-    scale = QUADRATIC_COST_FACTOR[scene.mesh.degree] * cells / LEVEL_1_CELLS
-    return scale * (EIGEN_SECONDS_PER_MODE * modes + STATIC_SOLVE_SECONDS * derivatives
-                    + TENSOR_SECONDS * (size / 8) ** 4)
-
-
-def reduced_tensor_bytes(scene: Scene, parametric: bool = True) -> float:
-    """Memory of the reduced internal-force tensor [bytes]: 8 m⁴ for its cubic part, times 1 + p
-    for its first ξ-derivatives (and + p² at Taylor order 2), m the candidate basis size."""
-    size = len(expected_basis(scene, parametric))
-    p = len(scene.shapes) if parametric else 0
-    return 8.0 * size ** 4 * (1 + p + (p * p if scene.reduction.taylor_order == 2 else 0))
-
-
-def _bench_runs(name: str, keep) -> list[dict]:
-    folder = bench_results()
-    path = folder / name if folder else None
-    if path is None or not path.exists():
-        return []
-    try:
-        return [r for r in json.loads(path.read_text())["runs"] if keep(r)]
-    except (json.JSONDecodeError, KeyError):
-        return []
-
-
-def expected_basis(scene: Scene, parametric: bool) -> list[str]:
-    """Candidate basis vectors (SPEC §7); dependent ones are dropped at build time."""
-    reduction = scene.reduction
-    actuation_modes = reduction.basis == "default" and scene.actuation.stiffness > 0 and scene.actuation.amplitude > 0
-    responses = response_labels(reduction.basis == "default" and reduction.response_vectors, actuation_modes,
-                                scene.fluid.thrust)
-    return candidate_labels(reduction.vibration_modes, reduction.modal_derivatives,
-                            len(scene.shapes) if parametric else 0, actuation_modes, responses)
+from aquarom_fenics.optimization.prom_builder import stability_plan
+from aquarom_fenics.studies.estimate import (REFERENCE_CELLS, basis_seconds, expected_basis, fom_seconds, level_cells,
+                                             prom_build_seconds, reduced_tensor_bytes, scene_cells, tail_screen_seconds)
 
 
 def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
     """Lines describing the work of ``command`` on ``scene``: the scene, its mesh, its body (read and
     checked as the run would, see ``planned_body``), then the work."""
-    cells = LEVEL_TARGET_CELLS.get(scene.mesh.level, 0) if not scene.mesh.file else None
+    cells = scene_cells(scene) if not scene.mesh.file else None
     lines = [f"scene {scene.name} (hash {scene.hash})"]
     if scene.mesh_file:
         from aquarom_fenics.geometry.mesh_files import MAX_MESH_FILE_BYTES
@@ -190,7 +92,7 @@ def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
 def plan_seconds(command: str, scene: Scene, model: str | None = None) -> float:
     """Estimated wall time [s] of ``command``: FOM runs, PROM builds (the basis steps that grow with
     the vibration modes included), tail screens and reduced solves, as :func:`plan` lists them."""
-    cells = (LEVEL_TARGET_CELLS.get(scene.mesh.level, 0) if not scene.mesh.file else None) or REFERENCE_CELLS
+    cells = scene_cells(scene)
     degree = scene.mesh.degree
     fom_time = fom_seconds(cells, scene.n_steps, degree)
     parametric = model != "rom"
@@ -235,7 +137,7 @@ def estimated_block_cells(level: int, length: float, width: float, height: float
         size = np.float64(block_mesh_size(level, *sides))
         cubes = np.prod(np.maximum(sides, size) / size)
         reference = np.prod(np.array(REFERENCE_BOX) / LEVEL_MESH_SIZE[level])
-        cells = LEVEL_TARGET_CELLS[level] * cubes / reference
+        cells = level_cells(level) * cubes / reference
     return float(cells) if np.isfinite(cells) else math.inf
 
 
@@ -254,7 +156,7 @@ def check_mesh_bounds(scene: Scene) -> None:
         return
     mesh = scene.mesh
     sides = (mesh.length, mesh.width, mesh.height)
-    target = LEVEL_TARGET_CELLS[mesh.level]
+    target = level_cells(mesh.level)
     cells = estimated_cells(scene)
     aspect = min(sides) / max(sides)
     box = " × ".join(f"{side:g}" for side in sides)

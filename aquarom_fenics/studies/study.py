@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-from aquarom_fenics.optimization.background_fom import BackgroundFom, start_if_useful
-from aquarom_fenics.optimization.fom_cache import fom_cache_path, fom_distance  # noqa: F401 — fom_cache_path: sweep's entries
+from aquarom_fenics.studies.background_fom import BackgroundFom, start_if_useful
+from aquarom_fenics.studies.fom_cache import fom_cache_path, fom_distance
 from aquarom_fenics.optimization.cost import CostWeights, design_space
 from aquarom_fenics.errors import InputError, Interrupted, SolverError
 from aquarom_fenics.parallel import worker_threads

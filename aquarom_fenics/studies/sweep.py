@@ -4,8 +4,8 @@ Designs come from a CSV file (one column per shape name), a grid (``name=lo:hi:n
 a seeded Latin hypercube over the scene's bounds; a shape a source does not set keeps its start
 value. Each design is one task (:func:`evaluate`) on a backend of :mod:`aquarom_fenics.parallel`;
 its row is written to ``sweep.csv`` as it finishes. The FOM's answer at a design is cached in the
-FOM cache (:func:`aquarom_fenics.optimization.study.fom_cache_path`, shared with the optimiser's
-FOM checks), so a re-run computes only what is missing; ``--resume`` keeps the rows already in
+FOM cache (:func:`aquarom_fenics.studies.fom_cache.fom_answer`, one entry format shared with the
+optimiser's FOM checks), so a re-run computes only what is missing; ``--resume`` keeps the rows already in
 ``sweep.csv`` and runs the designs it lacks.
 
 A design the design check refuses, a PROM outside its validity radius, a FOM that stops or a task
@@ -14,7 +14,6 @@ that fails is a row with its status and reason, never the end of the sweep.
 from __future__ import annotations
 
 import csv
-import json
 import logging
 import math
 import time
@@ -27,7 +26,8 @@ import numpy as np
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.parallel import run_all, worker_name
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.optimization.sweep_designs import (  # noqa: F401 — the design sources, also imported from here
+from aquarom_fenics.studies.fish_cache import shared_fish
+from aquarom_fenics.studies.sweep_designs import (  # noqa: F401 — the design sources, also imported from here
     MAX_DESIGN_FILE_BYTES, MAX_DESIGNS, csv_designs, grid_designs, latin_hypercube)
 
 
@@ -48,19 +48,6 @@ class SweepTask:
     design: dict
     model: str
     scene: Scene
-
-
-_FISH: dict = {}
-
-
-def _fish(scene: Scene):
-    """load_fish, kept per worker process for the designs after the first."""
-    from aquarom_fenics.geometry.fish import load_fish
-
-    key = json.dumps([scene.to_dict()["mesh"], scene.to_dict()["regions"], scene.shape_names], sort_keys=True)
-    if key not in _FISH:
-        _FISH[key] = load_fish(scene)
-    return _FISH[key]
 
 
 class _Stopped(Exception):
@@ -87,35 +74,14 @@ def evaluate(task: SweepTask) -> dict:
 
 
 def _fom_answer(task: SweepTask) -> dict:
-    """The FOM's distance and tail amplitude at the design, through the FOM cache."""
-    from aquarom_fenics.dynamics.simulate import simulate_fom
-    from aquarom_fenics.io.persistence import get_or_compute, write_json_atomic
-    from aquarom_fenics.optimization.study import fom_cache_path
+    """The FOM's distance and tail amplitude at the design, through the FOM cache (an entry of the
+    optimiser's FOM check is reused when it holds the tail amplitude)."""
+    from aquarom_fenics.studies.fom_cache import fom_answer
 
-    scene, design = task.scene, task.design
-    computed = []
-
-    def simulate() -> dict:
-        result = simulate_fom(scene, design, fish=_fish(scene), progress=False)
-        if not result.completed:
-            raise _Stopped(result.error)
-        computed.append(True)
-        return {"design": design, "scene_hash": scene.hash, "fom_hash": scene.fom_hash, "distance": result.distance,
-                "tail_amplitude": result.tail_amplitude, "wall_time": result.wall_time, "cells": result.n_cells,
-                "steps": len(result.trajectory) - 1}
-
-    answer = get_or_compute(fom_cache_path(scene, design, None), simulate,
-                            save=lambda value, path: write_json_atomic(path, value), load=_sweep_entry,
-                            label=f"FOM at {design}")
-    return {"distance_m": answer["distance"], "tail_amplitude_m": answer["tail_amplitude"], "cached": not computed}
-
-
-def _sweep_entry(path: Path) -> dict:
-    """A FOM cache entry with the tail amplitude too (an optimiser's FOM check stores the distance only)."""
-    entry = json.loads(path.read_text())
-    if entry.get("tail_amplitude") is None or entry.get("distance") is None:
-        raise ValueError("an entry without the tail amplitude")
-    return entry
+    answer = fom_answer(task.scene, task.design, need_tail=True)
+    if not answer.completed:
+        raise _Stopped(answer.stop_reason)
+    return {"distance_m": answer.distance, "tail_amplitude_m": answer.tail_amplitude, "cached": answer.cached}
 
 
 def reduced_model(scene: Scene, design: dict, model: str):
@@ -126,7 +92,7 @@ def reduced_model(scene: Scene, design: dict, model: str):
     from aquarom_fenics.reduction.prom import ReducedModel
     from aquarom_fenics.reduction.reductor import build_prom
 
-    fish = _fish(scene)
+    fish = shared_fish(scene)
     parametric = model == "prom"
     center = fish.parameter_vector({s.name: s.start for s in scene.shapes} if parametric else design)
     if parametric:
@@ -331,11 +297,10 @@ def summary(rows: list[dict]) -> dict:
 
 
 def estimate(scene: Scene, missing: int, model: str, workers: int) -> float:
-    """Estimated wall time [s] of the missing designs on ``workers`` workers (plan.py's cost figures)."""
-    from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS
-    from aquarom_fenics.optimization.plan import REFERENCE_CELLS, fom_seconds, prom_build_seconds
+    """Estimated wall time [s] of the missing designs on ``workers`` workers (:mod:`~aquarom_fenics.studies.estimate`)."""
+    from aquarom_fenics.studies.estimate import fom_seconds, prom_build_seconds, scene_cells
 
-    cells = LEVEL_TARGET_CELLS.get(scene.mesh.level, REFERENCE_CELLS) if not scene.mesh.file else REFERENCE_CELLS
+    cells = scene_cells(scene)
     degree = scene.mesh.degree
     start_up = 5.0 * min(workers, max(missing, 1)) / max(workers, 1)   # a worker's imports and first mesh
     if model == "fom":
@@ -350,12 +315,6 @@ def cached_designs(scene: Scene, designs: list[dict], model: str) -> int:
     """How many designs the FOM cache answers already (model fom; 0 for the reduced models)."""
     if model != "fom":
         return 0
-    from aquarom_fenics.optimization.study import fom_cache_path
+    from aquarom_fenics.studies.fom_cache import cached_answer
 
-    def answered(design) -> bool:
-        try:
-            return bool(_sweep_entry(fom_cache_path(scene, design, None)))
-        except (OSError, ValueError):
-            return False
-
-    return sum(answered(design) for design in designs)
+    return sum(cached_answer(scene, design, need_tail=True) is not None for design in designs)

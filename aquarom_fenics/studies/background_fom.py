@@ -31,7 +31,7 @@ def start_fom(scene: Scene, design: dict[str, float], amplitude: float | None) -
     """``fom_distance`` at the design, stored in the FOM cache (what the worker runs; its progress
     bar and log lines are discarded)."""
     from aquarom_fenics.geometry.fish import load_fish
-    from aquarom_fenics.optimization.fom_cache import fom_distance
+    from aquarom_fenics.studies.fom_cache import fom_distance
 
     with open(os.devnull, "w") as sink, contextlib.redirect_stderr(sink), contextlib.redirect_stdout(sink):
         return fom_distance(scene, load_fish(scene), design, amplitude)

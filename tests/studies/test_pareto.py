@@ -11,7 +11,7 @@ import pytest
 from aquarom_fenics.errors import InputError
 
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.optimization import study
+from aquarom_fenics.studies import study
 
 
 def test_a_point_whose_fom_check_stops_is_marked_infeasible_with_the_reason(tmp_path, monkeypatch):

@@ -5,8 +5,8 @@ import time
 import pytest
 
 from aquarom_fenics.dynamics.simulate import simulate_fom
-from aquarom_fenics.optimization.background_fom import BackgroundFom
-from aquarom_fenics.optimization.study import fom_cache_path
+from aquarom_fenics.studies.background_fom import BackgroundFom
+from aquarom_fenics.studies.study import fom_cache_path
 
 
 def test_worker_stores_the_start_distance_a_run_here_computes(make_scene):

@@ -13,7 +13,7 @@ from aquarom_fenics.cli import main
 from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
 from aquarom_fenics.parallel import ClusterSettings, DaskCluster
 from aquarom_fenics.io.scene import Scene, scene_from_dict
-from aquarom_fenics.optimization import sweep
+from aquarom_fenics.studies import sweep
 
 SCENE = """
 name = "sweep-test"
