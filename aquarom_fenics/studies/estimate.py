@@ -20,15 +20,15 @@ from aquarom_fenics.optimization.prom_builder import screens_tail
 from aquarom_fenics.reduction.basis import candidate_labels, response_labels
 from aquarom_fenics.verification.local_stability import tail_sample_steps
 
-# Reference costs at 7944 cells (level 3, 2 cores): FOM 2 s simulation, PROM build with p
-# parameters ≈ 0.5 + 0.33 p s, reduced solve ≈ 0.1 s (0.2 s with sensitivities).
+# The fallback cost law when no benchmark file exists: the FOM's seconds per 100 steps at
+# REFERENCE_CELLS, growing as cells^REFERENCE_FOM_EXPONENT (the figures' origin: docs/devlog.md).
 REFERENCE_CELLS = 7944
 REFERENCE_FOM_SECONDS = 10.3
 REFERENCE_FOM_EXPONENT = 1.1
 QUADRATIC_COST_FACTOR = {1: 1.0, 2: 8.6}
-"""Cost of a quadratic mesh against the linear one on the same cells (level 1 FOM: 16.4 s against 1.9 s)."""
+"""Cost of a quadratic mesh against the linear one on the same cells."""
 TAIL_SCREEN_SECONDS_PER_STATE = 0.33
-"""Tail screen per linearised state at the default mesh (degree 2, level 2: 16.5 s for 51 states)."""
+"""Seconds of the tail screen per linearised state at the default mesh."""
 
 
 def level_cells(level: int) -> int:
