@@ -1,0 +1,130 @@
+"""ROM and PROM accuracy over the stroke: the CO scene's actuation amplitude A against the FOM.
+
+For A in --amplitudes at the nominal shape (ξ = 0) and at the CO corner (z_tail = -0.5, z_head = +0.5,
+y_lin_long_tail = +0.4, y_head = +0.5, y_ellipse = +0.5): the FOM's distance and tail amplitude, and
+the relative errors of
+  - the ROM built at the design (``model = "rom"``, the scene at that A),
+  - the CO scene's PROM built at the design's shape (at the scene's A; A enters the reduced run only,
+    as in the CO study),
+  - at the corner also the PROM built at ξ = 0 evaluated at the corner (the validity radius is lifted:
+    it shows how far the PROM's Taylor expansion in ξ reaches).
+FOM runs are cached under --cache (by the scene's FOM hash, design and A). Writes
+results/validation/stroke_accuracy.json (rows, versions, scene) and prints a table.
+"""
+import argparse
+import hashlib
+import json
+import pickle
+from pathlib import Path
+
+import numpy as np
+
+from aquarom_fenics.api import Scene, build_prom, simulate
+from aquarom_fenics.io.persistence import write_json_atomic
+from aquarom_fenics.io.versions import software_versions
+from aquarom_fenics.verification.compare import model_errors
+
+REPOSITORY = Path(__file__).resolve().parents[1]
+AMPLITUDES = (0.05, 0.1, 0.2, 0.3, 0.4)
+CORNER = {"z_tail": -0.5, "z_head": 0.5, "y_lin_long_tail": 0.4, "y_head": 0.5, "y_ellipse": 0.5}
+SHAPES = {"nominal": {}, "corner": CORNER}
+
+
+def fom_run(scene: Scene, design: dict, cache: Path):
+    """The FOM run of ``design`` (distance, tail amplitude, trajectory), from ``cache`` when it holds it."""
+    key = hashlib.sha256(json.dumps([scene.fom_hash, sorted(design.items())]).encode()).hexdigest()[:16]
+    path = cache / f"fom-{key}.pickle"
+    if path.exists():
+        with open(path, "rb") as stream:
+            return pickle.load(stream)
+    result = simulate(scene, design)
+    result.model, result.states = None, []
+    cache.mkdir(parents=True, exist_ok=True)
+    with open(path, "wb") as stream:
+        pickle.dump(result, stream)
+    return result
+
+
+def errors(fom, reduced) -> dict:
+    """Relative distance and tail-amplitude errors, or why the reduced run stopped."""
+    if not reduced.completed:
+        return {"completed": False, "error": reduced.error}
+    return {"completed": True, **model_errors(fom, reduced)}
+
+
+def shape_rows(scene: Scene, label: str, design: dict, amplitudes, cache: Path, nominal_prom=None) -> list[dict]:
+    """One row per amplitude for the shape ``design``."""
+    prom = build_prom(scene, design)
+    rows = []
+    for amplitude in amplitudes:
+        stroke = scene.replace("actuation", amplitude=amplitude)
+        fom = fom_run(stroke, design, cache)
+        row = {"shape": label, "design": design, "amplitude": amplitude, "fom_completed": fom.completed,
+               "fom_distance": fom.distance, "fom_tail_amplitude": fom.tail_amplitude}
+        if fom.completed:
+            row["rom"] = errors(fom, simulate(stroke, design, model="rom"))
+            row["prom"] = errors(fom, simulate(stroke, design, model="prom", prom=prom))
+            if nominal_prom is not None:
+                row["prom_from_nominal"] = errors(fom, simulate(stroke, design, model="prom", prom=nominal_prom))
+        rows.append(row)
+        print_row(row)
+    return rows
+
+
+def percent(entry: dict | None, key: str) -> str:
+    if entry is None:
+        return "-"
+    if not entry.get("completed"):
+        return "failed"
+    return f"{100 * entry[key]:+.2f} %"
+
+
+def print_row(row: dict) -> None:
+    if not row["fom_completed"]:
+        print(f"{row['shape']:8s} A = {row['amplitude']:.2f}: the FOM did not complete", flush=True)
+        return
+    text = (f"{row['shape']:8s} A = {row['amplitude']:.2f}: FOM {100 * row['fom_distance']:7.3f} cm, tail "
+            f"{100 * row['fom_tail_amplitude']:6.3f} cm | ROM {percent(row['rom'], 'distance_relative')} "
+            f"(tail {percent(row['rom'], 'tail_amplitude_relative')}) | PROM {percent(row['prom'], 'distance_relative')} "
+            f"(tail {percent(row['prom'], 'tail_amplitude_relative')})")
+    if "prom_from_nominal" in row:
+        text += f" | PROM(ξ=0) {percent(row['prom_from_nominal'], 'distance_relative')}"
+    print(text, flush=True)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scene", default="co", help="scene name or file (default: co)")
+    parser.add_argument("--amplitudes", nargs="*", type=float, default=AMPLITUDES, metavar="A")
+    parser.add_argument("--shapes", nargs="*", choices=sorted(SHAPES), default=list(SHAPES))
+    parser.add_argument("--duration", type=float, default=None, help="simulated time [s] (default: the scene's)")
+    parser.add_argument("--set", nargs="*", default=[], metavar="SECTION.KEY=VALUE",
+                        help="scene overrides, e.g. reduction.response_vectors=false (JSON values)")
+    parser.add_argument("--cache", type=Path, default=REPOSITORY / "results" / "cache" / "stroke_accuracy")
+    parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "validation" / "stroke_accuracy.json")
+    args = parser.parse_args()
+    scene = Scene.load(args.scene)
+    if args.duration is not None:
+        scene = scene.replace("solver", duration=args.duration)
+    for item in args.set:
+        key, _, value = item.partition("=")
+        section, _, name = key.partition(".")
+        if not (section and name and value):
+            parser.error(f"--set {item!r}: expected SECTION.KEY=VALUE, e.g. reduction.response_vectors=false")
+        scene = scene.replace(section, **{name: json.loads(value)})
+    rows = []
+    nominal_prom = None
+    for label in args.shapes:
+        if label == "corner":
+            # the PROM at ξ = 0 with its radius lifted to reach the corner
+            wide = scene.replace("reduction", validity_fraction=1.0)
+            nominal_prom = build_prom(wide, {name: 0.0 for name in scene.shape_names})
+        rows += shape_rows(scene, label, SHAPES[label], args.amplitudes, args.cache,
+                           nominal_prom if label == "corner" else None)
+    report = {"rows": rows, "scene": scene.to_dict(), "scene_hash": scene.hash, "versions": software_versions()}
+    write_json_atomic(args.out, report)
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
