@@ -8,6 +8,8 @@ the relative errors of
     as in the CO study),
   - at the corner also the PROM built at ξ = 0 evaluated at the corner (the validity radius is lifted:
     it shows how far the PROM's Taylor expansion in ξ reaches).
+each with the basis without the stroke vectors ("without", ``[reduction] stroke_amplitude = 0``) and
+with them ("stroke", at --stroke-amplitude; docs/theory/basis.md, "Large strokes").
 FOM runs are cached under --cache (by the scene's FOM hash, design and A). Writes
 results/validation/stroke_accuracy.json (rows, versions, scene) and prints a table.
 """
@@ -46,28 +48,37 @@ def fom_run(scene: Scene, design: dict, cache: Path):
 
 
 def errors(fom, reduced) -> dict:
-    """Relative distance and tail-amplitude errors, or why the reduced run stopped."""
+    """Relative distance and tail-amplitude errors, or why the reduced run stopped; the run's wall time [s]."""
     if not reduced.completed:
-        return {"completed": False, "error": reduced.error}
-    return {"completed": True, **model_errors(fom, reduced)}
+        return {"completed": False, "error": reduced.error, "wall_time": reduced.wall_time}
+    return {"completed": True, "wall_time": reduced.wall_time, **model_errors(fom, reduced)}
 
 
-def shape_rows(scene: Scene, label: str, design: dict, amplitudes, cache: Path, nominal_prom=None) -> list[dict]:
-    """One row per amplitude for the shape ``design``."""
-    prom = build_prom(scene, design)
+def shape_rows(scenes: dict, label: str, design: dict, amplitudes, cache: Path, nominal_proms: dict) -> list[dict]:
+    """One row per amplitude for the shape ``design``: the FOM, and per basis (``scenes``: name → scene)
+    the ROM and the PROM errors."""
+    proms = {}
+    for basis, scene in scenes.items():
+        proms[basis] = build_prom(scene, design)
+        print(f"{label}, {basis} basis: PROM of {proms[basis].size} vectors ({', '.join(proms[basis].labels)})", flush=True)
     rows = []
     for amplitude in amplitudes:
-        stroke = scene.replace("actuation", amplitude=amplitude)
-        fom = fom_run(stroke, design, cache)
-        row = {"shape": label, "design": design, "amplitude": amplitude, "fom_completed": fom.completed,
-               "fom_distance": fom.distance, "fom_tail_amplitude": fom.tail_amplitude}
-        if fom.completed:
-            row["rom"] = errors(fom, simulate(stroke, design, model="rom"))
-            row["prom"] = errors(fom, simulate(stroke, design, model="prom", prom=prom))
-            if nominal_prom is not None:
-                row["prom_from_nominal"] = errors(fom, simulate(stroke, design, model="prom", prom=nominal_prom))
+        fom = None
+        row = {"shape": label, "design": design, "amplitude": amplitude}
+        for basis, scene in scenes.items():
+            stroke = scene.replace("actuation", amplitude=amplitude)
+            fom = fom or fom_run(stroke, design, cache)
+            row.update(fom_completed=fom.completed, fom_distance=fom.distance, fom_tail_amplitude=fom.tail_amplitude)
+            if not fom.completed:
+                break
+            entry = {"prom_size": proms[basis].size,
+                     "rom": errors(fom, simulate(stroke, design, model="rom")),
+                     "prom": errors(fom, simulate(stroke, design, model="prom", prom=proms[basis]))}
+            if basis in nominal_proms:
+                entry["prom_from_nominal"] = errors(fom, simulate(stroke, design, model="prom", prom=nominal_proms[basis]))
+            row[basis] = entry
         rows.append(row)
-        print_row(row)
+        print_row(row, list(scenes))
     return rows
 
 
@@ -79,16 +90,19 @@ def percent(entry: dict | None, key: str) -> str:
     return f"{100 * entry[key]:+.2f} %"
 
 
-def print_row(row: dict) -> None:
+def print_row(row: dict, bases: list[str]) -> None:
     if not row["fom_completed"]:
         print(f"{row['shape']:8s} A = {row['amplitude']:.2f}: the FOM did not complete", flush=True)
         return
     text = (f"{row['shape']:8s} A = {row['amplitude']:.2f}: FOM {100 * row['fom_distance']:7.3f} cm, tail "
-            f"{100 * row['fom_tail_amplitude']:6.3f} cm | ROM {percent(row['rom'], 'distance_relative')} "
-            f"(tail {percent(row['rom'], 'tail_amplitude_relative')}) | PROM {percent(row['prom'], 'distance_relative')} "
-            f"(tail {percent(row['prom'], 'tail_amplitude_relative')})")
-    if "prom_from_nominal" in row:
-        text += f" | PROM(ξ=0) {percent(row['prom_from_nominal'], 'distance_relative')}"
+            f"{100 * row['fom_tail_amplitude']:6.3f} cm")
+    for basis in bases:
+        entry = row[basis]
+        text += (f" | {basis}: ROM {percent(entry['rom'], 'distance_relative')} (tail "
+                 f"{percent(entry['rom'], 'tail_amplitude_relative')}), PROM {percent(entry['prom'], 'distance_relative')} "
+                 f"(tail {percent(entry['prom'], 'tail_amplitude_relative')})")
+        if "prom_from_nominal" in entry:
+            text += f", PROM(ξ=0) {percent(entry['prom_from_nominal'], 'distance_relative')}"
     print(text, flush=True)
 
 
@@ -100,6 +114,9 @@ def main():
     parser.add_argument("--duration", type=float, default=None, help="simulated time [s] (default: the scene's)")
     parser.add_argument("--set", nargs="*", default=[], metavar="SECTION.KEY=VALUE",
                         help="scene overrides, e.g. reduction.response_vectors=false (JSON values)")
+    parser.add_argument("--stroke-amplitude", type=float, default=None, metavar="A_S",
+                        help="the basis with the stroke vectors at [reduction] stroke_amplitude = A_S (default: the scene's, else the "
+                             "largest A; 0: none) besides the basis without them")
     parser.add_argument("--cache", type=Path, default=REPOSITORY / "results" / "cache" / "stroke_accuracy")
     parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "validation" / "stroke_accuracy.json")
     args = parser.parse_args()
@@ -112,16 +129,24 @@ def main():
         if not (section and name and value):
             parser.error(f"--set {item!r}: expected SECTION.KEY=VALUE, e.g. reduction.response_vectors=false")
         scene = scene.replace(section, **{name: json.loads(value)})
+    stroke_amplitude = args.stroke_amplitude
+    if stroke_amplitude is None:
+        stroke_amplitude = scene.reduction.stroke_amplitude or max(args.amplitudes)
+    scenes = {"without": scene.replace("reduction", stroke_amplitude=0.0)}
+    if stroke_amplitude > 0:
+        scenes["stroke"] = scene.replace("reduction", stroke_amplitude=stroke_amplitude)
     rows = []
-    nominal_prom = None
+    nominal_proms = {}
     for label in args.shapes:
         if label == "corner":
-            # the PROM at ξ = 0 with its radius lifted to reach the corner
-            wide = scene.replace("reduction", validity_fraction=1.0)
-            nominal_prom = build_prom(wide, {name: 0.0 for name in scene.shape_names})
-        rows += shape_rows(scene, label, SHAPES[label], args.amplitudes, args.cache,
-                           nominal_prom if label == "corner" else None)
-    report = {"rows": rows, "scene": scene.to_dict(), "scene_hash": scene.hash, "versions": software_versions()}
+            # the PROMs at ξ = 0 with their radius lifted to reach the corner
+            nominal_proms = {basis: build_prom(value.replace("reduction", validity_fraction=1.0),
+                                               {name: 0.0 for name in scene.shape_names})
+                             for basis, value in scenes.items()}
+        rows += shape_rows(scenes, label, SHAPES[label], args.amplitudes, args.cache,
+                           nominal_proms if label == "corner" else {})
+    report = {"rows": rows, "bases": {basis: value.to_dict()["reduction"] for basis, value in scenes.items()},
+              "scene": scene.to_dict(), "scene_hash": scene.hash, "versions": software_versions()}
     write_json_atomic(args.out, report)
     print(f"wrote {args.out}")
 
