@@ -299,7 +299,7 @@ def stroke_vectors(fom: FullOrderModel, labels: tuple[str, ...], static_solve, v
     """The stroke vectors of item 7 named by ``labels`` (:func:`stroke_labels`), in their order."""
     amplitude = fom.scene.reduction.stroke_amplitude
     try:
-        plus, minus = fom.static_response(amplitude, -amplitude), fom.static_response(-amplitude, amplitude)
+        plus, minus = stroke_response(fom, amplitude), stroke_response(fom, -amplitude)
     except SolverError as error:
         raise SolverError(f"[reduction] stroke_amplitude = {amplitude:g}: {error}; a smaller stroke_amplitude "
                           "(the largest amplitude the model runs) may converge") from None
@@ -316,6 +316,20 @@ def stroke_vectors(fom: FullOrderModel, labels: tuple[str, ...], static_solve, v
     first = static_solve(fom.matvec(fom.mass_matrix, psi))
     vectors["psi_inertia"] = static_solve(fom.matvec(fom.mass_matrix, first))
     return [vectors[label] for label in labels]
+
+
+def stroke_response(fom: FullOrderModel, amplitude: float, steps: int = 4) -> np.ndarray:
+    """u_s(a), the static response to the activations a (1, -1): Newton from rest or, when that fails, by
+    continuation in ``steps`` equal steps of a, each Newton from the previous solution."""
+    activations = amplitude * ANTAGONIST_PATTERN
+    try:
+        return fom.static_response(*activations)
+    except SolverError:
+        log.info("basis: the static response at a = %g needs continuation (%d steps)", amplitude, steps)
+    u = None
+    for step in range(1, steps + 1):
+        u = fom.static_response(*(step / steps * activations), start=u)
+    return u
 
 
 def unit_actuation_force(fom: FullOrderModel) -> np.ndarray:

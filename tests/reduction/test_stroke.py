@@ -67,3 +67,24 @@ def test_stroke_vectors_reduce_the_rom_error_of_a_large_stroke():
     assert abs(stroke["distance_relative"]) < 0.3 * abs(without["distance_relative"])
     assert abs(stroke["distance_relative"]) < 0.03
     assert stroke["tail_y_max_error_relative_to_peak"] < 0.3 * without["tail_y_max_error_relative_to_peak"]
+
+
+def test_the_stroke_response_by_continuation_is_the_static_response(quadratic_scene, quadratic_fish):
+    """A Newton that fails from rest (here: allowed two iterations at the full activation) is continued in
+    steps of the activation."""
+    from aquarom_fenics.errors import SolverError
+    from aquarom_fenics.reduction.basis import stroke_response
+
+    fom = FullOrderModel(quadratic_scene, quadratic_fish)
+    direct = fom.static_response(0.4, -0.4)
+    static_response = fom.static_response
+
+    def short_from_rest(left, right, start=None):
+        full_from_rest = start is None and abs(left) > 0.3
+        return static_response(left, right, max_iterations=2 if full_from_rest else 30, start=start)
+
+    fom.static_response = short_from_rest
+    with pytest.raises(SolverError):
+        short_from_rest(0.4, -0.4)
+    continued = stroke_response(fom, 0.4)
+    assert fom.norm(continued - direct) < 1e-8 * fom.norm(direct)
