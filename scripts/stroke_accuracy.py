@@ -19,9 +19,8 @@ import json
 import pickle
 from pathlib import Path
 
-import numpy as np
-
 from aquarom_fenics.api import Scene, build_prom, simulate
+from aquarom_fenics.errors import InputError
 from aquarom_fenics.io.persistence import write_json_atomic
 from aquarom_fenics.io.versions import software_versions
 from aquarom_fenics.verification.compare import model_errors
@@ -30,7 +29,6 @@ REPOSITORY = Path(__file__).resolve().parents[1]
 AMPLITUDES = (0.05, 0.1, 0.2, 0.3, 0.4)
 CORNER = {"z_tail": -0.5, "z_head": 0.5, "y_lin_long_tail": 0.4, "y_head": 0.5, "y_ellipse": 0.5}
 SHAPES = {"nominal": {}, "corner": CORNER}
-
 
 def fom_run(scene: Scene, design: dict, cache: Path):
     """The FOM run of ``design`` (distance, tail amplitude, trajectory), from ``cache`` when it holds it."""
@@ -46,13 +44,11 @@ def fom_run(scene: Scene, design: dict, cache: Path):
         pickle.dump(result, stream)
     return result
 
-
 def errors(fom, reduced) -> dict:
     """Relative distance and tail-amplitude errors, or why the reduced run stopped; the run's wall time [s]."""
     if not reduced.completed:
         return {"completed": False, "error": reduced.error, "wall_time": reduced.wall_time}
     return {"completed": True, "wall_time": reduced.wall_time, **model_errors(fom, reduced)}
-
 
 def shape_rows(scenes: dict, label: str, design: dict, amplitudes, cache: Path, nominal_proms: dict) -> list[dict]:
     """One row per amplitude for the shape ``design``: the FOM, and per basis (``scenes``: name → scene)
@@ -81,14 +77,12 @@ def shape_rows(scenes: dict, label: str, design: dict, amplitudes, cache: Path, 
         print_row(row, list(scenes))
     return rows
 
-
 def percent(entry: dict | None, key: str) -> str:
     if entry is None:
         return "-"
     if not entry.get("completed"):
         return "failed"
     return f"{100 * entry[key]:+.2f} %"
-
 
 def print_row(row: dict, bases: list[str]) -> None:
     if not row["fom_completed"]:
@@ -105,6 +99,28 @@ def print_row(row: dict, bases: list[str]) -> None:
             text += f", PROM(ξ=0) {percent(entry['prom_from_nominal'], 'distance_relative')}"
     print(text, flush=True)
 
+def scene_of(args, parser) -> Scene:
+    """The scene with --duration and --set applied; its shapes must name the corner's when it is asked for."""
+    scene = Scene.load(args.scene)
+    if args.duration is not None:
+        scene = scene.replace("solver", duration=args.duration)
+    for item in args.set:
+        key, _, value = item.partition("=")
+        section, _, name = key.partition(".")
+        try:
+            parsed = json.loads(value)
+        except json.JSONDecodeError:
+            parsed = None
+        if not (section and name and value) or parsed is None:
+            parser.error(f"--set {item!r}: expected SECTION.KEY=VALUE with a JSON value, e.g. reduction.response_vectors=false")
+        scene = scene.replace(section, **{name: parsed})
+    missing = sorted(set(CORNER) - set(scene.shape_names))
+    if "corner" in args.shapes and missing:
+        parser.error(f"--scene {args.scene}: its shapes lack {', '.join(missing)} of the CO corner; use a scene with "
+                     "the CO shapes or --shapes nominal")
+    if not args.amplitudes or min(args.amplitudes) <= 0:
+        parser.error(f"--amplitudes {args.amplitudes}: give one or more amplitudes A > 0")
+    return scene
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -120,15 +136,10 @@ def main():
     parser.add_argument("--cache", type=Path, default=REPOSITORY / "results" / "cache" / "stroke_accuracy")
     parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "validation" / "stroke_accuracy.json")
     args = parser.parse_args()
-    scene = Scene.load(args.scene)
-    if args.duration is not None:
-        scene = scene.replace("solver", duration=args.duration)
-    for item in args.set:
-        key, _, value = item.partition("=")
-        section, _, name = key.partition(".")
-        if not (section and name and value):
-            parser.error(f"--set {item!r}: expected SECTION.KEY=VALUE, e.g. reduction.response_vectors=false")
-        scene = scene.replace(section, **{name: json.loads(value)})
+    try:
+        scene = scene_of(args, parser)
+    except InputError as error:
+        parser.error(str(error))
     stroke_amplitude = args.stroke_amplitude
     if stroke_amplitude is None:
         stroke_amplitude = scene.reduction.stroke_amplitude or max(args.amplitudes)
@@ -149,7 +160,6 @@ def main():
               "scene": scene.to_dict(), "scene_hash": scene.hash, "versions": software_versions()}
     write_json_atomic(args.out, report)
     print(f"wrote {args.out}")
-
 
 if __name__ == "__main__":
     main()
