@@ -32,6 +32,7 @@ SOURCES = {
     "validation/stations.json": "scripts/validate.py --only stations",
     "validation/rom_accuracy.json": "scripts/rom_accuracy.py --meshes 2/1 2/2 2/3",
     "validation/prom_gradient.json": "scripts/validate_gradient.py --radius",
+    "validation/stroke_accuracy.json": "scripts/stroke_accuracy.py",
     "bench/fom.json": "scripts/bench_fom.py",
     "bench/prom.json": "scripts/bench_prom.py",
     "optimize/so1/summary.json": "aquarom optimize so1 --out results/optimize/so1 (empty cache)",
@@ -49,7 +50,7 @@ SOURCES = {
 }
 """Snapshot files (paths under ``results/`` and ``docs/data/`` alike) and the command that writes each."""
 
-PAGES = ("README.md", "docs/validation.md", "docs/studies.md", "docs/theory/stations.md")
+PAGES = ("README.md", "docs/validation.md", "docs/studies.md", "docs/theory/stations.md", "docs/theory/basis.md")
 """Files whose measured tables ``make docs`` rewrites."""
 
 MARKER = re.compile(r"(<!-- measured: (?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /measured -->)", re.S)
@@ -393,6 +394,43 @@ def co_table(folder: Path = SNAPSHOT) -> str:
     return table(header, rows) + "\n" + sources_note(notes)
 
 
+def _reduced_error(entry: dict | None) -> str:
+    """'distance error (tail amplitude error)' of a reduced run, or why it stopped."""
+    if entry is None:
+        return ""
+    if not entry.get("completed"):
+        return "stopped"
+    return f"{percent(entry['distance_relative'])} ({percent(entry['tail_amplitude_relative'])})"
+
+
+def stroke_table(folder: Path = SNAPSHOT) -> str:
+    """ROM and PROM errors over the CO amplitudes at the nominal shape and the CO corner, without and with
+    the stroke vectors (``scripts/stroke_accuracy.py``)."""
+    data = load("validation/stroke_accuracy.json", folder)
+    bases = [basis for basis in ("without", "stroke") if basis in data["bases"]]
+    rows = []
+    for row in data["rows"]:
+        if not row["fom_completed"]:
+            rows.append([row["shape"], f"{row['amplitude']:g}", "stopped"] + [""] * (2 * len(bases)))
+            continue
+        cells = [row["shape"], f"{row['amplitude']:g}", f"{cm(row['fom_distance'])} ({cm(row['fom_tail_amplitude'])})"]
+        for basis in bases:
+            cells += [_reduced_error(row[basis]["rom"]), _reduced_error(row[basis]["prom"])]
+        rows.append(cells)
+    names = {"without": "without the stroke vectors", "stroke": "with them"}
+    header = ["shape", "A", "FOM distance (tail amplitude) [cm]"]
+    for basis in bases:
+        header += [f"ROM {names[basis]}", f"PROM {names[basis]}"]
+    sizes = {basis: sorted({row[basis]["prom_size"] for row in data["rows"] if basis in row}) for basis in bases}
+    stroke = data["bases"].get("stroke", {}).get("stroke_amplitude")
+    note = (f"Errors of the distance (of the tail amplitude) against the FOM; PROM sizes m = "
+            + ", ".join(f"{'/'.join(map(str, sizes[basis]))} {names[basis]}" for basis in bases)
+            + (f", stroke_amplitude = {stroke:g}" if stroke else "") + ". "
+            + f"`{command_of('validation/stroke_accuracy.json')}`. "
+            + sources_note([("validation/stroke_accuracy.json", data)]))
+    return table(header, rows) + "\n" + note
+
+
 def shape_order(scene: str, values: dict) -> list[str]:
     """The names of ``values`` in the order of the shipped scene's [shapes] (as the commands print them)."""
     from aquarom_fenics.io.scene import Scene
@@ -431,7 +469,8 @@ def walkthrough_table(folder: Path = SNAPSHOT) -> str:
 
 
 TABLES = {"walkthrough": walkthrough_table, "accuracy": accuracy_table, "costs": cost_table, "mesh-convergence": mesh_table,
-          "station-convergence": stations_table, "studies": study_table, "studies-co": co_table}
+          "station-convergence": stations_table, "studies": study_table, "studies-co": co_table,
+          "stroke-accuracy": stroke_table}
 
 
 # ---------------------------------------------------------------- the pages

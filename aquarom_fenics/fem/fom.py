@@ -296,11 +296,12 @@ class FullOrderModel:
         return solve_into(solver, rhs, self._work_in, self._work_out)
 
     def static_response(self, left: float, right: float, tolerance: float = 1e-10,
-                        max_iterations: int = 30) -> np.ndarray:
-        """u solving f_int(u) = f_act(u) for fixed activations, head clamped (full Newton)."""
+                        max_iterations: int = 30, start: np.ndarray | None = None) -> np.ndarray:
+        """u solving f_int(u) = f_act(u) for fixed activations, head clamped (full Newton from ``start``,
+        default rest)."""
         self.muscle.set_activations((left, right))
         solver = mumps_solver(self.comm)
-        u = np.zeros(self.n_owned_dofs)
+        u = np.zeros(self.n_owned_dofs) if start is None else np.array(start, dtype=float)
         try:
             for _ in range(max_iterations):
                 internal = self.internal_force(u)

@@ -175,6 +175,7 @@ class ReductionSection:
     vibration_modes: int = _spec(1, lambda v: None if 1 <= v <= MAX_VIBRATION_MODES else f"must be in [1, {MAX_VIBRATION_MODES}]", "number of vibration modes n_vm")
     modal_derivatives: bool = _spec(True, None, "static modal derivatives θ_ij")
     response_vectors: bool = _spec(True, None, "with basis = 'default': the static responses ψ_m to the muscles' stiffness on ψ and, with stations = \"nodes\", τ to the thrust's tail-node force")
+    stroke_amplitude: float = _spec(0.0, lambda v: None if 0 <= v <= 10 else "must be in [0, 10] (0: off)", "with basis = 'default': > 0 adds the stroke vectors (docs/theory/basis.md, \"Large strokes\"): the FOM's static responses at the activations ±A_s (this A_s, e.g. the largest amplitude the model will run), the tail station's force responses and their inertia and modal-derivative terms; 0: off", legacy=0.0)
     taylor_order: int = _spec(1, _one_of(1, 2), "order of the PROM's Taylor expansion in ξ")
     drop_tolerance: float = _spec(1e-8, _positive, "basis vectors whose remaining mass-norm is below this are dropped")
     validity_fraction: float = _spec(0.25, _positive, "PROM validity radius of a parameter as a fraction of its largest |bound| (a shape's own `radius` overrides it)")

@@ -206,10 +206,10 @@ class StationThrustTerm:
             return correction.ravel()
         return apply
 
-    def unit_tail_force(self) -> np.ndarray:
-        """B_0ᵀ e_x: a unit x-force [N] on the tail station, on the owned dofs."""
+    def unit_tail_force(self, axis: int = 0) -> np.ndarray:
+        """B_0ᵀ e_axis: a unit force [N] along x (``axis`` 0) or y (1) on the tail station, on the owned dofs."""
         force = np.zeros((self.owned_weights.shape[1], 3))
-        force[:, 0] = self.owned_weights[0].toarray().ravel()
+        force[:, axis] = self.owned_weights[0].toarray().ravel()
         return force.ravel()
 
     def reduce(self, projector) -> "ThrustTensors":

@@ -11,6 +11,11 @@ With the head clamped in all directions:
      f_act = -a (b_1 + B_1 u) the static response to a is u = a ψ + a² (½ θ_ψ + ψ_m) + O(a³);
      τ = K_0⁻¹ e_tail,x, the static response to the thrust's tail force at rest (f_tail ∥ t = e_x),
      a point force that indents the tail node and so shortens the tail segment's t.
+  7. stroke vectors (``stroke_amplitude`` A_s > 0, not in ``basis = "paper"``; docs/theory/basis.md,
+     "Large strokes"): the FOM's static responses u_s(±A_s), f_int(u) = f_act(u) at the activations
+     ±A_s (1, -1) (every order of a, the large rotations of the tail included); the responses to the
+     tail station's unit forces, τ_x = K_0⁻¹ B_0ᵀ e_x and τ_y = K_0⁻¹ B_0ᵀ e_y; the modal derivative
+     θ_ψτ = -K_0⁻¹ (∂K/∂u[τ_x]) ψ; and the inertia (Ritz) vectors (K_0⁻¹ M)² ψ and K_0⁻¹ M τ_x.
 Each vector is normalised, then mass-orthonormalised; vectors whose remaining mass-norm falls
 below the drop tolerance are dropped and reported.
 """
@@ -27,6 +32,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 from slepc4py import SLEPc
 
+from aquarom_fenics.errors import SolverError
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.fem.linear_solver import mumps_solver, upper_triangle_copy
@@ -151,6 +157,18 @@ def response_labels(response_vectors: bool, actuation_modes: bool, thrust: bool)
     return (("psi_muscle",) if actuation_modes else ()) + (("tail_force",) if thrust else ())
 
 
+def stroke_labels(stroke: bool, actuation_modes: bool, thrust: bool, responses: tuple[str, ...] = ()) -> tuple[str, ...]:
+    """The stroke vectors of item 7 that apply (they need the actuation modes; the tail's, the thrust);
+    τ_x once, when the response vectors hold it already."""
+    if not (stroke and actuation_modes):
+        return ()
+    labels = ("stroke_plus", "stroke_minus")
+    if thrust:
+        labels += (() if "tail_force" in responses else ("tail_force",)) + ("tail_lateral", "theta_psi_tail")
+    labels += ("psi_inertia",)
+    return labels + (("tail_inertia",) if thrust else ())
+
+
 class KeptFactors:
     """The last Cholesky factorisation of a clamped K_0 in this process, kept with its matrix.
 
@@ -254,11 +272,17 @@ def _build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
                                 fom.thrust is not None and fom.station_averages is None)
     if "psi_muscle" in responses:
         candidates.append(-static_solve(variations.muscle_stiffness(psi)))
-    if "tail_force" in responses:
-        candidates.append(static_solve(unit_tail_force(fom)))
+    tail = static_solve(unit_tail_force(fom)) if "tail_force" in responses else None
+    if tail is not None:
+        candidates.append(tail)
+    strokes = stroke_labels(settings.basis == "default" and settings.stroke_amplitude > 0, actuation_modes,
+                            fom.thrust is not None, responses)
+    if strokes:
+        candidates += stroke_vectors(fom, strokes, static_solve, variations, psi, tail)
     timings["static_solves"] = time.perf_counter() - started - timings["vibration_modes"]
     variations.vector.destroy()
-    labels = candidate_labels(len(modes), settings.modal_derivatives, n_parameters, actuation_modes, responses)
+    labels = candidate_labels(len(modes), settings.modal_derivatives, n_parameters, actuation_modes,
+                              responses + strokes)
     vectors, labels, dropped = mass_orthonormalise(fom, list(zip(labels, candidates)), settings.drop_tolerance)
     timings["basis_total"] = time.perf_counter() - started
     if dropped:
@@ -269,6 +293,44 @@ def _build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
     return ReductionBasis(vectors, labels, dropped, frequencies, timings)
 
 
+def stroke_vectors(fom: FullOrderModel, labels: tuple[str, ...], static_solve, variations: _SecondVariations,
+                   psi: np.ndarray, tail: np.ndarray | None) -> list[np.ndarray]:
+    """The stroke vectors of item 7 named by ``labels`` (:func:`stroke_labels`), in their order."""
+    amplitude = fom.scene.reduction.stroke_amplitude
+    try:
+        plus, minus = stroke_response(fom, amplitude), stroke_response(fom, -amplitude)
+    except SolverError as error:
+        raise SolverError(f"[reduction] stroke_amplitude = {amplitude:g}: {error}; a smaller stroke_amplitude "
+                          "(the largest amplitude the model runs) may converge") from None
+    finally:
+        fom.set_displacement(np.zeros(fom.n_owned_dofs))
+        fom.muscle.set_activations((0.0, 0.0))
+    if tail is None and "tail_force" in labels:
+        tail = static_solve(unit_tail_force(fom))
+    vectors = {"stroke_plus": plus, "stroke_minus": minus, "tail_force": tail}
+    if "tail_lateral" in labels:
+        vectors["tail_lateral"] = static_solve(unit_tail_force(fom, axis=1))
+        vectors["theta_psi_tail"] = -static_solve(variations.evaluate(variations.modal, psi, tail))
+        vectors["tail_inertia"] = static_solve(fom.matvec(fom.mass_matrix, tail))
+    first = static_solve(fom.matvec(fom.mass_matrix, psi))
+    vectors["psi_inertia"] = static_solve(fom.matvec(fom.mass_matrix, first))
+    return [vectors[label] for label in labels]
+
+
+def stroke_response(fom: FullOrderModel, amplitude: float, steps: int = 4) -> np.ndarray:
+    """u_s(a), the static response to the activations a (1, -1): Newton from rest or, when that fails, by
+    continuation in ``steps`` equal steps of a, each Newton from the previous solution."""
+    activations = amplitude * ANTAGONIST_PATTERN
+    try:
+        return fom.static_response(*activations)
+    except SolverError:
+        log.info("basis: the static response at a = %g needs continuation (%d steps)", amplitude, steps)
+    u = None
+    for step in range(1, steps + 1):
+        u = fom.static_response(*(step / steps * activations), start=u)
+    return u
+
+
 def unit_actuation_force(fom: FullOrderModel) -> np.ndarray:
     """f_act at rest with the activation pattern at unit amplitude (left contracting, right extending)."""
     fom.muscle.set_activations(ANTAGONIST_PATTERN)
@@ -276,14 +338,14 @@ def unit_actuation_force(fom: FullOrderModel) -> np.ndarray:
     return fom.muscle.force()
 
 
-def unit_tail_force(fom: FullOrderModel, nodal: bool = False) -> np.ndarray:
-    """A unit force [N] in x on the tail, the direction of f_tail = ½ m̃ (v·n)² t at rest: B_0ᵀ e_x on the
-    tail station (e_tail,x on the tail node with ``stations = "nodes"`` or ``nodal``)."""
+def unit_tail_force(fom: FullOrderModel, nodal: bool = False, axis: int = 0) -> np.ndarray:
+    """A unit force [N] in x (``axis`` 0; y: 1) on the tail, in x the direction of f_tail = ½ m̃ (v·n)² t at
+    rest: B_0ᵀ e_x on the tail station (e_tail,x on the tail node with ``stations = "nodes"`` or ``nodal``)."""
     if not nodal and fom.station_averages is not None and fom.thrust is not None:
-        return fom.thrust.unit_tail_force()
+        return fom.thrust.unit_tail_force(axis)
     force = np.zeros(fom.n_owned_dofs)
     blocks, _ = fom.owned_positions(np.array([fom.fish.tags.tail_node]))
-    force[3 * blocks] = 1.0
+    force[3 * blocks + axis] = 1.0
     return force
 
 
