@@ -17,7 +17,7 @@ from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS
 from aquarom_fenics.io.paths import bench_results
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.optimization.prom_builder import screens_tail
-from aquarom_fenics.reduction.basis import candidate_labels, response_labels
+from aquarom_fenics.reduction.basis import candidate_labels, response_labels, stroke_labels
 from aquarom_fenics.verification.local_stability import tail_sample_steps
 
 # The fallback cost law when no benchmark file exists: the FOM's seconds per 100 steps at
@@ -138,6 +138,8 @@ def expected_basis(scene: Scene, parametric: bool) -> list[str]:
     actuation_modes = reduction.basis == "default" and scene.actuation.stiffness > 0 and scene.actuation.amplitude > 0
     responses = response_labels(reduction.basis == "default" and reduction.response_vectors, actuation_modes,
                                 scene.fluid.thrust)
+    responses += stroke_labels(reduction.basis == "default" and reduction.stroke_amplitude > 0, actuation_modes,
+                               scene.fluid.thrust, responses)
     return candidate_labels(reduction.vibration_modes, reduction.modal_derivatives,
                             len(scene.shapes) if parametric else 0, actuation_modes, responses)
 
