@@ -1,11 +1,12 @@
 """A virtual X display for off-screen renders on a machine without one.
 
-VTK's X render window needs an X server; a process without ``DISPLAY`` starts its own Xvfb. Xvfb's
-``-displayfd`` picks the first display number no running server answers on, which is not atomic:
-two servers started at the same moment can both take the same number, and a render on the one that
-lost the socket aborts the process ("bad X server connection"). The start is therefore serialised
-between processes by a lock file of this toolkit's own in the temporary folder, held until the new
-server accepts connections.
+VTK's X render window needs an X server; a process without ``DISPLAY`` starts its own Xvfb. Left to
+pick the first free display number itself (``-displayfd`` alone), two servers started at the same
+moment could both take the same number, and a render on the one that lost the socket aborted the
+process ("bad X server connection"). So the number is derived from the process id (distinct among
+live processes; another one is tried when a server holds it, up to :data:`DISPLAY_ATTEMPTS`), and
+the starts are serialised between processes by a lock file of this toolkit's own in the temporary
+folder, held until the new server accepts connections.
 """
 from __future__ import annotations
 
@@ -22,6 +23,8 @@ XVFB_START_TIMEOUT = 10.0
 """Seconds to wait for a virtual X server to accept connections."""
 START_LOCK_TIMEOUT = 60.0
 """Seconds to wait for other processes' servers to start before giving up."""
+DISPLAY_ATTEMPTS = 8
+"""Display numbers tried before giving up."""
 START_LOCK = "aquarom-xvfb-start.lock"
 """The lock file's name in the temporary folder (created by this toolkit, never removed)."""
 
@@ -31,15 +34,26 @@ def ensure_display() -> None:
 
     The server gets none of this process's open files: an inherited pipe (MPI's singleton daemon
     holds the process's stdout until every holder of its watch pipe is gone) would keep a caller
-    reading our output waiting for as long as the server lives. It picks a free display number
-    itself (``-displayfd``) while this process holds the start lock, so concurrent processes never
-    share one."""
+    reading our output waiting for as long as the server lives."""
     if os.environ.get("DISPLAY"):
         return
     with _start_lock():
-        server, number = _start_server()
+        for attempt in range(DISPLAY_ATTEMPTS):
+            number = display_number(os.getpid(), attempt)
+            server = _start_server(number)
+            if server is not None:
+                break
+        else:
+            raise RuntimeError(f"no display: Xvfb started on none of {DISPLAY_ATTEMPTS} display numbers "
+                               "(set DISPLAY, or check that xvfb is installed and works)")
     atexit.register(_stop_server, server)
     os.environ["DISPLAY"] = f":{number}"
+
+
+def display_number(pid: int, attempt: int) -> int:
+    """The display tried at ``attempt`` (0, 1, ...) by process ``pid``: 1000 + (pid + 9973 attempt) mod 60000,
+    above the numbers desktops and ``xvfb-run`` take."""
+    return 1000 + (pid + 9973 * attempt) % 60000
 
 
 class _start_lock:
@@ -69,11 +83,13 @@ class _start_lock:
         os.close(self.descriptor)          # closing releases the lock
 
 
-def _start_server() -> tuple[subprocess.Popen, int]:
-    """Xvfb on the first free display: (the server, its display number) once it accepts connections."""
+def _start_server(number: int) -> subprocess.Popen | None:
+    """Xvfb on display ``number`` once it accepts connections; None when it does not start there
+    within :data:`XVFB_START_TIMEOUT` (another server holds the number)."""
     read_end, write_end = os.pipe()
     try:
-        server = subprocess.Popen(["Xvfb", "-displayfd", str(write_end), "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
+        server = subprocess.Popen(["Xvfb", f":{number}", "-displayfd", str(write_end), "-screen", "0", "1024x768x24",
+                                   "-nolisten", "tcp"],
                                   stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                                   pass_fds=(write_end,), start_new_session=True)
     except FileNotFoundError:
@@ -81,14 +97,13 @@ def _start_server() -> tuple[subprocess.Popen, int]:
     finally:
         os.close(write_end)
     try:
-        number = _read_display_number(read_end, XVFB_START_TIMEOUT)
+        reported = _read_display_number(read_end, XVFB_START_TIMEOUT)
     finally:
         os.close(read_end)
-    if number is None:
+    if reported != number:
         _stop_server(server)
-        raise RuntimeError(f"no display: Xvfb did not report a display within {XVFB_START_TIMEOUT:g} s "
-                           "(set DISPLAY, or install xvfb)")
-    return server, number
+        return None
+    return server
 
 
 def _read_display_number(read_end: int, timeout: float) -> int | None:
