@@ -81,3 +81,15 @@ def dask_cluster():
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, protocol="tcp://", dashboard_address=None,
                       silence_logs=logging.ERROR) as cluster:
         yield cluster
+
+
+@pytest.fixture(scope="module")
+def quadratic_scene():
+    """The coarsest mesh with quadratic tetrahedra (the default's degree)."""
+    return coarse_scene(mesh={"degree": 2})
+
+
+@pytest.fixture(scope="module")
+def quadratic_fish(quadratic_scene):
+    from aquarom_fenics.geometry.fish import load_fish
+    return load_fish(quadratic_scene)

@@ -18,16 +18,6 @@ either rule (2.12 % and 2.14 % of its peak): the amplitude, a maximum over the l
 
 
 @pytest.fixture(scope="module")
-def quadratic_scene():
-    return coarse_scene(mesh={"degree": 2})
-
-
-@pytest.fixture(scope="module")
-def quadratic_fish(quadratic_scene):
-    return load_fish(quadratic_scene)
-
-
-@pytest.fixture(scope="module")
 def fom_run(quadratic_scene, quadratic_fish):
     return simulate_fom(quadratic_scene, fish=quadratic_fish, progress=False, keep_states=True)
 

@@ -18,16 +18,6 @@ CORNER = {"z_tail": -0.5, "z_head": 0.5, "y_lin_long_tail": 0.4, "y_head": 0.5, 
 """The CO box's corner where the basis without the stroke vectors is +12 % off the FOM's distance at A = 0.4."""
 
 
-@pytest.fixture(scope="module")
-def quadratic_scene():
-    return coarse_scene(mesh={"degree": 2})
-
-
-@pytest.fixture(scope="module")
-def quadratic_fish(quadratic_scene):
-    return load_fish(quadratic_scene)
-
-
 def labels(scene, fish):
     return build_basis(FullOrderModel(scene, fish), 0).labels
 
