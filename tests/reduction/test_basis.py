@@ -5,7 +5,6 @@ import pytest
 from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
 from aquarom_fenics.dynamics.simulate import simulate_fom
 from aquarom_fenics.fem.fom import FullOrderModel
-from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.reduction.basis import build_basis, mass_inner
 from aquarom_fenics.reduction.reductor import build_prom
 from conftest import coarse_scene
