@@ -65,3 +65,41 @@ def test_a_client_whose_start_fails_leaves_no_finaliser_traceback(tmp_path, caps
     assert "not reachable" in one_line(capsys)
     gc.collect()
     assert not unraisable, [str(report.exc_value) for report in unraisable]
+
+
+# ---------------------------------------------------------------------- large designs files
+def designs_file(directory: Path, rows: int) -> str:
+    path = directory / "designs.csv"
+    path.write_text("z_tail,y_thin\n" + "0.01,0.02\n" * rows)
+    return str(path)
+
+
+def test_a_designs_file_over_the_limit_is_refused_before_it_is_parsed(tmp_path, capsys, monkeypatch):
+    from aquarom_fenics.optimization import sweep_designs
+
+    monkeypatch.setattr(sweep_designs, "MAX_DESIGNS", 50)
+    parsed = []
+    number = sweep_designs.parse_number
+    monkeypatch.setattr(sweep_designs, "parse_number", lambda *a: parsed.append(1) or number(*a))
+    scene = write_scene(tmp_path)
+    assert main(["sweep", scene, "--designs", designs_file(tmp_path, 51), "--dry-run"]) == 2
+    assert "more than 50 designs" in one_line(capsys)
+    assert not parsed
+    assert main(["sweep", scene, "--designs", designs_file(tmp_path, 50), "--dry-run"]) == 0
+
+
+def test_a_dry_run_looks_up_a_bounded_number_of_designs_in_the_fom_cache(tmp_path, capsys, monkeypatch):
+    from aquarom_fenics.cli import sweep as sweep_command
+    from aquarom_fenics.optimization import sweep
+
+    monkeypatch.setattr(sweep_command, "DRY_RUN_CACHE_LOOKUPS", 7)
+    monkeypatch.setenv("AQUAROM_CACHE", str(tmp_path / "cache"))
+    looked_up = []
+    counted = sweep.cached_designs
+    monkeypatch.setattr(sweep, "cached_designs", lambda scene, designs, model: looked_up.append(len(designs))
+                        or counted(scene, designs, model))
+    scene = write_scene(tmp_path)
+    assert main(["sweep", scene, "--designs", designs_file(tmp_path, 20), "--dry-run"]) == 0
+    assert looked_up == [7]
+    text = capsys.readouterr().out
+    assert "0 of the first 7 designs answered already (the other 13 not looked up" in text and "20 to compute" in text
