@@ -103,3 +103,26 @@ def test_a_dry_run_looks_up_a_bounded_number_of_designs_in_the_fom_cache(tmp_pat
     assert looked_up == [7]
     text = capsys.readouterr().out
     assert "0 of the first 7 designs answered already (the other 13 not looked up" in text and "20 to compute" in text
+
+
+# ---------------------------------------------------------------------- Abaqus labels
+RECTANGLE = Path(__file__).resolve().parents[1] / "meshes" / "3d_rectangle_1272el.inp"
+
+
+@pytest.mark.parametrize("where", ["node", "element", "elset"])
+def test_an_abaqus_label_of_ten_to_the_twenty_is_one_line(tmp_path, capsys, where):
+    label = str(10 ** 20)
+    text = RECTANGLE.read_text()
+    if where == "node":       # an extra node (meshio reads it; unused nodes are dropped)
+        text = text.replace("*Node\n", f"*Node\n{label},           0.,           0.,           0.\n", 1)
+    elif where == "element":  # the first tetrahedron's label
+        head, _, tail = text.partition("*Element, type=C3D4\n")
+        text = head + "*Element, type=C3D4\n" + label + tail[tail.index(","):]
+    else:
+        text = text.replace("*End Instance", f"*Elset, elset=head, generate\n 1, {label}, 1\n*End Instance", 1)
+    (tmp_path / "big.inp").write_text(text)
+    scene = tmp_path / "big.toml"
+    scene.write_text('[mesh]\nfile = "big.inp"\nscale = 0.001\n[solver]\nduration = 0.2\n')
+    assert main(["mesh", str(scene)]) == 2
+    message = one_line(capsys)
+    assert f"label {label} is over 2147483647" in message and "line " in message
