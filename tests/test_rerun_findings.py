@@ -126,3 +126,93 @@ def test_an_abaqus_label_of_ten_to_the_twenty_is_one_line(tmp_path, capsys, wher
     assert main(["mesh", str(scene)]) == 2
     message = one_line(capsys)
     assert f"label {label} is over 2147483647" in message and "line " in message
+
+
+# ---------------------------------------------------------------------- SIGTERM: no process, no half-written file
+CO_LONG = """
+[mesh]
+level = 1
+[solver]
+duration = 2.0
+[fluid]
+drag = false
+[optimizer]
+max_iterations = 200
+[shapes]
+z_tail = { bounds = [-0.2, 0.2] }
+y_thin = { bounds = [-0.1, 0.1] }
+[actuation]
+amplitude = 0.2
+[cooptimization]
+enabled = true
+amplitude_bounds = [0.05, 0.4]
+weights = [0.5, 0.9]
+"""
+"""A co-optimisation whose two weights run long enough that a signal always lands inside their tasks."""
+
+def write_atomically_while_stopped(folder: str) -> None:
+    """A task caught by its pool's cancel inside an atomic write (between the temporary file and
+    its rename): ``started`` tells the test it is there."""
+    from aquarom_fenics.io import persistence
+
+    def slow_replace(source, target):
+        Path(folder, "started").write_text("")
+        time.sleep(120)
+        os.rename(source, target)
+
+    persistence.os.replace = slow_replace      # in this worker process only
+    persistence.write_text_atomic(Path(folder) / "result.csv", "a,b\n1,2\n")
+
+
+def test_sigterm_to_a_local_worker_runs_its_task_cleanups(tmp_path):
+    from aquarom_fenics.parallel import STOP_GRACE, LocalProcesses
+
+    pool = LocalProcesses(1)
+    pool.submit(write_atomically_while_stopped, str(tmp_path))
+    deadline = time.monotonic() + 120
+    while not (tmp_path / "started").exists() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert (tmp_path / "started").exists(), "the task did not start"
+    processes = list(pool._pool._processes.values())
+    started = time.monotonic()
+    pool.shutdown(cancel=True)
+    assert time.monotonic() - started < STOP_GRACE           # ended by SIGTERM, not killed after the grace
+    assert [process.exitcode for process in processes] == [143]
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["started"]    # no temporary left, no result
+
+
+def test_sigterm_to_a_pareto_sweep_on_two_workers_leaves_no_process_and_no_partial_file(tmp_path):
+    """As a batch system stops a job: SIGTERM to the command alone, which ends its workers."""
+    psutil = pytest.importorskip("psutil")
+    scene = tmp_path / "co.toml"
+    scene.write_text(CO_LONG)
+    command = [str(Path(sys.executable).with_name("aquarom")), "pareto", str(scene), "--workers", "2",
+               "--out", str(tmp_path / "p")]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True, env=os.environ | {"AQUAROM_CACHE": str(tmp_path / "cache")})
+    parent = psutil.Process(process.pid)
+    everything = []
+    try:
+        deadline = time.monotonic() + 240
+        while time.monotonic() < deadline and process.poll() is None and not list((tmp_path / "p").glob("w1_*/history.csv")):
+            time.sleep(0.5)                             # until the weights' tasks are writing
+        everything = parent.children(recursive=True)
+        assert len([child for child in everything if "python" in child.name()]) >= 2, "the two workers did not start"
+        process.send_signal(signal.SIGTERM)
+        _, err = process.communicate(timeout=120)
+        assert process.returncode == 143, err
+        assert "Traceback" not in err and "leaked semaphore" not in err, err
+        assert len([line for line in err.splitlines() if line.strip()]) == 1, err
+        gone, alive = psutil.wait_procs(everything, timeout=15)
+        assert not alive, [p.cmdline() for p in alive]
+        files = [path for path in (tmp_path / "p").rglob("*") if path.is_file()]
+        assert files and not [path for path in files if path.name.startswith(".")], files   # no temporary left
+        for path in files:
+            if path.suffix in (".csv", ".json"):
+                assert path.read_text().endswith("\n"), path
+    finally:                                            # whatever failed, this test leaves nothing running
+        for leftover in [parent, *everything]:
+            try:
+                leftover.kill()
+            except psutil.Error:
+                pass
