@@ -216,3 +216,31 @@ def test_sigterm_to_a_pareto_sweep_on_two_workers_leaves_no_process_and_no_parti
                 leftover.kill()
             except psutil.Error:
                 pass
+
+
+# ---------------------------------------------------------------------- a picture stopped by Ctrl-C
+LEFT_OPEN = """
+import sys
+from pathlib import Path
+import pyvista
+from aquarom_fenics.viz import render
+render._ensure_display()
+plotter = render._plotter((1, 1), (200, 200))
+plotter.add_mesh(pyvista.Sphere())
+plotter.screenshot(str(Path(sys.argv[1]) / "left_open.png"))     # drawn, never closed (Ctrl-C before _save)
+sys.exit(130)
+"""
+
+
+def test_a_plotter_left_open_does_not_change_the_exit_code(tmp_path):
+    """Ctrl-C during optimize's pictures exited with 1 and 'XIO: fatal IO error' (the window
+    outlived the process's own Xvfb), not 130."""
+    import shutil
+
+    if shutil.which("Xvfb") is None:
+        pytest.skip("Xvfb is not installed")
+    environment = {key: value for key, value in os.environ.items() if key != "DISPLAY"}
+    result = subprocess.run([sys.executable, "-c", LEFT_OPEN, str(tmp_path)], capture_output=True, text=True,
+                            env=environment, timeout=120)
+    assert result.returncode == 130 and "XIO" not in result.stderr, result.stderr
+    assert (tmp_path / "left_open.png").is_file()

@@ -270,8 +270,20 @@ def _ensure_display() -> None:
         _stop_server(server)
         raise RuntimeError(f"no display: Xvfb did not report a display within {XVFB_START_TIMEOUT:g} s "
                            "(set DISPLAY, or install xvfb)")
-    atexit.register(_stop_server, server)
+    atexit.register(_end_display, server)
     os.environ["DISPLAY"] = f":{number}"
+
+
+def _end_display(server: subprocess.Popen) -> None:
+    """At exit: close every plotter still open (one a Ctrl-C stopped mid-picture), then stop the
+    server; a window left on a stopped server makes Xlib end the process with exit code 1
+    ("XIO: fatal IO error") instead of the command's own."""
+    import pyvista
+
+    try:
+        pyvista.close_all()
+    finally:
+        _stop_server(server)
 
 
 def _read_display_number(read_end: int, timeout: float) -> int | None:
