@@ -244,3 +244,33 @@ def test_a_plotter_left_open_does_not_change_the_exit_code(tmp_path):
                             env=environment, timeout=120)
     assert result.returncode == 130 and "XIO" not in result.stderr, result.stderr
     assert (tmp_path / "left_open.png").is_file()
+
+
+INTERRUPTED_IMPORT = """
+import builtins, signal, sys
+real_import = builtins.__import__
+fired = []
+
+def importing(name, *args, **kwargs):       # Ctrl-C arrives while VTK loads one of its modules
+    if name.startswith("vtkmodules.vtkIOLegacy") and not fired:
+        fired.append(name)
+        signal.raise_signal(signal.SIGINT)
+    return real_import(name, *args, **kwargs)
+
+builtins.__import__ = importing
+from aquarom_fenics.viz import render
+try:
+    render.import_pyvista()
+except KeyboardInterrupt as stop:
+    print(stop, file=sys.stderr)
+    sys.exit(130)
+print("imported", file=sys.stderr)
+"""
+
+
+def test_ctrl_c_while_the_renderer_loads_is_an_interrupt():
+    """Ctrl-C during `import pyvista` (optimize's first picture) was VTK's ImportError, a traceback
+    and exit 1."""
+    result = subprocess.run([sys.executable, "-c", INTERRUPTED_IMPORT], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 130 and "Traceback" not in result.stderr, result.stderr
+    assert "while the renderer was loading (Ctrl-C)" in result.stderr
