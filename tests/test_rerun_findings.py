@@ -274,3 +274,33 @@ def test_ctrl_c_while_the_renderer_loads_is_an_interrupt():
     result = subprocess.run([sys.executable, "-c", INTERRUPTED_IMPORT], capture_output=True, text=True, timeout=300)
     assert result.returncode == 130 and "Traceback" not in result.stderr, result.stderr
     assert "while the renderer was loading (Ctrl-C)" in result.stderr
+
+
+def slow_start(folder: str) -> None:
+    Path(folder, "started").write_text("")
+    time.sleep(3)
+    Path(folder, "finished").write_text("")
+
+
+def test_sigterm_during_a_local_workers_start_up_waits_for_its_end(tmp_path):
+    """SIGTERM sent in the first second of a pareto --workers 2 (to the process group) cut the
+    workers' MPI start-up, and MPI's daemons printed 'ORTE_ERROR_LOG: Broken pipe' beside the
+    command's line; the start-up (WorkerSetup.on_start) now runs with SIGTERM held back."""
+    import functools
+
+    from aquarom_fenics.parallel import LocalProcesses, WorkerSetup
+
+    pool = LocalProcesses(1, WorkerSetup(on_start=functools.partial(slow_start, str(tmp_path))))
+    pool.submit(os.getpid)
+    deadline = time.monotonic() + 120
+    while not (tmp_path / "started").exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert (tmp_path / "started").exists(), "the worker's start-up did not run"
+    processes = list(pool._pool._processes.values())
+    for process in processes:
+        os.kill(process.pid, signal.SIGTERM)
+    for process in processes:
+        process.join(timeout=30)
+    assert (tmp_path / "finished").exists()
+    assert [process.exitcode for process in processes] == [143]
+    pool.shutdown(cancel=True)

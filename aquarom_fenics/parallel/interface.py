@@ -82,19 +82,33 @@ def _stop_worker(number, frame) -> None:
     os._exit(STOPPED_EXIT_CODE)
 
 
-def local_worker_started() -> None:
+def local_worker_started(on_start: Callable[[], None] | None = None) -> None:
     """What a local worker process does first (the pool's initializer): it knows it is a worker
     (Python 3.9+ pool workers are not daemonic, so :func:`in_worker` cannot tell from that), and
     it ignores Ctrl-C, which the terminal sends to the whole process group: the submitting process
     alone handles it and ends its workers (no worker traceback, none left running). SIGTERM, from
     the submitting process or sent to the group, ends the worker after its task's cleanups
-    (:class:`WorkerStopped`), leaving no half-written file."""
+    (:class:`WorkerStopped`), leaving no half-written file.
+
+    ``on_start`` (:attr:`WorkerSetup.on_start`) runs here with SIGTERM only recorded: a start-up is
+    not cut in the middle (MPI's start-up handshake cut by SIGTERM makes MPI's daemon print errors);
+    a SIGTERM that arrived meanwhile ends the worker when it is done. (A handler, not a blocked
+    signal mask: the mask is per thread, and a library's thread would take the signal.)"""
     import signal
 
     global _IN_LOCAL_WORKER
     _IN_LOCAL_WORKER = True
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, _stop_worker)
+    held: list[int] = []
+    signal.signal(signal.SIGTERM, lambda number, frame: held.append(number))
+    try:
+        if on_start is not None:
+            on_start()
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)       # again: whatever on_start's imports installed
+        signal.signal(signal.SIGTERM, _stop_worker)
+    if held:
+        os._exit(STOPPED_EXIT_CODE)
 
 
 def in_worker() -> bool:
