@@ -304,3 +304,13 @@ def test_sigterm_during_a_local_workers_start_up_waits_for_its_end(tmp_path):
     assert (tmp_path / "finished").exists()
     assert [process.exitcode for process in processes] == [143]
     pool.shutdown(cancel=True)
+
+
+def test_an_unreachable_scheduler_leaves_no_finaliser_traceback(tmp_path, capsys, unraisable):
+    pytest.importorskip("distributed")
+    scene = write_scene(tmp_path)
+    assert main(["sweep", scene, "--samples", "2", "--scheduler", "tcp://127.0.0.1:1",
+                 "--connect-timeout", "1", "--out", str(tmp_path / "s")]) == 2
+    assert "not reachable within 1 s" in one_line(capsys)
+    gc.collect()
+    assert not unraisable, [str(report.exc_value) for report in unraisable]
