@@ -13,6 +13,10 @@ from aquarom_fenics.errors import InputError
 from aquarom_fenics.io.run_record import check_run_record, write_run_record
 
 
+DRY_RUN_CACHE_LOOKUPS = 1000
+"""Designs a dry run looks up in the FOM cache (about 1 ms each): its estimate for more is an upper bound."""
+
+
 def sweep_designs(args, scene) -> tuple[list[dict], str]:
     """The designs of --designs, --grid or --samples (exactly one of them) and a description."""
     from aquarom_fenics.studies import sweep_designs as sources
@@ -125,7 +129,8 @@ def dry_run(args, scene, designs, source, kept, cluster, workers) -> int:
     from aquarom_fenics.studies.sweep import cached_designs, estimate
 
     todo = [design for k, design in enumerate(designs) if k not in kept]
-    cached = cached_designs(scene, todo, args.model)
+    looked_up = todo[:DRY_RUN_CACHE_LOOKUPS]
+    cached = cached_designs(scene, looked_up, args.model)
     missing = len(todo) - cached
     lines = plan("sweep", scene, args.model)[:5]      # scene, mesh, body (2 lines), forms; refuses a bad mesh
     say("plan for `aquarom sweep` (dry run, nothing is written):")
@@ -135,7 +140,10 @@ def dry_run(args, scene, designs, source, kept, cluster, workers) -> int:
     if kept:
         say(f"  resume: {len(kept)} rows kept from sweep.csv")
     if args.model == "fom":
-        say(f"  FOM cache: {cached} of the {len(todo)} designs answered already; {missing} to compute "
+        which = (f"the {len(todo)} designs answered already" if len(looked_up) == len(todo)
+                 else f"the first {len(looked_up)} designs answered already (the other {len(todo) - len(looked_up)} "
+                      "not looked up, counted as to compute)")
+        say(f"  FOM cache: {cached} of {which}; {missing} to compute "
             f"({scene.n_steps} steps of {scene.solver.time_step:g} s each)")
     where = cluster.describe() if cluster.distributed else (f"{workers} local worker process(es)" if workers > 1
                                                             else "this process (one worker)")

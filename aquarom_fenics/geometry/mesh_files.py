@@ -110,6 +110,7 @@ def _read_abaqus(path: Path):
     as a region."""
     from meshio import abaqus    # its own reader: meshio.read() prints a ReadError and exits
 
+    _check_abaqus_labels(path)
     try:
         mesh = abaqus.read(str(path))
     except Exception as error:
@@ -134,6 +135,32 @@ def _read_abaqus(path: Path):
             regions[name] = np.concatenate(members)
     points, cells = used_nodes_only(np.asarray(mesh.points, dtype=float), cells)
     return points, cells, regions
+
+
+MAX_ABAQUS_LABEL = 2**31 - 1
+"""Largest node or element label accepted in an .inp file (Abaqus labels are 32-bit integers)."""
+
+_LABELLED_SECTIONS = ("node", "element", "nset", "elset")
+
+
+def _check_abaqus_labels(path: Path) -> None:
+    """InputError (one line, with the line number) for a label over :data:`MAX_ABAQUS_LABEL` in the
+    data of a *Node (its first field), *Element, *Nset or *Elset section; meshio would fail on it
+    with a message about C integers, or hold it where a set is generated from a range."""
+    section = ""
+    with open(path, encoding="utf-8", errors="replace") as stream:
+        for number, line in enumerate(stream, start=1):
+            text = line.strip()
+            if text.startswith("*"):
+                section = "" if text.startswith("**") else text[1:].split(",")[0].strip().lower()
+                continue
+            if section not in _LABELLED_SECTIONS:
+                continue
+            fields = [field.strip() for field in text.split(",")]
+            for field in fields[:1] if section == "node" else fields:
+                if field.isdigit() and (len(field) > 10 or int(field) > MAX_ABAQUS_LABEL):
+                    raise InputError(f"mesh file {path} line {number}: label {field[:24]}{'…' if len(field) > 24 else ''} "
+                                     f"is over {MAX_ABAQUS_LABEL} (labels are 32-bit integers); renumber the mesh")
 
 
 def _unique_cells(cells: np.ndarray, regions: dict[str, np.ndarray]):

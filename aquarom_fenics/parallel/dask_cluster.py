@@ -123,13 +123,41 @@ def connect(settings: ClusterSettings):
     timeout = f"{settings.connect_timeout:g}s"
     address = (scheduler_file_address(Path(settings.scheduler_file)) if settings.scheduler_file
                else check_address(settings.scheduler, settings.describe()))
+    where = settings.scheduler or f"of {settings.scheduler_file}"
+    if address.startswith("tls://") and not _tls_configured():
+        raise InputError(f"Dask scheduler {where}: tls:// needs Dask's TLS settings (distributed.comm.tls.ca-file, "
+                         ".client.cert and .client.key in the Dask configuration); set them, or use tcp://")
+    client = Client.__new__(Client)
     try:
-        return Client(address, timeout=timeout, set_as_default=False)
-    except (OSError, TimeoutError, ValueError) as error:
-        where = settings.scheduler or f"of {settings.scheduler_file}"
+        client.__init__(address, timeout=timeout, set_as_default=False)
+    except Exception as error:  # noqa: BLE001 — whatever Dask raises while connecting is one line
+        _abandon(client)
         reason = str(error).splitlines()[0] if str(error) else type(error).__name__
         raise InputError(f"Dask scheduler {where}: not reachable within {settings.connect_timeout:g} s "
-                         f"({reason}); start it or check the address") from None
+                         f"({reason[:200]}); start it or check the address") from None
+    except BaseException:                 # Ctrl-C or SIGTERM while connecting
+        _abandon(client)
+        raise
+    return client
+
+
+def _tls_configured() -> bool:
+    """Whether Dask's configuration gives a client TLS context (without one, Dask's tls:// connect
+    fails with a TypeError)."""
+    from distributed.security import Security
+
+    return Security().get_connection_args("client").get("ssl_context") is not None
+
+
+def _abandon(client) -> None:
+    """A client whose start failed, closed now and never again: Dask's finaliser would otherwise
+    close it at garbage collection, seconds later, and print its own timeout as a traceback."""
+    try:
+        client.close(timeout=1)
+    except Exception:  # noqa: BLE001 — nothing was connected; the failure is already reported
+        pass
+    finally:
+        client.__dict__["_Client__loop"] = None     # Client.__del__ closes only a client with a loop
 
 
 def _appears(path: Path, seconds: float) -> bool:

@@ -48,25 +48,67 @@ class WorkerSetup:
 
 def run_task(variables: dict[str, str], function: Callable, args: tuple):
     """``function(*args)`` in a worker after setting the submitter's ``variables`` (what every
-    backend but the in-process one runs)."""
+    backend but the in-process one runs). A local worker's task stopped by SIGTERM
+    (:class:`WorkerStopped`) ends the worker process once the task's cleanups have run."""
+    global _IN_TASK
     os.environ.update(variables)
-    return function(*args)
+    _IN_TASK = True
+    try:
+        return function(*args)
+    except WorkerStopped:
+        os._exit(STOPPED_EXIT_CODE)
+    finally:
+        _IN_TASK = False
 
 
 _IN_LOCAL_WORKER = False
 """Set in a worker process of a local pool when it starts (:func:`local_worker_started`)."""
+_IN_TASK = False
+"""True while :func:`run_task` runs a task in this process."""
+STOPPED_EXIT_CODE = 143
+"""Exit code of a local worker ended by SIGTERM (128 + 15, as a death by the signal)."""
 
 
-def local_worker_started() -> None:
+class WorkerStopped(BaseException):
+    """Raised in a local worker's running task by SIGTERM (its pool being cancelled): the task's
+    ``finally`` blocks run (an atomic write removes its temporary file), then the worker ends;
+    a BaseException, so that no ``except Exception`` of the task keeps it running."""
+
+
+def _stop_worker(number, frame) -> None:
+    """A local worker's SIGTERM handler: unwind the running task, or end at once when idle."""
+    if _IN_TASK:
+        raise WorkerStopped("stopped by SIGTERM")
+    os._exit(STOPPED_EXIT_CODE)
+
+
+def local_worker_started(on_start: Callable[[], None] | None = None) -> None:
     """What a local worker process does first (the pool's initializer): it knows it is a worker
     (Python 3.9+ pool workers are not daemonic, so :func:`in_worker` cannot tell from that), and
     it ignores Ctrl-C, which the terminal sends to the whole process group: the submitting process
-    alone handles it and ends its workers (no worker traceback, none left running)."""
+    alone handles it and ends its workers (no worker traceback, none left running). SIGTERM, from
+    the submitting process or sent to the group, ends the worker after its task's cleanups
+    (:class:`WorkerStopped`), leaving no half-written file.
+
+    ``on_start`` (:attr:`WorkerSetup.on_start`) runs here with SIGTERM only recorded: a start-up is
+    not cut in the middle (MPI's start-up handshake cut by SIGTERM makes MPI's daemon print errors);
+    a SIGTERM that arrived meanwhile ends the worker when it is done. (A handler, not a blocked
+    signal mask: the mask is per thread, and a library's thread would take the signal.)"""
     import signal
 
     global _IN_LOCAL_WORKER
     _IN_LOCAL_WORKER = True
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    held: list[int] = []
+    signal.signal(signal.SIGTERM, lambda number, frame: held.append(number))
+    try:
+        if on_start is not None:
+            on_start()
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)       # again: whatever on_start's imports installed
+        signal.signal(signal.SIGTERM, _stop_worker)
+    if held:
+        os._exit(STOPPED_EXIT_CODE)
 
 
 def in_worker() -> bool:

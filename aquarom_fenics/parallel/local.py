@@ -36,7 +36,7 @@ class LocalProcesses:
             for variable in THREAD_VARIABLES:
                 os.environ[variable] = "1"     # the spawned workers inherit it
             self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
-                                             initializer=local_worker_started)
+                                             initializer=local_worker_started, initargs=(self.setup.on_start,))
             _open_pools.add(self)
         return self._pool
 

@@ -70,14 +70,13 @@ def csv_designs(path: Path, scene: Scene) -> list[dict[str, float]]:
     require_regular_file(path, "--designs", MAX_DESIGN_FILE_BYTES)
     try:
         with open(path, newline="", encoding="utf-8-sig") as stream:      # a byte-order mark is allowed
-            rows = list(csv.reader(stream))
+            rows = _bounded_rows(csv.reader(stream), path)
     except UnicodeDecodeError:
         raise InputError(f"--designs {path}: not a UTF-8 text file") from None
     except csv.Error as error:
         raise InputError(f"--designs {path}: not a CSV file ({error})") from None
     except OSError as error:
         raise InputError(f"--designs {path}: cannot be read ({error.strerror})") from None
-    rows = [row for row in rows if any(cell.strip() for cell in row)]
     if len(rows) < 2:
         raise InputError(f"--designs {path}: needs a header of shape names and at least one row of values")
     header = [cell.strip() for cell in rows[0]]
@@ -94,6 +93,19 @@ def csv_designs(path: Path, scene: Scene) -> list[dict[str, float]]:
         designs.append(_complete(scene, {name: parse_number(cell.strip(), f"--designs {path} line {number} column {name}")
                                          for name, cell in zip(header, row)}))
     return designs
+
+
+def _bounded_rows(reader, path: Path) -> list[list[str]]:
+    """The non-blank rows of ``reader``, a header and at most :data:`MAX_DESIGNS` more; InputError
+    (one line) as soon as there are more, before the rest of the file is read."""
+    rows = []
+    for row in reader:
+        if any(cell.strip() for cell in row):
+            rows.append(row)
+            if len(rows) > MAX_DESIGNS + 1:
+                raise InputError(f"--designs {path}: more than {MAX_DESIGNS:,} designs (a header and one row "
+                                 "per design); split the file into several sweeps")
+    return rows
 
 
 def latin_hypercube(scene: Scene, samples: int, seed: int) -> list[dict[str, float]]:

@@ -46,7 +46,7 @@ def ensure_display() -> None:
         else:
             raise RuntimeError(f"no display: Xvfb started on none of {DISPLAY_ATTEMPTS} display numbers "
                                "(set DISPLAY, or check that xvfb is installed and works)")
-    atexit.register(_stop_server, server)
+    atexit.register(_end_display, server)
     os.environ["DISPLAY"] = f":{number}"
 
 
@@ -104,6 +104,19 @@ def _start_server(number: int) -> subprocess.Popen | None:
         _stop_server(server)
         return None
     return server
+
+
+def _end_display(server: subprocess.Popen) -> None:
+    """At exit: close every plotter still open (one a Ctrl-C stopped mid-picture), then stop the
+    server; a window left on a stopped server makes Xlib end the process with exit code 1
+    ("XIO: fatal IO error") instead of the command's own."""
+    import sys
+
+    try:
+        if "pyvista" in sys.modules:
+            sys.modules["pyvista"].close_all()
+    finally:
+        _stop_server(server)
 
 
 def _read_display_number(read_end: int, timeout: float) -> int | None:

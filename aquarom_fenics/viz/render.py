@@ -14,6 +14,7 @@ import numpy as np
 from mpi4py import MPI
 
 from aquarom_fenics.errors import InputError
+from aquarom_fenics.io.stop_signals import stop_between_steps, stop_for
 from aquarom_fenics.io.xdmf import REGION_TAG_NAMES
 from aquarom_fenics.viz.display import ensure_display
 
@@ -197,8 +198,7 @@ def cell_regions(tags, n_cells: int) -> np.ndarray:
 
 def tetra_grid(points: np.ndarray, cells: np.ndarray):
     """pyvista UnstructuredGrid of linear tetrahedra from (n_nodes, 3) points [m] and (n_cells, 4) cells."""
-    import pyvista
-
+    pyvista = import_pyvista()
     cells = np.asarray(cells, dtype=np.int64)
     return pyvista.UnstructuredGrid({pyvista.CellType.TETRA: cells}, np.asarray(points, dtype=np.float64))
 
@@ -226,10 +226,25 @@ def _frame_camera(plotter, points: np.ndarray, size: tuple[int, int], top_space:
     plotter.renderer.reset_camera_clipping_range()
 
 
+def import_pyvista():
+    """pyvista, imported with Ctrl-C and SIGTERM held back until the import is complete: VTK's module
+    loader turns an interrupt inside its imports into an ImportError (a traceback and exit 1 instead
+    of the stop's one line); a stop asked for meanwhile is raised afterwards."""
+    import sys
+
+    if "pyvista" in sys.modules:
+        return sys.modules["pyvista"]
+    with stop_between_steps() as stop_requested:
+        import pyvista
+        stop = stop_requested()
+    if stop is not None:
+        raise stop_for(stop, "while the renderer was loading")
+    return pyvista
+
+
 def _plotter(shape: tuple[int, int], panel_size: tuple[int, int] = PANEL_SIZE):
     """Off-screen pyvista Plotter with ``shape`` (rows, columns) panels of ``panel_size`` pixels."""
-    import pyvista
-
+    pyvista = import_pyvista()
     ensure_display()
     rows, columns = shape
     plotter = pyvista.Plotter(off_screen=True, shape=shape, border=False,
