@@ -224,7 +224,8 @@ import sys
 from pathlib import Path
 import pyvista
 from aquarom_fenics.viz import render
-render._ensure_display()
+from aquarom_fenics.viz.display import ensure_display
+ensure_display()
 plotter = render._plotter((1, 1), (200, 200))
 plotter.add_mesh(pyvista.Sphere())
 plotter.screenshot(str(Path(sys.argv[1]) / "left_open.png"))     # drawn, never closed (Ctrl-C before _save)
