@@ -75,7 +75,7 @@ def designs_file(directory: Path, rows: int) -> str:
 
 
 def test_a_designs_file_over_the_limit_is_refused_before_it_is_parsed(tmp_path, capsys, monkeypatch):
-    from aquarom_fenics.optimization import sweep_designs
+    from aquarom_fenics.studies import sweep_designs
 
     monkeypatch.setattr(sweep_designs, "MAX_DESIGNS", 50)
     parsed = []
@@ -90,7 +90,7 @@ def test_a_designs_file_over_the_limit_is_refused_before_it_is_parsed(tmp_path, 
 
 def test_a_dry_run_looks_up_a_bounded_number_of_designs_in_the_fom_cache(tmp_path, capsys, monkeypatch):
     from aquarom_fenics.cli import sweep as sweep_command
-    from aquarom_fenics.optimization import sweep
+    from aquarom_fenics.studies import sweep
 
     monkeypatch.setattr(sweep_command, "DRY_RUN_CACHE_LOOKUPS", 7)
     monkeypatch.setenv("AQUAROM_CACHE", str(tmp_path / "cache"))
