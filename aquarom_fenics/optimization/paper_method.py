@@ -6,14 +6,26 @@ bound becomes active; between PROM builds d ≈ d_c + ∇d_c·(z - z_c); a new P
 |z - z_c|_i exceeds ``rebuild_threshold`` or every ``n_rebuild`` iterations, except that a
 rebuild due by the count alone, at a design inside the last PROM's validity radius, simulates
 that PROM there for the new linearisation (history ``surrogate``) instead of building one.
+
+Co-optimisation (z = (ξ, A)): the amplitude enters the reduced actuation exactly, so the PROM of
+the shapes ξ_c is valid over A's whole range. At every exact evaluation (a build or a surrogate)
+A is set to its conditional optimum A*(ξ) = argmin_A L(ξ, A) on that PROM (a bounded 1-D search),
+and the descent z ← z - γ W ∇L_b moves the shapes only, with A fixed until the next centre. The
+descent on (ξ, A) together stalled: ∂L/∂A is 10-15 times ∂L/∂ξ, so W = 1/‖∇L_b‖_∞ made the shape
+steps 1/15 of γ; A moved against its lower bound, its W was halved at every sign change, and the
+linearised d, convex in A (d ~ A^1.5), under-predicted every climb in A, so w₁ = 0.2 reached the
+iteration limit at A = 0.12 (optimum ≈ 0.14).
 """
 from __future__ import annotations
 
 import logging
 
-import numpy as np
+import dataclasses
 
-from aquarom_fenics.errors import InputError
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from aquarom_fenics.errors import InputError, SolverError
 from aquarom_fenics.optimization.cost import (DesignSpace, Evaluation, barrier_scale_at, first_order, first_order_at,
                                               require_interior)
 from aquarom_fenics.optimization.history import history_row, optimality_reason, record
@@ -76,16 +88,19 @@ def paper_method(scene, space, builder, weights, history, checkpoint, state, saf
                 scaling *= 0.5
                 state.update(z=z.tolist(), scaling=scaling.tolist())
                 continue
+            z = _best_amplitude(space, builder, prom, weights, z)
             exact = builder.evaluate(prom, z, weights)
             center = {"z": z.tolist(), "distance": exact.distance, "distance_gradient": exact.distance_gradient.tolist(),
                       "prom_z": (z if rebuild else np.array(center["prom_z"])).tolist()}
             state.update(since_build=0, confirm=False)
         distance, distance_gradient = _linearised_distance(center, z)
         cost, gradient = _weighted_cost(space, weights, z, distance, distance_gradient)
-        barrier_value, barrier_gradient = barrier(space, z)
+        descent = _descent_space(space, z)
+        barrier_value, barrier_gradient = barrier(descent, z)
         barrier_scale = barrier_scale_at(settings, cost)
-        total_gradient = np.where(space.free, gradient + barrier_scale * barrier_gradient, 0.0)
-        measure = first_order(space, z, cost, gradient, settings.active_tolerance, barrier_scale).measure
+        total_gradient = np.where(descent.free, gradient + barrier_scale * barrier_gradient, 0.0)
+        measure = first_order(space, z, cost, gradient, settings.active_tolerance, barrier_scale,
+                              space.descent_barrier_rows).measure
         if measure <= settings.optimality_tolerance and not rebuild:
             # optimal by a linearised gradient: confirmed by a PROM built where the barrier's nearly
             # active bounds are active, if its first-order measure there passes; else by one built here
@@ -120,7 +135,7 @@ def paper_method(scene, space, builder, weights, history, checkpoint, state, saf
             scaling = _rescaled(scaling, total_gradient, np.array(previous), barrier_scale * barrier_gradient,
                                 due, settings)
         step = -settings.step_size * scaling * total_gradient
-        fraction, blocking = _fraction_to_boundary(space, z, step)
+        fraction, blocking = _fraction_to_boundary(descent, z, step)
         if fraction < 1.0:
             scaling[blocking] *= 0.5
             step = fraction * step
@@ -142,9 +157,9 @@ def paper_method(scene, space, builder, weights, history, checkpoint, state, saf
                 state.update(since_build=settings.n_rebuild, confirm=True)
             checkpoint.save(state, history, builder)
     if center is not None and np.allclose(z, center["prom_z"]) and prom is not None:
-        final = builder.evaluate(prom, z, weights)
+        final = builder.evaluate(prom, _best_amplitude(space, builder, prom, weights, z), weights)
     else:
-        final = _final_evaluation(builder, weights, z, np.array(center["z"]))
+        final = _final_evaluation(space, builder, weights, z, np.array(center["z"]))
     if not reason.startswith("first-order"):        # a converged iterate's row is the last one recorded
         _record_final(scene, space, history, history[-1]["iteration"] + 1, final, started, on_iteration)
     closed = _barrier_gap_closed(space, builder, weights, final, settings.barrier_weight)
@@ -185,7 +200,9 @@ def _barrier_gap_closed(space: DesignSpace, builder: PromBuilder, weights, final
     if not (near_lower.any() or near_upper.any()):
         return None
     try:
-        evaluation = builder.evaluate(builder.build(snapped), snapped, weights)
+        prom = builder.build(snapped)
+        snapped = _best_amplitude(space, builder, prom, weights, snapped)
+        evaluation = builder.evaluate(prom, snapped, weights)
     except InputError:
         return None
     if evaluation.cost >= final.cost:
@@ -208,14 +225,65 @@ def _rescaled(scaling, gradient, previous, barrier_part, exact: bool, settings) 
     return np.where(exact & (sign_change > 0) & outside_barrier_layer & room, 2.0 * scaling, scaling)
 
 
-def _final_evaluation(builder: PromBuilder, weights, z, last_built) -> Evaluation:
-    """A PROM built at the last iterate (stepping back towards the last built design if refused)."""
+def _final_evaluation(space: DesignSpace, builder: PromBuilder, weights, z, last_built) -> Evaluation:
+    """A PROM built at the last iterate (stepping back towards the last built design if refused),
+    the amplitude at its conditional optimum there."""
     for _ in range(20):
         try:
-            return builder.evaluate(builder.build(z), z, weights)
+            prom = builder.build(z)
+            break
         except InputError:
             z = last_built + 0.5 * (z - last_built)
-    return builder.evaluate(builder.build(last_built), last_built, weights)
+    else:
+        z = last_built
+        prom = builder.build(z)
+    return builder.evaluate(prom, _best_amplitude(space, builder, prom, weights, z), weights)
+
+
+def _descent_space(space: DesignSpace, z: np.ndarray) -> DesignSpace:
+    """The space the descent steps in: with co-optimisation the amplitude fixed at its value in z
+    (lower = upper = A; set by :func:`_best_amplitude` at every exact evaluation), so that
+    neither the step, W nor the barrier act on it."""
+    if not space.with_amplitude:
+        return space
+    lower, upper = space.lower.copy(), space.upper.copy()
+    lower[-1] = upper[-1] = z[-1]
+    return dataclasses.replace(space, lower=lower, upper=upper)
+
+
+def _best_amplitude(space: DesignSpace, builder: PromBuilder, prom, weights, z: np.ndarray) -> np.ndarray:
+    """z with A = argmin_{A ∈ [A_lo, A_hi]} L(ξ, A) on ``prom`` (shapes ξ of z fixed).
+
+    L(A) = -w_1 d(ξ, A) + w_2 α A²; the PROM's reduced actuation is linear in A, so the PROM of ξ
+    answers for every A. Bounded Brent search (tolerance 1e-5 of A's range, so |∂L/∂A| left
+    over is far below the first-order tolerance), then each bound is compared. A design the
+    PROM cannot simulate counts as L = +∞; an A* whose PROM gait the stability test refuses
+    leaves z's amplitude unchanged."""
+    if not space.with_amplitude or space.upper[-1] <= space.lower[-1]:
+        return z
+    lower, upper = float(space.lower[-1]), float(space.upper[-1])
+
+    def cost(amplitude: float) -> float:
+        trial = np.array(z, dtype=float)
+        trial[-1] = amplitude
+        try:
+            return builder.evaluate(prom, trial, weights).cost
+        except SolverError:
+            return np.inf
+
+    search = minimize_scalar(cost, bounds=(lower, upper), method="bounded",
+                             options={"xatol": 1e-5 * (upper - lower)})
+    candidates = {float(search.x): float(search.fun), lower: cost(lower), upper: cost(upper)}
+    amplitude = min(candidates, key=candidates.get)
+    if not np.isfinite(candidates[amplitude]):
+        return z
+    best = np.array(z, dtype=float)
+    best[-1] = amplitude
+    try:
+        builder.refuse_infeasible(prom, best)
+    except InputError:
+        return z
+    return best
 
 
 def _strictly_inside(space: DesignSpace, z: np.ndarray) -> np.ndarray:
