@@ -242,3 +242,29 @@ def test_paper_method_co_optimisation_ends_at_the_first_order_point_of_every_wei
     expected = min((0.75 * w1 * 1.4 / (1.0 - w1)) ** 2, 0.4)
     assert result.optimum[0] == 0.2 and abs(result.optimum[1]) < 0.01 * 0.2
     assert result.optimum[2] == pytest.approx(expected, rel=1e-3)
+
+
+class FaceBuilder(AnalyticBuilder):
+    """d = 0.01 + 0.02 z_tail + 0.01 y_thin - 0.5 z_tail²: uphill through the face z_tail + y_thin ≤ 0.1,
+    whose best point (z_tail, y_thin) = (0.01, 0.09) lies inside the box."""
+
+    def evaluate(self, prom, z, weights):
+        z = np.array(z, dtype=float)
+        distance = 0.01 + 0.02 * z[0] + 0.01 * z[1] - 0.5 * z[0] ** 2
+        gradient = np.array([0.02 - z[0], 0.01])
+        return Evaluation(z, -distance, -gradient, distance, gradient)
+
+
+def test_paper_method_slides_along_a_nearly_active_linear_constraint_to_its_best_point(fish):
+    """The fraction to the boundary alone cut every step at the face and halved W of both
+    parameters: the run crept along the face (55 iterations here; SO9 stalled on the step tolerance)."""
+    scene = scene_from_dict({"mesh": {"level": 1}, "shapes": SHAPES, "solver": {"duration": 1.0},
+                             "constraints": [{"coefficients": {"z_tail": 1.0, "y_thin": 1.0}, "upper": 0.1}],
+                             "optimizer": {"method": "paper", "max_iterations": 100, "rebuild_threshold": 0.02,
+                                           "n_rebuild": 2, "step_tolerance": 1e-5}}, source="<toy>")
+    space = optimize_module.optimization_space(scene, fish)
+    result = optimize(scene, fish=fish, builder=FaceBuilder(scene, fish, space))
+    assert result.converged, (result.stop_reason, result.optimality.measure)
+    assert [row["constraint"] for row in result.optimality.active] == ["constraint row 1"]
+    assert result.optimum[0] == pytest.approx(0.01, abs=0.01 * 0.2)
+    assert result.iterations <= 25          # 55 when every step was cut at the face
