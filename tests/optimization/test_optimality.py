@@ -268,3 +268,17 @@ def test_paper_method_slides_along_a_nearly_active_linear_constraint_to_its_best
     assert [row["constraint"] for row in result.optimality.active] == ["constraint row 1"]
     assert result.optimum[0] == pytest.approx(0.01, abs=0.01 * 0.2)
     assert result.iterations <= 25          # 55 when every step was cut at the face
+
+
+def test_paper_state_reads_a_checkpoint_state_of_either_format_and_writes_it_back_unchanged():
+    """A state written before ``prom_z``, ``confirm`` and ``restarted`` existed loads (the PROM at the
+    centre, no confirmation pending, W not restarted); a full one survives the JSON round trip."""
+    from aquarom_fenics.optimization.paper_method import PaperState
+
+    old = {"z": [0.1, -0.02], "iteration": 7, "scaling": [0.5, 0.25], "previous_gradient": None, "since_build": 2,
+           "center": {"z": [0.1, -0.01], "distance": 0.03, "distance_gradient": [0.2, -0.1]}}
+    state = PaperState.from_dict(json.loads(json.dumps(old)))
+    assert state.center.prom_z.tolist() == [0.1, -0.01] and not state.confirm and not state.restarted
+    assert state.center.at(np.array([0.1, -0.02]))[0] == pytest.approx(0.03 + 0.001)
+    full = state.to_dict() | {"previous_gradient": [1e-3, -2e-3], "confirm": True, "restarted": True}
+    assert PaperState.from_dict(json.loads(json.dumps(full))).to_dict() == full
