@@ -50,7 +50,7 @@ def parse_budgets(text: str, bounds: tuple[float, float], where: str = "--budget
             count = int(count)
             if count < 1:
                 raise ValueError
-            values = tuple(float(v) for v in np.linspace(float(low), float(high), count))
+            values = tuple(round(float(v), 12) for v in np.linspace(float(low), float(high), count))   # 0.15, not 0.15000000000000002
         else:
             values = tuple(float(v) for v in text.split(","))
     except ValueError:

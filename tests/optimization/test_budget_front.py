@@ -14,6 +14,7 @@ from aquarom_fenics.optimization.cost import design_space
 
 def test_budgets_from_a_range_or_a_list_and_bad_ones_refused_in_one_line():
     assert parse_budgets("0.05:0.4:8", (0.05, 0.4)) == pytest.approx(tuple(np.linspace(0.05, 0.4, 8)))
+    assert parse_budgets("0.05:0.4:8", (0.05, 0.4))[2] == 0.15          # written to pareto.csv as typed
     assert parse_budgets("0.1,0.2", (0.05, 0.4)) == (0.1, 0.2)
     for text, words in (("0.05:0.5:3", "outside the amplitude bounds [0.05, 0.4]"), ("0.2,0.1", "increase strictly"),
                         ("a:b", "LOW:HIGH:COUNT"), ("0.1:0.2:0", "LOW:HIGH:COUNT")):
