@@ -29,7 +29,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("verification", ("verification",)),
     ("viz", ("viz",)),
     ("studies", ("optimization.study", "optimization.background_fom", "optimization.sweep", "optimization.plan",
-                 "verification.validation")),
+                 "optimization.budget_front", "verification.validation")),
     ("interface", ("cli", "api")),
 )
 """(layer, names) from the bottom up."""

@@ -273,7 +273,7 @@ def test_paper_method_slides_along_a_nearly_active_linear_constraint_to_its_best
 def test_paper_state_reads_a_checkpoint_state_of_either_format_and_writes_it_back_unchanged():
     """A state written before ``prom_z``, ``confirm`` and ``restarted`` existed loads (the PROM at the
     centre, no confirmation pending, W not restarted); a full one survives the JSON round trip."""
-    from aquarom_fenics.optimization.paper_method import PaperState
+    from aquarom_fenics.optimization.paper_state import PaperState
 
     old = {"z": [0.1, -0.02], "iteration": 7, "scaling": [0.5, 0.25], "previous_gradient": None, "since_build": 2,
            "center": {"z": [0.1, -0.01], "distance": 0.03, "distance_gradient": [0.2, -0.1]}}
