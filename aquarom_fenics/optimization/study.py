@@ -432,7 +432,7 @@ def _pareto_row(w1: float, weights: CostWeights, space, optimum: np.ndarray, pro
     stopped at a first-order point (a point that did not is left off the front)."""
     amplitude = float(optimum[-1])
     completed = fom_distance is not None
-    return {"w1": w1, "amplitude": amplitude, "energy": weights.energy_term(amplitude),
+    return {"mode": "weight", "w1": w1, "amplitude": amplitude, "energy": weights.energy_term(amplitude),
             "distance_m": fom_distance if completed else float("nan"),
             "prom_distance_m": prom_distance,
             "fom_check": "completed" if completed else "infeasible",

@@ -34,6 +34,7 @@ def test_a_point_whose_fom_check_stops_is_marked_infeasible_with_the_reason(tmp_
     assert [row["fom_check"] for row in rows] == ["completed", "infeasible"]
     assert rows[0]["fom_check_reason"] == "" and "did not converge at t = 1.42 s" in rows[1]["fom_check_reason"]
     assert [row["converged"] for row in rows] == ["True", "False"]      # the optimiser's first-order point
+    assert [row["mode"] for row in rows] == ["weight", "weight"]       # a budget front's rows say "budget"
     assert (tmp_path / "pareto.png").stat().st_size > 10_000
 
 
