@@ -52,3 +52,14 @@ def test_the_budget_front_swims_farther_with_every_larger_budget_each_point_fom_
     assert np.all(np.diff(fom) > 0), fom
     assert all(float(row["amplitude"]) == pytest.approx(float(row["budget"]), abs=1e-3) for row in table)
     assert (out / "pareto.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("budgets, words", [("0.3,0.2", "must increase strictly"),
+                                            ("0.01:0.4:8", "outside the amplitude bounds")])
+def test_pareto_refuses_bad_budgets_in_one_line_and_writes_nothing(tmp_path, capsys, budgets, words):
+    from aquarom_fenics.cli import main
+
+    assert main(["pareto", "co", "--budgets", budgets, "--out", str(tmp_path / "front")]) == InputError.exit_code
+    error = capsys.readouterr().err.strip()
+    assert words in error and "\n" not in error and "Traceback" not in error
+    assert not (tmp_path / "front").exists()
