@@ -10,11 +10,9 @@ that PROM there for the new linearisation (history ``surrogate``) instead of bui
 Co-optimisation (z = (ξ, A)): the amplitude enters the reduced actuation exactly, so the PROM of
 the shapes ξ_c is valid over A's whole range. At every exact evaluation (a build or a surrogate)
 A is set to its conditional optimum A*(ξ) = argmin_A L(ξ, A) on that PROM (a bounded 1-D search),
-and the descent z ← z - γ W ∇L_b moves the shapes only, with A fixed until the next centre. The
-descent on (ξ, A) together stalled: ∂L/∂A is 10-15 times ∂L/∂ξ, so W = 1/‖∇L_b‖_∞ made the shape
-steps 1/15 of γ; A moved against its lower bound, its W was halved at every sign change, and the
-linearised d, convex in A (d ~ A^1.5), under-predicted every climb in A, so w₁ = 0.2 reached the
-iteration limit at A = 0.12 (optimum ≈ 0.14).
+and the descent z ← z - γ W ∇L_b moves the shapes only, with A fixed until the next centre: one
+W over (ξ, A) is set by ∂L/∂A, much larger than ∂L/∂ξ, and the linearised d is convex in A, so
+a joint descent creeps (docs/studies.md, CO).
 """
 from __future__ import annotations
 
@@ -405,10 +403,8 @@ def _along_active_rows(space: DesignSpace, z, step, scaling, tolerance: float) -
 
     A row a·z ≤ b with slack ≤ ``tolerance`` · range that the step would shrink (a·Δz > 0) takes
     Δz ← Δz - W a (a·Δz) / (aᵀ W a), so that a·Δz = 0: the step slides along the face in the
-    metric of W. Without it the fraction to the boundary cut every step at the face and halved
-    W of every parameter in the row, so the motion along the face died out (SO9 stopped on the
-    step tolerance with a first-order measure of 0.14, the residual tangential to the face).
-    The box bounds are left to the barrier and the bound snapping."""
+    metric of W, where the fraction to the boundary alone would cut it at the face and halve W
+    of every parameter in the row. The box bounds are left to the barrier and the bound snapping."""
     rows = space.constraint_matrix
     if not rows.size:
         return step
