@@ -103,6 +103,8 @@ def run_pareto(args) -> int:
     from aquarom_fenics.studies.study import checkpoint_pattern, pareto_sweep
 
     scene, _ = check_inputs(args, load_scene(args))
+    if args.budgets is not None:
+        return run_budget_front(args, scene)
     with shutting_down(open_work_pool(args, scene, len(scene.cooptimization.weights), default_workers=1)) as pool:
         out = claim_output(args, args.out or Path("results") / "pareto" / scene.name, resume=args.resume,
                            resume_file=f"w1_*/{checkpoint_pattern(scene)}")
@@ -112,6 +114,21 @@ def run_pareto(args) -> int:
                else f"FOM check stopped (infeasible), PROM distance {100 * point['prom_distance_m']:.3f} cm")
         say(f"w1 = {point['w1']:.2f}: amplitude {point['amplitude']:.3f}, energy {point['energy']:.4f}, {fom}")
     say(f"outputs in {shown(args, out)}/ (pareto.csv, pareto.png, one folder per weight)")
+    return 0
+
+
+def run_budget_front(args, scene) -> int:
+    """``aquarom pareto --budgets``: max d subject to A ≤ A_k for each budget, in this process."""
+    from aquarom_fenics.studies.budget_front import budget_front, parse_budgets
+
+    budgets = parse_budgets(args.budgets, scene.cooptimization.amplitude_bounds)
+    out = claim_output(args, args.out or Path("results") / "pareto" / f"{scene.name}-budgets")
+    for point in budget_front(scene, out, budgets):
+        fom = (f"FOM distance {100 * point['distance_m']:.3f} cm" if point["fom_check"] == "completed"
+               else f"FOM check stopped (infeasible), PROM distance {100 * point['prom_distance_m']:.3f} cm")
+        say(f"A ≤ {point['budget']:.3f}: amplitude {point['amplitude']:.3f}, {fom}, PROM "
+            f"{100 * point['prom_distance_m']:.3f} cm, {'converged' if point['converged'] else 'NOT converged'}")
+    say(f"outputs in {shown(args, out)}/ (pareto.csv, pareto.png)")
     return 0
 
 

@@ -15,6 +15,7 @@ EXAMPLES = {
     "compare": "aquarom compare so1 --xi y_thin=0.02 --level 1 --out results/so1-compare",
     "optimize": "aquarom optimize so1 --level 1 --out results/so1-opt\n  aquarom optimize so1 --out results/so1-opt --resume",
     "pareto": "aquarom pareto co --level 1 --out results/co-pareto\n"
+              "  aquarom pareto co --budgets 0.05:0.4:8 --out results/co-budgets\n"
               "  aquarom pareto co --scheduler-file ~/dask-scheduler.json --out results/co-pareto\n"
               "  aquarom pareto co --level 1 --out results/co-pareto --resume",
     "animate": "aquarom animate results/nominal-fom --fps 20 --stride 2",
@@ -113,6 +114,10 @@ def build_parser() -> argparse.ArgumentParser:
     pareto.add_argument("--resume", action="store_true",
                         help="continue the sweep in --out: keep the weights that completed, continue the others "
                              "from their checkpoints")
+    pareto.add_argument("--budgets", metavar="LOW:HIGH:COUNT",
+                        help="trace the front by effort budgets instead of the weights: maximise the distance "
+                             "subject to A ≤ A_k for COUNT budgets from LOW to HIGH (or a comma list A1,A2,...), "
+                             "each from the previous optimum, each FOM-checked")
     add_sweep(command("sweep", "run a model at every design of a CSV file, a grid or a Latin hypercube (sweep.csv, "
                             "sweep.png); on local worker processes or a Dask cluster",
                       out="output directory (default results/sweep/SCENE-MODEL)", progress=True))

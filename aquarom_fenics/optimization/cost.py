@@ -52,6 +52,16 @@ class DesignSpace:
         """The slacks that must stay positive inside the set: all but the box rows of fixed parameters."""
         return np.concatenate([self.free, self.free, np.ones(self.constraint_bound.size, dtype=bool)])
 
+    @property
+    def descent_barrier_rows(self) -> np.ndarray:
+        """The rows the paper method's log-barrier covers: :attr:`barrier_rows` without the
+        amplitude's two (A is set to its conditional optimum at every PROM, not held off its bounds)."""
+        rows = self.barrier_rows.copy()
+        if self.with_amplitude:
+            n = len(self.names)
+            rows[n - 1] = rows[2 * n - 1] = False
+        return rows
+
     def most_interior_point(self) -> np.ndarray:
         """argmax_z min_i s_i(z) over the barrier rows (a linear programme in (z, t))."""
         rows = self.barrier_rows
@@ -107,13 +117,14 @@ class FirstOrder:
 
 
 def first_order(space: DesignSpace, z: np.ndarray, cost: float, gradient: np.ndarray, tolerance: float,
-                barrier_scale: float = 0.0) -> FirstOrder:
-    """The optimality measure and active set of :class:`FirstOrder` (``barrier_scale`` = μ)."""
+                barrier_scale: float = 0.0, barrier_rows: np.ndarray | None = None) -> FirstOrder:
+    """The optimality measure and active set of :class:`FirstOrder` (``barrier_scale`` = μ over
+    ``barrier_rows``, by default :attr:`DesignSpace.barrier_rows`)."""
     free = space.free
     scale = space.upper - space.lower
     slacks, ranges, jacobian = space.slacks(z), space.slack_ranges, space.slack_jacobian
     active = space.active_rows(z, tolerance)
-    inactive = np.setdiff1d(np.flatnonzero(space.barrier_rows), active)
+    inactive = np.setdiff1d(np.flatnonzero(space.barrier_rows if barrier_rows is None else barrier_rows), active)
     residual = np.asarray(gradient, dtype=float).copy()
     if barrier_scale > 0 and inactive.size:
         residual -= jacobian[inactive].T @ (barrier_scale / slacks[inactive])
@@ -265,8 +276,8 @@ def barrier_scale_at(settings, cost: float) -> float:
 
 def first_order_at(scene: Scene, space: DesignSpace, evaluation: Evaluation) -> FirstOrder:
     """First-order measure and active set at an evaluated design; the paper method's barrier
-    multipliers μ / s_i count for its inactive rows."""
+    multipliers μ / s_i count for its inactive rows (not the amplitude's: A is under no barrier)."""
     settings = scene.optimizer
     barrier_scale = barrier_scale_at(settings, evaluation.cost) if settings.method == "paper" else 0.0
     return first_order(space, evaluation.z, evaluation.cost, evaluation.gradient, settings.active_tolerance,
-                       barrier_scale)
+                       barrier_scale, space.descent_barrier_rows)

@@ -376,11 +376,12 @@ def pareto_point(scene: Scene, out_dir: Path, w1: float, fish: Fish | None = Non
     if summary is not None:
         check, space = summary["fom_check"], design_space(scene)
         return _pareto_row(w1, weights, space, np.array([summary["optimum"][n] for n in space.names]),
-                           summary["prom_distance_optimal"], check["optimal_distance"], check["error"])
+                           summary["prom_distance_optimal"], check["optimal_distance"], check["error"],
+                           bool(summary.get("converged", False)))
     result, check = run_optimization(scene, folder, resume=resume and holds_file(folder, checkpoint_pattern(scene)),
                                      weights=weights, fish=fish or load_fish(scene), render=False)
     return _pareto_row(w1, weights, result.space, result.optimum, result.evaluation.distance,
-                       check.optimal_distance, check.error)
+                       check.optimal_distance, check.error, result.converged)
 
 
 def weight_folder(w1: float) -> str:
@@ -425,14 +426,15 @@ def completed_summary(folder: Path, scene: Scene, weights: CostWeights | None = 
 
 
 def _pareto_row(w1: float, weights: CostWeights, space, optimum: np.ndarray, prom_distance: float,
-                fom_distance: float | None, fom_error: str | None) -> dict:
+                fom_distance: float | None, fom_error: str | None, converged: bool) -> dict:
     """A row of pareto.csv: the amplitude is the last design variable; a FOM check that did not
-    complete leaves the distance NaN and gives the FOM's stop reason."""
+    complete leaves the distance NaN and gives the FOM's stop reason; ``converged``: the optimiser
+    stopped at a first-order point (a point that did not is left off the front)."""
     amplitude = float(optimum[-1])
     completed = fom_distance is not None
-    return {"w1": w1, "amplitude": amplitude, "energy": weights.energy_term(amplitude),
+    return {"mode": "weight", "w1": w1, "amplitude": amplitude, "energy": weights.energy_term(amplitude),
             "distance_m": fom_distance if completed else float("nan"),
             "prom_distance_m": prom_distance,
             "fom_check": "completed" if completed else "infeasible",
-            "fom_check_reason": "" if completed else (fom_error or ""),
+            "fom_check_reason": "" if completed else (fom_error or ""), "converged": converged,
             **{f"xi_{n}": float(v) for n, v in zip(space.names[:-1], optimum[:-1])}}

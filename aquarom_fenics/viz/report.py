@@ -290,7 +290,9 @@ def plot_pareto(points: list[dict], out_path: Path) -> Path:
     Each point holds ``w1`` (weight of -d), ``distance_m`` [m], ``energy`` (α A², the cost's units)
     and ``amplitude`` A. A design is on the front when no other one swims as far or farther for
     as little energy or less (and is better in one of the two). A point without a FOM distance
-    (its FOM check stopped: NaN) is drawn as a cross at its ``prom_distance_m``, off the front.
+    (its FOM check stopped: NaN) is drawn as a cross at its ``prom_distance_m``, off the front; a
+    point whose optimiser did not reach a first-order point (``converged`` false) as a grey
+    square, off the front too.
     """
     plt = _pyplot()
     out_path = Path(out_path)
@@ -298,15 +300,21 @@ def plot_pareto(points: list[dict], out_path: Path) -> Path:
     energy = np.array([point["energy"] for point in points], dtype=float)
     distance = 100 * np.array([point["distance_m"] for point in points], dtype=float)
     feasible = np.isfinite(distance)
+    converged = np.array([_true(point.get("converged", True)) for point in points], dtype=bool)
+    candidates = feasible & converged
     on_front = np.zeros(len(points), dtype=bool)
-    on_front[feasible] = _non_dominated(energy[feasible], distance[feasible])
+    on_front[candidates] = _non_dominated(energy[candidates], distance[candidates])
     order = np.argsort(energy)
     front = order[on_front[order]]
     figure, axis = plt.subplots(figsize=(7, 5))
     axis.plot(energy[front], distance[front], "-o", color="tab:blue", label="non-dominated front", zorder=3)
-    dominated = feasible & ~on_front
+    dominated = candidates & ~on_front
     axis.plot(energy[dominated], distance[dominated], "o", color="0.55", markerfacecolor="none",
               label="dominated", zorder=3)
+    stalled = feasible & ~converged
+    if stalled.any():
+        axis.plot(energy[stalled], distance[stalled], "s", color="0.4", markerfacecolor="none", zorder=3,
+                  label="not converged (no first-order point): off the front")
     if not feasible.all():
         distance[~feasible] = [100 * point.get("prom_distance_m", np.nan) for point, ok in zip(points, feasible) if not ok]
         axis.plot(energy[~feasible], distance[~feasible], "x", color="tab:red", zorder=3,
@@ -323,6 +331,56 @@ def plot_pareto(points: list[dict], out_path: Path) -> Path:
     figure.savefig(out_path, dpi=DPI)
     plt.close(figure)
     return out_path
+
+
+def plot_budget_front(points: list[dict], out_path: Path) -> Path:
+    """The front traced by budgets: left, the distance [cm] against the budget A_k, from the PROM
+    (dashed) and the FOM (solid) at each optimum, the FOM front through the converged points only
+    (a point not converged: grey square; a FOM run that stopped: red cross at the PROM distance);
+    right, the optimal shape parameters ξ (``xi_<name>``) along the front.
+
+    Each point holds ``budget``, ``amplitude``, ``distance_m`` (FOM, NaN when it stopped),
+    ``prom_distance_m`` and ``converged``."""
+    plt = _pyplot()
+    out_path = Path(out_path)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    budget = np.array([float(point["budget"]) for point in points])
+    fom = 100 * np.array([float(point["distance_m"]) for point in points])
+    prom = 100 * np.array([float(point["prom_distance_m"]) for point in points])
+    converged = np.array([_true(point.get("converged", True)) for point in points], dtype=bool)
+    checked = np.isfinite(fom)
+    figure, (front, shapes) = plt.subplots(1, 2, figsize=(11, 4.5))
+    front.plot(budget[converged], prom[converged], "--^", color="tab:orange", label="PROM at the optimum")
+    on_front = converged & checked
+    front.plot(budget[on_front], fom[on_front], "-o", color="tab:blue", label="FOM at the optimum (the front)")
+    if (checked & ~converged).any():
+        front.plot(budget[checked & ~converged], fom[checked & ~converged], "s", color="0.4", markerfacecolor="none",
+                   label="not converged: off the front")
+    if (~checked).any():
+        front.plot(budget[~checked], prom[~checked], "x", color="tab:red", label="FOM run stopped (PROM distance)")
+    front.set_xlabel("budget: amplitude A ≤ A_k")
+    front.set_ylabel("distance d [cm]")
+    front.set_title("max d subject to A ≤ A_k")
+    front.grid(alpha=0.3)
+    front.legend(loc="upper left", fontsize=8)
+    names = [key for key in points[0] if key.startswith("xi_")]
+    for name in names:
+        shapes.plot(budget, [float(point[name]) for point in points], "-o", markersize=4, label=name[3:])
+    shapes.set_xlabel("budget: amplitude A ≤ A_k")
+    shapes.set_ylabel("shape parameter ξ at the optimum")
+    shapes.set_title("optimal shapes along the front")
+    shapes.grid(alpha=0.3)
+    if names:
+        shapes.legend(loc="best", fontsize=8)
+    figure.tight_layout()
+    figure.savefig(out_path, dpi=DPI)
+    plt.close(figure)
+    return out_path
+
+
+def _true(value) -> bool:
+    """A CSV or JSON truth value: True, "True", "true" are true."""
+    return value is True or str(value).strip().lower() == "true"
 
 
 def _pareto_labels(points, energy: np.ndarray, distance: np.ndarray, resolution: float = 0.02):

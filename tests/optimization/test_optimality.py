@@ -207,3 +207,78 @@ def test_paper_method_stops_at_the_last_accepted_design_when_the_check_refuses_e
     result = optimize(scene, fish=fish, builder=CheckedSlopeBuilder(scene, fish, space))
     assert result.stop_reason.startswith("every step from the last accepted design is refused"), result.stop_reason
     assert 0.04 < result.optimum[0] <= 0.05 and abs(result.optimum[1]) < 0.01 * 0.2
+
+
+class StrokeBuilder(AnalyticBuilder):
+    """Co-optimisation: d(ξ, A) = c(ξ) A^1.5 with c = 1 + 2 z_tail - 10 y_thin² (largest on z_tail's
+    upper bound), convex in A as the swimmer's distance is; the amplitude is the last entry of z."""
+
+    def evaluate(self, prom, z, weights):
+        z = np.array(z, dtype=float)
+        shape = 1.0 + 2.0 * z[0] - 10.0 * z[1] ** 2
+        distance = shape * z[2] ** 1.5
+        gradient = np.array([2.0 * z[2] ** 1.5, -20.0 * z[1] * z[2] ** 1.5, 1.5 * shape * z[2] ** 0.5])
+        cost = -weights.distance * distance + weights.energy * weights.energy_term(z[2])
+        cost_gradient = -weights.distance * gradient
+        cost_gradient[2] += weights.energy * 2 * weights.alpha * z[2]
+        return Evaluation(z, cost, cost_gradient, distance, gradient)
+
+    def trusts(self, prom, z):
+        """Valid over the whole amplitude range (as the PROM is), within the radius in the shapes."""
+        return prom is not None and bool(np.all(np.abs(np.asarray(z)[:2] - prom[:2]) <= self.radius))
+
+
+@pytest.mark.parametrize("w1", [0.2, 0.3, 0.9])
+def test_paper_method_co_optimisation_ends_at_the_first_order_point_of_every_weight(fish, w1):
+    """L = -w₁ c A^1.5 + (1 - w₁) A² on the shape corner c = 1.4: A* = (0.75 w₁ c / (1 - w₁))², or
+    the amplitude's upper bound 0.4. The descent on (ξ, A) together ran out of iterations here."""
+    scene = scene_from_dict({"mesh": {"level": 1}, "shapes": SHAPES, "solver": {"duration": 1.0},
+                             "cooptimization": {"enabled": True, "amplitude_bounds": [0.05, 0.4]},
+                             "optimizer": {"method": "paper", "max_iterations": 100}}, source="<toy>")
+    space = optimize_module.optimization_space(scene, fish)
+    weights = CostWeights(distance=w1, energy=1.0 - w1)
+    result = optimize(scene, fish=fish, weights=weights, builder=StrokeBuilder(scene, fish, space))
+    assert result.converged, (result.stop_reason, result.optimality.measure)
+    expected = min((0.75 * w1 * 1.4 / (1.0 - w1)) ** 2, 0.4)
+    assert result.optimum[0] == 0.2 and abs(result.optimum[1]) < 0.01 * 0.2
+    assert result.optimum[2] == pytest.approx(expected, rel=1e-3)
+
+
+class FaceBuilder(AnalyticBuilder):
+    """d = 0.01 + 0.02 z_tail + 0.01 y_thin - 0.5 z_tail²: uphill through the face z_tail + y_thin ≤ 0.1,
+    whose best point (z_tail, y_thin) = (0.01, 0.09) lies inside the box."""
+
+    def evaluate(self, prom, z, weights):
+        z = np.array(z, dtype=float)
+        distance = 0.01 + 0.02 * z[0] + 0.01 * z[1] - 0.5 * z[0] ** 2
+        gradient = np.array([0.02 - z[0], 0.01])
+        return Evaluation(z, -distance, -gradient, distance, gradient)
+
+
+def test_paper_method_slides_along_a_nearly_active_linear_constraint_to_its_best_point(fish):
+    """The fraction to the boundary alone cut every step at the face and halved W of both
+    parameters: the run crept along the face (55 iterations here; SO9 stalled on the step tolerance)."""
+    scene = scene_from_dict({"mesh": {"level": 1}, "shapes": SHAPES, "solver": {"duration": 1.0},
+                             "constraints": [{"coefficients": {"z_tail": 1.0, "y_thin": 1.0}, "upper": 0.1}],
+                             "optimizer": {"method": "paper", "max_iterations": 100, "rebuild_threshold": 0.02,
+                                           "n_rebuild": 2, "step_tolerance": 1e-5}}, source="<toy>")
+    space = optimize_module.optimization_space(scene, fish)
+    result = optimize(scene, fish=fish, builder=FaceBuilder(scene, fish, space))
+    assert result.converged, (result.stop_reason, result.optimality.measure)
+    assert [row["constraint"] for row in result.optimality.active] == ["constraint row 1"]
+    assert result.optimum[0] == pytest.approx(0.01, abs=0.01 * 0.2)
+    assert result.iterations <= 25          # 55 when every step was cut at the face
+
+
+def test_paper_state_reads_a_checkpoint_state_of_either_format_and_writes_it_back_unchanged():
+    """A state written before ``prom_z``, ``confirm`` and ``restarted`` existed loads (the PROM at the
+    centre, no confirmation pending, W not restarted); a full one survives the JSON round trip."""
+    from aquarom_fenics.optimization.paper_state import PaperState
+
+    old = {"z": [0.1, -0.02], "iteration": 7, "scaling": [0.5, 0.25], "previous_gradient": None, "since_build": 2,
+           "center": {"z": [0.1, -0.01], "distance": 0.03, "distance_gradient": [0.2, -0.1]}}
+    state = PaperState.from_dict(json.loads(json.dumps(old)))
+    assert state.center.prom_z.tolist() == [0.1, -0.01] and not state.confirm and not state.restarted
+    assert state.center.at(np.array([0.1, -0.02]))[0] == pytest.approx(0.03 + 0.001)
+    full = state.to_dict() | {"previous_gradient": [1e-3, -2e-3], "confirm": True, "restarted": True}
+    assert PaperState.from_dict(json.loads(json.dumps(full))).to_dict() == full

@@ -22,7 +22,7 @@ def test_a_point_whose_fom_check_stops_is_marked_infeasible_with_the_reason(tmp_
         amplitude = 0.1 if weights.distance < 0.5 else 0.4
         result = SimpleNamespace(optimum=np.array([0.0] * (len(names) - 1) + [amplitude]),
                                  evaluation=SimpleNamespace(distance=0.02 if amplitude < 0.4 else 0.3),
-                                 space=SimpleNamespace(names=names))
+                                 space=SimpleNamespace(names=names), converged=amplitude < 0.4)
         stopped = "FOM at {...} stopped: Newton did not converge at t = 1.42 s"
         check = study.FomCheck(0.045, 0.021 if amplitude < 0.4 else None, 0.045, result.evaluation.distance, 1.0,
                                None if amplitude < 0.4 else stopped)
@@ -33,6 +33,8 @@ def test_a_point_whose_fom_check_stops_is_marked_infeasible_with_the_reason(tmp_
     rows = list(csv.DictReader((tmp_path / "pareto.csv").open()))
     assert [row["fom_check"] for row in rows] == ["completed", "infeasible"]
     assert rows[0]["fom_check_reason"] == "" and "did not converge at t = 1.42 s" in rows[1]["fom_check_reason"]
+    assert [row["converged"] for row in rows] == ["True", "False"]      # the optimiser's first-order point
+    assert [row["mode"] for row in rows] == ["weight", "weight"]       # a budget front's rows say "budget"
     assert (tmp_path / "pareto.png").stat().st_size > 10_000
 
 
@@ -41,7 +43,7 @@ def _completed_summary(scene, w1, amplitude, distance, names, scene_hash=None):
             "optimum": {**{n: 0.1 for n in names[:-1]}, "amplitude": amplitude},
             "prom_distance_optimal": distance + 0.001,
             "cost_weights": {"distance": w1, "energy": 1.0 - w1, "alpha": scene.cooptimization.energy_weight},
-            "fom_check": {"optimal_distance": distance, "error": None}}
+            "fom_check": {"optimal_distance": distance, "error": None}, "converged": True}
 
 
 def test_a_resumed_sweep_keeps_completed_weights_and_continues_the_others_from_their_checkpoints(tmp_path, monkeypatch):
@@ -58,7 +60,8 @@ def test_a_resumed_sweep_keeps_completed_weights_and_continues_the_others_from_t
     def optimised(scene, out_dir, weights, fish, render, resume=False):
         calls.append((Path(out_dir).name, resume))
         result = SimpleNamespace(optimum=np.array([0.0] * (len(names) - 1) + [0.4]),
-                                 evaluation=SimpleNamespace(distance=0.3), space=SimpleNamespace(names=names))
+                                 evaluation=SimpleNamespace(distance=0.3), space=SimpleNamespace(names=names),
+                                 converged=True)
         return result, study.FomCheck(0.045, 0.29, 0.045, 0.3, 1.0, None)
 
     monkeypatch.setattr(study, "run_optimization", optimised)

@@ -127,6 +127,24 @@ def test_pareto_leaves_a_point_whose_fom_check_stopped_off_the_front(tmp_path, m
     assert drawn["front_input"].tolist() == [1.0, 3.0]          # the infeasible point is not on the front
 
 
+def test_pareto_leaves_a_point_that_did_not_converge_off_the_front(tmp_path, monkeypatch):
+    """A weight whose optimiser stopped before a first-order point (``converged`` False, as the CSV
+    writes it) is no optimum: however far it swims, the front is drawn without it."""
+    points = [{"w1": 0.2, "distance_m": 0.01, "energy": 0.001, "amplitude": 0.1, "converged": True},
+              {"w1": 0.3, "distance_m": 0.05, "energy": 0.002, "amplitude": 0.15, "converged": "False"},
+              {"w1": 0.9, "distance_m": 0.03, "energy": 0.004, "amplitude": 0.2, "converged": "True"}]
+    drawn = {}
+    original = report._non_dominated
+
+    def recording(energy, distance):
+        drawn["front_input"] = distance.copy()
+        return original(energy, distance)
+
+    monkeypatch.setattr(report, "_non_dominated", recording)
+    assert_not_blank(read_rgb(report.plot_pareto(points, tmp_path / "pareto.png")))
+    assert drawn["front_input"].tolist() == [1.0, 3.0]
+
+
 def test_non_dominated_keeps_the_points_no_other_beats():
     energy = np.array([1.0, 2.0, 2.0, 3.0, 1.0])
     distance = np.array([1.0, 3.0, 2.0, 2.5, 0.5])

@@ -1,0 +1,65 @@
+"""The Pareto front by effort budgets: max d subject to A ≤ A_k, continued from budget to budget,
+each optimum FOM-checked (level 1, a 1 s horizon, three budgets)."""
+import csv
+import dataclasses
+
+import numpy as np
+import pytest
+
+from aquarom_fenics.errors import InputError
+from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.studies.budget_front import COLUMNS, budget_front, continuation_start, parse_budgets
+from aquarom_fenics.optimization.cost import design_space
+
+
+def test_budgets_from_a_range_or_a_list_and_bad_ones_refused_in_one_line():
+    assert parse_budgets("0.05:0.4:8", (0.05, 0.4)) == pytest.approx(tuple(np.linspace(0.05, 0.4, 8)))
+    assert parse_budgets("0.05:0.4:8", (0.05, 0.4))[2] == 0.15          # written to pareto.csv as typed
+    assert parse_budgets("0.1,0.2", (0.05, 0.4)) == (0.1, 0.2)
+    for text, words in (("0.05:0.5:3", "outside the amplitude bounds [0.05, 0.4]"), ("0.2,0.1", "increase strictly"),
+                        ("a:b", "LOW:HIGH:COUNT"), ("0.1:0.2:0", "LOW:HIGH:COUNT")):
+        with pytest.raises(InputError) as refused:
+            parse_budgets(text, (0.05, 0.4))
+        assert words in str(refused.value) and "\n" not in str(refused.value)
+
+
+def test_a_budget_continues_from_the_previous_optimum_with_the_amplitude_at_the_budget():
+    space = design_space(Scene.load("co"))
+    upper = space.upper.copy()
+    upper[-1] = 0.2
+    bounded = dataclasses.replace(space, upper=upper)
+    previous = np.array([-0.5, 0.5, 0.4, 0.5, 0.5, 0.1])
+    np.testing.assert_array_equal(continuation_start(bounded, previous), [-0.5, 0.5, 0.4, 0.5, 0.5, 0.2])
+    assert continuation_start(bounded, None)[-1] == 0.2
+
+
+@pytest.fixture(scope="module")
+def front(tmp_path_factory):
+    scene = Scene.load("co").replace("solver", duration=1.0)
+    out = tmp_path_factory.mktemp("budgets")
+    return budget_front(scene, out, (0.1, 0.2, 0.3)), out
+
+
+def test_the_budget_front_swims_farther_with_every_larger_budget_each_point_fom_checked(front):
+    rows, out = front
+    table = list(csv.DictReader((out / "pareto.csv").open()))
+    names = [shape.name for shape in Scene.load("co").shapes]
+    assert list(table[0]) == COLUMNS + [f"xi_{n}" for n in names]
+    assert [row["mode"] for row in table] == ["budget"] * 3 and all(row["w1"] == "" for row in table)
+    assert [float(row["budget"]) for row in table] == [0.1, 0.2, 0.3]
+    assert all(row["fom_check"] == "completed" and row["converged"] == "True" for row in table)
+    fom = [float(row["distance_m"]) for row in table]
+    assert np.all(np.diff(fom) > 0), fom
+    assert all(float(row["amplitude"]) == pytest.approx(float(row["budget"]), abs=1e-3) for row in table)
+    assert (out / "pareto.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("budgets, words", [("0.3,0.2", "must increase strictly"),
+                                            ("0.01:0.4:8", "outside the amplitude bounds")])
+def test_pareto_refuses_bad_budgets_in_one_line_and_writes_nothing(tmp_path, capsys, budgets, words):
+    from aquarom_fenics.cli import main
+
+    assert main(["pareto", "co", "--budgets", budgets, "--out", str(tmp_path / "front")]) == InputError.exit_code
+    error = capsys.readouterr().err.strip()
+    assert words in error and "\n" not in error and "Traceback" not in error
+    assert not (tmp_path / "front").exists()
