@@ -110,29 +110,8 @@ def test_pareto_writes_a_figure(tmp_path):
     assert_not_blank(read_rgb(path))
 
 
-def test_pareto_leaves_a_point_whose_fom_check_stopped_off_the_front(tmp_path, monkeypatch):
-    points = [{"w1": 0.2, "distance_m": 0.01, "energy": 0.001, "amplitude": 0.1, "prom_distance_m": 0.011},
-              {"w1": 0.5, "distance_m": 0.03, "energy": 0.004, "amplitude": 0.2, "prom_distance_m": 0.031},
-              {"w1": 0.9, "distance_m": float("nan"), "energy": 0.016, "amplitude": 0.4, "prom_distance_m": 0.09}]
-    drawn = {}
-    original = report._non_dominated
-
-    def recording(energy, distance):
-        drawn["front_input"] = distance.copy()
-        return original(energy, distance)
-
-    monkeypatch.setattr(report, "_non_dominated", recording)
-    path = report.plot_pareto(points, tmp_path / "pareto.png")
-    assert_not_blank(read_rgb(path))
-    assert drawn["front_input"].tolist() == [1.0, 3.0]          # the infeasible point is not on the front
-
-
-def test_pareto_leaves_a_point_that_did_not_converge_off_the_front(tmp_path, monkeypatch):
-    """A weight whose optimiser stopped before a first-order point (``converged`` False, as the CSV
-    writes it) is no optimum: however far it swims, the front is drawn without it."""
-    points = [{"w1": 0.2, "distance_m": 0.01, "energy": 0.001, "amplitude": 0.1, "converged": True},
-              {"w1": 0.3, "distance_m": 0.05, "energy": 0.002, "amplitude": 0.15, "converged": "False"},
-              {"w1": 0.9, "distance_m": 0.03, "energy": 0.004, "amplitude": 0.2, "converged": "True"}]
+def front_input(points, tmp_path, monkeypatch):
+    """The distances the Pareto plot hands to its non-dominated filter (the plot is drawn and not blank)."""
     drawn = {}
     original = report._non_dominated
 
@@ -142,7 +121,23 @@ def test_pareto_leaves_a_point_that_did_not_converge_off_the_front(tmp_path, mon
 
     monkeypatch.setattr(report, "_non_dominated", recording)
     assert_not_blank(read_rgb(report.plot_pareto(points, tmp_path / "pareto.png")))
-    assert drawn["front_input"].tolist() == [1.0, 3.0]
+    return drawn["front_input"]
+
+
+def test_pareto_leaves_a_point_whose_fom_check_stopped_off_the_front(tmp_path, monkeypatch):
+    points = [{"w1": 0.2, "distance_m": 0.01, "energy": 0.001, "amplitude": 0.1, "prom_distance_m": 0.011},
+              {"w1": 0.5, "distance_m": 0.03, "energy": 0.004, "amplitude": 0.2, "prom_distance_m": 0.031},
+              {"w1": 0.9, "distance_m": float("nan"), "energy": 0.016, "amplitude": 0.4, "prom_distance_m": 0.09}]
+    assert front_input(points, tmp_path, monkeypatch).tolist() == [1.0, 3.0]   # the infeasible one is not on the front
+
+
+def test_pareto_leaves_a_point_that_did_not_converge_off_the_front(tmp_path, monkeypatch):
+    """A weight whose optimiser stopped before a first-order point (``converged`` False, as the CSV
+    writes it) is no optimum: however far it swims, the front is drawn without it."""
+    points = [{"w1": 0.2, "distance_m": 0.01, "energy": 0.001, "amplitude": 0.1, "converged": True},
+              {"w1": 0.3, "distance_m": 0.05, "energy": 0.002, "amplitude": 0.15, "converged": "False"},
+              {"w1": 0.9, "distance_m": 0.03, "energy": 0.004, "amplitude": 0.2, "converged": "True"}]
+    assert front_input(points, tmp_path, monkeypatch).tolist() == [1.0, 3.0]
 
 
 def test_non_dominated_keeps_the_points_no_other_beats():
