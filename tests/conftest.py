@@ -57,6 +57,21 @@ y_thin = {{ bounds = [-0.1, 0.1] }}
 """A scene file on level 1 with two shapes: format with ``duration`` [s] and ``extra`` TOML."""
 
 
+def write_short_scene(directory, duration=0.2, extra="", name="scene.toml", template=SHORT_SCENE) -> str:
+    """Write ``template`` (default :data:`SHORT_SCENE`) formatted with ``duration`` and ``extra`` as
+    ``directory/name``; its path as a string, as the command line takes it."""
+    path = directory / name
+    path.write_text(template.format(duration=duration, extra=extra))
+    return str(path)
+
+
+def one_line(capsys) -> str:
+    """The one error line on stderr (a `warning:` line before it, e.g. an --xi outside the bounds, aside)."""
+    error = "\n".join(line for line in capsys.readouterr().err.strip().splitlines() if not line.startswith("warning:"))
+    assert len(error.splitlines()) == 1 and "Traceback" not in error, error
+    return error
+
+
 def coarse_scene(**sections):
     """A scene on mesh level 1; keyword arguments are TOML tables, e.g. solver={"duration": 0.2}."""
     data = {"mesh": {"level": 1}}

@@ -18,19 +18,7 @@ import pytest
 
 from aquarom_fenics.cli import main
 
-from conftest import SHORT_SCENE as SHORT
-
-
-def write_scene(directory: Path, duration=0.2, extra="") -> str:
-    path = directory / "scene.toml"
-    path.write_text(SHORT.format(duration=duration, extra=extra))
-    return str(path)
-
-
-def one_line(capsys) -> str:
-    error = "\n".join(line for line in capsys.readouterr().err.strip().splitlines() if not line.startswith("warning:"))
-    assert len(error.splitlines()) == 1 and "Traceback" not in error, error
-    return error
+from conftest import one_line, write_short_scene as write_scene
 
 
 @pytest.fixture

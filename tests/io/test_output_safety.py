@@ -17,7 +17,7 @@ from aquarom_fenics.io import tables as tables_module
 from aquarom_fenics.io import persistence as persistence_module
 from aquarom_fenics.cli import main
 
-from conftest import SHORT_SCENE as SHORT
+from conftest import one_line, write_short_scene as write_scene
 
 OPTIMIZE = """
 [mesh]
@@ -33,19 +33,6 @@ z_tail = {{ bounds = [-0.2, 0.2] }}
 y_thin = {{ bounds = [-0.1, 0.1] }}
 {extra}
 """
-
-
-def write_scene(directory: Path, duration=0.2, extra="", name="scene.toml", template=SHORT) -> str:
-    path = directory / name
-    path.write_text(template.format(duration=duration, extra=extra))
-    return str(path)
-
-
-def one_line(capsys) -> str:
-    """The one error line on stderr (a `warning:` line before it, e.g. an --xi outside the bounds, aside)."""
-    error = "\n".join(line for line in capsys.readouterr().err.strip().splitlines() if not line.startswith("warning:"))
-    assert len(error.splitlines()) == 1 and "Traceback" not in error, error
-    return error
 
 
 def snapshot(folder: Path) -> dict[str, bytes]:

@@ -16,19 +16,7 @@ from aquarom_fenics.errors import InputError
 from aquarom_fenics.io import outputs as outputs_module
 from aquarom_fenics.io.output_lock import lock_file_of, lock_output, release_output_locks
 
-from conftest import SHORT_SCENE as SHORT
-
-
-def write_scene(directory: Path, duration=0.2, extra="", name="scene.toml") -> str:
-    path = directory / name
-    path.write_text(SHORT.format(duration=duration, extra=extra))
-    return str(path)
-
-
-def one_line(capsys) -> str:
-    error = "\n".join(line for line in capsys.readouterr().err.strip().splitlines() if not line.startswith("warning:"))
-    assert len(error.splitlines()) == 1 and "Traceback" not in error, error
-    return error
+from conftest import one_line, write_short_scene as write_scene
 
 
 def simulate(scene, out, *extra) -> int:
