@@ -110,11 +110,17 @@ def run_pareto(args) -> int:
                            resume_file=f"w1_*/{checkpoint_pattern(scene)}")
         points = pareto_sweep(scene, out, pool=pool, resume=args.resume)
     for point in points:
-        fom = (f"FOM distance {100 * point['distance_m']:.3f} cm" if point["fom_check"] == "completed"
-               else f"FOM check stopped (infeasible), PROM distance {100 * point['prom_distance_m']:.3f} cm")
-        say(f"w1 = {point['w1']:.2f}: amplitude {point['amplitude']:.3f}, energy {point['energy']:.4f}, {fom}")
+        say(f"w1 = {point['w1']:.2f}: amplitude {point['amplitude']:.3f}, energy {point['energy']:.4f}, "
+            f"{fom_phrase(point)}")
     say(f"outputs in {shown(args, out)}/ (pareto.csv, pareto.png, one folder per weight)")
     return 0
+
+
+def fom_phrase(point: dict) -> str:
+    """A Pareto point's FOM check in words: its distance, or that it stopped (with the PROM's distance)."""
+    if point["fom_check"] == "completed":
+        return f"FOM distance {100 * point['distance_m']:.3f} cm"
+    return f"FOM check stopped (infeasible), PROM distance {100 * point['prom_distance_m']:.3f} cm"
 
 
 def run_budget_front(args, scene) -> int:
@@ -124,9 +130,7 @@ def run_budget_front(args, scene) -> int:
     budgets = parse_budgets(args.budgets, scene.cooptimization.amplitude_bounds)
     out = claim_output(args, args.out or Path("results") / "pareto" / f"{scene.name}-budgets")
     for point in budget_front(scene, out, budgets):
-        fom = (f"FOM distance {100 * point['distance_m']:.3f} cm" if point["fom_check"] == "completed"
-               else f"FOM check stopped (infeasible), PROM distance {100 * point['prom_distance_m']:.3f} cm")
-        say(f"A ≤ {point['budget']:.3f}: amplitude {point['amplitude']:.3f}, {fom}, PROM "
+        say(f"A ≤ {point['budget']:.3f}: amplitude {point['amplitude']:.3f}, {fom_phrase(point)}, PROM "
             f"{100 * point['prom_distance_m']:.3f} cm, {'converged' if point['converged'] else 'NOT converged'}")
     say(f"outputs in {shown(args, out)}/ (pareto.csv, pareto.png)")
     return 0

@@ -31,6 +31,7 @@ from aquarom_fenics.optimization.cost import CostWeights, DesignSpace
 from aquarom_fenics.optimization.optimize import OptimizationResult, optimization_space, optimize
 from aquarom_fenics.optimization.prom_builder import PromBuilder
 from aquarom_fenics.studies.fom_cache import fom_distance
+from aquarom_fenics.studies.study import design_and_amplitude
 
 log = logging.getLogger("aquarom")
 
@@ -111,10 +112,8 @@ def budget_front(scene: Scene, out_dir: Path, budgets: tuple[float, ...], fish: 
 
 
 def _fom_distance(scene: Scene, fish: Fish, result: OptimizationResult) -> tuple[float | None, str | None]:
-    space = result.space
-    shapes = dict(zip(space.names[: space.n_shapes], map(float, result.optimum[: space.n_shapes])))
     try:
-        return fom_distance(scene, fish, shapes, float(result.optimum[-1])), None
+        return fom_distance(scene, fish, *design_and_amplitude(result.space, result.optimum)), None
     except SolverError as failure:
         return None, str(failure)
 
@@ -124,15 +123,14 @@ def budget_row(budget: float, weights: CostWeights, result: OptimizationResult, 
     """A row of pareto.csv for one budget: A and the shapes at the optimum, the PROM and FOM
     distances [m] (NaN and the FOM's reason when its run stopped), whether the optimiser ended
     at a first-order point, its measure and stop reason, the PROM builds and seconds it took."""
-    space = result.space
-    amplitude = float(result.optimum[-1])
+    shapes, amplitude = design_and_amplitude(result.space, result.optimum)
     return {"mode": "budget", "w1": None, "budget": float(budget), "amplitude": amplitude,
             "energy": weights.alpha * amplitude ** 2, "distance_m": float("nan") if fom is None else fom,
             "prom_distance_m": result.evaluation.distance, "fom_check": "infeasible" if fom is None else "completed",
             "fom_check_reason": error or "", "converged": result.converged,
             "first_order_measure": result.optimality.measure, "stop_reason": result.stop_reason,
             "prom_builds": builds, "seconds": round(seconds, 1),
-            **{f"xi_{n}": float(v) for n, v in zip(space.names[: space.n_shapes], result.optimum[: space.n_shapes])}}
+            **{f"xi_{name}": value for name, value in shapes.items()}}
 
 
 def write_front(rows: list[dict], out_dir: Path) -> None:
