@@ -99,6 +99,7 @@ def local_worker_started(on_start: Callable[[], None] | None = None) -> None:
     global _IN_LOCAL_WORKER
     _IN_LOCAL_WORKER = True
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGTERM})   # a mask inherited from the spawning thread
     held: list[int] = []
     signal.signal(signal.SIGTERM, lambda number, frame: held.append(number))
     try:
