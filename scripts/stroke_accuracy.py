@@ -150,8 +150,8 @@ def main():
     nominal_proms = {}
     for label in args.shapes:
         if label == "corner":
-            # the PROMs at ξ = 0 with their radius lifted to reach the corner
-            nominal_proms = {basis: build_prom(value.replace("reduction", validity_fraction=1.0),
+            # the PROMs at ξ = 0 with their radius lifted to reach the corner (neither capped)
+            nominal_proms = {basis: build_prom(value.replace("reduction", validity_fraction=1.0, validity_change=0.0),
                                                {name: 0.0 for name in scene.shape_names})
                              for basis, value in scenes.items()}
         rows += shape_rows(scenes, label, SHAPES[label], args.amplitudes, args.cache,

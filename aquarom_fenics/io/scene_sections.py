@@ -179,6 +179,7 @@ class ReductionSection:
     taylor_order: int = _spec(1, _one_of(1, 2), "order of the PROM's Taylor expansion in ξ")
     drop_tolerance: float = _spec(1e-8, _positive, "basis vectors whose remaining mass-norm is below this are dropped")
     validity_fraction: float = _spec(0.25, _positive, "PROM validity radius of a parameter as a fraction of its largest |bound| (a shape's own `radius` overrides it)")
+    validity_change: float = _spec(0.0, lambda v: None if 0 <= v <= 1 else "must be in [0, 1] (0: off)", "> 0 caps each PROM's validity radius at the built design: r_k ≤ this / s_k, s_k = the largest relative ξ_k-derivative ‖∂T/∂ξ_k‖/‖T‖ of its internal force and mass tensors T, so that to first order no tensor changes by more than this fraction across the radius (docs/theory/basis.md, \"The validity radius at thin designs\"); 0: off, the radius of validity_fraction or the shape's own", legacy=0.0)
 
 
 @dataclass(frozen=True)

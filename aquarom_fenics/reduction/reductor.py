@@ -86,12 +86,39 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
     prom = ReducedModel(
         scene_hash=scene.hash, software_version=__version__, shape_names=list(fish.shape_names[:p]),
         design_point=dict(zip(fish.shape_names, map(float, xi_center))),
-        xi_center=xi_center[:p], validity_radius=np.array(scene.validity_radii()[:p]), labels=basis.labels,
+        xi_center=xi_center[:p], validity_radius=validity_radii(scene, elastic, inertia, p), labels=basis.labels,
         basis=np.stack([fom.nodal_displacement(vectors[:, j]) for j in range(m)], axis=-1), dropped=basis.dropped,
         frequencies=basis.frequencies, elastic=elastic, muscle=muscle, inertia=inertia, drag=drag, thrust=thrust,
         observation=observation, cells=fom.n_cells, dofs=fom.n_global_dofs, timings=timings)
     fom.destroy()
     return prom
+
+
+def validity_radii(scene: Scene, elastic, inertia, p: int) -> np.ndarray:
+    """The PROM's validity radius per parameter [1]: the scene's r_k (``validity_fraction`` or the shape's
+    own ``radius``), with ``[reduction] validity_change`` = c > 0 capped at the design it is built on,
+
+        r_k ≤ c / s_k,   s_k = max_T ‖∂T/∂ξ_k‖_F / ‖T‖_F,   T ∈ {K1, K2, K3 of f_int,r; M_r},
+
+    so that to first order no internal-force or mass tensor changes by more than the fraction c across
+    the radius. The tensors depend on ξ through F_1⁻¹ and det F_1; where a design thins a region they vary
+    like powers of its local thickness and s_k, with the error of the Taylor in ξ, grows (CO scene:
+    s_k ≤ 1.1 at ξ = 0, up to 8 at the corner, where det F_1 falls to 0.10 at the tail's edges)."""
+    radius = np.array(scene.validity_radii()[:p], dtype=float)
+    change = scene.reduction.validity_change
+    if change <= 0 or p == 0:
+        return radius
+    rates = np.zeros(p)
+    for taylor in (elastic.linear, elastic.quadratic, elastic.cubic, inertia.mass):
+        scale = np.linalg.norm(taylor.constant)
+        if taylor.first is None or scale == 0:
+            continue
+        rates = np.maximum(rates, np.linalg.norm(taylor.first.reshape(p, -1), axis=1) / scale)
+    capped = np.minimum(radius, np.divide(change, rates, out=np.full(p, np.inf), where=rates > 0))
+    if np.any(capped < radius):
+        log.info("PROM: validity radius %s, capped where the tensors change fast (relative ξ-derivatives %s, "
+                 "[reduction] validity_change = %g)", np.round(capped, 4).tolist(), np.round(rates, 2).tolist(), change)
+    return capped
 
 
 def reused_basis(fom: FullOrderModel, prom: ReducedModel) -> ReductionBasis:

@@ -37,7 +37,7 @@ def validity_study(base: Scene, fish=None, on_row: Callable[[dict], None] | None
     from aquarom_fenics.reduction.reductor import build_prom
 
     fish = fish or load_fish(base)
-    wide = base.replace("reduction", validity_fraction=10.0)
+    wide = base.replace("reduction", validity_fraction=10.0, validity_change=0.0)     # no radius: the study measures it
     proms = {order: build_prom(wide.replace("reduction", taylor_order=order), fish=fish) for order in ORDERS}
     nominal = simulate_fom(base, fish=fish, progress=False)
     rows = []

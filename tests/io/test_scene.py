@@ -288,7 +288,7 @@ def test_a_key_added_later_keeps_the_hash_of_the_scenes_before_it_at_its_legacy_
     """[fluid] spine_rule came after scenes were hashed (their caches, checkpoints and studies): at the
     rule they computed with ("rear"), written out or not, the hash is the one without the key; the new
     default ("trapezoid") and any other value change it."""
-    from aquarom_fenics.io.scene_sections import FluidSection, legacy_values
+    from aquarom_fenics.io.scene_sections import FluidSection, ReductionSection, legacy_values
 
     assert legacy_values(FluidSection) == {"spine_rule": "rear"}
     scene = Scene.load("co")
@@ -296,9 +296,11 @@ def test_a_key_added_later_keeps_the_hash_of_the_scenes_before_it_at_its_legacy_
     rear = scene.replace("fluid", spine_rule="rear")
     data = rear.to_dict()
     del data["fluid"]["spine_rule"]
-    for section, key in (("mesh", "head_end"), ("regions", "head"), ("regions", "muscles"),
-                         ("reduction", "stroke_amplitude")):        # later keys at their legacy values
+    for section, key in (("mesh", "head_end"), ("regions", "head"), ("regions", "muscles")):   # later keys at their legacy values
         del data[section][key]
+    for key, legacy in legacy_values(ReductionSection).items():    # the CO scene sets some of them
+        if data["reduction"][key] == legacy:
+            del data["reduction"][key]
     assert rear.hash == rear._digest(data)
     assert scene.hash != rear.hash and scene.fom_hash != rear.fom_hash
     assert 'spine_rule = "rear"' in rear.to_toml()          # a written scene still names it
@@ -315,7 +317,7 @@ def test_the_region_and_head_end_keys_keep_the_hashes_of_the_scenes_before_them(
     scene = Scene.load("nominal")
     data = scene.to_dict()
     for section, key in (("mesh", "head_end"), ("regions", "head"), ("regions", "muscles"),
-                         ("reduction", "stroke_amplitude")):        # later keys at their legacy values
+                         ("reduction", "stroke_amplitude"), ("reduction", "validity_change")):   # later keys at their legacy values
         del data[section][key]
     assert scene.hash == scene._digest(data)
     written = scene_from_dict(tomllib.loads(scene.to_toml()), source=scene.source, base_dir=scene.base_dir)
