@@ -176,6 +176,7 @@ class ReductionSection:
     modal_derivatives: bool = _spec(True, None, "static modal derivatives θ_ij")
     response_vectors: bool = _spec(True, None, "with basis = 'default': the static responses ψ_m to the muscles' stiffness on ψ and, with stations = \"nodes\", τ to the thrust's tail-node force")
     stroke_amplitude: float = _spec(0.0, lambda v: None if 0 <= v <= 10 else "must be in [0, 10] (0: off)", "with basis = 'default': > 0 adds the stroke vectors (docs/theory/basis.md, \"Large strokes\"): the FOM's static responses at the activations ±A_s (this A_s, e.g. the largest amplitude the model will run), the tail station's force responses and their inertia and modal-derivative terms; 0: off", legacy=0.0)
+    stroke_sensitivities: bool = _spec(False, None, "with stroke_amplitude > 0 and a PROM: also the stroke responses' sensitivities ∂u_s(±A_s)/∂ξ_k (a forward difference of the FOM's static responses, step 1 % of the parameter's range towards the box's middle), so that the PROM's ξ-gradient follows how the large stroke changes with the shape (docs/theory/basis.md, \"The PROM's ξ-gradient with the stroke vectors\")", legacy=False)
     taylor_order: int = _spec(1, _one_of(1, 2), "order of the PROM's Taylor expansion in ξ")
     drop_tolerance: float = _spec(1e-8, _positive, "basis vectors whose remaining mass-norm is below this are dropped")
     validity_fraction: float = _spec(0.25, _positive, "PROM validity radius of a parameter as a fraction of its largest |bound| (a shape's own `radius` overrides it)")

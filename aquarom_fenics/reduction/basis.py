@@ -15,7 +15,8 @@ With the head clamped in all directions:
      "Large strokes"): the FOM's static responses u_s(±A_s), f_int(u) = f_act(u) at the activations
      ±A_s (1, -1) (every order of a, the large rotations of the tail included); the responses to the
      tail station's unit forces, τ_x = K_0⁻¹ B_0ᵀ e_x and τ_y = K_0⁻¹ B_0ᵀ e_y; the modal derivative
-     θ_ψτ = -K_0⁻¹ (∂K/∂u[τ_x]) ψ; and the inertia (Ritz) vectors (K_0⁻¹ M)² ψ and K_0⁻¹ M τ_x.
+     θ_ψτ = -K_0⁻¹ (∂K/∂u[τ_x]) ψ; and the inertia (Ritz) vectors (K_0⁻¹ M)² ψ and K_0⁻¹ M τ_x;
+     with ``stroke_sensitivities`` (PROMs) also ∂u_s(±A_s)/∂ξ_k, by a forward difference in ξ_k.
 Each vector is normalised, then mass-orthonormalised; vectors whose remaining mass-norm falls
 below the drop tolerance are dropped and reported.
 """
@@ -157,16 +158,19 @@ def response_labels(response_vectors: bool, actuation_modes: bool, thrust: bool)
     return (("psi_muscle",) if actuation_modes else ()) + (("tail_force",) if thrust else ())
 
 
-def stroke_labels(stroke: bool, actuation_modes: bool, thrust: bool, responses: tuple[str, ...] = ()) -> tuple[str, ...]:
+def stroke_labels(stroke: bool, actuation_modes: bool, thrust: bool, responses: tuple[str, ...] = (),
+                  sensitivities: int = 0) -> tuple[str, ...]:
     """The stroke vectors of item 7 that apply (they need the actuation modes; the tail's, the thrust);
-    τ_x once, when the response vectors hold it already."""
+    τ_x once, when the response vectors hold it already; with ``sensitivities`` = p > 0 the stroke
+    responses' ξ-sensitivities ``dstroke_plus_k``, ``dstroke_minus_k`` (k = 1 … p) last."""
     if not (stroke and actuation_modes):
         return ()
     labels = ("stroke_plus", "stroke_minus")
     if thrust:
         labels += (() if "tail_force" in responses else ("tail_force",)) + ("tail_lateral", "theta_psi_tail")
     labels += ("psi_inertia",)
-    return labels + (("tail_inertia",) if thrust else ())
+    labels += ("tail_inertia",) if thrust else ()
+    return labels + tuple(f"dstroke_{sign}_{k + 1}" for k in range(sensitivities) for sign in ("plus", "minus"))
 
 
 class KeptFactors:
@@ -276,7 +280,7 @@ def _build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
     if tail is not None:
         candidates.append(tail)
     strokes = stroke_labels(settings.basis == "default" and settings.stroke_amplitude > 0, actuation_modes,
-                            fom.thrust is not None, responses)
+                            fom.thrust is not None, responses, n_parameters if settings.stroke_sensitivities else 0)
     if strokes:
         candidates += stroke_vectors(fom, strokes, static_solve, variations, psi, tail)
     timings["static_solves"] = time.perf_counter() - started - timings["vibration_modes"]
@@ -314,7 +318,33 @@ def stroke_vectors(fom: FullOrderModel, labels: tuple[str, ...], static_solve, v
         vectors["tail_inertia"] = static_solve(fom.matvec(fom.mass_matrix, tail))
     first = static_solve(fom.matvec(fom.mass_matrix, psi))
     vectors["psi_inertia"] = static_solve(fom.matvec(fom.mass_matrix, first))
+    for k in sorted({int(label.rsplit("_", 1)[1]) - 1 for label in labels if label.startswith("dstroke_")}):
+        vectors[f"dstroke_plus_{k + 1}"], vectors[f"dstroke_minus_{k + 1}"] = stroke_sensitivity(fom, k, plus, minus)
     return [vectors[label] for label in labels]
+
+
+SENSITIVITY_STEP = 0.01
+"""Forward-difference step of the stroke sensitivities, as a fraction of the parameter's range."""
+
+
+def stroke_sensitivity(fom: FullOrderModel, k: int, plus: np.ndarray, minus: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """∂u_s(±A_s)/∂ξ_k ≈ (u_s(ξ + h e_k) - u_s(ξ)) / h, h = SENSITIVITY_STEP × the range of ξ_k, towards the
+    middle of its bounds; each moved response by Newton from the response at ξ (same nominal mesh and dofs)."""
+    shape = fom.scene.shapes[k]
+    step = SENSITIVITY_STEP * (shape.upper - shape.lower) * (1.0 if fom.xi[k] <= 0.5 * (shape.lower + shape.upper) else -1.0)
+    moved_xi = fom.xi.copy()
+    moved_xi[k] += step
+    moved = FullOrderModel(fom.scene, fom.fish, moved_xi, comm=fom.comm)
+    activations = fom.scene.reduction.stroke_amplitude * ANTAGONIST_PATTERN
+    try:
+        responses = [fom.owned_values(moved.nodal_displacement(moved.static_response(*(sign * activations), start=start)))
+                     for sign, start in ((1.0, plus), (-1.0, minus))]
+    except SolverError as error:
+        raise SolverError(f"[reduction] stroke_sensitivities: the stroke response at {fom.fish.shape_names[k]} "
+                          f"moved by {step:g}: {error}") from None
+    finally:
+        moved.destroy()
+    return (responses[0] - plus) / step, (responses[1] - minus) / step
 
 
 def stroke_response(fom: FullOrderModel, amplitude: float, steps: int = 4) -> np.ndarray:

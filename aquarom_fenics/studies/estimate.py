@@ -139,7 +139,8 @@ def expected_basis(scene: Scene, parametric: bool) -> list[str]:
     responses = response_labels(reduction.basis == "default" and reduction.response_vectors, actuation_modes,
                                 scene.fluid.thrust)
     responses += stroke_labels(reduction.basis == "default" and reduction.stroke_amplitude > 0, actuation_modes,
-                               scene.fluid.thrust, responses)
+                               scene.fluid.thrust, responses,
+                               len(scene.shapes) if parametric and reduction.stroke_sensitivities else 0)
     return candidate_labels(reduction.vibration_modes, reduction.modal_derivatives,
                             len(scene.shapes) if parametric else 0, actuation_modes, responses)
 

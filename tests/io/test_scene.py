@@ -317,7 +317,8 @@ def test_the_region_and_head_end_keys_keep_the_hashes_of_the_scenes_before_them(
     scene = Scene.load("nominal")
     data = scene.to_dict()
     for section, key in (("mesh", "head_end"), ("regions", "head"), ("regions", "muscles"),
-                         ("reduction", "stroke_amplitude"), ("reduction", "validity_change")):   # later keys at their legacy values
+                         ("reduction", "stroke_amplitude"), ("reduction", "validity_change"),
+                         ("reduction", "stroke_sensitivities")):   # later keys at their legacy values
         del data[section][key]
     assert scene.hash == scene._digest(data)
     written = scene_from_dict(tomllib.loads(scene.to_toml()), source=scene.source, base_dir=scene.base_dir)
