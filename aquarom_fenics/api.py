@@ -27,7 +27,7 @@ from aquarom_fenics.geometry.fish import Fish, load_fish
 from aquarom_fenics.reduction.prom import ReducedModel
 from aquarom_fenics.dynamics.reduced_dynamics import ReducedResult, simulate_reduced
 from aquarom_fenics.reduction.reductor import build_prom as _build_prom
-from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.io.scene import Scene, scene_from_dict
 from aquarom_fenics.dynamics.simulate import SimulationResult, simulate_fom
 from aquarom_fenics.optimization.optimize import DEFAULT_MAX_TIME, OptimizationResult
 from aquarom_fenics.studies.study import FomCheck, run_optimization
@@ -36,7 +36,7 @@ from aquarom_fenics.geometry.shape_registry import RegisteredField, register_sha
 from aquarom_fenics.verification.check import CheckResult
 
 __all__ = ["Scene", "Fish", "load_fish", "simulate", "build_prom", "optimize", "start_design", "CostWeights",
-           "ReducedModel", "SimulationResult", "ReducedResult", "OptimizationResult", "FomCheck",
+           "ReducedModel", "SimulationResult", "ReducedResult", "OptimizationResult", "FomCheck", "scene_from_dict",
            "register_shape_field", "unregister_shape_field", "RegisteredField", "check_shape_fields", "CheckResult"]
 
 

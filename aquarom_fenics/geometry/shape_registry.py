@@ -22,7 +22,6 @@ import numpy as np
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry import shapes
-from aquarom_fenics.io.scene_sections import MeshSection
 
 Value = Callable[[np.ndarray], np.ndarray]
 """(n, 3) relative positions X [m] -> (n, 3) displacement U(X) [m] per unit ξ."""
@@ -34,16 +33,18 @@ RESERVED = ("amplitude", "design", "status", "distance_m", "tail_amplitude_m", "
 """Names that a design's tables and outputs use beside the shape names."""
 
 PROBE_DIVISIONS = 5
+PROBE_BOX = (0.2, 0.04, 0.1)
+"""L, W, H [m] of the probe box: the built-in block's default ``[mesh] length, width, height``."""
 
 
 def probe_points() -> np.ndarray:
     """(125, 3) relative positions where a field is checked at registration: the centres of a 5 × 5 × 5
     grid of the built-in block's box (L × W × H = 0.2 × 0.04 × 0.1 m), all inside the body."""
-    block = MeshSection()
+    length, width, height = PROBE_BOX
     centres = (np.arange(PROBE_DIVISIONS) + 0.5) / PROBE_DIVISIONS
-    x = -block.length * centres
-    y = block.width * (centres - 0.5)
-    z = block.height * (centres - 0.5)
+    x = -length * centres
+    y = width * (centres - 0.5)
+    z = height * (centres - 0.5)
     return np.stack(np.meshgrid(x, y, z, indexing="ij"), axis=-1).reshape(-1, 3)
 
 

@@ -6,7 +6,7 @@ import pytest
 from aquarom_fenics.api import (build_prom, check_shape_fields, load_fish, register_shape_field, simulate,
                                 unregister_shape_field)
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.geometry.shape_registry import registered_fields
+from aquarom_fenics.geometry.shape_registry import PROBE_BOX, probe_points, registered_fields
 from aquarom_fenics.geometry.shapes import shape_displacement, shape_gradients, shape_names
 from aquarom_fenics.verification.check import table_row
 from conftest import coarse_scene
@@ -46,6 +46,17 @@ def test_a_registered_field_is_a_shape_name_until_unregistered(registry, box):
     assert "my_tail" not in shape_names() and len(shape_names()) == 14
     with pytest.raises(InputError, match="unknown shape variation 'my_tail'"):
         one_shape_scene("my_tail")
+
+
+def test_the_probe_points_lie_inside_the_default_block():
+    from aquarom_fenics.io.scene_sections import MeshSection
+
+    block = MeshSection()
+    assert PROBE_BOX == (block.length, block.width, block.height)
+    points = probe_points()
+    assert points.shape == (125, 3)
+    assert np.all((points[:, 0] < 0) & (points[:, 0] > -block.length))
+    assert np.all(np.abs(points[:, 1:]) < np.array([block.width, block.height]) / 2)
 
 
 def flat(X):
