@@ -165,3 +165,11 @@ def test_the_taylor_test_passes_a_correct_registered_field_and_fails_a_wrong_gra
     assert good.passed and good.order == "2.00"
     assert bad.passed is False and bad.order == "1.00"
     assert "the remainder falls like h^1.00 (median), not h²: the gradient is not that of the value" in bad.note
+
+
+def test_no_fresh_worker_process_runs_a_scene_with_a_registered_field(registry, box):
+    """A worker started afresh does not know the field: the FOM check runs the start design here."""
+    from aquarom_fenics.studies.background_fom import start_if_useful
+
+    registry("my_tail", *copy_of("z_tail", box))
+    assert start_if_useful(one_shape_scene("my_tail"), {"my_tail": 0.0}, None, cached=False) is None
