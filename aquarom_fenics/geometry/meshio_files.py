@@ -6,7 +6,8 @@ tetrahedra in file order, and {region name: indices of those tetrahedra}.
 
 - ``.vtu``: the regions are the values of an integer cell-data array (the first present of
   :data:`REGION_ARRAYS`, or the only integer array), each named by the file's field data
-  (``name: [value, 3]`` as gmsh writes it, or ``name: [value]``) or by its value as text.
+  (``name: [value, 3]`` as gmsh writes it, or ``name: [value]``) or by its value as text; an
+  unnamed 0 marks the cells of no region.
 - ``.med``: the regions are the groups of the cells' families (meshio's ``cell_tags``); a family
   without a group is named by its number as text, family 0 (no family) is no region.
 - Exodus: the regions are the element blocks of tetrahedra, named by their position in the file
@@ -120,7 +121,11 @@ def read_vtu(path: Path):
     if array is None:
         return points, cells, {}
     values = np.round(_cell_values(mesh, array, blocks)).astype(np.int64)
-    return points, cells, _regions_from_values(values, _field_data_names(mesh.field_data or {}))
+    names = _field_data_names(mesh.field_data or {})
+    regions = _regions_from_values(values, names)
+    if 0 not in names:
+        regions.pop("0", None)        # 0 marks the cells of no region (gmsh: no physical group)
+    return points, cells, regions
 
 
 def read_med(path: Path):
