@@ -10,6 +10,8 @@
     result.optimum_dict, check.start_distance, check.optimal_distance   # names as in summary.json
 
 Every model runs the scene's start values for a shape not given in ``xi`` (as the CLI does).
+A shape field of one's own: :func:`register_shape_field` (a name, U(X) and ∇U(X)), then name it in
+the scene's ``[shapes]``; :func:`check_shape_fields` runs the Taylor test of its gradient.
 Messages: :func:`aquarom_fenics.set_log_level` ("info" for details; warnings only by default).
 """
 from __future__ import annotations
@@ -25,14 +27,26 @@ from aquarom_fenics.geometry.fish import Fish, load_fish
 from aquarom_fenics.reduction.prom import ReducedModel
 from aquarom_fenics.dynamics.reduced_dynamics import ReducedResult, simulate_reduced
 from aquarom_fenics.reduction.reductor import build_prom as _build_prom
-from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.io.scene import Scene, scene_from_dict
 from aquarom_fenics.dynamics.simulate import SimulationResult, simulate_fom
 from aquarom_fenics.optimization.optimize import DEFAULT_MAX_TIME, OptimizationResult
 from aquarom_fenics.studies.study import FomCheck, run_optimization
 from aquarom_fenics.errors import InputError, Interrupted, SolverError
+from aquarom_fenics.geometry.shape_registry import RegisteredField, register_shape_field, unregister_shape_field
+from aquarom_fenics.verification.check import CheckResult
 
 __all__ = ["Scene", "Fish", "load_fish", "simulate", "build_prom", "optimize", "start_design", "CostWeights",
-           "ReducedModel", "SimulationResult", "ReducedResult", "OptimizationResult", "FomCheck"]
+           "ReducedModel", "SimulationResult", "ReducedResult", "OptimizationResult", "FomCheck", "scene_from_dict",
+           "register_shape_field", "unregister_shape_field", "RegisteredField", "check_shape_fields", "CheckResult"]
+
+
+def check_shape_fields(scene: Scene, names: list[str] | None = None, fish: Fish | None = None) -> list[CheckResult]:
+    """The Taylor test of each shape field's gradient against its value (the rows ``0`` of
+    ``aquarom check``) at the quadrature points of the scene's mesh: the fields ``names``, registered
+    or of the catalogue (default: the scene's shapes). ``result.passed``, ``result.note`` say how it went."""
+    from aquarom_fenics.verification.shape_fields import check_shape_gradients
+
+    return list(check_shape_gradients(fish or load_fish(scene), names))
 
 
 def start_design(scene: Scene, xi: dict[str, float] | None = None) -> dict[str, float]:

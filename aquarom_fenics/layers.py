@@ -16,7 +16,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("base", ("", "errors", "files", "layers")),
     ("parallel", ("parallel",)),
     ("forms", ("forms", "scenes", "meshes")),
-    ("shape catalogue", ("geometry.shapes",)),
+    ("shape catalogue", ("geometry.shapes", "geometry.shape_registry")),
     ("io", ("io",)),
     ("discretisation", ("fem.dolfinx_adapter", "fem.cellwise")),
     ("geometry", ("geometry",)),

@@ -201,7 +201,10 @@ def run_basis(args) -> int:
 
 
 def run_check(args) -> int:
+    from itertools import chain
+
     from aquarom_fenics.verification.check import run_checks, table_header, table_row
+    from aquarom_fenics.verification.shape_fields import check_shape_gradients
     from aquarom_fenics.geometry.fish import load_fish
     from aquarom_fenics.reduction.prom import ReducedModel
     from aquarom_fenics.reduction.reductor import build_prom
@@ -216,7 +219,7 @@ def run_check(args) -> int:
         f"{prom.cells} cells; mesh of the scene: {fish.mesh.cells.shape[0]} cells")
     say(table_header())
     failed = []
-    for result in run_checks(scene, prom, fish):
+    for result in chain(check_shape_gradients(fish), run_checks(scene, prom, fish)):
         say(table_row(result))
         if result.passed is False:
             failed.append(result.check)

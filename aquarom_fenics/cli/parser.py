@@ -137,7 +137,8 @@ def build_parser() -> argparse.ArgumentParser:
     animate.add_argument("--stride", type=int, default=1, help="one frame every K stored samples (default 1)")
     command("basis", "build the scene's PROM and draw every basis vector on the fish (basis.png)",
             out="output directory (default results/basis/SCENE)")
-    command("check", "Taylor tests of the scene's PROM against its FOM forms and finite differences (exit 1 on a FAIL)",
+    command("check", "Taylor tests of the scene's shape-field gradients against their values and of its PROM "
+                     "against its FOM forms and finite differences (exit 1 on a FAIL)",
             prom="PROM file from `aquarom build` to check (default: build one)")
     cache_help = "list or clear the caches of meshes, PROMs and FOM checks (content-addressed, checksummed)"
     cache = commands.add_parser("cache", help=cache_help, description=cache_help,

@@ -1,5 +1,6 @@
-"""Tetrahedral meshes and their regions read from files: gmsh ``.msh`` (gmsh's own reader) and
-Abaqus ``.inp`` (C3D4, meshio)."""
+"""Tetrahedral meshes and their regions read from files: gmsh ``.msh`` (gmsh's own reader),
+Abaqus ``.inp`` (C3D4, meshio) and, with meshio too, ``.vtu``, ``.med`` and Exodus ``.e``/``.exo``
+(``meshio_files``)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import numpy as np
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.gmsh_session import GMSH_TETRAHEDRON, gmsh_model, points_and_cells_from_gmsh
+from aquarom_fenics.geometry.meshio_files import MESHIO_READERS
 from aquarom_fenics.geometry.mesh import (FishMesh, mean_edge_length, oriented_positively, signed_cell_volumes,
                                            used_nodes_only)
 from aquarom_fenics.io.readback import MAX_MESH_FILE_BYTES, require_regular_file
@@ -175,17 +177,19 @@ def _unique_cells(cells: np.ndarray, regions: dict[str, np.ndarray]):
     return cells[keep], {name: np.unique(renumber[indices]) for name, indices in regions.items()}
 
 
-_MESH_READERS = {".msh": _read_gmsh, ".inp": _read_abaqus}
+_MESH_READERS = {".msh": _read_gmsh, ".inp": _read_abaqus} | MESHIO_READERS
 
 
 def read_mesh(path, scale: float = 1.0, translate=(0.0, 0.0, 0.0)) -> FishMesh:
-    """Read a gmsh `.msh` (formats 2 and 4, with gmsh's own reader) or Abaqus `.inp` (C3D4, with
-    meshio) tetrahedral mesh and its regions.
+    """Read a gmsh `.msh` (formats 2 and 4, with gmsh's own reader), an Abaqus `.inp` (C3D4), a
+    `.vtu`, `.med` or Exodus `.e`/`.exo` (with meshio) tetrahedral mesh and its regions.
 
     Points become `points * scale + translate` (m); only nodes used by tetrahedra are kept, a
     tetrahedron repeated in the file is kept once and every tetrahedron is oriented positively.
     Regions (``FishMesh.regions``): the volume physical groups of a .msh file (unnamed ones by
-    their number as text) and the element sets of an .inp file that hold tetrahedra. Abaqus: the
+    their number as text), the element sets of an .inp file that hold tetrahedra, and those of
+    the meshio formats as ``meshio_files`` describes (.vtu: an integer cell-data array named by the
+    field data; .med: the families' groups; Exodus: the element blocks). Abaqus: the
     `*Node` and `*Element, type=C3D4` data are read as they stand (labels may be sparse; part
     instance placements are ignored).
     """
@@ -194,8 +198,8 @@ def read_mesh(path, scale: float = 1.0, translate=(0.0, 0.0, 0.0)) -> FishMesh:
     reader = _MESH_READERS.get(path.suffix.lower())
     if reader is None:
         raise InputError(
-            f"mesh file {path}: unsupported suffix {path.suffix!r}; use a gmsh .msh or an "
-            "Abaqus .inp file"
+            f"mesh file {path}: unsupported suffix {path.suffix!r}; use one of {', '.join(_MESH_READERS)} "
+            "(gmsh, Abaqus, VTK XML, MED, Exodus II)"
         )
     require_regular_file(path, "mesh file", MAX_MESH_FILE_BYTES)     # no FIFO, device or link loop
     points, cells, regions = reader(path)

@@ -306,21 +306,37 @@ GRADIENTS: dict[str, ShapeGradient] = {
 """∇U_k of every catalog field, exact (piecewise-analytic; one-sided at the kinks)."""
 
 
+REGISTERED: dict[str, tuple[ShapeField, ShapeGradient]] = {}
+"""Fields registered in this process (``shape_registry.register_shape_field``): name -> (field,
+gradient) with the catalogue's signatures. They follow the catalogue in ``shape_names``."""
+
+
+def shape_gradient_function(name: str) -> ShapeGradient:
+    """∇U of the catalogue's or a registered field ``name``."""
+    if name in GRADIENTS:
+        return GRADIENTS[name]
+    shape_field(name)                       # InputError for an unknown name
+    return REGISTERED[name][1]
+
+
 def shape_gradients(names: Sequence[str], relative_points: np.ndarray, box: BoxDimensions) -> np.ndarray:
     """(p, n, 3, 3): ∇U_k at (n, 3) relative coordinates, for every name."""
     points = np.asarray(relative_points, dtype=float).reshape(-1, 3)
-    return np.stack([GRADIENTS[name](points[:, 0], points[:, 1], points[:, 2], box) for name in names]) \
-        if len(names) else np.zeros((0, points.shape[0], 3, 3))
+    return np.stack([shape_gradient_function(name)(points[:, 0], points[:, 1], points[:, 2], box)
+                     for name in names]) if len(names) else np.zeros((0, points.shape[0], 3, 3))
 
 
 def shape_names() -> list[str]:
-    return list(CATALOG)
+    """The catalogue's names, then those registered in this process."""
+    return list(CATALOG) + list(REGISTERED)
 
 
 def shape_field(name: str) -> ShapeField:
-    if name not in CATALOG:
-        raise InputError(f"unknown shape variation '{name}'; valid names: {', '.join(CATALOG)}")
-    return CATALOG[name]
+    if name in CATALOG:
+        return CATALOG[name]
+    if name in REGISTERED:
+        return REGISTERED[name][0]
+    raise InputError(f"unknown shape variation '{name}'; valid names: {', '.join(shape_names())}")
 
 
 def shape_displacement(name: str, relative_points: np.ndarray, box: BoxDimensions) -> np.ndarray:

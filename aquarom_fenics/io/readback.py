@@ -29,7 +29,7 @@ MAX_JSON_BYTES = 256 * 1024 * 1024
 MAX_JSON_DEPTH = 64
 """Deepest nesting of arrays and objects accepted in a JSON file read back."""
 MAX_MESH_FILE_BYTES = 2 * 1024 ** 3
-"""Largest mesh file read (.msh or .inp) [bytes]: checked by the reader and by the scene's hash."""
+"""Largest mesh file read (any format) [bytes]: checked by the reader and by the scene's hash."""
 
 
 class SchemaError(ValueError):

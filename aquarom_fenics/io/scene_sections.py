@@ -88,7 +88,7 @@ def _interval_within(low, high):
 class MeshSection:
     level: int = _spec(3, _one_of(1, 2, 3, 4, 5), "refinement level of the built-in block (1: ~1.3k … 5: ~25k cells)")
     degree: int = _spec(1, _one_of(1, 2), "Lagrange degree of the displacement (1: linear, 2: quadratic tetrahedra)")
-    file: str = _spec("", None, "external mesh (gmsh .msh or Abaqus .inp of first-order tetrahedra), relative to the scene file; its volume physical groups or element sets are the regions named in [regions]; replaces the block (--level is refused with it)")
+    file: str = _spec("", None, "external mesh (gmsh .msh, Abaqus .inp, .vtu, .med or Exodus .e/.exo of first-order tetrahedra), relative to the scene file; its volume physical groups or element sets are the regions named in [regions]; replaces the block (--level is refused with it)")
     scale: float = _spec(1.0, _positive, "factor applied to the file's coordinates (to metres)")
     translate: tuple[float, float, float] = _spec((0.0, 0.0, 0.0), None, "shift after scaling [m]")
     length: float = _spec(0.20, _positive, "block length L along x [m]")

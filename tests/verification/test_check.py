@@ -99,3 +99,12 @@ def test_scene_without_shapes_skips_the_xi_checks(capsys):
 def test_missing_prom_file_is_bad_input(tmp_path, capsys):
     assert main(["check", "so1", "--level", "1", "--prom", str(tmp_path / "missing.npz")]) == 2
     assert "not found" in capsys.readouterr().err
+
+
+def test_check_starts_with_the_taylor_test_of_each_shape_field(tmp_path, capsys):
+    scene_file = tmp_path / "two.toml"
+    scene_file.write_text(ONE_SHAPE_SCENE + "y_fin = { bounds = [-0.5, 0.5] }\n")
+    assert main(["check", str(scene_file)]) == 0
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("0 ")]
+    assert [row.split()[2] for row in rows] == ["z_tail", "y_fin"]
+    assert all("PASS" in row and " 2.00 " in row for row in rows), rows
