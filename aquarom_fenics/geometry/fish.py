@@ -136,7 +136,8 @@ def load_mesh(scene: Scene) -> FishMesh:
 def tag_scene_fish(scene: Scene, mesh: FishMesh, nodes: LagrangeNodes) -> FishTags:
     """The tags of the scene's mesh: its regions named in ``[regions]``, or the fractions' cells."""
     return tag_fish(mesh, head_fraction=scene.regions.head_fraction, muscle_range=scene.regions.muscle_range,
-                    nodes=nodes, head=scene.regions.head, muscles=scene.regions.muscles)
+                    nodes=nodes, head=scene.regions.head, muscles=scene.regions.muscles,
+                    require_axis=scene.fluid.stations == "nodes")
 
 
 def body_summary(scene: Scene, mesh: FishMesh, tags: FishTags) -> list[str]:

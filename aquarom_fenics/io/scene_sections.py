@@ -199,7 +199,7 @@ class OptimizerSection:
     seed: int = _spec(0, _non_negative, "seed of the Latin-hypercube starts")
     tail_screen: bool = _spec(False, None, "refuse designs whose tail region the thrust destabilises: the FOM linearised at the PROM's last-stroke states (a FOM linearisation and a dense eigenvalue problem per screened state at each PROM build, shared by the ranks under mpirun)")
     tail_growth_limit: float = _spec(100.0, _positive, "tail screen: largest growth rate Re λ of the tail region's modes accepted [1/s]")
-    tail_region_radius: float = _spec(0.015, _positive, "tail screen: the region is the free nodes within this distance of the tail node [m]")
+    tail_region_radius: float = _spec(0.015, _positive, "tail screen: the region is the free nodes within this distance of the tail station (its rest position) [m]")
 
 
 @dataclass(frozen=True)

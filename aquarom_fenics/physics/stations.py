@@ -153,9 +153,34 @@ def _cell_subset(nodes: LagrangeNodes, cells: np.ndarray) -> LagrangeNodes:
     return LagrangeNodes(nodes.degree, nodes.points, nodes.cell_nodes[cells], nodes.edges, nodes.n_vertices)
 
 
-def dorsal_profile(relative_x: np.ndarray, relative_z: np.ndarray):
-    """z(X) of the nominal dorsal skin on y = 0, piecewise linear through the given skin nodes
-    (relative coordinates [m]), as a function of relative x."""
-    order = np.argsort(relative_x, kind="stable")
-    x, z = np.asarray(relative_x)[order], np.asarray(relative_z)[order]
-    return lambda at: np.interp(at, x, z)
+def skin_line_heights(points: np.ndarray, facets: np.ndarray, x: np.ndarray, y: float,
+                      relative_tolerance: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
+    """(top, bottom), each (n,): the largest and smallest z [m] where the vertical line through (x_i, y)
+    meets the skin triangles ``facets`` (vertex indices into ``points``); NaN where it misses them.
+
+    A triangle meets the line where the barycentric coordinates λ of (x_i, y) in its projection on
+    the x-y plane are all ≥ 0 (within ``relative_tolerance``, so that a line along an edge meets
+    both triangles); there z = z_0 + λ_1 (z_1 - z_0) + λ_2 (z_2 - z_0). Triangles standing vertical
+    (their x-y projection degenerate) are passed over: their edges belong to triangles that are not.
+    """
+    corners = np.asarray(points, dtype=float)[np.asarray(facets)]            # (n_f, 3 corners, 3)
+    origin, first, second = corners[:, 0], corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    determinant = first[:, 0] * second[:, 1] - first[:, 1] * second[:, 0]   # 2 × projected area
+    doubled_area = np.linalg.norm(np.cross(first, second), axis=1)
+    upright = np.abs(determinant) > relative_tolerance * doubled_area
+    lower, upper = corners[:, :, :2].min(axis=1), corners[:, :, :2].max(axis=1)
+    reach = relative_tolerance * np.sqrt(doubled_area)
+    x = np.asarray(x, dtype=float)
+    top, bottom = np.full(x.size, np.nan), np.full(x.size, np.nan)
+    for i, x_i in enumerate(x):
+        near = np.flatnonzero(upright & (lower[:, 0] <= x_i + reach) & (upper[:, 0] >= x_i - reach)
+                              & (lower[:, 1] <= y + reach) & (upper[:, 1] >= y - reach))
+        offset = np.array([x_i, y]) - origin[near, :2]
+        lambda_1 = (offset[:, 0] * second[near, 1] - offset[:, 1] * second[near, 0]) / determinant[near]
+        lambda_2 = (first[near, 0] * offset[:, 1] - first[near, 1] * offset[:, 0]) / determinant[near]
+        inside = np.minimum(np.minimum(lambda_1, lambda_2), 1.0 - lambda_1 - lambda_2) >= -relative_tolerance
+        if not inside.any():
+            continue
+        z = (origin[near, 2] + lambda_1 * first[near, 2] + lambda_2 * second[near, 2])[inside]
+        top[i], bottom[i] = z.max(), z.min()
+    return top, bottom

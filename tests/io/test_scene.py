@@ -490,18 +490,22 @@ def test_binary_mesh_file_is_one_line_and_exit_code_2(tmp_path, capfd):
 
 def test_structured_box_with_axis_nodes_is_a_valid_fish(tmp_path, capfd):
     write_box_inp(tmp_path / "box.inp", counts=(9, 3, 3))
-    path = write_scene(tmp_path, '[mesh]\nfile = "box.inp"\n')
+    path = write_scene(tmp_path, '[mesh]\nfile = "box.inp"\nhead_end = "+x"\n')
     code, out, err = run_cli(["mesh", path], capfd)
     assert code == 0, err
     assert "cells        192" in out
     assert "spine        9 nodes" in out
 
 
-def test_mesh_without_nodes_on_the_body_axis_is_refused(tmp_path, capfd):
+def test_mesh_without_nodes_on_the_body_axis_is_refused_by_the_nodal_model_only(tmp_path, capfd):
     write_box_inp(tmp_path / "box.inp", counts=(9, 4, 4))
-    path = write_scene(tmp_path, '[mesh]\nfile = "box.inp"\n')
+    path = write_scene(tmp_path, '[mesh]\nfile = "box.inp"\nhead_end = "+x"\n[fluid]\nstations = "nodes"\n')
     code, out, err = run_cli(["mesh", path], capfd)
-    assert_one_line_error(code, out, err, "mesh", "box.inp", "body axis")
+    assert_one_line_error(code, out, err, "mesh", "box.inp", "body axis", 'stations = "nodes"')
+    path = write_scene(tmp_path, '[mesh]\nfile = "box.inp"\nhead_end = "+x"\n')
+    code, out, err = run_cli(["mesh", path], capfd)
+    assert code == 0, err
+    assert "stations     41, every 0.005 m" in out and "spine        none: no nodes on the body axis" in out
 
 
 def test_design_that_inverts_cells_names_the_parameter(tmp_path, capfd):
