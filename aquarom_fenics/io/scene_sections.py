@@ -43,9 +43,21 @@ def _spec(default, check=None, doc="", variable_length=False, coerce=None, legac
                                             "coerce": coerce, "legacy": legacy})
 
 
+@dataclass(frozen=True)
+class LegacyValues:
+    """The ``legacy`` of a key at which several values reproduce what scenes computed before it."""
+
+    values: tuple
+
+
 def legacy_values(section) -> dict[str, Any]:
     """{key: value} of a section's keys that ``Scene.hash`` leaves out at that value (``legacy``)."""
     return {f.name: f.metadata["legacy"] for f in fields(section) if f.metadata.get("legacy", NO_LEGACY) is not NO_LEGACY}
+
+
+def at_legacy(value, legacy) -> bool:
+    """Whether a key's ``value`` is its ``legacy`` value (one of them, for ``LegacyValues``)."""
+    return value in legacy.values if isinstance(legacy, LegacyValues) else value == legacy
 
 
 def _station_count(value, where):
@@ -94,7 +106,8 @@ class MeshSection:
     length: float = _spec(0.20, _positive, "block length L along x [m]")
     width: float = _spec(0.04, _positive, "block width W along y [m]")
     height: float = _spec(0.10, _positive, "block height H along z [m]")
-    head_end: str = _spec("+x", _one_of("+x", "-x"), "where the head of the mesh lies along x: \"+x\" (at the largest x, as the block) or \"-x\" (the mesh is then mirrored in x, so that it swims towards +x); refused when the head region lies at the other end", legacy="+x")
+    axis: str = _spec("x", _one_of("x", "y", "z"), "the axis the body lies along in the mesh file (its swimming direction); \"y\" and \"z\" turn the mesh a quarter turn (about z, or about y) so that the body lies along x; the block lies along x", legacy="x")
+    head_end: str = _spec("", _one_of("", "+x", "-x", "+y", "-y", "+z", "-z"), "where the head lies along [mesh] axis: \"+x\" (at the largest x, as the block) or \"-x\" (the mesh is then mirrored in x, so that it swims towards +x); \"+y\", \"-y\", \"+z\", \"-z\" with axis = \"y\" or \"z\". Left out (\"\"): the end the head region reaches, said in one line, and refused when ambiguous (no head region, or one reaching both ends or neither); refused when the head region lies at the other end", legacy=LegacyValues(("", "+x")))
 
 
 @dataclass(frozen=True)

@@ -296,7 +296,7 @@ def test_a_key_added_later_keeps_the_hash_of_the_scenes_before_it_at_its_legacy_
     rear = scene.replace("fluid", spine_rule="rear")
     data = rear.to_dict()
     del data["fluid"]["spine_rule"]
-    for section, key in (("mesh", "head_end"), ("regions", "head"), ("regions", "muscles"),
+    for section, key in (("mesh", "axis"), ("mesh", "head_end"), ("regions", "head"), ("regions", "muscles"),
                          ("reduction", "stroke_amplitude")):        # later keys at their legacy values
         del data[section][key]
     assert rear.hash == rear._digest(data)
@@ -305,23 +305,25 @@ def test_a_key_added_later_keeps_the_hash_of_the_scenes_before_it_at_its_legacy_
     assert Scene.load("co").hash == scene.hash
 
 
-def test_the_region_and_head_end_keys_keep_the_hashes_of_the_scenes_before_them():
-    """[regions] head, muscles and [mesh] head_end came after scenes were hashed: at the block's names
-    and "+x", written out or not, the hash is the one without them; other values change it."""
-    from aquarom_fenics.io.scene_sections import MeshSection, RegionsSection, legacy_values
+def test_the_region_axis_and_head_end_keys_keep_the_hashes_of_the_scenes_before_them():
+    """[regions] head, muscles and [mesh] axis, head_end came after scenes were hashed: at the block's
+    names, "x" and "+x" or not given (""), written out or not, the hash is the one without them; other
+    values change it."""
+    from aquarom_fenics.io.scene_sections import LegacyValues, MeshSection, RegionsSection, legacy_values
 
     assert legacy_values(RegionsSection) == {"head": "head", "muscles": ("left_muscle", "right_muscle")}
-    assert legacy_values(MeshSection) == {"head_end": "+x"}
+    assert legacy_values(MeshSection) == {"axis": "x", "head_end": LegacyValues(("", "+x"))}
     scene = Scene.load("nominal")
     data = scene.to_dict()
-    for section, key in (("mesh", "head_end"), ("regions", "head"), ("regions", "muscles"),
+    for section, key in (("mesh", "axis"), ("mesh", "head_end"), ("regions", "head"), ("regions", "muscles"),
                          ("reduction", "stroke_amplitude")):        # later keys at their legacy values
         del data[section][key]
     assert scene.hash == scene._digest(data)
     written = scene_from_dict(tomllib.loads(scene.to_toml()), source=scene.source, base_dir=scene.base_dir)
     assert written.hash == scene.hash and written.regions.muscles == ("left_muscle", "right_muscle")
+    assert scene.mesh.head_end == "+x" and scene.replace("mesh", head_end="").hash == scene.hash
     for section, values in (("regions", {"head": "nose"}), ("regions", {"muscles": ["right_muscle", "left_muscle"]}),
-                            ("mesh", {"head_end": "-x"})):
+                            ("mesh", {"head_end": "-x"}), ("mesh", {"axis": "y", "head_end": "+y"})):
         changed = scene.replace(section, **values)
         assert changed.hash != scene.hash and changed.fom_hash != scene.fom_hash
 
@@ -330,7 +332,8 @@ def test_the_region_and_head_end_keys_keep_the_hashes_of_the_scenes_before_them(
     ({"regions": {"muscles": ["left_muscle"]}}, r"\[regions\] muscles must name two different regions"),
     ({"regions": {"muscles": ["a", "a"]}}, r"\[regions\] muscles must name two different regions"),
     ({"regions": {"head": ""}}, r"\[regions\] head must be the name of a region"),
-    ({"mesh": {"head_end": "+y"}}, r"\[mesh\] head_end = '\+y' must be one of '\+x', '-x'"),
+    ({"mesh": {"head_end": "+w"}}, r"\[mesh\] head_end = '\+w' must be one of '', '\+x', '-x', '\+y', '-y', '\+z', '-z'"),
+    ({"mesh": {"axis": "w"}}, r"\[mesh\] axis = 'w' must be one of 'x', 'y', 'z'"),
 ])
 def test_bad_region_names_and_head_ends_are_one_line(table, message):
     with pytest.raises(InputError, match=message):
