@@ -100,7 +100,7 @@ def _interval_within(low, high):
 class MeshSection:
     level: int = _spec(3, _one_of(1, 2, 3, 4, 5), "refinement level of the built-in block (1: ~1.3k … 5: ~25k cells)")
     degree: int = _spec(1, _one_of(1, 2), "Lagrange degree of the displacement (1: linear, 2: quadratic tetrahedra)")
-    file: str = _spec("", None, "external mesh (gmsh .msh or Abaqus .inp of first-order tetrahedra), relative to the scene file; its volume physical groups or element sets are the regions named in [regions]; replaces the block (--level is refused with it)")
+    file: str = _spec("", None, "external mesh (gmsh .msh or Abaqus .inp of first-order tetrahedra), relative to the scene file; its volume physical groups or element sets are the regions named in [regions]; no nodes on the body axis needed (but with [fluid] stations = \"nodes\"); replaces the block (--level is refused with it)")
     scale: float = _spec(1.0, _positive, "factor applied to the file's coordinates (to metres)")
     translate: tuple[float, float, float] = _spec((0.0, 0.0, 0.0), None, "shift after scaling [m]")
     length: float = _spec(0.20, _positive, "block length L along x [m]")
@@ -142,9 +142,9 @@ class ActuationSection:
 class FluidSection:
     density: float = _spec(1000.0, _positive, "ρ_w [kg/m³]")
     thrust: bool = _spec(True, None, "Lighthill reactive thrust, through the stations")
-    stations: int | str = _spec(40, None, "N_s: the thrust acts through N_s + 1 cross-section stations (averages over slabs of L/N_s); \"nodes\": on the spine nodes (the source's model, no mesh limit)", coerce=_station_count)
+    stations: int | str = _spec(40, None, "N_s: the thrust acts through N_s + 1 cross-section stations (averages over slabs of L/N_s; no nodes on the body axis needed); \"nodes\": on the spine nodes (the source's model, no mesh limit; needs nodes on the body axis y = z = 0 from tail to head face and skin nodes on y = 0 above it)", coerce=_station_count)
     drag: bool = _spec(True, None, "form drag on the skin")
-    tail_station: str = _spec("face", _one_of("face", "slab"), "the tail station's kinematics: the average over the end face x = -L ('face', within 3 % of the station-converged distance at N_s = 40) or the half-hat average over the last slab ('slab', SPEC §5's first definition, -4 % at N_s = 40)")
+    tail_station: str = _spec("face", _one_of("face", "slab"), "the tail station's kinematics: the average over the end face x = -L ('face', within 3 % of the station-converged distance at N_s = 40; on a body without an end face, a tapering tail, the last slab's, with a log line) or the half-hat average over the last slab ('slab', SPEC §5's first definition, -4 % at N_s = 40)")
     spine_force: str = _spec("source", _one_of("source", "lagrangian"), "spine force -d/dt(∂T_a/∂v) ('source') or with +∂T_a/∂x ('lagrangian', exchanges no energy by itself)")
     spine_rule: str = _spec("trapezoid", _one_of("trapezoid", "rear"), "quadrature of the spine force along the body: shared by each segment's two stations ('trapezoid', second order in 1/N_s: 0.1 % from the station-converged distance at N_s = 40) or on its rear station ('rear', SPEC §5, first order: +2 %); stations = \"nodes\" is the source's model and always 'rear'", legacy="rear")
 
