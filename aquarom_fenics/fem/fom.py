@@ -11,7 +11,6 @@ meshed directly (``moved_mesh``, u_ξ = 0).
 """
 from __future__ import annotations
 
-import logging
 import time as clock
 from collections.abc import Iterator
 
@@ -22,7 +21,7 @@ from petsc4py import PETSc
 from ufl.algorithms import extract_coefficients
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
-from aquarom_fenics.errors import SolverError
+from aquarom_fenics.errors import InputError, SolverError
 from aquarom_fenics.fem.linear_solver import mumps_solver, solve_into
 from aquarom_fenics.fem.newton_system import NewtonMatrix, NewtonSolver, SolveProfile
 from aquarom_fenics.fem.time_scheme import TimeScheme
@@ -32,10 +31,9 @@ from aquarom_fenics.physics.drag import DragTerm
 from aquarom_fenics.physics.elastic import ElasticTerm
 from aquarom_fenics.physics.inertia import InertiaTerm
 from aquarom_fenics.physics.muscle import MuscleTerm
-from aquarom_fenics.physics.stations import StationAverages, station_averages
+from aquarom_fenics.physics.stations import averages_of
 from aquarom_fenics.physics.thrust_full_order import NodalThrustTerm, StationThrustTerm
 
-log = logging.getLogger("aquarom")
 
 
 class FullOrderModel:
@@ -178,6 +176,9 @@ class FullOrderModel:
         observed points' weights (``_build_observation``)."""
         n_stations = self.scene.fluid.stations
         if n_stations == "nodes":
+            if not self.fish.tags.has_spine:
+                raise InputError(f"mesh {self.fish.mesh.source}: no nodes on the body axis y = 0, z = 0, which "
+                                 "[fluid] stations = \"nodes\" acts on; use stations = N_s")
             self.station_averages = None
             self._head_velocity_weights = np.ones(self._head_x_owned.size)
             self._head_velocity_dofs = self._head_x_owned
@@ -409,25 +410,6 @@ class FullOrderModel:
         nodal = np.zeros((self.fish.nodes.points.shape[0], 3))
         nodal[self.layout.owned_nodes] = u.reshape(-1, 3)
         return self.comm.allreduce(nodal, op=MPI.SUM)
-
-
-def averages_of(fish: Fish, n_stations: int, tail_station: str = "face") -> StationAverages:
-    """The station averages of a fish's nominal mesh, computed once per fish (kept in ``fish.derived``),
-    station count and tail station ("slab": the half-hat over the last slab; "face": the end face x = -L)."""
-    key = ("station_averages", n_stations, tail_station)
-    if key not in fish.derived:
-        tags = fish.tags
-        face = None
-        if tail_station == "face":
-            on_tail = np.abs(tags.box.relative(fish.mesh.points)[:, 0] + tags.box.length) <= tags.tolerance
-            face = tags.skin_facets[on_tail[tags.skin_facets].all(axis=1)]
-            if face.size == 0:
-                face = None
-                log.info("mesh %s has no end face at x = %.6g m (its tail tapers): the tail station averages the "
-                         "last slab's half-hat (as [fluid] tail_station = \"slab\")", fish.mesh.source, tags.box.x_tail)
-        fish.derived[key] = station_averages(fish.mesh.points, fish.mesh.cells, fish.nodes, tags.box, n_stations,
-                                             tags.head_cells, face)
-    return fish.derived[key]
 
 
 class ShapeDirection:

@@ -18,6 +18,7 @@ cells: the rule converges with the mesh, like the rest of the discretisation).
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,6 +26,8 @@ from scipy import sparse
 
 from aquarom_fenics.geometry.mesh import TETRAHEDRON_EDGES, LagrangeNodes, signed_cell_volumes
 from aquarom_fenics.geometry.shapes import reference_to_cells
+
+log = logging.getLogger("aquarom")
 
 STATION_QUADRATURE_DEGREE = 8
 """Degree of the per-cell rule for ∫ h_i φ_j dV_0 (φ_j of degree ≤ 2 times a kinked hat)."""
@@ -147,6 +150,25 @@ def station_averages(mesh_points: np.ndarray, mesh_cells: np.ndarray, nodes: Lag
     head_integrals = weighted_node_integrals(mesh_points, mesh_cells[head_cells], _cell_subset(nodes, head_cells),
                                              lambda x: np.ones((1, x.shape[0])))[0]
     return StationAverages(stations, sparse.csr_matrix(weights), head_integrals / head_integrals.sum())
+
+
+def averages_of(fish, n_stations: int, tail_station: str = "face") -> StationAverages:
+    """The station averages of a fish's nominal mesh, computed once per fish (kept in ``fish.derived``),
+    station count and tail station ("slab": the half-hat over the last slab; "face": the end face x = -L)."""
+    key = ("station_averages", n_stations, tail_station)
+    if key not in fish.derived:
+        tags = fish.tags
+        face = None
+        if tail_station == "face":
+            on_tail = np.abs(tags.box.relative(fish.mesh.points)[:, 0] + tags.box.length) <= tags.tolerance
+            face = tags.skin_facets[on_tail[tags.skin_facets].all(axis=1)]
+            if face.size == 0:
+                face = None
+                log.info("mesh %s has no end face at x = %.6g m (its tail tapers): the tail station averages the "
+                         "last slab's half-hat (as [fluid] tail_station = \"slab\")", fish.mesh.source, tags.box.x_tail)
+        fish.derived[key] = station_averages(fish.mesh.points, fish.mesh.cells, fish.nodes, tags.box, n_stations,
+                                             tags.head_cells, face)
+    return fish.derived[key]
 
 
 def _cell_subset(nodes: LagrangeNodes, cells: np.ndarray) -> LagrangeNodes:
