@@ -35,7 +35,6 @@ from aquarom_fenics.physics.stations import averages_of
 from aquarom_fenics.physics.thrust_full_order import NodalThrustTerm, StationThrustTerm
 
 
-
 class FullOrderModel:
     """One design of a scene, ready to be integrated in time (implements ``NewtonSystem``)."""
 
