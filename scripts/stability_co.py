@@ -53,12 +53,12 @@ def scene_overrides(assignments: list[str]) -> dict:
 
 
 def tail_modes(scene: Scene, fish, xi, result, radius: float, every: int) -> dict:
-    """Frozen linearisation of the tail region (nodes within ``radius`` of the tail node) at every
+    """Frozen linearisation of the tail region (nodes within ``radius`` of the tail station) at every
     ``every``-th stored state: fastest growth, its frequency and the step map's spectral radius, with the
     thrust (the run's model) and with the thrust switched off (same states)."""
     without_thrust = FullOrderModel(scene.replace("fluid", thrust=False), fish, xi)
     h = scene.solver.time_step
-    dofs = region_dofs(result.model, fish.tags.tail_node, radius)      # same mesh, design and fixed dofs
+    dofs = region_dofs(result.model, result.model.tail_point(), radius)      # same mesh, design and fixed dofs
     records = {}
     for name, model in (("with_thrust", result.model), ("without_thrust", without_thrust)):
         records[name] = [local_stability(model, step * h, *state, dofs, model.scheme).summary()

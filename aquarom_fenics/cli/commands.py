@@ -43,14 +43,44 @@ def run_mesh(args) -> int:
           nodes        {nodes} of degree {fish.degree} ({mesh.points.shape[0]} vertices, {3 * nodes} dofs)
           head         {tags.head_cells.size} cells, {tags.head_nodes.size} nodes
           muscles      left {tags.left_muscle_cells.size} cells, right {tags.right_muscle_cells.size} cells
-          skin         {tags.skin_facets.shape[0]} facets, {tags.skin_nodes.size} nodes
-          spine        {tags.spine_nodes.size} nodes, {tags.spine_segments.shape[0]} segments, tail node {tags.tail_node}
-          dorsal nodes {tags.dorsal_nodes.size}
-          quality      min {quality.min():.3f}, mean {quality.mean():.3f} (1 = regular tetrahedron)"""))
+          skin         {tags.skin_facets.shape[0]} facets, {tags.skin_nodes.size} nodes"""))
+    for label, text in thrust_points(scene, fish):
+        say(f"  {label:<12} {text}")
+    say(f"  quality      min {quality.min():.3f}, mean {quality.mean():.3f} (1 = regular tetrahedron)")
     for line in body_summary(scene, mesh, tags):
         label, _, text = line.partition(": ")
         say(f"  {label:<12} {text}")
     return 0
+
+
+def thrust_points(scene, fish) -> list[tuple[str, str]]:
+    """(label, text) rows of where the thrust acts: the stations (N_s + 1, their spacing, the tail
+    station, the body's depth d from its skin) and, where the mesh has nodes on its axis, the spine
+    (``stations = "nodes"`` acts on it and needs it)."""
+    import numpy as np
+
+    from aquarom_fenics.physics.stations import station_positions
+    from aquarom_fenics.physics.thrust_full_order import station_sections
+
+    tags, fluid = fish.tags, scene.fluid
+    rows = []
+    if fluid.stations != "nodes":
+        box, count = tags.box, fluid.stations
+        sections = station_sections(fish, station_positions(box.length, box.x_tail, count))
+        depth = sections.top[:, 2] - sections.bottom[:, 2]
+        on_tail = np.abs(box.relative(fish.mesh.points)[:, 0] + box.length) <= tags.tolerance
+        face = int(on_tail[tags.skin_facets].all(axis=1).sum())
+        tail = (f"the end face x = {box.x_tail:.4g} m ({face} facets)" if fluid.tail_station == "face" and face
+                else "the last slab's half-hat" + ("" if fluid.tail_station == "slab" else " (no end face)"))
+        rows.append(("stations", f"{count + 1}, every {box.length / count:.4g} m from x = {box.x_tail:.4g} to "
+                                 f"{box.x_head:.4g} m; tail station: {tail}; depth d from the skin "
+                                 f"{depth.min():.4g} to {depth.max():.4g} m (tail {depth[0]:.4g} m)"))
+    if tags.has_spine:
+        rows.append(("spine", f"{tags.spine_nodes.size} nodes, {tags.spine_segments.shape[0]} segments, tail node "
+                              f"{tags.tail_node}, {tags.dorsal_nodes.size} dorsal nodes"))
+    else:
+        rows.append(("spine", "none: no nodes on the body axis (the stations need none; stations = \"nodes\" would)"))
+    return rows
 
 
 def run_shapes(args) -> int:

@@ -21,7 +21,7 @@ from petsc4py import PETSc
 from ufl.algorithms import extract_coefficients
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
-from aquarom_fenics.errors import SolverError
+from aquarom_fenics.errors import InputError, SolverError
 from aquarom_fenics.fem.linear_solver import mumps_solver, solve_into
 from aquarom_fenics.fem.newton_system import NewtonMatrix, NewtonSolver, SolveProfile
 from aquarom_fenics.fem.time_scheme import TimeScheme
@@ -31,7 +31,7 @@ from aquarom_fenics.physics.drag import DragTerm
 from aquarom_fenics.physics.elastic import ElasticTerm
 from aquarom_fenics.physics.inertia import InertiaTerm
 from aquarom_fenics.physics.muscle import MuscleTerm
-from aquarom_fenics.physics.stations import StationAverages, station_averages
+from aquarom_fenics.physics.stations import averages_of
 from aquarom_fenics.physics.thrust_full_order import NodalThrustTerm, StationThrustTerm
 
 
@@ -157,29 +157,56 @@ class FullOrderModel:
         return blocks, position[blocks]
 
     def _build_spine(self):
-        """Owned blocks of the spine nodes (tail -> head) and their global blocks on every rank."""
+        """Owned blocks of the spine nodes (tail -> head) and their global blocks on every rank: the nodal
+        model's (``stations = "nodes"``); empty for a mesh without nodes on its axis."""
         tags = self.fish.tags
         self.spine_nodes = tags.spine_nodes
         self.spine_blocks, self.spine_index = self.owned_positions(self.spine_nodes)
         global_blocks = np.zeros(self.spine_nodes.size, dtype=np.int64)
         global_blocks[self.spine_index] = self.layout.global_block[self.spine_blocks]
         self.spine_global_blocks = self.comm.allreduce(global_blocks, op=MPI.SUM)
-        self.head_x_global_dof = int(3 * self.spine_global_blocks[-1])
-        head = self.owned_positions(np.array([tags.head_spine_node]))[0]
+        self.head_x_global_dof = int(3 * self.spine_global_blocks[-1]) if tags.has_spine else None
+        head = self.owned_positions(np.array([tags.head_spine_node]))[0] if tags.has_spine else np.zeros(0, int)
         self._head_x_owned = 3 * head  # empty on ranks that do not own the head node
 
     def _build_stations(self):
         """The station averages B and the head average (SPEC §5), or None for ``stations = "nodes"``;
-        the head's reference x-velocity weights on the owned x dofs (the head node for "nodes")."""
+        the head's reference x-velocity weights on the owned x dofs (the head node for "nodes"), and the
+        observed points' weights (``_build_observation``)."""
         n_stations = self.scene.fluid.stations
         if n_stations == "nodes":
+            if not self.fish.tags.has_spine:
+                raise InputError(f"mesh {self.fish.mesh.source}: no nodes on the body axis y = 0, z = 0, which "
+                                 "[fluid] stations = \"nodes\" acts on; use stations = N_s")
             self.station_averages = None
             self._head_velocity_weights = np.ones(self._head_x_owned.size)
             self._head_velocity_dofs = self._head_x_owned
-            return
-        self.station_averages = averages_of(self.fish, n_stations, self.scene.fluid.tail_station)
-        self._head_velocity_weights = self.station_averages.head_weights[self.layout.owned_nodes]
-        self._head_velocity_dofs = 3 * np.arange(self.layout.n_owned_blocks)
+        else:
+            self.station_averages = averages_of(self.fish, n_stations, self.scene.fluid.tail_station)
+            self._head_velocity_weights = self.station_averages.head_weights[self.layout.owned_nodes]
+            self._head_velocity_dofs = 3 * np.arange(self.layout.n_owned_blocks)
+        self._build_observation()
+
+    def _build_observation(self):
+        """Weights w on the owned dofs of the observed displacements (SPEC §3: outputs, never where a force
+        acts), head x = w_head·u and tail y = w_tail·u: the head's volume average of u_x (the drag's
+        reference, the head being stiff) and the tail station's average of u_y (the end face x = -L with
+        ``tail_station = "face"``); the head and tail spine nodes with ``stations = "nodes"``."""
+        self._head_x_weights = np.zeros(self.n_owned_dofs)
+        self._head_x_weights[self._head_velocity_dofs] = self._head_velocity_weights
+        self._tail_y_weights = np.zeros(self.n_owned_dofs)
+        if self.station_averages is None:
+            tail = self.owned_positions(np.array([self.fish.tags.tail_node]))[0]
+            self._tail_y_weights[3 * tail + 1] = 1.0
+        else:
+            self._tail_y_weights[1::3] = self.station_averages.weights[0][:, self.layout.owned_nodes].toarray().ravel()
+
+    def tail_point(self) -> np.ndarray:
+        """(3,) rest position [m] of the tail's observation point in this design: the tail station's
+        average of the rest positions (the tail node's with ``stations = "nodes"``)."""
+        if self.station_averages is None:
+            return self.rest_points[self.fish.tags.tail_node].copy()
+        return np.asarray(self.station_averages.weights[0] @ self.rest_points).ravel()
 
     def _build_boundary_conditions(self):
         """Swimming: head nodes fixed in y and z, free in x (SPEC §5). Clamped: all head dofs."""
@@ -348,10 +375,17 @@ class FullOrderModel:
         return owned
 
     def observables(self, u: np.ndarray) -> dict[str, float]:
-        """Head x, tail y and centre-of-mass x displacements [m]."""
-        spine = self.spine_values(u)
-        com_x = self.comm.allreduce(float(self.inertia.mass_moment_x @ u), op=MPI.SUM) / self.inertia.total_mass
-        return {"head_x": float(spine[-1, 0]), "tail_y": float(spine[0, 1]), "com_x": com_x}
+        """Head x, tail y and centre-of-mass x displacements [m] (``_build_observation``)."""
+        local = np.array([self._head_x_weights @ u, self._tail_y_weights @ u, self.inertia.mass_moment_x @ u])
+        head_x, tail_y, moment = self.comm.allreduce(local, op=MPI.SUM)
+        return {"head_x": float(head_x), "tail_y": float(tail_y), "com_x": float(moment) / self.inertia.total_mass}
+
+    def observation_rows(self, vectors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(head x row, tail y row), each (m,): the observed displacements from reduced coordinates η of
+        the owned dof columns ``vectors`` (u = V η), on every rank."""
+        local = np.stack([self._head_x_weights @ vectors, self._tail_y_weights @ vectors])
+        head_x, tail_y = self.comm.allreduce(local, op=MPI.SUM)
+        return head_x, tail_y
 
     def kinetic_energy(self, v: np.ndarray) -> float:
         """½ u̇ᵀ M u̇ [J]."""
@@ -375,21 +409,6 @@ class FullOrderModel:
         nodal = np.zeros((self.fish.nodes.points.shape[0], 3))
         nodal[self.layout.owned_nodes] = u.reshape(-1, 3)
         return self.comm.allreduce(nodal, op=MPI.SUM)
-
-
-def averages_of(fish: Fish, n_stations: int, tail_station: str = "face") -> StationAverages:
-    """The station averages of a fish's nominal mesh, computed once per fish (kept in ``fish.derived``),
-    station count and tail station ("slab": the half-hat over the last slab; "face": the end face x = -L)."""
-    key = ("station_averages", n_stations, tail_station)
-    if key not in fish.derived:
-        tags = fish.tags
-        face = None
-        if tail_station == "face":
-            on_tail = np.abs(tags.box.relative(fish.mesh.points)[:, 0] + tags.box.length) <= tags.tolerance
-            face = tags.skin_facets[on_tail[tags.skin_facets].all(axis=1)]
-        fish.derived[key] = station_averages(fish.mesh.points, fish.mesh.cells, fish.nodes, tags.box, n_stations,
-                                             tags.head_cells, face)
-    return fish.derived[key]
 
 
 class ShapeDirection:

@@ -14,7 +14,7 @@ from mpi4py import MPI
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS, block_cache_path, block_mesh
-from aquarom_fenics.geometry.body import block_lines, body_lines, check_body_length, with_head_at_max_x
+from aquarom_fenics.geometry.body import AXES, block_lines, body_lines, check_body_length, in_swimming_frame
 from aquarom_fenics.geometry.mesh import FishMesh, LagrangeNodes, lagrange_nodes
 from aquarom_fenics.geometry.mesh_files import read_mesh
 from aquarom_fenics.io.scene import Scene
@@ -120,23 +120,30 @@ class Fish:
 
 
 def load_mesh(scene: Scene) -> FishMesh:
-    """The scene's mesh with its head at the largest x: the block, or the file's mesh scaled,
-    translated and (``[mesh] head_end = "-x"``) mirrored in x; InputError for a body outside
-    1 mm–5 m or a head region at the other end than the declared one."""
+    """The scene's mesh in the swimming frame (along x, head at the largest x): the block, or the file's
+    mesh scaled, translated and turned from its ``[mesh] axis`` and head end (``in_swimming_frame``:
+    declared, or inferred from the head region); InputError for a body outside 1 mm–5 m along its
+    axis, an ambiguous head end or a head region at the other end than the declared one."""
+    axis, head_end = scene.mesh.axis, scene.mesh.head_end
     if scene.mesh_file is not None:
         mesh = read_mesh(scene.mesh_file, scale=scene.mesh.scale, translate=scene.mesh.translate)
     else:
+        if axis != "x" or head_end not in ("", "+x", "-x"):
+            raise InputError(f"scene {scene.source}: [mesh] axis = \"{axis}\", head_end = \"{head_end}\": the "
+                             "built-in block lies along x with its head at +x; axis and head_end describe a mesh file")
         check_body_length(scene.mesh.length, "block", block=True)
         mesh = block_mesh(scene.mesh.level, scene.mesh.length, scene.mesh.width, scene.mesh.height,
                           head_fraction=scene.regions.head_fraction, muscle_range=scene.regions.muscle_range)
-    check_body_length(float(np.ptp(mesh.points[:, 0])), mesh.source)
-    return with_head_at_max_x(mesh, scene.mesh.head_end, scene.regions.head)
+        head_end = head_end or "+x"
+    check_body_length(float(np.ptp(mesh.points[:, AXES.index(axis)])), mesh.source, axis=axis)
+    return in_swimming_frame(mesh, axis, head_end, scene.regions.head)
 
 
 def tag_scene_fish(scene: Scene, mesh: FishMesh, nodes: LagrangeNodes) -> FishTags:
     """The tags of the scene's mesh: its regions named in ``[regions]``, or the fractions' cells."""
     return tag_fish(mesh, head_fraction=scene.regions.head_fraction, muscle_range=scene.regions.muscle_range,
-                    nodes=nodes, head=scene.regions.head, muscles=scene.regions.muscles)
+                    nodes=nodes, head=scene.regions.head, muscles=scene.regions.muscles,
+                    require_axis=scene.fluid.stations == "nodes")
 
 
 def body_summary(scene: Scene, mesh: FishMesh, tags: FishTags) -> list[str]:

@@ -1,5 +1,9 @@
 """Regions and special nodes of the fish (SPEC §3): the mesh's tagged regions, nodes found from coordinates.
 
+Nodes on the body axis (the spine) are needed only by the nodal thrust model (``[fluid] stations =
+"nodes"``); with stations (the default) a body meshed without nodes on its axis is accepted, and its
+spine and dorsal nodes are empty.
+
 Every comparison uses a tolerance relative to the mesh size (`mesh_tolerance`), never exact
 float equality. Positions are taken relative to the bounding box (`FishBox.relative`), so that
 the reference fish has x ∈ [-L, 0], y ∈ [-W/2, W/2], z ∈ [-H/2, H/2] whatever its placement.
@@ -73,11 +77,16 @@ class FishTags:
     right_muscle_cells: np.ndarray  # tagged right muscle (y < 0)
     skin_facets: np.ndarray  # (n_facets, 3) exterior boundary triangles, normals pointing out
     skin_nodes: np.ndarray
-    spine_nodes: np.ndarray  # nodes with y_rel = z_rel = 0, sorted tail -> head
+    spine_nodes: np.ndarray  # nodes with y_rel = z_rel = 0, sorted tail -> head; empty without axis nodes
     spine_segments: np.ndarray  # (n_spine - 1, 2): [rear, front] consecutive spine nodes
-    tail_node: int  # spine node at x_rel = -L
-    head_spine_node: int  # spine node at x_rel = 0
+    tail_node: int | None  # spine node at x_rel = -L (None without axis nodes)
+    head_spine_node: int | None  # spine node at x_rel = 0 (None without axis nodes)
     dorsal_nodes: np.ndarray  # (n_segments,) skin node on y_rel = 0, z_rel > 0, x nearest rear
+
+    @property
+    def has_spine(self) -> bool:
+        """Whether the mesh has nodes on its axis from tail face to head face (the nodal model's spine)."""
+        return self.spine_nodes.size >= 2
 
 
 def mesh_tolerance(points, cells) -> float:
@@ -246,21 +255,42 @@ def centroid_regions(mesh: FishMesh, box: FishBox, tolerance: float, head_fracti
     return head, left, right
 
 
+def _optional_spine(mesh: FishMesh, nodes: LagrangeNodes, box: FishBox, tolerance: float, skin_nodes,
+                    require_axis: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(spine nodes, dorsal nodes): the spine (``_spine``) and one dorsal node per segment. With
+    ``require_axis`` (the nodal thrust model) a mesh without them is refused; otherwise both are
+    empty for such a mesh (the stations need neither)."""
+    try:
+        spine_nodes = _spine(mesh, nodes, box, tolerance)
+        dorsal = _dorsal_nodes(mesh, nodes, box, tolerance, skin_nodes, spine_nodes[:-1])
+    except InputError as error:
+        if require_axis:
+            raise InputError(f"{error} (needed by [fluid] stations = \"nodes\", the nodal thrust model; "
+                             "the default stations need no nodes on the axis)") from None
+        log.debug("mesh %s: no spine (%s); the stations need none", mesh.source, error)
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    return spine_nodes, dorsal
+
+
 def tag_fish(mesh: FishMesh, head_fraction=0.35, muscle_range=(-0.95, -0.35),
              nodes: LagrangeNodes | None = None, head: str = TAGGED_REGIONS[0],
-             muscles=TAGGED_REGIONS[1:]) -> FishTags:
-    """All tags of SPEC §3 for a fish mesh (head, muscles, skin, spine, tail, dorsal nodes).
+             muscles=TAGGED_REGIONS[1:], require_axis: bool = False) -> FishTags:
+    """All tags of SPEC §3 for a fish mesh (head, muscles, skin, and where the mesh has nodes on its
+    axis the spine, tail, head spine and dorsal nodes).
 
     Head and muscles are the mesh's tagged regions (``FishMesh.regions``) named ``head`` and
     ``muscles`` = (left, right): a mesh with one of them must have all three. A mesh with none of
     them falls back to cell centroids and the fractions, with a warning. Node tags refer to
-    ``nodes`` (default: the vertices, i.e. linear elements).
+    ``nodes`` (default: the vertices, i.e. linear elements). ``require_axis``: refuse a mesh without
+    a spine (``[fluid] stations = "nodes"``); otherwise its spine and dorsal nodes are empty.
     """
     check_region_fractions(mesh.source, head_fraction, muscle_range)
     nodes = nodes or lagrange_nodes(mesh, 1)
     box = FishBox.of(mesh.points)
     tolerance = mesh_tolerance(mesh.points, mesh.cells)
-    spine_nodes = _spine(mesh, nodes, box, tolerance)
+    facets = skin_facets(mesh.cells)
+    skin_nodes = nodes.facet_nodes(facets)
+    spine_nodes, dorsal_nodes = _optional_spine(mesh, nodes, box, tolerance, skin_nodes, require_axis)
     spine_segments = np.column_stack([spine_nodes[:-1], spine_nodes[1:]])
     names = (head, *muscles)
     if is_tagged(mesh, names):
@@ -268,8 +298,6 @@ def tag_fish(mesh: FishMesh, head_fraction=0.35, muscle_range=(-0.95, -0.35),
     else:
         head_cells, left_muscle_cells, right_muscle_cells = centroid_regions(mesh, box, tolerance, head_fraction,
                                                                              muscle_range, names)
-    facets = skin_facets(mesh.cells)
-    skin_nodes = nodes.facet_nodes(facets)
     return FishTags(
         box=box,
         tolerance=tolerance,
@@ -281,7 +309,7 @@ def tag_fish(mesh: FishMesh, head_fraction=0.35, muscle_range=(-0.95, -0.35),
         skin_nodes=skin_nodes,
         spine_nodes=spine_nodes,
         spine_segments=spine_segments,
-        tail_node=int(spine_nodes[0]),
-        head_spine_node=int(spine_nodes[-1]),
-        dorsal_nodes=_dorsal_nodes(mesh, nodes, box, tolerance, skin_nodes, spine_segments[:, 0]),
+        tail_node=int(spine_nodes[0]) if spine_nodes.size else None,
+        head_spine_node=int(spine_nodes[-1]) if spine_nodes.size else None,
+        dorsal_nodes=dorsal_nodes,
     )

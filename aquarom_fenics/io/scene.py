@@ -24,7 +24,7 @@ from aquarom_fenics.io.paths import shipped_meshes, shipped_scenes
 from aquarom_fenics.io.scene_sections import (SECTIONS, ActuationSection, CooptimizationSection, FluidSection,
                                               LinearConstraint, MaterialSection, MeshSection, OptimizerSection,
                                               OutputSection, ReductionSection, RegionsSection, ShapeSpec,
-                                              SolverSection, legacy_values)
+                                              SolverSection, at_legacy, legacy_values)
 
 SCENES_DIR = shipped_scenes()
 
@@ -127,7 +127,7 @@ class Scene:
         data = self.to_dict()
         for section, cls in SECTIONS.items():
             for key, legacy in legacy_values(cls).items():
-                if data[section][key] == legacy:
+                if at_legacy(data[section][key], legacy):
                     del data[section][key]
         return data
 

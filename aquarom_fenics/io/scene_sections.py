@@ -43,9 +43,21 @@ def _spec(default, check=None, doc="", variable_length=False, coerce=None, legac
                                             "coerce": coerce, "legacy": legacy})
 
 
+@dataclass(frozen=True)
+class LegacyValues:
+    """The ``legacy`` of a key at which several values reproduce what scenes computed before it."""
+
+    values: tuple
+
+
 def legacy_values(section) -> dict[str, Any]:
     """{key: value} of a section's keys that ``Scene.hash`` leaves out at that value (``legacy``)."""
     return {f.name: f.metadata["legacy"] for f in fields(section) if f.metadata.get("legacy", NO_LEGACY) is not NO_LEGACY}
+
+
+def at_legacy(value, legacy) -> bool:
+    """Whether a key's ``value`` is its ``legacy`` value (one of them, for ``LegacyValues``)."""
+    return value in legacy.values if isinstance(legacy, LegacyValues) else value == legacy
 
 
 def _station_count(value, where):
@@ -88,13 +100,14 @@ def _interval_within(low, high):
 class MeshSection:
     level: int = _spec(3, _one_of(1, 2, 3, 4, 5), "refinement level of the built-in block (1: ~1.3k … 5: ~25k cells)")
     degree: int = _spec(1, _one_of(1, 2), "Lagrange degree of the displacement (1: linear, 2: quadratic tetrahedra)")
-    file: str = _spec("", None, "external mesh (gmsh .msh, Abaqus .inp, .vtu, .med or Exodus .e/.exo of first-order tetrahedra), relative to the scene file; its volume physical groups or element sets are the regions named in [regions]; replaces the block (--level is refused with it)")
+    file: str = _spec("", None, "external mesh (gmsh .msh, Abaqus .inp, .vtu, .med or Exodus .e/.exo of first-order tetrahedra), relative to the scene file; its volume physical groups or element sets are the regions named in [regions]; no nodes on the body axis needed (but with [fluid] stations = \"nodes\"); replaces the block (--level is refused with it)")
     scale: float = _spec(1.0, _positive, "factor applied to the file's coordinates (to metres)")
     translate: tuple[float, float, float] = _spec((0.0, 0.0, 0.0), None, "shift after scaling [m]")
     length: float = _spec(0.20, _positive, "block length L along x [m]")
     width: float = _spec(0.04, _positive, "block width W along y [m]")
     height: float = _spec(0.10, _positive, "block height H along z [m]")
-    head_end: str = _spec("+x", _one_of("+x", "-x"), "where the head of the mesh lies along x: \"+x\" (at the largest x, as the block) or \"-x\" (the mesh is then mirrored in x, so that it swims towards +x); refused when the head region lies at the other end", legacy="+x")
+    axis: str = _spec("x", _one_of("x", "y", "z"), "the axis the body lies along in the mesh file (its swimming direction); \"y\" and \"z\" turn the mesh a quarter turn (about z, or about y) so that the body lies along x; the block lies along x", legacy="x")
+    head_end: str = _spec("", _one_of("", "+x", "-x", "+y", "-y", "+z", "-z"), "where the head lies along [mesh] axis: \"+x\" (at the largest x, as the block) or \"-x\" (the mesh is then mirrored in x, so that it swims towards +x); \"+y\", \"-y\", \"+z\", \"-z\" with axis = \"y\" or \"z\". Left out (\"\"): the end the head region reaches, said in one line, and refused when ambiguous (no head region, or one reaching both ends or neither); refused when the head region lies at the other end", legacy=LegacyValues(("", "+x")))
 
 
 @dataclass(frozen=True)
@@ -129,9 +142,9 @@ class ActuationSection:
 class FluidSection:
     density: float = _spec(1000.0, _positive, "ρ_w [kg/m³]")
     thrust: bool = _spec(True, None, "Lighthill reactive thrust, through the stations")
-    stations: int | str = _spec(40, None, "N_s: the thrust acts through N_s + 1 cross-section stations (averages over slabs of L/N_s); \"nodes\": on the spine nodes (the source's model, no mesh limit)", coerce=_station_count)
+    stations: int | str = _spec(40, None, "N_s: the thrust acts through N_s + 1 cross-section stations (averages over slabs of L/N_s; no nodes on the body axis needed); \"nodes\": on the spine nodes (the source's model, no mesh limit; needs nodes on the body axis y = z = 0 from tail to head face and skin nodes on y = 0 above it)", coerce=_station_count)
     drag: bool = _spec(True, None, "form drag on the skin")
-    tail_station: str = _spec("face", _one_of("face", "slab"), "the tail station's kinematics: the average over the end face x = -L ('face', within 3 % of the station-converged distance at N_s = 40) or the half-hat average over the last slab ('slab', SPEC §5's first definition, -4 % at N_s = 40)")
+    tail_station: str = _spec("face", _one_of("face", "slab"), "the tail station's kinematics: the average over the end face x = -L ('face', within 3 % of the station-converged distance at N_s = 40; on a body without an end face, a tapering tail, the last slab's, with a log line) or the half-hat average over the last slab ('slab', SPEC §5's first definition, -4 % at N_s = 40)")
     spine_force: str = _spec("source", _one_of("source", "lagrangian"), "spine force -d/dt(∂T_a/∂v) ('source') or with +∂T_a/∂x ('lagrangian', exchanges no energy by itself)")
     spine_rule: str = _spec("trapezoid", _one_of("trapezoid", "rear"), "quadrature of the spine force along the body: shared by each segment's two stations ('trapezoid', second order in 1/N_s: 0.1 % from the station-converged distance at N_s = 40) or on its rear station ('rear', SPEC §5, first order: +2 %); stations = \"nodes\" is the source's model and always 'rear'", legacy="rear")
 
@@ -201,7 +214,7 @@ class OptimizerSection:
     seed: int = _spec(0, _non_negative, "seed of the Latin-hypercube starts")
     tail_screen: bool = _spec(False, None, "refuse designs whose tail region the thrust destabilises: the FOM linearised at the PROM's last-stroke states (a FOM linearisation and a dense eigenvalue problem per screened state at each PROM build, shared by the ranks under mpirun)")
     tail_growth_limit: float = _spec(100.0, _positive, "tail screen: largest growth rate Re λ of the tail region's modes accepted [1/s]")
-    tail_region_radius: float = _spec(0.015, _positive, "tail screen: the region is the free nodes within this distance of the tail node [m]")
+    tail_region_radius: float = _spec(0.015, _positive, "tail screen: the region is the free nodes within this distance of the tail station (its rest position) [m]")
 
 
 @dataclass(frozen=True)

@@ -103,18 +103,18 @@ class DragTensors:
 class ReducedDrag:
     """The reduced drag at one design ξ (a :class:`ReducedTerm`)."""
 
-    def __init__(self, tensors: DragTensors, delta: np.ndarray, head_x_row: np.ndarray):
-        self.tensors, self.delta, self.head_x_row = tensors, delta, head_x_row
+    def __init__(self, tensors: DragTensors, delta: np.ndarray, velocity_row: np.ndarray):
+        self.tensors, self.delta, self.velocity_row = tensors, delta, velocity_row
         self.direction = tensors.direction.at(delta)
         self.direction_gradient = tensors.direction.gradient(delta)            # ∂g_r/∂ξ_k, (p, m)
 
     def force(self, eta_dot: np.ndarray) -> np.ndarray:
-        return drag_force(self.direction, self.head_x_row @ eta_dot)
+        return drag_force(self.direction, self.velocity_row @ eta_dot)
 
     def tangents(self, time, eta, eta_dot, eta_ddot):
-        """C_t part -∂f/∂η̇ = -2 g_r v_x (head x row)ᵀ."""
-        column = drag_velocity_jacobian(self.direction, self.head_x_row @ eta_dot)
-        return None, np.multiply.outer(-column, self.head_x_row), None
+        """C_t part -∂f/∂η̇ = -2 g_r v_x (wᵀ V)ᵀ."""
+        column = drag_velocity_jacobian(self.direction, self.velocity_row @ eta_dot)
+        return None, np.multiply.outer(-column, self.velocity_row), None
 
     def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
-        return -drag_force(self.direction_gradient, self.head_x_row @ eta_dot)
+        return -drag_force(self.direction_gradient, self.velocity_row @ eta_dot)

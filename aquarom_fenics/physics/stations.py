@@ -18,6 +18,7 @@ cells: the rule converges with the mesh, like the rest of the discretisation).
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,6 +26,8 @@ from scipy import sparse
 
 from aquarom_fenics.geometry.mesh import TETRAHEDRON_EDGES, LagrangeNodes, signed_cell_volumes
 from aquarom_fenics.geometry.shapes import reference_to_cells
+
+log = logging.getLogger("aquarom")
 
 STATION_QUADRATURE_DEGREE = 8
 """Degree of the per-cell rule for ∫ h_i φ_j dV_0 (φ_j of degree ≤ 2 times a kinked hat)."""
@@ -149,13 +152,57 @@ def station_averages(mesh_points: np.ndarray, mesh_cells: np.ndarray, nodes: Lag
     return StationAverages(stations, sparse.csr_matrix(weights), head_integrals / head_integrals.sum())
 
 
+def averages_of(fish, n_stations: int, tail_station: str = "face") -> StationAverages:
+    """The station averages of a fish's nominal mesh, computed once per fish (kept in ``fish.derived``),
+    station count and tail station ("slab": the half-hat over the last slab; "face": the end face x = -L)."""
+    key = ("station_averages", n_stations, tail_station)
+    if key not in fish.derived:
+        tags = fish.tags
+        face = None
+        if tail_station == "face":
+            on_tail = np.abs(tags.box.relative(fish.mesh.points)[:, 0] + tags.box.length) <= tags.tolerance
+            face = tags.skin_facets[on_tail[tags.skin_facets].all(axis=1)]
+            if face.size == 0:
+                face = None
+                log.info("mesh %s has no end face at x = %.6g m (its tail tapers): the tail station averages the "
+                         "last slab's half-hat (as [fluid] tail_station = \"slab\")", fish.mesh.source, tags.box.x_tail)
+        fish.derived[key] = station_averages(fish.mesh.points, fish.mesh.cells, fish.nodes, tags.box, n_stations,
+                                             tags.head_cells, face)
+    return fish.derived[key]
+
+
 def _cell_subset(nodes: LagrangeNodes, cells: np.ndarray) -> LagrangeNodes:
     return LagrangeNodes(nodes.degree, nodes.points, nodes.cell_nodes[cells], nodes.edges, nodes.n_vertices)
 
 
-def dorsal_profile(relative_x: np.ndarray, relative_z: np.ndarray):
-    """z(X) of the nominal dorsal skin on y = 0, piecewise linear through the given skin nodes
-    (relative coordinates [m]), as a function of relative x."""
-    order = np.argsort(relative_x, kind="stable")
-    x, z = np.asarray(relative_x)[order], np.asarray(relative_z)[order]
-    return lambda at: np.interp(at, x, z)
+def skin_line_heights(points: np.ndarray, facets: np.ndarray, x: np.ndarray, y: float,
+                      relative_tolerance: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
+    """(top, bottom), each (n,): the largest and smallest z [m] where the vertical line through (x_i, y)
+    meets the skin triangles ``facets`` (vertex indices into ``points``); NaN where it misses them.
+
+    A triangle meets the line where the barycentric coordinates λ of (x_i, y) in its projection on
+    the x-y plane are all ≥ 0 (within ``relative_tolerance``, so that a line along an edge meets
+    both triangles); there z = z_0 + λ_1 (z_1 - z_0) + λ_2 (z_2 - z_0). Triangles standing vertical
+    (their x-y projection degenerate) are passed over: their edges belong to triangles that are not.
+    """
+    corners = np.asarray(points, dtype=float)[np.asarray(facets)]            # (n_f, 3 corners, 3)
+    origin, first, second = corners[:, 0], corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    determinant = first[:, 0] * second[:, 1] - first[:, 1] * second[:, 0]   # 2 × projected area
+    doubled_area = np.linalg.norm(np.cross(first, second), axis=1)
+    upright = np.abs(determinant) > relative_tolerance * doubled_area
+    lower, upper = corners[:, :, :2].min(axis=1), corners[:, :, :2].max(axis=1)
+    reach = relative_tolerance * np.sqrt(doubled_area)
+    x = np.asarray(x, dtype=float)
+    top, bottom = np.full(x.size, np.nan), np.full(x.size, np.nan)
+    for i, x_i in enumerate(x):
+        near = np.flatnonzero(upright & (lower[:, 0] <= x_i + reach) & (upper[:, 0] >= x_i - reach)
+                              & (lower[:, 1] <= y + reach) & (upper[:, 1] >= y - reach))
+        offset = np.array([x_i, y]) - origin[near, :2]
+        lambda_1 = (offset[:, 0] * second[near, 1] - offset[:, 1] * second[near, 0]) / determinant[near]
+        lambda_2 = (first[near, 0] * offset[:, 1] - first[near, 1] * offset[:, 0]) / determinant[near]
+        inside = np.minimum(np.minimum(lambda_1, lambda_2), 1.0 - lambda_1 - lambda_2) >= -relative_tolerance
+        if not inside.any():
+            continue
+        z = (origin[near, 2] + lambda_1 * first[near, 2] + lambda_2 * second[near, 2])[inside]
+        top[i], bottom[i] = z.max(), z.min()
+    return top, bottom

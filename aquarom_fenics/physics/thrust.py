@@ -122,7 +122,8 @@ class SpineGeometry:
 def virtual_mass(dorsal_z, fluid_density: float) -> np.ndarray:
     """Virtual mass per length m̃ = (π/4) ρ_w d², d = 2 z_dorsal [kg/m].
 
-    dorsal_z: z [m] of each segment's dorsal node in the shape-varied configuration.
+    dorsal_z: d/2 [m] of each segment in the shape-varied configuration: half the body's depth at its
+    station (the stations), or the height of its dorsal node above the axis (the nodal model).
     fluid_density: ρ_w [kg/m³].
     """
     depth = 2.0 * np.asarray(dorsal_z, dtype=float)

@@ -8,13 +8,15 @@ Each projects itself on a basis into the ``ThrustTensors`` of ``thrust_reduced.p
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.shapes import shape_displacement
-from aquarom_fenics.physics.stations import dorsal_profile
+from aquarom_fenics.physics.stations import skin_line_heights
 from aquarom_fenics.physics.thrust import SpineGeometry, thrust_force, virtual_mass
 from aquarom_fenics.physics.thrust_jacobians import thrust_jacobians
 from aquarom_fenics.physics.thrust_reduced import ThrustTensors
@@ -113,29 +115,34 @@ class StationThrustTerm:
         self.owned_weights = averages.weights[:, fom.layout.owned_nodes].tocsr()      # (N_s + 1, owned nodes)
         self.owned_weights_t = self.owned_weights.T.tocsr()
         rest_xy = averages.average(rest_points[:, :2])
-        points = station_dorsal_points(fish, averages)
-        self.rear_points = points[:-1]
-        self.front_points = points[1:] if fluid.spine_rule == "trapezoid" else None
-        self.dorsal_z = self.rear_points[:, 2] + self.dorsal_shift(fom.xi, self.rear_points)
-        self.front_dorsal_z = (None if self.front_points is None
-                               else self.front_points[:, 2] + self.dorsal_shift(fom.xi, self.front_points))
+        sections = station_sections(fish, averages.stations)
+        self.rear_sections = sections.rows(slice(None, -1))
+        self.front_sections = sections.rows(slice(1, None)) if fluid.spine_rule == "trapezoid" else None
+        self.dorsal_z = self.half_depth(fom.xi, self.rear_sections)
+        self.front_dorsal_z = (None if self.front_sections is None
+                               else self.half_depth(fom.xi, self.front_sections))
         self.spine = SpineGeometry(rest_xy, virtual_mass(self.dorsal_z, fluid.density), fluid.spine_force,
-                                   None if self.front_points is None else virtual_mass(self.front_dorsal_z, fluid.density))
+                                   None if self.front_sections is None else virtual_mass(self.front_dorsal_z, fluid.density))
         n_owned = self.owned_weights.shape[1]
         self._block_rows = np.arange(n_owned + 1, dtype=np.int32)
         self._block_columns = fom.layout.global_block[:n_owned].astype(np.int32)
 
-    def dorsal_shift(self, xi: np.ndarray, points: np.ndarray) -> np.ndarray:
-        """Δz of the dorsal skin at ``points`` (rear or front stations) for the design ξ: Σ_k ξ_k U_k,z (exact)."""
-        return self.dorsal_gradient(xi.size, points) @ xi if xi.size else np.zeros(points.shape[0])
+    def half_depth(self, xi: np.ndarray, sections: "StationSections") -> np.ndarray:
+        """d/2 [m] of the design ξ at the ``sections`` (rear or front stations): the nominal half depth
+        (z_top - z_bottom)/2 plus Σ_k ξ_k ∂(d/2)/∂ξ_k (exact, see ``half_depth_gradient``)."""
+        nominal = 0.5 * (sections.top[:, 2] - sections.bottom[:, 2])
+        return nominal + self.half_depth_gradient(xi.size, sections) @ xi if xi.size else nominal
 
-    def dorsal_gradient(self, n_parameters: int, points: np.ndarray) -> np.ndarray:
-        """(N_s, p) ∂z_dorsal/∂ξ_k at ``points``: U_k,z of the exact shape fields there."""
+    def half_depth_gradient(self, n_parameters: int, sections: "StationSections") -> np.ndarray:
+        """(N_s, p) ∂(d/2)/∂ξ_k = (U_k,z(top) - U_k,z(bottom))/2 of the exact shape fields at each
+        section's top and bottom skin points (= U_k,z(top) on a body symmetric about z = z_axis)."""
         fish = self.fom.fish
         names = fish.shape_names[:n_parameters]
         if not names:
-            return np.zeros((points.shape[0], 0))
-        return np.column_stack([shape_displacement(name, points, fish.tags.box)[:, 2] for name in names])
+            return np.zeros((sections.top.shape[0], 0))
+        return np.column_stack([0.5 * (shape_displacement(name, sections.top, fish.tags.box)[:, 2]
+                                       - shape_displacement(name, sections.bottom, fish.tags.box)[:, 2])
+                                for name in names])
 
     def station_values(self, owned: np.ndarray) -> np.ndarray:
         """(N_s + 1, 2) x-y station averages B_i of an owned dof array, on every rank."""
@@ -206,39 +213,55 @@ class StationThrustTerm:
             return correction.ravel()
         return apply
 
-    def unit_tail_force(self, axis: int = 0) -> np.ndarray:
-        """B_0ᵀ e_axis: a unit force [N] along x (``axis`` 0) or y (1) on the tail station, on the owned dofs."""
-        force = np.zeros((self.owned_weights.shape[1], 3))
-        force[:, axis] = self.owned_weights[0].toarray().ravel()
-        return force.ravel()
-
     def reduce(self, projector) -> "ThrustTensors":
         """B V (station kinematics exact in η and ξ), the rest stations with their exact ξ-gradient B U,
-        and the dorsal heights with theirs."""
+        and the half depths with theirs."""
         fom = self.fom
         p, m = projector.n_parameters, projector.vectors.shape[1]
         columns = projector.vectors.reshape(-1, 3, m)[:, :2, :].reshape(-1, 2 * m)
         rows = fom.comm.allreduce(self.owned_weights @ columns, op=MPI.SUM).reshape(-1, 2, m)
         shape_xy = shape_rows(fom.fish)[:, :2, :p].reshape(fom.fish.nodes.points.shape[0], 2 * p)
         rest_gradient = fom.station_averages.weights @ shape_xy
-        front = {} if self.front_points is None else {
-            "front_dorsal_z": self.front_dorsal_z, "front_dorsal_z_gradient": self.dorsal_gradient(p, self.front_points)}
+        front = {} if self.front_sections is None else {
+            "front_dorsal_z": self.front_dorsal_z,
+            "front_dorsal_z_gradient": self.half_depth_gradient(p, self.front_sections)}
         return ThrustTensors(rows=rows, rest_xy=self.spine.rest_xy, rest_xy_gradient=np.asarray(rest_gradient).reshape(self.spine.n_nodes, 2, p),
-                          dorsal_z=self.dorsal_z, dorsal_z_gradient=self.dorsal_gradient(p, self.rear_points),
+                          dorsal_z=self.dorsal_z, dorsal_z_gradient=self.half_depth_gradient(p, self.rear_sections),
                           fluid_density=fom.scene.fluid.density, **front)
 
 
-def station_dorsal_points(fish, averages) -> np.ndarray:
-    """(N_s + 1, 3) relative positions (X_i, 0, z_dorsal(X_i)) of the nominal dorsal skin on y = 0 at
-    every station (tail -> head; the rear stations are all but the last, the front ones all but the
-    first); z_dorsal interpolates the skin nodes on y = 0 above the axis (their highest z at each x)."""
+@dataclass(frozen=True)
+class StationSections:
+    """Where each station's vertical line x = X_i, y = y_axis meets the nominal skin: its highest point
+    ``top`` and lowest ``bottom``, (n, 3) relative positions [m] (x_rel, 0, z_rel), tail -> head. The
+    body's depth there is d = z_top - z_bottom (SPEC §5: d = 2 z_dorsal on a body symmetric about its
+    axis, like the block)."""
+
+    top: np.ndarray
+    bottom: np.ndarray
+
+    def rows(self, selection) -> "StationSections":
+        return StationSections(self.top[selection], self.bottom[selection])
+
+
+def station_sections(fish, stations: np.ndarray) -> StationSections:
+    """The ``StationSections`` at the nominal x [m] of every station (``stations``, N_s + 1, tail -> head;
+    the rear stations are all but the last, the front ones all but the first), from the body's own
+    skin: no nodes on the axis or on y = 0 are needed.
+
+    An end station whose line misses the skin (a body tapering to a point off the line) has depth 0;
+    InputError when the line of an inner station misses it (the body does not cross its mid-plane
+    y = y_axis there)."""
     tags = fish.tags
-    relative = tags.box.relative(fish.nodes.points)
-    skin = tags.skin_nodes
-    on_plane = skin[(np.abs(relative[skin, 1]) <= tags.tolerance) & (relative[skin, 2] > tags.tolerance)]
-    x, z = relative[on_plane, 0], relative[on_plane, 2]
-    same_x = np.abs(x[:, None] - x[None, :]) <= tags.tolerance
-    highest = np.where(same_x, z[None, :], -np.inf).max(axis=1)
-    station_x = averages.stations - tags.box.x_head
-    profile = dorsal_profile(x, highest)
-    return np.column_stack([station_x, np.zeros_like(station_x), profile(station_x)])
+    relative = tags.box.relative(fish.mesh.points)
+    station_x = np.asarray(stations, dtype=float) - tags.box.x_head
+    top, bottom = skin_line_heights(relative, tags.skin_facets, station_x, 0.0)
+    missed = np.flatnonzero(np.isnan(top))
+    inner = missed[(missed > 0) & (missed < station_x.size - 1)]
+    if inner.size:
+        raise InputError(f"mesh {fish.mesh.source}: the vertical line y = {tags.box.y_axis:.6g} m at station {inner[0]}, "
+                         f"x = {stations[inner[0]]:.6g} m, misses the body; the stations need a body that "
+                         "crosses its mid-plane y = y_axis along its whole length")
+    top[missed] = bottom[missed] = 0.0
+    zeros = np.zeros_like(station_x)
+    return StationSections(np.column_stack([station_x, zeros, top]), np.column_stack([station_x, zeros, bottom]))

@@ -2,7 +2,7 @@
 projects (``ThrustTensors``) and the term at one design ξ (``ReducedThrust``).
 
 The law is evaluated exactly on the reduced kinematics W η (W = B V for stations, V at the spine
-nodes for the nodal model); its virtual mass is quadratic in ξ (z_dorsal linear), the rest
+nodes for the nodal model); its virtual mass is quadratic in ξ (the half depth d/2 linear), the rest
 stations linear in ξ (B U).
 """
 from __future__ import annotations
@@ -26,8 +26,8 @@ class ThrustTensors:
     rows: np.ndarray                     # (n_points, 2, m): W
     rest_xy: np.ndarray                  # (n_points, 2) rest x-y at ξ_c [m]
     rest_xy_gradient: np.ndarray         # (n_points, 2, p) ∂(rest x-y)/∂ξ: B U (exact; zero for the nodal model)
-    dorsal_z: np.ndarray                 # (n_segments,) z_dorsal - z_axis at ξ_c
-    dorsal_z_gradient: np.ndarray        # (n_segments, p) ∂z_dorsal/∂ξ (exact)
+    dorsal_z: np.ndarray                 # (n_segments,) half depth d/2 at ξ_c (z_dorsal - z_axis on the nodal spine)
+    dorsal_z_gradient: np.ndarray        # (n_segments, p) ∂(d/2)/∂ξ (exact)
     fluid_density: float                 # ρ_w [kg/m³]
     front_dorsal_z: np.ndarray | None = None            # the same at the segments' front stations
     front_dorsal_z_gradient: np.ndarray | None = None   # (trapezoid rule; None: rear rule)

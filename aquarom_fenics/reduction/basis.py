@@ -370,11 +370,17 @@ def unit_actuation_force(fom: FullOrderModel) -> np.ndarray:
 
 def unit_tail_force(fom: FullOrderModel, nodal: bool = False, axis: int = 0) -> np.ndarray:
     """A unit force [N] in x (``axis`` 0; y: 1) on the tail, in x the direction of f_tail = ½ m̃ (v·n)² t at
-    rest: B_0ᵀ e_x on the tail station (e_tail,x on the tail node with ``stations = "nodes"`` or ``nodal``)."""
-    if not nodal and fom.station_averages is not None and fom.thrust is not None:
-        return fom.thrust.unit_tail_force(axis)
+    rest: B_0ᵀ e_x on the tail station (e_tail,x on the tail node with ``stations = "nodes"`` or ``nodal``,
+    and with the thrust off on a mesh that has a tail node)."""
+    tags = fom.fish.tags
+    if not nodal and fom.station_averages is not None and (fom.thrust is not None or not tags.has_spine):
+        force = np.zeros((fom.layout.n_owned_blocks, 3))
+        force[:, axis] = fom.station_averages.weights[0][:, fom.layout.owned_nodes].toarray().ravel()
+        return force.ravel()
+    if not tags.has_spine:
+        raise ValueError(f"mesh {fom.fish.mesh.source} has no tail node (no nodes on its axis)")
     force = np.zeros(fom.n_owned_dofs)
-    blocks, _ = fom.owned_positions(np.array([fom.fish.tags.tail_node]))
+    blocks, _ = fom.owned_positions(np.array([tags.tail_node]))
     force[3 * blocks + axis] = 1.0
     return force
 

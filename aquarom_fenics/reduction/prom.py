@@ -35,8 +35,8 @@ ZIP_MAGIC = b"PK\x03\x04"       # first bytes of a .npz (zip) archive
 class Observation:
     """Rows of V giving the observed displacements [m] from η."""
 
-    head_x_row: np.ndarray               # (m,) row of V at the head spine node's x dof
-    tail_y_row: np.ndarray               # (m,) row of V at the tail node's y dof
+    head_x_row: np.ndarray               # (m,) the head's average x (the head spine node's with stations = "nodes")
+    tail_y_row: np.ndarray               # (m,) the tail station's average y (the tail node's with stations = "nodes")
 
 
 @dataclass

@@ -55,7 +55,7 @@ class MeshCase:
     distance: float                  # m
     tail_amplitude: float            # m
     first_frequency: float           # Hz
-    static_tail_deflection: float    # m, tail y
+    static_tail_deflection: float    # m, the tail's observed y (the tail station's average)
     tail_compliance: float           # m/N, tail station x under a unit x-force on it
     wall_time: float                 # s, the FOM run (set-up and time integration)
 
@@ -74,7 +74,7 @@ def measure(scene: Scene, fish: Fish | None = None) -> MeshCase:
         _, frequencies = vibration_modes(model, stiffness, 1)
         stiffness.destroy()
         peak = scene.actuation.amplitude
-        deflection = model.spine_values(model.static_response(peak, -peak))[0, 1]
+        deflection = model.observables(model.static_response(peak, -peak))["tail_y"]
         compliance = tail_compliances(model)["station" if model.station_averages is not None else "node"]
     finally:
         model.destroy()
@@ -85,11 +85,11 @@ def measure(scene: Scene, fish: Fish | None = None) -> MeshCase:
 
 def tail_compliances(model: FullOrderModel) -> dict[str, float]:
     """Static x-compliance [m/N] at rest, head clamped, under a unit x-force: ``node`` of the tail node
-    (e_tail,xᵀ K_0⁻¹ e_tail,x) and, with stations, ``station`` of the tail station (B_0 K_0⁻¹ B_0ᵀ e_x)."""
+    (e_tail,xᵀ K_0⁻¹ e_tail,x; on a mesh with nodes on its axis) and, with stations, ``station`` of the tail station (B_0 K_0⁻¹ B_0ᵀ e_x)."""
     stiffness = clamped_stiffness(model)
     solver = mumps_solver(model.comm)
     solver.setOperators(stiffness)
-    forces = {"node": unit_tail_force(model, nodal=True)}
+    forces = {"node": unit_tail_force(model, nodal=True)} if model.fish.tags.has_spine else {}
     if model.station_averages is not None and model.thrust is not None:
         forces["station"] = unit_tail_force(model)
     try:

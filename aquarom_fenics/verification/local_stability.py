@@ -69,15 +69,17 @@ def _scipy_copy(matrix) -> scipy.sparse.csr_matrix:
     return scipy.sparse.csr_matrix((values.copy(), columns.copy(), rows.copy()))
 
 
-def region_dofs(model, center_node: int, radius: float) -> np.ndarray:
-    """Free dofs of the nodes within ``radius`` [m] of input node ``center_node`` (rest shape)."""
+def region_dofs(model, center, radius: float) -> np.ndarray:
+    """Free dofs of the nodes within ``radius`` [m] of the point ``center`` (3,) [m] (rest shape)."""
+    center = np.asarray(center, dtype=float)
     positions = model.rest_points[model.layout.owned_nodes]
-    distances = np.linalg.norm(positions - model.rest_points[center_node], axis=1)
+    distances = np.linalg.norm(positions - center, axis=1)
     near = np.flatnonzero(distances < radius)
     dofs = np.setdiff1d((3 * near[:, None] + np.arange(3)).ravel(), model.fixed_dofs)
     if not dofs.size:
         free_nodes = np.setdiff1d(np.arange(positions.shape[0]), model.fixed_dofs // 3)
-        raise InputError(f"the region of radius {radius:g} m around node {center_node} holds no free node; "
+        where = ", ".join(f"{value:.4g}" for value in center)
+        raise InputError(f"the region of radius {radius:g} m around ({where}) m holds no free node; "
                          f"the nearest free node is {distances[free_nodes].min():.3g} m away: use a larger radius")
     return dofs
 
@@ -166,7 +168,7 @@ def prom_tail_growth(prom: ReducedModel, scene: Scene, fish: Fish, xi=None, stop
         u = V η,  u̇ = V η̇,  ü = V η̈,
 
     and the FOM at ξ is linearised about it on the tail region (free nodes within
-    ``[optimizer] tail_region_radius`` of the tail node), coefficients frozen: the largest Re λ of
+    ``[optimizer] tail_region_radius`` of the tail's observation point, the tail station), coefficients frozen: the largest Re λ of
     λ² M_t + λ C_t + K_t. Stops at the first state whose growth rate exceeds ``stop_above`` [1/s].
     The ranks of ``comm`` share the states (each linearises its own on one rank) and return the
     same answer as one rank: the states up to the first one over the limit.
@@ -181,7 +183,7 @@ def prom_tail_growth(prom: ReducedModel, scene: Scene, fish: Fish, xi=None, stop
     rates, failure = [], None           # (position in steps, λ) of this rank's states
     try:
         basis = reused_basis(model, prom).vectors
-        dofs = region_dofs(model, fish.tags.tail_node, scene.optimizer.tail_region_radius)
+        dofs = region_dofs(model, model.tail_point(), scene.optimizer.tail_region_radius)
 
         def tangents_at(position):
             k = steps[position]
@@ -267,7 +269,8 @@ def prom_tail_stability(prom: ReducedModel, scene: Scene, fish: Fish, xi=None,
     growth = prom_tail_growth(prom, scene, fish, xi, stop_above=settings.tail_growth_limit)
     if isinstance(growth, str):
         return Stability(False, f"unstable: the PROM stops ({growth})")
-    where = (f"the tail region's fastest mode (free nodes within {settings.tail_region_radius:g} m of the tail node, "
+    tail = "tail node" if scene.fluid.stations == "nodes" else "tail station"
+    where = (f"the tail region's fastest mode (free nodes within {settings.tail_region_radius:g} m of the {tail}, "
              f"linearised at the PROM's states) grows at {growth.growth_rate:.3g} 1/s ({growth.frequency:.3g} Hz) "
              f"at t = {growth.time:.3g} s")
     if growth.growth_rate > settings.tail_growth_limit:

@@ -476,13 +476,19 @@ def test_bad_transform_and_level_are_input_errors(tmp_path):
         block_mesh(1, width=0.0, cache_dir=tmp_path)
 
 
-def test_mesh_without_nodes_on_the_axis_is_an_input_error(tmp_path):
+def test_mesh_without_nodes_on_the_axis_has_no_spine_and_the_nodal_model_refuses_it(tmp_path):
+    """The stations need no nodes on the axis; the nodal model (stations = "nodes") acts on them."""
     path = tmp_path / "uncut.msh"
     write_uncut_box_msh(path)
     fish = read_mesh(path)
     assert len(fish.cells) > 0
-    with pytest.raises(InputError, match="uncut.msh: no nodes on the body axis y = 0, z = 0"):
-        tag_fish(fish)
+    tags = tag_fish(fish)
+    assert not tags.has_spine and tags.tail_node is None and tags.head_spine_node is None
+    assert tags.spine_nodes.size == tags.dorsal_nodes.size == 0 and tags.spine_segments.shape == (0, 2)
+    with pytest.raises(InputError, match=r"uncut.msh: no nodes on the body axis y = 0, z = 0 .* \(needed by \[fluid\] "
+                                         r"stations = \"nodes\", the nodal thrust model; the default stations need no "
+                                         r"nodes on the axis\)$"):
+        tag_fish(fish, require_axis=True)
 
 
 def test_empty_regions_are_input_errors(coarse):
@@ -498,8 +504,10 @@ def test_empty_regions_are_input_errors(coarse):
 def test_tail_without_axis_node_is_an_input_error(coarse, coarse_tags):
     points = coarse.points.copy()
     points[coarse_tags.tail_node, 1] += W / 8
+    moved = FishMesh(points=points, cells=coarse.cells, source="moved")
     with pytest.raises(InputError, match="moved: no node on the body axis .* at the tail face"):
-        tag_fish(FishMesh(points=points, cells=coarse.cells, source="moved"))
+        tag_fish(moved, require_axis=True)
+    assert not tag_fish(moved).has_spine
 
 
 def test_a_gmsh_session_leaves_the_callers_sigint_handler_in_place():

@@ -233,7 +233,8 @@ def test_a_spine_with_a_gap_no_edge_spans_is_refused(block):
     moved = FishMesh(points=points, cells=block.cells, source="moved", regions=block.regions)
     with pytest.raises(InputError, match=rf"^mesh moved: the body axis y = 0, z = 0 is not a line of mesh edges "
                                          rf"\({len(spine) - 1} vertices on it, 1 of the {len(spine) - 2} gaps"):
-        tag_fish(moved)
+        tag_fish(moved, require_axis=True)
+    assert not tag_fish(moved).has_spine           # the stations need no spine
 
 
 def half_cut_box(path):
@@ -272,11 +273,12 @@ def bad_mesh(kind, tmp_path, block):
     if kind == "head at the other end":
         mirror = mirrored(block)
         write_msh(path, mirror.points, mirror.cells, groups, passive=passive)
-        return path, "", ["region 'head' lies at the -x end", 'head_end = "-x"']
+        return path, 'head_end = "+x"', ["region 'head' lies at the -x end", 'head_end = "-x"']
     if kind == "half cut":
-        half_cut_box(path)
-        return path, "", ["the body axis y = 0, z = 0 is not a line of mesh edges",
-                          "cut by both planes y = 0 and z = 0"]
+        half_cut_box(path)         # accepted by the stations, refused by the nodal model
+        return path, 'head_end = "+x"\n[fluid]\nstations = "nodes"', [
+            "the body axis y = 0, z = 0 is not a line of mesh edges", "cut by both planes y = 0 and z = 0",
+            'needed by [fluid] stations = "nodes"']
     raise ValueError(kind)
 
 
@@ -326,7 +328,7 @@ def test_level_with_a_mesh_file_is_refused(command, tmp_path, block, capfd):
     path = tmp_path / "block.msh"
     write_msh(path, block.points, block.cells, block_regions(block), passive=passive_cells(block))
     scene = tmp_path / "scene.toml"
-    scene.write_text(f'[mesh]\nfile = "{path.name}"\n')
+    scene.write_text(f'[mesh]\nfile = "{path.name}"\nhead_end = "+x"\n')
     code = main([command[0], str(scene), *command[1:], "--level", "2"])
     out, err = capfd.readouterr()
     assert code == 2

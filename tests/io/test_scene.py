@@ -296,7 +296,7 @@ def test_a_key_added_later_keeps_the_hash_of_the_scenes_before_it_at_its_legacy_
     rear = scene.replace("fluid", spine_rule="rear")
     data = rear.to_dict()
     del data["fluid"]["spine_rule"]
-    for section, key in (("mesh", "head_end"), ("regions", "head"), ("regions", "muscles")):   # later keys at their legacy values
+    for section, key in (("mesh", "axis"), ("mesh", "head_end"), ("regions", "head"), ("regions", "muscles")):   # later keys at their legacy values
         del data[section][key]
     for key, legacy in legacy_values(ReductionSection).items():    # the CO scene sets some of them
         if data["reduction"][key] == legacy:
@@ -307,24 +307,26 @@ def test_a_key_added_later_keeps_the_hash_of_the_scenes_before_it_at_its_legacy_
     assert Scene.load("co").hash == scene.hash
 
 
-def test_the_region_and_head_end_keys_keep_the_hashes_of_the_scenes_before_them():
-    """[regions] head, muscles and [mesh] head_end came after scenes were hashed: at the block's names
-    and "+x", written out or not, the hash is the one without them; other values change it."""
-    from aquarom_fenics.io.scene_sections import MeshSection, RegionsSection, legacy_values
+def test_the_region_axis_and_head_end_keys_keep_the_hashes_of_the_scenes_before_them():
+    """[regions] head, muscles and [mesh] axis, head_end came after scenes were hashed: at the block's
+    names, "x" and "+x" or not given (""), written out or not, the hash is the one without them; other
+    values change it."""
+    from aquarom_fenics.io.scene_sections import LegacyValues, MeshSection, RegionsSection, legacy_values
 
     assert legacy_values(RegionsSection) == {"head": "head", "muscles": ("left_muscle", "right_muscle")}
-    assert legacy_values(MeshSection) == {"head_end": "+x"}
+    assert legacy_values(MeshSection) == {"axis": "x", "head_end": LegacyValues(("", "+x"))}
     scene = Scene.load("nominal")
     data = scene.to_dict()
-    for section, key in (("mesh", "head_end"), ("regions", "head"), ("regions", "muscles"),
+    for section, key in (("mesh", "axis"), ("mesh", "head_end"), ("regions", "head"), ("regions", "muscles"),
                          ("reduction", "stroke_amplitude"), ("reduction", "validity_change"),
                          ("reduction", "stroke_sensitivities")):   # later keys at their legacy values
         del data[section][key]
     assert scene.hash == scene._digest(data)
     written = scene_from_dict(tomllib.loads(scene.to_toml()), source=scene.source, base_dir=scene.base_dir)
     assert written.hash == scene.hash and written.regions.muscles == ("left_muscle", "right_muscle")
+    assert scene.mesh.head_end == "+x" and scene.replace("mesh", head_end="").hash == scene.hash
     for section, values in (("regions", {"head": "nose"}), ("regions", {"muscles": ["right_muscle", "left_muscle"]}),
-                            ("mesh", {"head_end": "-x"})):
+                            ("mesh", {"head_end": "-x"}), ("mesh", {"axis": "y", "head_end": "+y"})):
         changed = scene.replace(section, **values)
         assert changed.hash != scene.hash and changed.fom_hash != scene.fom_hash
 
@@ -333,7 +335,8 @@ def test_the_region_and_head_end_keys_keep_the_hashes_of_the_scenes_before_them(
     ({"regions": {"muscles": ["left_muscle"]}}, r"\[regions\] muscles must name two different regions"),
     ({"regions": {"muscles": ["a", "a"]}}, r"\[regions\] muscles must name two different regions"),
     ({"regions": {"head": ""}}, r"\[regions\] head must be the name of a region"),
-    ({"mesh": {"head_end": "+y"}}, r"\[mesh\] head_end = '\+y' must be one of '\+x', '-x'"),
+    ({"mesh": {"head_end": "+w"}}, r"\[mesh\] head_end = '\+w' must be one of '', '\+x', '-x', '\+y', '-y', '\+z', '-z'"),
+    ({"mesh": {"axis": "w"}}, r"\[mesh\] axis = 'w' must be one of 'x', 'y', 'z'"),
 ])
 def test_bad_region_names_and_head_ends_are_one_line(table, message):
     with pytest.raises(InputError, match=message):
@@ -493,18 +496,22 @@ def test_binary_mesh_file_is_one_line_and_exit_code_2(tmp_path, capfd):
 
 def test_structured_box_with_axis_nodes_is_a_valid_fish(tmp_path, capfd):
     write_box_inp(tmp_path / "box.inp", counts=(9, 3, 3))
-    path = write_scene(tmp_path, '[mesh]\nfile = "box.inp"\n')
+    path = write_scene(tmp_path, '[mesh]\nfile = "box.inp"\nhead_end = "+x"\n')
     code, out, err = run_cli(["mesh", path], capfd)
     assert code == 0, err
     assert "cells        192" in out
     assert "spine        9 nodes" in out
 
 
-def test_mesh_without_nodes_on_the_body_axis_is_refused(tmp_path, capfd):
+def test_mesh_without_nodes_on_the_body_axis_is_refused_by_the_nodal_model_only(tmp_path, capfd):
     write_box_inp(tmp_path / "box.inp", counts=(9, 4, 4))
-    path = write_scene(tmp_path, '[mesh]\nfile = "box.inp"\n')
+    path = write_scene(tmp_path, '[mesh]\nfile = "box.inp"\nhead_end = "+x"\n[fluid]\nstations = "nodes"\n')
     code, out, err = run_cli(["mesh", path], capfd)
-    assert_one_line_error(code, out, err, "mesh", "box.inp", "body axis")
+    assert_one_line_error(code, out, err, "mesh", "box.inp", "body axis", 'stations = "nodes"')
+    path = write_scene(tmp_path, '[mesh]\nfile = "box.inp"\nhead_end = "+x"\n')
+    code, out, err = run_cli(["mesh", path], capfd)
+    assert code == 0, err
+    assert "stations     41, every 0.005 m" in out and "spine        none: no nodes on the body axis" in out
 
 
 def test_design_that_inverts_cells_names_the_parameter(tmp_path, capfd):

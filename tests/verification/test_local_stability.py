@@ -80,7 +80,7 @@ def test_tangents_are_the_derivatives_of_the_residual(swimming_run):
     model = result.model
     u, v, a = result.states[-1]
     time = scene.solver.duration
-    dofs = region_dofs(model, model.fish.tags.tail_node, scene.optimizer.tail_region_radius)
+    dofs = region_dofs(model, model.tail_point(), scene.optimizer.tail_region_radius)
     rng = np.random.default_rng(0)
     tangents_at = region_tangents(model, time, u, v, a, dofs)
     for position, matrix, scale in ((0, tangents_at[0], 1e-4), (1, tangents_at[1], 1e-2), (2, tangents_at[2], 1.0)):
@@ -100,7 +100,7 @@ def test_local_stability_of_the_tail_at_rest_is_stable(swimming_run):
     """At rest nothing feeds the tail: every mode decays, the step map contracts."""
     scene, result = swimming_run
     model = result.model
-    dofs = region_dofs(model, model.fish.tags.tail_node, 0.04)
+    dofs = region_dofs(model, model.tail_point(), 0.04)
     assert dofs.size > 30 and not np.intersect1d(dofs, model.fixed_dofs).size
     zero = np.zeros(model.n_owned_dofs)
     rest = local_stability(model, 0.0, zero, zero, zero, dofs, model.scheme)
@@ -131,9 +131,9 @@ def test_stability_script_writes_the_tail_modes_with_and_without_the_thrust(tmp_
 def test_a_region_without_free_nodes_is_refused_in_one_line(swimming_run):
     _, result = swimming_run
     model = result.model
-    with pytest.raises(InputError, match=r"radius 0 m around node \d+ holds no free node; the nearest free node is "
+    with pytest.raises(InputError, match=r"radius 0 m around \(-0.2, [-\d.e]+, [-\d.e]+\) m holds no free node; the nearest free node is "
                                          r"[\d.e-]+ m away: use a larger radius"):
-        region_dofs(model, model.fish.tags.tail_node, 0.0)
+        region_dofs(model, model.tail_point(), 0.0)
 
 
 @pytest.fixture(scope="module")
@@ -148,7 +148,7 @@ def growth_rates_at(prom, scene, fish, steps) -> np.ndarray:
     run = simulate_reduced(prom, scene)
     model = FullOrderModel(scene, fish)
     basis = reused_basis(model, prom).vectors
-    dofs = region_dofs(model, fish.tags.tail_node, scene.optimizer.tail_region_radius)
+    dofs = region_dofs(model, model.tail_point(), scene.optimizer.tail_region_radius)
     times = run.trajectory.arrays()["time"]
     rates = [local_stability(model, times[k], basis @ run.states[k], basis @ run.velocities[k],
                              basis @ run.accelerations[k], dofs, model.scheme).growth_rate for k in steps]
