@@ -11,9 +11,10 @@ _FISH: dict = {}
 
 
 def fish_key(scene: Scene) -> str:
-    """What a fish is made of: the scene's [mesh] and [regions] sections and its shape names."""
+    """What a fish is made of: the scene's [mesh] and [regions] sections, its muscles' regions and its shape names."""
     data = scene.to_dict()
-    return json.dumps([data["mesh"], data["regions"], scene.shape_names], sort_keys=True)
+    muscles = [muscle.region for muscle in scene.actuated_muscles]
+    return json.dumps([data["mesh"], data["regions"], muscles, scene.shape_names], sort_keys=True)
 
 
 def shared_fish(scene: Scene):

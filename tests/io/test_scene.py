@@ -297,7 +297,7 @@ def test_a_key_added_later_keeps_the_hash_of_the_scenes_before_it_at_its_legacy_
     data = rear.to_dict()
     del data["fluid"]["spine_rule"]
     for section, key in (("mesh", "head_end"), ("regions", "head"), ("regions", "muscles"),
-                         ("reduction", "stroke_amplitude")):        # later keys at their legacy values
+                         ("regions", "muscle_pairs"), ("reduction", "stroke_amplitude")):        # later keys at their legacy values
         del data[section][key]
     assert rear.hash == rear._digest(data)
     assert scene.hash != rear.hash and scene.fom_hash != rear.fom_hash
@@ -310,12 +310,13 @@ def test_the_region_and_head_end_keys_keep_the_hashes_of_the_scenes_before_them(
     and "+x", written out or not, the hash is the one without them; other values change it."""
     from aquarom_fenics.io.scene_sections import MeshSection, RegionsSection, legacy_values
 
-    assert legacy_values(RegionsSection) == {"head": "head", "muscles": ("left_muscle", "right_muscle")}
+    assert legacy_values(RegionsSection) == {"head": "head", "muscles": ("left_muscle", "right_muscle"),
+                                             "muscle_pairs": 1}
     assert legacy_values(MeshSection) == {"head_end": "+x"}
     scene = Scene.load("nominal")
     data = scene.to_dict()
     for section, key in (("mesh", "head_end"), ("regions", "head"), ("regions", "muscles"),
-                         ("reduction", "stroke_amplitude")):        # later keys at their legacy values
+                         ("regions", "muscle_pairs"), ("reduction", "stroke_amplitude")):        # later keys at their legacy values
         del data[section][key]
     assert scene.hash == scene._digest(data)
     written = scene_from_dict(tomllib.loads(scene.to_toml()), source=scene.source, base_dir=scene.base_dir)
