@@ -185,6 +185,12 @@ def check_block_muscles(scene: Scene) -> None:
             raise InputError(f"scene {scene.source}: [[muscles]] {number} region '{muscle.region}' is no region of "
                              f"the block (with [regions] muscle_pairs = {scene.regions.muscle_pairs}: "
                              f"{', '.join(names[1:])})")
+    named = [muscle.region for muscle in scene.muscles]
+    for side in ("left", "right"):          # a side's muscle is the union of its segments
+        segments = [name for name in named if name.startswith(f"{side}_") and name != f"{side}_muscle"]
+        if f"{side}_muscle" in named and segments:
+            raise InputError(f"block: the regions {side}_muscle and {segments[0]} overlap; head and muscles must "
+                             "be disjoint sets of cells (name the segments or their union)")
 
 
 def load_fish(scene: Scene, comm: MPI.Comm = MPI.COMM_WORLD) -> Fish:

@@ -8,7 +8,9 @@ With the head clamped in all directions:
   5. actuation modes ψ = K_0⁻¹ f_act,1 and θ_ψ = -K_0⁻¹ (∂K/∂u[ψ]) ψ (not in ``basis = "paper"``),
      one pair per independent activation pattern P_k of the muscles (``ActivationLaw.patterns``: the
      antagonist pair has one, (1, -1); muscles with phases two per frequency, the sin and cos parts),
-     ``psi``, ``theta_psi`` for the first, ``psi_2``, ``theta_psi_2``, … for the others;
+     ``psi``, ``theta_psi`` for the first, ``psi_2``, ``theta_psi_2``, … for the others; with several
+     patterns also θ_ψkψl = -K_0⁻¹ (∂K/∂u[ψ_k]) ψ_l (k < l, ``theta_psi_k_l``) and the inertia vectors
+     K_0⁻¹ M ψ_k (``psi_mass_k``): the travelling wave's ROM needs them (docs/theory/basis.md);
   6. response vectors (``response_vectors``, not in ``basis = "paper"``):
      ψ_m = -K_0⁻¹ B_1 ψ, B_1 = ∂²Π_act,1/∂u² the muscles' stiffness at unit activation: with
      f_act = -a (b_1 + B_1 u) the static response to a is u = a ψ + a² (½ θ_ψ + ψ_m) + O(a³)
@@ -149,13 +151,17 @@ def candidate_labels(n_modes: int, modal_derivatives: bool, n_parameters: int, a
                      responses: tuple[str, ...] = ()) -> list[str]:
     """Names of the candidate vectors in the order of SPEC §7: rigid_x, mode_i, theta_i_j (i ≤ j),
     xi_i_k (mode i, parameter k, both from 1), psi and theta_psi (per activation pattern: psi_2,
-    theta_psi_2, …), then the ``responses`` (``psi_muscle``, ``tail_force``; see :func:`response_labels`)."""
+    theta_psi_2, …; with several patterns then theta_psi_k_l (k < l) and psi_mass_k), then the
+    ``responses`` (``psi_muscle``, ``tail_force``; see :func:`response_labels`)."""
     labels = ["rigid_x"] + [f"mode_{i + 1}" for i in range(n_modes)]
     if modal_derivatives:
         labels += [f"theta_{i + 1}_{j + 1}" for j in range(n_modes) for i in range(j + 1)]
     labels += [f"xi_{i + 1}_{k + 1}" for k in range(n_parameters) for i in range(n_modes)]
     for suffix in pattern_suffixes(actuation_modes):
         labels += ["psi" + suffix, "theta_psi" + suffix]
+    if int(actuation_modes) > 1:
+        labels += [f"theta_psi_{k + 1}_{l + 1}" for l in range(int(actuation_modes)) for k in range(l)]
+        labels += [f"psi_mass_{k + 1}" for k in range(int(actuation_modes))]
     return labels + list(responses)
 
 
@@ -277,6 +283,10 @@ def _build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
     psis = [static_solve(unit_actuation_force(fom, pattern)) for pattern in patterns]
     for psi in psis:
         candidates += [psi, -static_solve(variations.evaluate(variations.modal, psi, psi))]
+    if len(psis) > 1:        # several patterns (a travelling wave): their coupling and inertia (docs/theory/basis.md)
+        candidates += [-static_solve(variations.evaluate(variations.modal, psis[k], psis[l]))
+                       for l in range(len(psis)) for k in range(l)]
+        candidates += [static_solve(fom.matvec(fom.mass_matrix, vector)) for vector in psis]
     psi = psis[0] if psis else None
     # τ follows the tail node's indentation under the nodal thrust; through the stations it is not needed
     # (degree 2, level 2: the ROM's distance and tail amplitude change by 0.002 % and 0.03 % without it)
