@@ -191,3 +191,22 @@ def test_the_travelling_wave_scene_runs_with_its_full_and_reduced_model(tmp_path
     assert full.completed and reduced.completed
     assert full.tail_amplitude > 1e-3
     assert reduced.tail_amplitude == pytest.approx(full.tail_amplitude, rel=0.1)
+
+
+def test_the_wave_basis_has_the_responses_of_each_activation_pattern():
+    """Two patterns (the sin and cos parts): ψ, θ_ψ and ψ_m of each, θ_ψ12 and K_0⁻¹Mψ_k; the plan's
+    estimate names the same candidates; the pair keeps its basis of one pattern."""
+    from aquarom_fenics.reduction.basis import build_basis
+    from aquarom_fenics.studies.estimate import expected_basis
+
+    wave = Scene.load("wave").replace("mesh", degree=1)
+    model = FullOrderModel(wave, load_fish(wave))
+    basis = build_basis(model, 0)
+    model.destroy()
+    wave_vectors = ["psi", "theta_psi", "psi_2", "theta_psi_2", "theta_psi_1_2", "psi_mass_1", "psi_mass_2",
+                    "psi_muscle", "psi_muscle_2"]
+    assert basis.labels[3:] == wave_vectors
+    expected = expected_basis(wave, parametric=False)       # the nodal thrust's τ counted: an upper bound
+    assert set(expected) - {"tail_force"} == set(basis.labels + basis.dropped)
+    assert expected[3:-1] == wave_vectors
+    assert expected_basis(coarse_scene(), parametric=False)[3:-1] == ["psi", "theta_psi", "psi_muscle"]
