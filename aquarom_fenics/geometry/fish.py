@@ -123,6 +123,9 @@ def load_mesh(scene: Scene) -> FishMesh:
     """The scene's mesh with its head at the largest x: the block, or the file's mesh scaled,
     translated and (``[mesh] head_end = "-x"``) mirrored in x; InputError for a body outside
     1 mm–5 m or a head region at the other end than the declared one."""
+    if scene.mesh_file is not None and scene.regions.muscle_pairs > 1:
+        raise InputError(f"scene {scene.source}: [regions] muscle_pairs = {scene.regions.muscle_pairs} splits the "
+                         "built-in block's muscles; a mesh file has its own regions: name them in [[muscles]] tables")
     if scene.mesh_file is not None:
         mesh = read_mesh(scene.mesh_file, scale=scene.mesh.scale, translate=scene.mesh.translate)
     else:

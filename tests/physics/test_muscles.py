@@ -210,3 +210,12 @@ def test_the_wave_basis_has_the_responses_of_each_activation_pattern():
     assert set(expected) - {"tail_force"} == set(basis.labels + basis.dropped)
     assert expected[3:-1] == wave_vectors
     assert expected_basis(coarse_scene(), parametric=False)[3:-1] == ["psi", "theta_psi", "psi_muscle"]
+
+
+def test_muscle_pairs_with_a_mesh_file_is_one_line_and_exit_code_2(tmp_path, capsys):
+    """The block's segments are the block's: a mesh file names its own regions."""
+    (tmp_path / "body.msh").write_text("not read")
+    scene = tmp_path / "scene.toml"
+    scene.write_text('[mesh]\nfile = "body.msh"\n[regions]\nmuscle_pairs = 2\n')
+    assert main(["mesh", str(scene)]) == 2
+    assert "muscle_pairs = 2 splits the built-in block's muscles" in one_line(capsys)
