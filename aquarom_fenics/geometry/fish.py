@@ -141,7 +141,8 @@ def tag_scene_fish(scene: Scene, mesh: FishMesh, nodes: LagrangeNodes) -> FishTa
     """The tags of the scene's mesh: its regions named in ``[regions]`` and ``[[muscles]]``, or the fractions' cells."""
     return tag_fish(mesh, head_fraction=scene.regions.head_fraction, muscle_range=scene.regions.muscle_range,
                     nodes=nodes, head=scene.regions.head, muscles=muscle_regions(scene),
-                    muscle_key="[[muscles]] {} region" if scene.muscles else "[regions] muscles")
+                    muscle_key="[[muscles]] {} region" if scene.muscles else "[regions] muscles",
+                    fallback=not scene.muscles)      # regions named in tables must exist
 
 
 def muscle_regions(scene: Scene) -> tuple[str, ...]:

@@ -262,14 +262,14 @@ def centroid_regions(mesh: FishMesh, box: FishBox, tolerance: float, head_fracti
 
 def tag_fish(mesh: FishMesh, head_fraction=0.35, muscle_range=(-0.95, -0.35),
              nodes: LagrangeNodes | None = None, head: str = TAGGED_REGIONS[0],
-             muscles=TAGGED_REGIONS[1:], muscle_key="[regions] muscles") -> FishTags:
+             muscles=TAGGED_REGIONS[1:], muscle_key="[regions] muscles", fallback: bool = True) -> FishTags:
     """All tags of SPEC §3 for a fish mesh (head, muscles, skin, spine, tail, dorsal nodes).
 
     Head and muscles are the mesh's tagged regions (``FishMesh.regions``) named ``head`` and
     ``muscles`` (a pair (left, right), or any number named by ``[[muscles]]``, ``muscle_key``): a
-    mesh with one of them must have all. A mesh with none of them falls back, for a pair, to cell
-    centroids and the fractions, with a warning. Node tags refer to ``nodes`` (default: the
-    vertices, i.e. linear elements).
+    mesh with one of them must have all. A mesh with none of them falls back, for a pair and with
+    ``fallback``, to cell centroids and the fractions, with a warning. Node tags refer to ``nodes``
+    (default: the vertices, i.e. linear elements).
     """
     check_region_fractions(mesh.source, head_fraction, muscle_range)
     nodes = nodes or lagrange_nodes(mesh, 1)
@@ -278,7 +278,7 @@ def tag_fish(mesh: FishMesh, head_fraction=0.35, muscle_range=(-0.95, -0.35),
     spine_nodes = _spine(mesh, nodes, box, tolerance)
     spine_segments = np.column_stack([spine_nodes[:-1], spine_nodes[1:]])
     names = (head, *muscles)
-    if is_tagged(mesh, names) or len(muscles) != 2:
+    if is_tagged(mesh, names) or len(muscles) != 2 or not fallback:
         head_cells, *muscle_cells = tagged_regions(mesh, names, muscle_key)
     else:
         head_cells, *muscle_cells = centroid_regions(mesh, box, tolerance, head_fraction, muscle_range, names)

@@ -220,3 +220,13 @@ def test_muscle_pairs_with_a_mesh_file_is_one_line_and_exit_code_2(tmp_path, cap
     scene.write_text('[mesh]\nfile = "body.msh"\n[regions]\nmuscle_pairs = 2\n')
     assert main(["mesh", str(scene)]) == 2
     assert "muscle_pairs = 2 splits the built-in block's muscles" in one_line(capsys)
+
+
+def test_muscle_tables_on_a_mesh_without_regions_are_refused(paired_block):
+    """The centroid rule chooses the pair of [regions] muscles only: a table's region must exist."""
+    from aquarom_fenics.geometry.mesh import FishMesh
+
+    untagged = FishMesh(points=paired_block.points, cells=paired_block.cells, source="untagged")
+    with pytest.raises(InputError, match=r"no region 'head' \(\[regions\] head\); its regions are none"):
+        tag_fish(untagged, muscles=("a", "b"), muscle_key="[[muscles]] {} region", fallback=False)
+    assert len(tag_fish(untagged).muscle_cells) == 2          # the pair: by centroid, as before
