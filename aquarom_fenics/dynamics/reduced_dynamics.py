@@ -18,6 +18,7 @@ from threadpoolctl import ThreadpoolController
 
 from aquarom_fenics.dynamics.integrator import IntegrationStopped, NewtonSettings, StepReport, TimeScheme, integrate
 from aquarom_fenics.fem.time_scheme import between
+from aquarom_fenics.physics.muscle import ActivationLaw
 from aquarom_fenics.reduction.prom import ReducedModel
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.dynamics.trajectory import (Trajectory, swimming_distance, tail_amplitude, window_mask,
@@ -54,7 +55,7 @@ class ReducedSystem:
         self.elastic = prom.elastic.at(d)
         self.inertia = prom.inertia.at(d, prom.elastic.linear, self.elastic.k1)
         self.muscle = prom.muscle.at(d, scene.actuation.amplitude if amplitude is None else amplitude,
-                                     scene.actuation.frequency, scene.actuation.start_ramp)
+                                     ActivationLaw.of(scene))
         self.thrust = prom.thrust.at(d, scene.fluid.spine_force) if prom.thrust is not None else None
         self.drag = prom.drag.at(d) if prom.drag is not None else None
         self.terms = [term for term in (self.elastic, self.muscle, self.inertia, self.thrust, self.drag)

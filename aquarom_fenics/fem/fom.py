@@ -322,11 +322,11 @@ class FullOrderModel:
         """solver⁻¹ rhs; SolverError if PETSc fails or the solve diverges (a failed factorisation)."""
         return solve_into(solver, rhs, self._work_in, self._work_out)
 
-    def static_response(self, left: float, right: float, tolerance: float = 1e-10,
+    def static_response(self, *activations: float, tolerance: float = 1e-10,
                         max_iterations: int = 30, start: np.ndarray | None = None) -> np.ndarray:
-        """u solving f_int(u) = f_act(u) for fixed activations, head clamped (full Newton from ``start``,
-        default rest)."""
-        self.muscle.set_activations((left, right))
+        """u solving f_int(u) = f_act(u) for fixed activations (a_1, …, a_N; the pair: left, right), head
+        clamped (full Newton from ``start``, default rest)."""
+        self.muscle.set_activations(activations)
         solver = mumps_solver(self.comm)
         u = np.zeros(self.n_owned_dofs) if start is None else np.array(start, dtype=float)
         try:
@@ -344,7 +344,7 @@ class FullOrderModel:
         finally:
             solver.destroy()
         raise SolverError(f"static solve did not converge in {max_iterations} iterations "
-                          f"(activations left {left}, right {right})")
+                          f"(activations {', '.join(f'{value:g}' for value in activations)})")
 
     def destroy(self) -> None:
         """Release the PETSc matrices, vectors and solvers of the model, its Newton system and its

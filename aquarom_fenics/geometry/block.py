@@ -70,10 +70,18 @@ def _snap_to_box(points: np.ndarray, lower: np.ndarray, upper: np.ndarray, x_pla
     return snapped
 
 
-def region_planes(length: float, head_fraction: float, muscle_range) -> np.ndarray:
+def muscle_segment_ends(length: float, muscle_range, pairs: int = 1) -> np.ndarray:
+    """x [m] of the ends of the ``pairs`` equal segments of the muscle range, tail to head (pairs + 1 values)."""
+    rear, front = (bound * length for bound in muscle_range)
+    inner = [rear + k * (front - rear) / pairs for k in range(1, pairs)]
+    return np.array([rear, *inner, front])
+
+
+def region_planes(length: float, head_fraction: float, muscle_range, pairs: int = 1) -> np.ndarray:
     """Sorted x positions (m, head face at x = 0) of the region interfaces inside the box: the head's
-    rear face x = -head_fraction L and the muscles' ends x = muscle_range L (SPEC §2–§3)."""
-    planes = {-head_fraction * length, *(bound * length for bound in muscle_range)}
+    rear face x = -head_fraction L, the muscles' ends x = muscle_range L (SPEC §2–§3) and, with
+    ``pairs`` > 1, the ends of the muscle segments."""
+    planes = {-head_fraction * length, *muscle_segment_ends(length, muscle_range, pairs).tolist()}
     inside = [x for x in planes if -length < x < 0.0]
     return np.array(sorted(inside))
 
@@ -147,12 +155,20 @@ def _mirrored(points: np.ndarray, cells: np.ndarray, axis: int) -> tuple[np.ndar
     return np.vstack([points, mirror_points]), np.vstack([cells, mirror_cells])
 
 
+def block_region_names(pairs: int = 1) -> tuple[str, ...]:
+    """The regions of the block: head, the muscles left_muscle and right_muscle and, with ``pairs`` > 1,
+    their segments left_1 … left_n, right_1 … right_n (numbered from the tail)."""
+    segments = [f"{side}_{k}" for side in ("left", "right") for k in range(1, pairs + 1)] if pairs > 1 else []
+    return ("head", "left_muscle", "right_muscle", *segments)
+
+
 def _generate_block(level: int, length: float, width: float, height: float, head_fraction: float = 0.35,
-                    muscle_range=(-0.95, -0.35)):
+                    muscle_range=(-0.95, -0.35), pairs: int = 1):
     """(points, cells, regions) of the block: the gmsh quarter mirrored in y, then in z; ``regions``
-    maps "head", "left_muscle" (y > 0) and "right_muscle" (y < 0) to sorted cell indices."""
+    maps "head", "left_muscle" (y > 0) and "right_muscle" (y < 0) and the segments of
+    :func:`block_region_names` to sorted cell indices."""
     size = block_mesh_size(level, length, width, height)
-    planes = region_planes(length, head_fraction, muscle_range)
+    planes = region_planes(length, head_fraction, muscle_range, pairs)
     points, cells, quarter_regions = _quarter_block(size, length, width, height, planes, head_fraction, muscle_range)
     lower = np.array([-length, 0.0, 0.0])
     upper = np.array([0.0, width / 2, height / 2])
@@ -167,21 +183,27 @@ def _generate_block(level: int, length: float, width: float, height: float, head
     regions = {"head": np.flatnonzero(region == QUARTER_REGIONS.index("head")),
                "left_muscle": np.flatnonzero(muscle & left_half),
                "right_muscle": np.flatnonzero(muscle & ~left_half)}
+    if pairs > 1:                # the mesh conforms to the segments: each cell's centroid is inside one
+        segment = np.searchsorted(muscle_segment_ends(length, muscle_range, pairs), points[cells].mean(axis=1)[:, 0])
+        for k in range(1, pairs + 1):
+            regions[f"left_{k}"] = np.flatnonzero(muscle & left_half & (segment == k))
+            regions[f"right_{k}"] = np.flatnonzero(muscle & ~left_half & (segment == k))
     return points, cells, regions
 
 
 def block_cache_path(level: int, length: float, width: float, height: float, cache_dir: Path | None = None,
-                     head_fraction: float = 0.35, muscle_range=(-0.95, -0.35)) -> Path:
+                     head_fraction: float = 0.35, muscle_range=(-0.95, -0.35), pairs: int = 1) -> Path:
     """Where :func:`block_mesh` caches a level (whether or not it exists yet)."""
-    return _block_cache_path(cache_dir or mesh_cache(), level, length, width, height, head_fraction, muscle_range)
+    return _block_cache_path(cache_dir or mesh_cache(), level, length, width, height, head_fraction, muscle_range,
+                             pairs)
 
 
 def _block_cache_path(cache_dir: Path, level: int, length: float, width: float, height: float,
-                      head_fraction: float, muscle_range):
+                      head_fraction: float, muscle_range, pairs: int = 1):
     rear, front = muscle_range
     name = (
         f"block_level{level}_L{length:.9g}_W{width:.9g}_H{height:.9g}"
-        f"_head{head_fraction:.9g}_muscles{rear:.9g}_{front:.9g}"
+        f"_head{head_fraction:.9g}_muscles{rear:.9g}_{front:.9g}" + (f"_pairs{pairs}" if pairs > 1 else "") +
         f"_gmsh{gmsh_version()}_recipe{BLOCK_MESH_RECIPE}.npz"
     )
     return cache_dir / name
@@ -197,8 +219,9 @@ def _save_block(mesh, path: Path) -> None:
                             **{_REGION_KEY + name: indices for name, indices in regions.items()}})
 
 
-def _load_cached_block(path: Path):
-    """(points, cells, regions) from a cache file; ValueError if it is not a valid tagged mesh."""
+def _load_cached_block(path: Path, names=block_region_names()):
+    """(points, cells, regions) from a cache file; ValueError if it is not a valid tagged mesh with the
+    regions ``names``."""
     try:
         with np.load(path, allow_pickle=False) as data:
             points = np.array(data["points"], dtype=float)
@@ -216,7 +239,7 @@ def _load_cached_block(path: Path):
         and np.all(np.isfinite(points))
         and cells.min() >= 0
         and cells.max() < len(points)
-        and set(regions) == {"head", "left_muscle", "right_muscle"}
+        and set(regions) == set(names)
         and all(indices.ndim == 1 and len(indices) > 0 and indices.min() >= 0 and indices.max() < len(cells)
                 for indices in regions.values())
     )
@@ -233,11 +256,13 @@ def block_mesh(
     cache_dir: Path | None = None,
     head_fraction: float = 0.35,
     muscle_range=(-0.95, -0.35),
+    pairs: int = 1,
 ) -> FishMesh:
     """The box x ∈ [-L, 0], y ∈ [-W/2, W/2], z ∈ [-H/2, H/2] (m) meshed with linear tetrahedra that
     conform to the regions (SPEC §3): the head x ≥ -head_fraction L and the muscles
     muscle_range[0] L < x < muscle_range[1] L, left (y > 0) and right (y < 0), are tagged cell sets
-    (``FishMesh.regions``) whose interfaces are faces of the mesh.
+    (``FishMesh.regions``) whose interfaces are faces of the mesh; with ``pairs`` > 1 the muscles'
+    x-range is split into that many equal segments, tagged too (:func:`block_region_names`).
 
     The mesh is mirror-symmetric about y = 0 and z = 0 and has nodes on the body axis y = z = 0
     from x = -L to x = 0, equally spaced between the interface planes (h: `block_mesh_size`). The
@@ -250,13 +275,14 @@ def block_mesh(
     level = int(level)
     head_fraction, muscle_range = float(head_fraction), tuple(float(bound) for bound in muscle_range)
     cache_dir = mesh_cache() if cache_dir is None else Path(cache_dir)
-    cache_path = _block_cache_path(cache_dir, level, length, width, height, head_fraction, muscle_range)
+    cache_path = _block_cache_path(cache_dir, level, length, width, height, head_fraction, muscle_range, pairs)
 
     def not_cached(error: OSError) -> None:
         warnings.warn(f"block mesh not cached in {cache_dir}: {error}", stacklevel=4)
 
     points, cells, regions = get_or_compute(
-        cache_path, lambda: _generate_block(level, length, width, height, head_fraction, muscle_range),
-        save=_save_block, load=_load_cached_block, label="mesh cache", on_store_error=not_cached)
+        cache_path, lambda: _generate_block(level, length, width, height, head_fraction, muscle_range, pairs),
+        save=_save_block, load=lambda path: _load_cached_block(path, block_region_names(pairs)), label="mesh cache",
+        on_store_error=not_cached)
     source = f"block level {level} (L={length:g} m, W={width:g} m, H={height:g} m)"
     return FishMesh(points=points, cells=cells, source=source, regions=regions)

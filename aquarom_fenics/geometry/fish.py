@@ -13,7 +13,7 @@ from mpi4py import MPI
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.fem import dolfinx_adapter as fx
-from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS, block_cache_path, block_mesh
+from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS, block_cache_path, block_mesh, block_region_names
 from aquarom_fenics.geometry.body import AXES, block_lines, body_lines, check_body_length, in_swimming_frame
 from aquarom_fenics.geometry.mesh import FishMesh, LagrangeNodes, lagrange_nodes
 from aquarom_fenics.geometry.mesh_files import read_mesh
@@ -125,6 +125,9 @@ def load_mesh(scene: Scene) -> FishMesh:
     declared, or inferred from the head region); InputError for a body outside 1 mm–5 m along its
     axis, an ambiguous head end or a head region at the other end than the declared one."""
     axis, head_end = scene.mesh.axis, scene.mesh.head_end
+    if scene.mesh_file is not None and scene.regions.muscle_pairs > 1:
+        raise InputError(f"scene {scene.source}: [regions] muscle_pairs = {scene.regions.muscle_pairs} splits the "
+                         "built-in block's muscles; a mesh file has its own regions: name them in [[muscles]] tables")
     if scene.mesh_file is not None:
         mesh = read_mesh(scene.mesh_file, scale=scene.mesh.scale, translate=scene.mesh.translate)
     else:
@@ -133,26 +136,34 @@ def load_mesh(scene: Scene) -> FishMesh:
                              "built-in block lies along x with its head at +x; axis and head_end describe a mesh file")
         check_body_length(scene.mesh.length, "block", block=True)
         mesh = block_mesh(scene.mesh.level, scene.mesh.length, scene.mesh.width, scene.mesh.height,
-                          head_fraction=scene.regions.head_fraction, muscle_range=scene.regions.muscle_range)
+                          head_fraction=scene.regions.head_fraction, muscle_range=scene.regions.muscle_range,
+                          pairs=scene.regions.muscle_pairs)
         head_end = head_end or "+x"
     check_body_length(float(np.ptp(mesh.points[:, AXES.index(axis)])), mesh.source, axis=axis)
     return in_swimming_frame(mesh, axis, head_end, scene.regions.head)
 
 
 def tag_scene_fish(scene: Scene, mesh: FishMesh, nodes: LagrangeNodes) -> FishTags:
-    """The tags of the scene's mesh: its regions named in ``[regions]``, or the fractions' cells."""
+    """The tags of the scene's mesh: its regions named in ``[regions]`` and ``[[muscles]]``, or the fractions' cells."""
     return tag_fish(mesh, head_fraction=scene.regions.head_fraction, muscle_range=scene.regions.muscle_range,
-                    nodes=nodes, head=scene.regions.head, muscles=scene.regions.muscles,
+                    nodes=nodes, head=scene.regions.head, muscles=muscle_regions(scene),
+                    muscle_key="[[muscles]] {} region" if scene.muscles else "[regions] muscles",
+                    fallback=not scene.muscles,      # regions named in tables must exist
                     require_axis=scene.fluid.stations == "nodes")
+
+
+def muscle_regions(scene: Scene) -> tuple[str, ...]:
+    """The region names of the muscles the scene drives, in their order."""
+    return tuple(muscle.region for muscle in scene.actuated_muscles)
 
 
 def body_summary(scene: Scene, mesh: FishMesh, tags: FishTags) -> list[str]:
     """Length, volume, element count and region volumes of the scene's body (``aquarom mesh``, dry runs)."""
-    head, (left, right) = scene.regions.head, scene.regions.muscles
-    regions = {head: tags.head_cells, left: tags.left_muscle_cells, right: tags.right_muscle_cells}
+    head, muscles = scene.regions.head, muscle_regions(scene)
+    regions = {head: tags.head_cells} | dict(zip(muscles, tags.muscle_cells))
     regions |= {name: cells for name, cells in mesh.regions.items() if name not in regions}
-    how = ("tagged" if is_tagged(mesh, (head, left, right))
-           else f"head and muscles chosen by cell centroid: the mesh has no region {head}, {left} or {right}")
+    how = ("tagged" if is_tagged(mesh, (head, *muscles))
+           else f"head and muscles chosen by cell centroid: the mesh has no region {head}, {', '.join(muscles)}")
     return body_lines(mesh, regions, how)
 
 
@@ -164,8 +175,9 @@ def planned_body(scene: Scene) -> tuple[list[str], int]:
         mesh = scene.mesh
         cached = block_cache_path(mesh.level, mesh.length, mesh.width, mesh.height,
                                   head_fraction=scene.regions.head_fraction,
-                                  muscle_range=scene.regions.muscle_range).exists()
+                                  muscle_range=scene.regions.muscle_range, pairs=scene.regions.muscle_pairs).exists()
         if not cached:
+            check_block_muscles(scene)
             check_body_length(mesh.length, "block", block=True)
             cells = LEVEL_TARGET_CELLS[mesh.level]
             return block_lines(mesh.length, mesh.width, mesh.height, scene.regions.head_fraction,
@@ -173,6 +185,23 @@ def planned_body(scene: Scene) -> tuple[list[str], int]:
     body = load_mesh(scene)
     tags = tag_scene_fish(scene, body, lagrange_nodes(body, scene.mesh.degree))
     return body_summary(scene, body, tags), len(body.cells)
+
+
+def check_block_muscles(scene: Scene) -> None:
+    """InputError naming a ``[[muscles]]`` region the block has not (the block's regions are known
+    before it is meshed: :func:`block_region_names`)."""
+    names = block_region_names(scene.regions.muscle_pairs)
+    for number, muscle in enumerate(scene.muscles, start=1):
+        if muscle.region not in names:
+            raise InputError(f"scene {scene.source}: [[muscles]] {number} region '{muscle.region}' is no region of "
+                             f"the block (with [regions] muscle_pairs = {scene.regions.muscle_pairs}: "
+                             f"{', '.join(names[1:])})")
+    named = [muscle.region for muscle in scene.muscles]
+    for side in ("left", "right"):          # a side's muscle is the union of its segments
+        segments = [name for name in named if name.startswith(f"{side}_") and name != f"{side}_muscle"]
+        if f"{side}_muscle" in named and segments:
+            raise InputError(f"block: the regions {side}_muscle and {segments[0]} overlap; head and muscles must "
+                             "be disjoint sets of cells (name the segments or their union)")
 
 
 def load_fish(scene: Scene, comm: MPI.Comm = MPI.COMM_WORLD) -> Fish:

@@ -82,6 +82,7 @@ class FishTags:
     tail_node: int | None  # spine node at x_rel = -L (None without axis nodes)
     head_spine_node: int | None  # spine node at x_rel = 0 (None without axis nodes)
     dorsal_nodes: np.ndarray  # (n_segments,) skin node on y_rel = 0, z_rel > 0, x nearest rear
+    muscle_cells: tuple = ()  # cells of each driven muscle, in the order of the scene's muscles
 
     @property
     def has_spine(self) -> bool:
@@ -213,23 +214,36 @@ def is_tagged(mesh: FishMesh, names=TAGGED_REGIONS) -> bool:
     return any(len(mesh.regions.get(name, ())) for name in names)
 
 
-def tagged_regions(mesh: FishMesh, names=TAGGED_REGIONS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(head, left muscle, right muscle) cells of a tagged mesh: its regions ``names`` = (head, left,
-    right), checked; InputError naming the missing region and the regions the mesh has."""
+def tagged_regions(mesh: FishMesh, names=TAGGED_REGIONS, muscle_key="[regions] muscles") -> tuple[np.ndarray, ...]:
+    """(head, muscle 1, muscle 2, …) cells of a tagged mesh: its regions ``names`` = (head, muscles…),
+    checked; InputError naming the missing region (``muscle_key``: the scene key that names the
+    muscles, "{}" replaced by the muscle's number) and the regions the mesh has, or two that overlap."""
     names = tuple(names)
-    keys = ("[regions] head", "[regions] muscles", "[regions] muscles")
+    keys = ["[regions] head"] + [muscle_key.format(number) for number in range(1, len(names))]
     for name, key in zip(names, keys):
         if len(mesh.regions.get(name, ())) == 0:
             present = ", ".join(f"'{region}'" for region in mesh.regions if len(mesh.regions[region])) or "none"
             raise InputError(f"mesh {mesh.source}: no region '{name}' ({key}); its regions are {present}")
-    head, left, right = (np.unique(np.asarray(mesh.regions[name], dtype=np.int64)) for name in names)
-    for name, cells in zip(names, (head, left, right)):
+    regions = [np.unique(np.asarray(mesh.regions[name], dtype=np.int64)) for name in names]
+    for name, cells in zip(names, regions):
         if cells.min() < 0 or cells.max() >= len(mesh.cells):
             raise InputError(f"mesh {mesh.source}: region {name} names cells outside the mesh")
-    if len(np.intersect1d(head, np.union1d(left, right))) or len(np.intersect1d(left, right)):
-        raise InputError(f"mesh {mesh.source}: the regions {', '.join(names)} overlap; head and muscles must "
-                         "be disjoint sets of cells")
-    return head, left, right
+    for i, j in ((i, j) for j in range(len(names)) for i in range(j)):
+        if len(np.intersect1d(regions[i], regions[j])):
+            raise InputError(f"mesh {mesh.source}: the regions {names[i]} and {names[j]} overlap; head and muscles "
+                             "must be disjoint sets of cells")
+    return tuple(regions)
+
+
+def muscle_sides(box: FishBox, centroids, muscles) -> tuple[np.ndarray, np.ndarray]:
+    """(left, right) cells of the muscles (pictures and messages): a pair is (left, right) in its order;
+    of any other number, each muscle whose cells' mean y_rel is ≥ 0 is on the left, the others on the right."""
+    if len(muscles) == 2:
+        return muscles[0], muscles[1]
+    left = [cells for cells in muscles if box.relative(centroids[cells])[:, 1].mean() >= 0.0]
+    right = [cells for cells in muscles if box.relative(centroids[cells])[:, 1].mean() < 0.0]
+    joined = (np.unique(np.concatenate(side)) if side else np.zeros(0, dtype=np.int64) for side in (left, right))
+    return tuple(joined)
 
 
 def centroid_regions(mesh: FishMesh, box: FishBox, tolerance: float, head_fraction, muscle_range,
@@ -274,15 +288,17 @@ def _optional_spine(mesh: FishMesh, nodes: LagrangeNodes, box: FishBox, toleranc
 
 def tag_fish(mesh: FishMesh, head_fraction=0.35, muscle_range=(-0.95, -0.35),
              nodes: LagrangeNodes | None = None, head: str = TAGGED_REGIONS[0],
-             muscles=TAGGED_REGIONS[1:], require_axis: bool = False) -> FishTags:
+             muscles=TAGGED_REGIONS[1:], muscle_key="[regions] muscles", fallback: bool = True,
+             require_axis: bool = False) -> FishTags:
     """All tags of SPEC §3 for a fish mesh (head, muscles, skin, and where the mesh has nodes on its
     axis the spine, tail, head spine and dorsal nodes).
 
     Head and muscles are the mesh's tagged regions (``FishMesh.regions``) named ``head`` and
-    ``muscles`` = (left, right): a mesh with one of them must have all three. A mesh with none of
-    them falls back to cell centroids and the fractions, with a warning. Node tags refer to
-    ``nodes`` (default: the vertices, i.e. linear elements). ``require_axis``: refuse a mesh without
-    a spine (``[fluid] stations = "nodes"``); otherwise its spine and dorsal nodes are empty.
+    ``muscles`` (a pair (left, right), or any number named by ``[[muscles]]``, ``muscle_key``): a
+    mesh with one of them must have all. A mesh with none of them falls back, for a pair and with
+    ``fallback``, to cell centroids and the fractions, with a warning. Node tags refer to ``nodes``
+    (default: the vertices, i.e. linear elements). ``require_axis``: refuse a mesh without a spine
+    (``[fluid] stations = "nodes"``); otherwise its spine and dorsal nodes are empty.
     """
     check_region_fractions(mesh.source, head_fraction, muscle_range)
     nodes = nodes or lagrange_nodes(mesh, 1)
@@ -293,11 +309,11 @@ def tag_fish(mesh: FishMesh, head_fraction=0.35, muscle_range=(-0.95, -0.35),
     spine_nodes, dorsal_nodes = _optional_spine(mesh, nodes, box, tolerance, skin_nodes, require_axis)
     spine_segments = np.column_stack([spine_nodes[:-1], spine_nodes[1:]])
     names = (head, *muscles)
-    if is_tagged(mesh, names):
-        head_cells, left_muscle_cells, right_muscle_cells = tagged_regions(mesh, names)
+    if is_tagged(mesh, names) or len(muscles) != 2 or not fallback:
+        head_cells, *muscle_cells = tagged_regions(mesh, names, muscle_key)
     else:
-        head_cells, left_muscle_cells, right_muscle_cells = centroid_regions(mesh, box, tolerance, head_fraction,
-                                                                             muscle_range, names)
+        head_cells, *muscle_cells = centroid_regions(mesh, box, tolerance, head_fraction, muscle_range, names)
+    left_muscle_cells, right_muscle_cells = muscle_sides(box, cell_centroids(mesh.points, mesh.cells), muscle_cells)
     return FishTags(
         box=box,
         tolerance=tolerance,
@@ -312,4 +328,5 @@ def tag_fish(mesh: FishMesh, head_fraction=0.35, muscle_range=(-0.95, -0.35),
         tail_node=int(spine_nodes[0]) if spine_nodes.size else None,
         head_spine_node=int(spine_nodes[-1]) if spine_nodes.size else None,
         dorsal_nodes=dorsal_nodes,
+        muscle_cells=tuple(muscle_cells),
     )

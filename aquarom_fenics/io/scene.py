@@ -22,9 +22,10 @@ from aquarom_fenics.errors import InputError
 from aquarom_fenics.parallel.settings import ClusterSettings, cluster_from_table
 from aquarom_fenics.io.paths import shipped_meshes, shipped_scenes
 from aquarom_fenics.io.scene_sections import (SECTIONS, ActuationSection, CooptimizationSection, FluidSection,
-                                              LinearConstraint, MaterialSection, MeshSection, OptimizerSection,
-                                              OutputSection, ReductionSection, RegionsSection, ShapeSpec,
-                                              SolverSection, at_legacy, legacy_values)
+                                              LinearConstraint, MaterialSection, MeshSection, MuscleSpec,
+                                              OptimizerSection, OutputSection, ReductionSection, RegionsSection,
+                                              ShapeSpec, SolverSection, at_legacy, legacy_values)
+from aquarom_fenics.io.scene_muscles import default_muscles, muscles_from_list
 
 SCENES_DIR = shipped_scenes()
 
@@ -43,6 +44,8 @@ class Scene:
     regions: RegionsSection = RegionsSection()
     actuation: ActuationSection = ActuationSection()
     fluid: FluidSection = FluidSection()
+    muscles: tuple[MuscleSpec, ...] = ()
+    """The ``[[muscles]]`` tables; empty: the antagonist pair of ``[regions] muscles`` (:attr:`actuated_muscles`)."""
     shapes: tuple[ShapeSpec, ...] = ()
     constraints: tuple[LinearConstraint, ...] = ()
     solver: SolverSection = SolverSection()
@@ -75,6 +78,11 @@ class Scene:
         return scene_from_dict(data, source=str(path), base_dir=str(path.parent))
 
     @property
+    def actuated_muscles(self) -> tuple[MuscleSpec, ...]:
+        """The muscles the models drive: the ``[[muscles]]`` tables, or the default antagonist pair."""
+        return self.muscles or default_muscles(self.regions)
+
+    @property
     def shape_names(self) -> list[str]:
         return [shape.name for shape in self.shapes]
 
@@ -104,6 +112,8 @@ class Scene:
         data.pop("source")
         data.pop("base_dir")
         data.pop("cluster")
+        if not self.muscles:
+            data.pop("muscles")       # the scenes without [[muscles]] keep their hash
         if self.mesh_file is not None:
             data["mesh"]["file"] = str(self.mesh_file)
         return data
@@ -121,6 +131,8 @@ class Scene:
         actuation, fluid, solver and the shape names; not the bounds, reduction, optimiser or output."""
         data = self._hashed_dict()
         selected = {section: data[section] for section in FOM_SECTIONS}
+        if "muscles" in data:
+            selected["muscles"] = data["muscles"]
         return self._digest(selected | {"shapes": [shape.name for shape in self.shapes]})
 
     def _hashed_dict(self) -> dict[str, Any]:
@@ -159,6 +171,9 @@ class Scene:
             radius = "" if shape.radius is None else f", radius = {_toml_value(shape.radius)}"
             lines.append(f"{shape.name} = {{ bounds = [{_toml_value(shape.lower)}, {_toml_value(shape.upper)}], "
                          f"start = {_toml_value(shape.start)}{radius} }}")
+        for muscle in self.muscles:
+            lines += ["\n[[muscles]]"] + [f"{key} = {_toml_value(value)}" for key, value in
+                                           dataclasses.asdict(muscle).items() if value is not None]
         for constraint in self.constraints:
             lines.append("\n[[constraints]]")
             lines.append("coefficients = { " + ", ".join(f"{name} = {_toml_value(value)}"
@@ -245,7 +260,7 @@ def _nesting_depth(text: str) -> int:
 
 def scene_from_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str = ".") -> Scene:
     where = f"scene {source}"
-    known = {"name", "description", "shapes", "constraints", "cluster", *SECTIONS}
+    known = {"name", "description", "shapes", "constraints", "muscles", "cluster", *SECTIONS}
     for key in data:
         if key not in known:
             raise InputError(f"{where}: unknown key '{key}'; valid top-level keys: {', '.join(sorted(known))}")
@@ -260,8 +275,9 @@ def scene_from_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str 
     sections = {key: _section_from_dict(cls, _table(data, key, where), where, key) for key, cls in SECTIONS.items()}
     shapes = _shapes_from_dict(_table(data, "shapes", where), where)
     constraints = _constraints_from_list(data.get("constraints", []), shapes, where)
+    muscles = muscles_from_list(data["muscles"], sections["regions"], where) if "muscles" in data else ()
     cluster = cluster_from_table(data.get("cluster", {}), where, base_dir)
-    return Scene(name=name, description=description, source=source, base_dir=base_dir,
+    return Scene(name=name, description=description, source=source, base_dir=base_dir, muscles=muscles,
                  shapes=shapes, constraints=constraints, cluster=cluster, **sections)
 
 

@@ -126,7 +126,22 @@ class RegionsSection:
     head_fraction: float = _spec(0.35, lambda v: None if 0 < v < 1 else "must be in (0, 1)", "head x ≥ -fraction·L: the block's head region, and on a mesh without regions the cells whose centroid lies there")
     muscle_range: tuple[float, float] = _spec((-0.95, -0.35), _interval_within(-1.0, 0.0), "muscles -a·L < x < -b·L, as [-a, -b]: the block's muscle regions, and on a mesh without regions the cells whose centroid lies there")
     head: str = _spec("head", None, "the region (gmsh volume physical group, Abaqus element set) that is the stiff head; head_fraction and muscle_range place the block's regions, and choose the cells of a mesh without regions", coerce=_region_name, legacy="head")
-    muscles: tuple[str, str] = _spec(("left_muscle", "right_muscle"), None, "the two muscle regions [left, right], driven in antiphase (a_left = A sin(2π f t), a_right = -a_left)", coerce=_muscle_pair, legacy=("left_muscle", "right_muscle"))
+    muscles: tuple[str, str] = _spec(("left_muscle", "right_muscle"), None, "the two muscle regions [left, right], driven in antiphase (a_left = A sin(2π f t), a_right = -a_left), when the scene has no [[muscles]] tables", coerce=_muscle_pair, legacy=("left_muscle", "right_muscle"))
+    muscle_pairs: int = _spec(1, lambda v: None if 1 <= v <= 20 else "must be in [1, 20]", "the block's muscle range split along x into this many conforming segments, regions left_1 … left_n and right_1 … right_n from tail to head (left_muscle and right_muscle stay their unions); name them in [[muscles]] tables", legacy=1)
+
+
+@dataclass(frozen=True)
+class MuscleSpec:
+    """One ``[[muscles]]`` table: the muscle's region, its unit fibre direction m_j and its activation
+
+        a_j(t) = A s_j r(t) sin(2π f_j t + φ_j),   A and r(t) of [actuation],
+
+    with the scale s_j, the phase φ_j in degrees and the frequency f_j [Hz] (None: [actuation] frequency)."""
+    region: str
+    fibre: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    scale: float = 1.0
+    phase: float = 0.0
+    frequency: float | None = None
 
 
 @dataclass(frozen=True)

@@ -1,9 +1,11 @@
 """Muscle actuation (SPEC §5): f_act = -∂Π_act/∂u with the muscle energy of ``forms/muscle.py``,
 
-    Π_act = Σ_j ½ k a_j(t) ∫_muscle_j |F_2 m|² dV_ξ,   (a_left, a_right) = A r(t) sin(2π f t) (1, -1),
+    Π_act = Σ_j ½ k a_j(t) ∫_muscle_j |F_2 m_j|² dV_ξ,   a_j(t) = A s_j r(t) sin(2π f_j t + φ_j),
 
-r = 1 (SPEC) or, with ``[actuation] start_ramp`` τ > 0, the smooth start r(t) = sin²(π t / 2τ) for
-t < τ (then a ~ t³ at t = 0 instead of a jump of ȧ that rings the stiff modes).
+over the scene's muscles j (``[[muscles]]``: region, fibre m_j, scale s_j, phase φ_j, frequency f_j;
+without them the antagonist pair (a_left, a_right) = A r(t) sin(2π f t) (1, -1)). r = 1 (SPEC) or,
+with ``[actuation] start_ramp`` τ > 0, the smooth start r(t) = sin²(π t / 2τ) for t < τ (then
+a ~ t³ at t = 0 instead of a jump of ȧ that rings the stiff modes).
 
 The activation law and its derivative in A are written here once, for the full and the reduced
 model. Π_act is linear in each a_j: the reduced force is -Σ_j a_j (b_j + B_j η) with b_j, B_j the
@@ -11,6 +13,7 @@ projected force and tangent of muscle j alone at unit activation.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,37 +38,103 @@ def start_ramp(time: float, ramp_time: float) -> float:
     return float(np.sin(0.5 * np.pi * time / ramp_time) ** 2)
 
 
+@dataclass(frozen=True)
+class ActivationLaw:
+    """a_j(t) = A s_j r(t) sin(2π f_j t + φ_j) of each muscle j (φ_j in radians here)."""
+
+    scales: tuple[float, ...]
+    phases: tuple[float, ...]
+    frequencies: tuple[float, ...]          # Hz
+    ramp_time: float = 0.0                  # τ [s] of r(t)
+
+    @classmethod
+    def antagonist(cls, frequency: float, ramp_time: float = 0.0) -> "ActivationLaw":
+        """The pair (a_left, a_right) = A r(t) sin(2π f t) (1, -1)."""
+        return cls(tuple(ANTAGONIST_PATTERN.tolist()), (0.0, 0.0), (frequency, frequency), ramp_time)
+
+    @classmethod
+    def of(cls, scene) -> "ActivationLaw":
+        """The law of the scene's muscles (``Scene.actuated_muscles``; phases given in degrees)."""
+        muscles, actuation = scene.actuated_muscles, scene.actuation
+        return cls(tuple(muscle.scale for muscle in muscles), tuple(math.radians(muscle.phase) for muscle in muscles),
+                   tuple(actuation.frequency if muscle.frequency is None else muscle.frequency for muscle in muscles),
+                   actuation.start_ramp)
+
+    @property
+    def size(self) -> int:
+        return len(self.scales)
+
+    def unit(self, time: float) -> np.ndarray:
+        """∂a_j/∂A = s_j r(t) sin(2π f_j t + φ_j), one muscle at a time (the pair's values bit for bit)."""
+        ramp = start_ramp(time, self.ramp_time)
+        return np.array([ramp * np.sin(2.0 * np.pi * frequency * time + phase) * scale
+                         for scale, phase, frequency in zip(self.scales, self.phases, self.frequencies)])
+
+    def patterns(self) -> list[np.ndarray]:
+        """The independent activation patterns P_k, with a(t) = A r(t) Σ_k c_k(t) P_k: per frequency f,
+        sin(2π f t + φ_j) = cos φ_j sin(2π f t) + sin φ_j cos(2π f t) gives (s_j cos φ_j) and (s_j sin φ_j)
+        over its muscles. Orthogonalised in turn (Euclidean); a pattern with nothing left is dropped. The
+        first is kept as it is: the pair's is (1, -1)."""
+        candidates = []
+        for frequency in dict.fromkeys(self.frequencies):
+            mask = np.array([f == frequency for f in self.frequencies], dtype=float)
+            candidates += [mask * np.array(self.scales) * np.cos(self.phases),
+                           mask * np.array(self.scales) * np.sin(self.phases)]
+        scale = max(np.linalg.norm(candidate) for candidate in candidates)
+        kept: list[np.ndarray] = []
+        for candidate in candidates:
+            remaining = candidate.copy()
+            for pattern in kept:
+                remaining = remaining - (pattern @ remaining) / (pattern @ pattern) * pattern
+            if np.linalg.norm(remaining) > 1e-9 * scale:
+                kept.append(remaining if kept else candidate)
+        return kept
+
+
 def unit_activations(frequency: float, time: float, ramp_time: float = 0.0) -> np.ndarray:
-    """∂(a_left, a_right)/∂A = r(t) sin(2π f t) (1, -1)."""
-    return start_ramp(time, ramp_time) * np.sin(2.0 * np.pi * frequency * time) * ANTAGONIST_PATTERN
+    """∂(a_left, a_right)/∂A = r(t) sin(2π f t) (1, -1) of the antagonist pair."""
+    return ActivationLaw.antagonist(frequency, ramp_time).unit(time)
 
 
 def activations(amplitude: float, frequency: float, time: float, ramp_time: float = 0.0) -> np.ndarray:
-    """(a_left, a_right) = A r(t) sin(2π f t) (1, -1)."""
+    """(a_left, a_right) = A r(t) sin(2π f t) (1, -1) of the antagonist pair."""
     return amplitude * unit_activations(frequency, time, ramp_time)
 
 
-class MuscleTerm:
-    """The two muscles of one FOM: their activations (constants of the form), force and tangent form.
+def muscle_cells(scene, tags) -> tuple[np.ndarray, ...]:
+    """The cells of each muscle the scene drives (``FishTags.muscle_cells``), checked to be one per muscle."""
+    muscles = scene.actuated_muscles
+    cells = tags.muscle_cells or (tags.left_muscle_cells, tags.right_muscle_cells)
+    if len(cells) != len(muscles):
+        raise ValueError(f"the fish has {len(cells)} muscles and the scene drives {len(muscles)}: "
+                         "load the fish from this scene")
+    return tuple(cells)
 
+
+class MuscleTerm:
+    """The muscles of one FOM: their activations (constants of the form), force and tangent form.
+
+    Muscle j (from 0) is the region number j + 1 of the forms' measure (LEFT, RIGHT for the pair).
     Off (``on`` False, zero force) when the scene's muscle stiffness k or amplitude A is zero.
     """
 
     def __init__(self, fom):
-        scene, tags = fom.scene, fom.fish.tags
+        scene = fom.scene
         self.fom = fom
-        self.amplitude, self.frequency = scene.actuation.amplitude, scene.actuation.frequency
-        self.ramp_time = scene.actuation.start_ramp
+        self.amplitude, self.law = scene.actuation.amplitude, ActivationLaw.of(scene)
         self.on = scene.actuation.stiffness > 0 and scene.actuation.amplitude > 0
-        self._activations = [fx.constant(fom.mesh, 0.0), fx.constant(fom.mesh, 0.0)]
-        muscles = fx.cell_measure(fom.mesh, {LEFT: tags.left_muscle_cells, RIGHT: tags.right_muscle_cells})
-        self.measures = [muscles(LEFT), muscles(RIGHT)]
+        cells = muscle_cells(scene, fom.fish.tags)
+        self._activations = [fx.constant(fom.mesh, 0.0) for _ in cells]
+        muscles = fx.cell_measure(fom.mesh, {number: region for number, region in enumerate(cells, start=LEFT)})
+        self.measures = [muscles(number) for number in range(LEFT, LEFT + len(cells))]
+        self.fibres = [muscle.fibre for muscle in scene.actuated_muscles]
         self.negative_force_form = self.tangent_form = None
         if self.on:
             u = fom.displacement
             energy = fom.stiffness_rule(muscle_energy(
                 u, fom.shape_gradients["stiffness"], fx.constant(fom.mesh, scene.actuation.stiffness),
-                self._activations, self.measures, nominal_volume=scene.actuation.muscle_volume == "nominal"))
+                self._activations, self.measures, nominal_volume=scene.actuation.muscle_volume == "nominal",
+                fibres=self.fibres))
             self.negative_force_form = ufl.derivative(energy, u, fom.test_function)
             self.tangent_form = ufl.derivative(self.negative_force_form, u, fom.trial_function)
             self._negative_force = fx.compile_form(self.negative_force_form)
@@ -77,13 +146,15 @@ class MuscleTerm:
             self._vector.destroy()
 
     def set_activations(self, values) -> None:
-        """(a_left, a_right) of the forms."""
+        """(a_1, …, a_N) of the forms (the pair: (a_left, a_right)); ValueError for another number."""
+        if len(values) != len(self._activations):
+            raise ValueError(f"{len(values)} activations for {len(self._activations)} muscles")
         for constant, value in zip(self._activations, values):
             constant.value = value
 
     def set_time(self, time: float) -> None:
         """The activations of the scene's law at time t."""
-        self.set_activations(activations(self.amplitude, self.frequency, time, self.ramp_time))
+        self.set_activations(self.amplitude * self.law.unit(time))
 
     def force(self) -> np.ndarray:
         """f_act = -∂Π_act/∂u at the FOM's displacement and the current activations [N]."""
@@ -94,9 +165,9 @@ class MuscleTerm:
     def reduce(self, projector) -> "MuscleTensors":
         """b_j = Vᵀ ∂Π_act,j/∂u and B_j = Vᵀ ∂²Π_act,j/∂u² V at rest, a_j = 1 (zero when off), with
         their Taylor terms in ξ, sampled (:func:`sampled_muscle_tensors`)."""
-        m = projector.vectors.shape[1]
+        m, n = projector.vectors.shape[1], len(self.measures)
         if not self.on:
-            return MuscleTensors(Taylor(np.zeros((2, m))), Taylor(np.zeros((2, m, m))))
+            return MuscleTensors(Taylor(np.zeros((n, m))), Taylor(np.zeros((n, m, m))))
         return sampled_muscle_tensors(self.fom, projector)
 
 
@@ -110,30 +181,35 @@ def sampled_muscle_tensors(fom, projector) -> "MuscleTensors":
         B_j,ik = Π_j(V_i + V_k) - Π_j(0) - b_j,i - b_j,k - ½ (B_j,ii + B_j,kk),
 
     each Π_j the FOM's quadrature sum Σ_c Σ_q ω_q |det J_c| ψ over muscle j's cells, and its ξ-derivatives
-    (UFL derivatives of ψ along the shape directions) in the same evaluations.
+    (UFL derivatives of ψ along the shape directions) in the same evaluations; ψ has muscle j's fibre
+    (one compiled expression per fibre direction).
     """
     scene, vectors = fom.scene, projector.vectors
     m, p, order = vectors.shape[1], projector.n_parameters, projector.order
     sample = fx.new_function(fom.space, "muscle_sample")
-    density = muscle_energy_density(sample, fom.shape_gradients["stiffness"],
-                                    fx.constant(fom.mesh, scene.actuation.stiffness),
-                                    nominal_volume=scene.actuation.muscle_volume == "nominal")
     directions = [fom.shape_direction(f"muscle_direction_{k}") for k in range(p if order >= 1 else 0)]
     for k, direction in enumerate(directions):
         direction.set_parameter(k)
-    first = [fom.shape_derivative(density, direction) for direction in directions]
     pairs = [(k, l) for k in range(p) for l in range(k, p)] if order >= 2 else []
-    second = [fom.shape_derivative(first[k], directions[l]) for k, l in pairs]
     degree = fom.quadrature_degrees["stiffness"]
-    expression = fx.compile_quadrature_expression(
-        abs(ufl.JacobianDeterminant(fom.mesh)) * ufl.as_vector([density] + first + second), degree)
     reference_weights = fx.quadrature_rule(degree)[1]
-    n_terms = 1 + len(first) + len(second)
+    n_terms = 1 + len(directions) + len(pairs)
     # the sampled terms: [value, ∂/∂ξ_k (k < p), ∂²/∂ξ_k∂ξ_l (the pairs k ≤ l)], by derivative indices
-    column = {indices: n for n, indices in enumerate([()] + [(k,) for k in range(len(first))] + pairs)}
-    tags = fom.fish.tags
+    column = {indices: n for n, indices in enumerate([()] + [(k,) for k in range(len(directions))] + pairs)}
 
-    def energies(cells, displacement):        # (Π, ∂Π/∂ξ_k, ∂²Π/∂ξ_k∂ξ_l) at u
+    def compiled(fibre):          # the terms' expression for one fibre direction
+        density = muscle_energy_density(sample, fom.shape_gradients["stiffness"],
+                                        fx.constant(fom.mesh, scene.actuation.stiffness),
+                                        nominal_volume=scene.actuation.muscle_volume == "nominal", fibre=fibre)
+        first = [fom.shape_derivative(density, direction) for direction in directions]
+        second = [fom.shape_derivative(first[k], directions[l]) for k, l in pairs]
+        return fx.compile_quadrature_expression(
+            abs(ufl.JacobianDeterminant(fom.mesh)) * ufl.as_vector([density] + first + second), degree)
+
+    fibres = [tuple(muscle.fibre) for muscle in scene.actuated_muscles]
+    expressions = {fibre: compiled(fibre) for fibre in dict.fromkeys(fibres)}
+
+    def energies(expression, cells, displacement):        # (Π, ∂Π/∂ξ_k, ∂²Π/∂ξ_k∂ξ_l) at u
         fx.set_owned_values(sample, displacement)
         values = fx.evaluate_expression(expression, cells).reshape(cells.size, reference_weights.size, n_terms)
         return np.einsum("cqt,q->t", values, reference_weights)
@@ -142,9 +218,10 @@ def sampled_muscle_tensors(fom, projector) -> "MuscleTensors":
     pair_list = [(i, k) for i in range(m) for k in range(i + 1, m)]
     shifts += [vectors[:, i] + vectors[:, k] for i, k in pair_list]
     constants, linears = [], []
-    for muscle_cells in (tags.left_muscle_cells, tags.right_muscle_cells):
-        cells = fx.owned_cells_among(fom.mesh, muscle_cells)
-        sampled = np.stack([energies(cells, np.zeros(fom.n_owned_dofs))] + [energies(cells, u) for u in shifts])
+    for region, fibre in zip(muscle_cells(scene, fom.fish.tags), fibres):
+        cells, expression = fx.owned_cells_among(fom.mesh, region), expressions[fibre]
+        sampled = np.stack([energies(expression, cells, np.zeros(fom.n_owned_dofs))]
+                           + [energies(expression, cells, u) for u in shifts])
         sampled = fom.comm.allreduce(sampled, op=MPI.SUM)
         rest, plus, minus, both = sampled[0], sampled[1: 1 + m], sampled[1 + m: 1 + 2 * m], sampled[1 + 2 * m:]
         gradient = (plus - minus) / 2.0                                                   # (m, n_terms)
@@ -164,35 +241,36 @@ def sampled_muscle_tensors(fom, projector) -> "MuscleTensors":
 class MuscleTensors:
     """The reduced muscles: f_act,r = -Σ_j a_j (b_j + B_j η)."""
 
-    constant: Taylor                     # b_j (2, m): ∂Π_act,j/∂u at rest for a_j = 1 (left, right)
-    linear: Taylor                       # B_j (2, m, m): ∂²Π_act,j/∂u² for a_j = 1
+    constant: Taylor                     # b_j (N, m): ∂Π_act,j/∂u at rest for a_j = 1 (the pair: left, right)
+    linear: Taylor                       # B_j (N, m, m): ∂²Π_act,j/∂u² for a_j = 1
 
-    def at(self, delta: np.ndarray, amplitude: float, frequency: float, ramp_time: float = 0.0) -> "ReducedMuscle":
-        return ReducedMuscle(self, delta, amplitude, frequency, ramp_time)
+    def at(self, delta: np.ndarray, amplitude: float, law: ActivationLaw) -> "ReducedMuscle":
+        return ReducedMuscle(self, delta, amplitude, law)
 
 
 class ReducedMuscle:
     """The reduced muscles at one design ξ and amplitude A (a :class:`ReducedTerm`).
 
-    B_j and ∂B_j/∂ξ_k are kept flat, (2, m²) and (p, 2, m²), to contract Σ_j a_j B_j as one product.
+    B_j and ∂B_j/∂ξ_k are kept flat, (N, m²) and (p, N, m²), to contract Σ_j a_j B_j as one product.
     """
 
-    def __init__(self, tensors: MuscleTensors, delta: np.ndarray, amplitude: float, frequency: float,
-                 ramp_time: float = 0.0):
+    def __init__(self, tensors: MuscleTensors, delta: np.ndarray, amplitude: float, law: ActivationLaw):
         self.tensors, self.delta = tensors, delta
-        self.amplitude, self.frequency, self.ramp_time = amplitude, frequency, ramp_time
+        self.amplitude, self.law = amplitude, law
         self.constant = tensors.constant.at(delta)
         self.linear = tensors.linear.at(delta)
-        m = self.constant.shape[-1]
-        self._linear_rows = self.linear.reshape(2, m * m)
-        self.constant_gradient = tensors.constant.gradient(delta)                      # (p, 2, m)
-        self._linear_gradient_rows = tensors.linear.gradient(delta).reshape(-1, 2, m * m)
+        n, m = self.constant.shape
+        if n != law.size:
+            raise ValueError(f"the PROM has {n} muscles and the activation law {law.size}")
+        self._linear_rows = self.linear.reshape(n, m * m)
+        self.constant_gradient = tensors.constant.gradient(delta)                      # (p, N, m)
+        self._linear_gradient_rows = tensors.linear.gradient(delta).reshape(-1, n, m * m)
         self._time, self._activations = None, None
 
     def activations(self, time: float) -> np.ndarray:
-        """(a_left, a_right) at time t (kept for the same t)."""
+        """(a_1, …, a_N) at time t (kept for the same t)."""
         if time != self._time:
-            self._time, self._activations = time, activations(self.amplitude, self.frequency, time, self.ramp_time)
+            self._time, self._activations = time, self.amplitude * self.law.unit(time)
         return self._activations
 
     def _stiffness(self, a: np.ndarray) -> np.ndarray:
@@ -209,7 +287,7 @@ class ReducedMuscle:
 
     def amplitude_derivative(self, time: float, eta: np.ndarray) -> np.ndarray:
         """∂r/∂A = Σ_j (∂a_j/∂A) (b_j + B_j η)."""
-        return self._per_activation(unit_activations(self.frequency, time, self.ramp_time), eta)
+        return self._per_activation(self.law.unit(time), eta)
 
     def tangents(self, time, eta, eta_dot, eta_ddot):
         """K_t part Σ_j a_j B_j."""

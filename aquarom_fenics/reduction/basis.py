@@ -5,15 +5,21 @@ With the head clamped in all directions:
   2. vibration modes (K_0 - ω² M) φ = 0 (SLEPc, shift-invert at 0);
   3. static modal derivatives θ_ij = -K_0⁻¹ (∂K/∂u[φ_j]) φ_i, i ≤ j;
   4. static parameter sensitivities Ξ_ik = -K_0⁻¹ (∂K/∂ξ_k) φ_i;
-  5. actuation modes ψ = K_0⁻¹ f_act,1 and θ_ψ = -K_0⁻¹ (∂K/∂u[ψ]) ψ (not in ``basis = "paper"``);
+  5. actuation modes ψ = K_0⁻¹ f_act,1 and θ_ψ = -K_0⁻¹ (∂K/∂u[ψ]) ψ (not in ``basis = "paper"``),
+     one pair per independent activation pattern P_k of the muscles (``ActivationLaw.patterns``: the
+     antagonist pair has one, (1, -1); muscles with phases two per frequency, the sin and cos parts),
+     ``psi``, ``theta_psi`` for the first, ``psi_2``, ``theta_psi_2``, … for the others; with several
+     patterns also θ_ψkψl = -K_0⁻¹ (∂K/∂u[ψ_k]) ψ_l (k < l, ``theta_psi_k_l``) and the inertia vectors
+     K_0⁻¹ M ψ_k (``psi_mass_k``): the travelling wave's ROM needs them (docs/theory/basis.md);
   6. response vectors (``response_vectors``, not in ``basis = "paper"``):
      ψ_m = -K_0⁻¹ B_1 ψ, B_1 = ∂²Π_act,1/∂u² the muscles' stiffness at unit activation: with
-     f_act = -a (b_1 + B_1 u) the static response to a is u = a ψ + a² (½ θ_ψ + ψ_m) + O(a³);
+     f_act = -a (b_1 + B_1 u) the static response to a is u = a ψ + a² (½ θ_ψ + ψ_m) + O(a³)
+     (per pattern: ``psi_muscle``, ``psi_muscle_2``, …);
      τ = K_0⁻¹ e_tail,x, the static response to the thrust's tail force at rest (f_tail ∥ t = e_x),
      a point force that indents the tail node and so shortens the tail segment's t.
   7. stroke vectors (``stroke_amplitude`` A_s > 0, not in ``basis = "paper"``; docs/theory/basis.md,
      "Large strokes"): the FOM's static responses u_s(±A_s), f_int(u) = f_act(u) at the activations
-     ±A_s (1, -1) (every order of a, the large rotations of the tail included); the responses to the
+     ±A_s P_1 (the pair: ±A_s (1, -1); every order of a, the large rotations of the tail included); the responses to the
      tail station's unit forces, τ_x = K_0⁻¹ B_0ᵀ e_x and τ_y = K_0⁻¹ B_0ᵀ e_y; the modal derivative
      θ_ψτ = -K_0⁻¹ (∂K/∂u[τ_x]) ψ; and the inertia (Ritz) vectors (K_0⁻¹ M)² ψ and K_0⁻¹ M τ_x;
      with ``stroke_sensitivities`` (PROMs) also ∂u_s(±A_s)/∂ξ_k, by a forward difference in ξ_k.
@@ -37,7 +43,6 @@ from aquarom_fenics.errors import SolverError
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.fem.linear_solver import mumps_solver, upper_triangle_copy
-from aquarom_fenics.physics.muscle import ANTAGONIST_PATTERN
 
 log = logging.getLogger("aquarom")
 
@@ -81,9 +86,9 @@ class _SecondVariations:
         self.shape_direction.set_parameter(k)
         return self.evaluate(self.shape, a)
 
-    def muscle_stiffness(self, a: np.ndarray) -> np.ndarray:
-        """B_1 a = ∂²Π_act/∂u² (0)[a] with the activations at the antagonist pattern at unit amplitude."""
-        self.fom.muscle.set_activations(ANTAGONIST_PATTERN)
+    def muscle_stiffness(self, a: np.ndarray, pattern: np.ndarray) -> np.ndarray:
+        """B_1 a = ∂²Π_act/∂u² (0)[a] with the activations at ``pattern`` (unit amplitude)."""
+        self.fom.muscle.set_activations(pattern)
         return self.evaluate(self.muscle, a)
 
 
@@ -137,25 +142,36 @@ def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int,
     return np.column_stack(modes), np.array(frequencies)
 
 
-def candidate_labels(n_modes: int, modal_derivatives: bool, n_parameters: int, actuation_modes: bool,
+def pattern_suffixes(actuation_modes: int) -> list[str]:
+    """"" for the first activation pattern, "_2", "_3", … for the others (``actuation_modes``: their
+    number, True for one, False or 0 for none)."""
+    return ["" if k == 0 else f"_{k + 1}" for k in range(int(actuation_modes))]
+
+
+def candidate_labels(n_modes: int, modal_derivatives: bool, n_parameters: int, actuation_modes: int,
                      responses: tuple[str, ...] = ()) -> list[str]:
     """Names of the candidate vectors in the order of SPEC §7: rigid_x, mode_i, theta_i_j (i ≤ j),
-    xi_i_k (mode i, parameter k, both from 1), psi and theta_psi, then the ``responses``
-    (``psi_muscle``, ``tail_force``; see :func:`response_labels`)."""
+    xi_i_k (mode i, parameter k, both from 1), psi and theta_psi (per activation pattern: psi_2,
+    theta_psi_2, …; with several patterns then theta_psi_k_l (k < l) and psi_mass_k), then the
+    ``responses`` (``psi_muscle``, ``tail_force``; see :func:`response_labels`)."""
     labels = ["rigid_x"] + [f"mode_{i + 1}" for i in range(n_modes)]
     if modal_derivatives:
         labels += [f"theta_{i + 1}_{j + 1}" for j in range(n_modes) for i in range(j + 1)]
     labels += [f"xi_{i + 1}_{k + 1}" for k in range(n_parameters) for i in range(n_modes)]
-    if actuation_modes:
-        labels += ["psi", "theta_psi"]
+    for suffix in pattern_suffixes(actuation_modes):
+        labels += ["psi" + suffix, "theta_psi" + suffix]
+    if int(actuation_modes) > 1:
+        labels += [f"theta_psi_{k + 1}_{l + 1}" for l in range(int(actuation_modes)) for k in range(l)]
+        labels += [f"psi_mass_{k + 1}" for k in range(int(actuation_modes))]
     return labels + list(responses)
 
 
-def response_labels(response_vectors: bool, actuation_modes: bool, thrust: bool) -> tuple[str, ...]:
-    """The response vectors of item 6 that apply: ψ_m needs the actuation modes, τ the nodal thrust."""
+def response_labels(response_vectors: bool, actuation_modes: int, thrust: bool) -> tuple[str, ...]:
+    """The response vectors of item 6 that apply: ψ_m (one per activation pattern) needs the actuation
+    modes, τ the nodal thrust."""
     if not response_vectors:
         return ()
-    return (("psi_muscle",) if actuation_modes else ()) + (("tail_force",) if thrust else ())
+    return tuple("psi_muscle" + suffix for suffix in pattern_suffixes(actuation_modes)) + (("tail_force",) if thrust else ())
 
 
 def stroke_labels(stroke: bool, actuation_modes: bool, thrust: bool, responses: tuple[str, ...] = (),
@@ -266,16 +282,22 @@ def _build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
             candidates.append(-static_solve(variations.evaluate(variations.modal, modes[i], modes[j])))
     for k in range(n_parameters):
         candidates += [-static_solve(variations.shape_variation(mode, k)) for mode in modes]
-    actuation_modes = settings.basis == "default" and fom.muscle.on
-    if actuation_modes:
-        psi = static_solve(unit_actuation_force(fom))
+    patterns = fom.muscle.law.patterns() if settings.basis == "default" and fom.muscle.on else []
+    actuation_modes = len(patterns)
+    psis = [static_solve(unit_actuation_force(fom, pattern)) for pattern in patterns]
+    for psi in psis:
         candidates += [psi, -static_solve(variations.evaluate(variations.modal, psi, psi))]
+    if len(psis) > 1:        # several patterns (a travelling wave): their coupling and inertia (docs/theory/basis.md)
+        candidates += [-static_solve(variations.evaluate(variations.modal, psis[k], psis[l]))
+                       for l in range(len(psis)) for k in range(l)]
+        candidates += [static_solve(fom.matvec(fom.mass_matrix, vector)) for vector in psis]
+    psi = psis[0] if psis else None
     # τ follows the tail node's indentation under the nodal thrust; through the stations it is not needed
     # (degree 2, level 2: the ROM's distance and tail amplitude change by 0.002 % and 0.03 % without it)
     responses = response_labels(settings.basis == "default" and settings.response_vectors, actuation_modes,
                                 fom.thrust is not None and fom.station_averages is None)
     if "psi_muscle" in responses:
-        candidates.append(-static_solve(variations.muscle_stiffness(psi)))
+        candidates += [-static_solve(variations.muscle_stiffness(vector, pattern)) for vector, pattern in zip(psis, patterns)]
     tail = static_solve(unit_tail_force(fom)) if "tail_force" in responses else None
     if tail is not None:
         candidates.append(tail)
@@ -308,7 +330,7 @@ def stroke_vectors(fom: FullOrderModel, labels: tuple[str, ...], static_solve, v
                           "(the largest amplitude the model runs) may converge") from None
     finally:
         fom.set_displacement(np.zeros(fom.n_owned_dofs))
-        fom.muscle.set_activations((0.0, 0.0))
+        fom.muscle.set_activations(np.zeros(fom.muscle.law.size))
     if tail is None and "tail_force" in labels:
         tail = static_solve(unit_tail_force(fom))
     vectors = {"stroke_plus": plus, "stroke_minus": minus, "tail_force": tail}
@@ -348,9 +370,10 @@ def stroke_sensitivity(fom: FullOrderModel, k: int, plus: np.ndarray, minus: np.
 
 
 def stroke_response(fom: FullOrderModel, amplitude: float, steps: int = 4) -> np.ndarray:
-    """u_s(a), the static response to the activations a (1, -1): Newton from rest or, when that fails, by
-    continuation in ``steps`` equal steps of a, each Newton from the previous solution."""
-    activations = amplitude * ANTAGONIST_PATTERN
+    """u_s(a), the static response to the activations a P_1 (the first activation pattern; the pair's
+    (1, -1)): Newton from rest or, when that fails, by continuation in ``steps`` equal steps of a, each
+    Newton from the previous solution."""
+    activations = amplitude * fom.muscle.law.patterns()[0]
     try:
         return fom.static_response(*activations)
     except SolverError:
@@ -361,9 +384,10 @@ def stroke_response(fom: FullOrderModel, amplitude: float, steps: int = 4) -> np
     return u
 
 
-def unit_actuation_force(fom: FullOrderModel) -> np.ndarray:
-    """f_act at rest with the activation pattern at unit amplitude (left contracting, right extending)."""
-    fom.muscle.set_activations(ANTAGONIST_PATTERN)
+def unit_actuation_force(fom: FullOrderModel, pattern: np.ndarray | None = None) -> np.ndarray:
+    """f_act at rest with the activations at ``pattern`` (default the first activation pattern; the
+    pair's (1, -1): left contracting, right extending)."""
+    fom.muscle.set_activations(fom.muscle.law.patterns()[0] if pattern is None else pattern)
     fom.set_displacement(np.zeros(fom.n_owned_dofs))
     return fom.muscle.force()
 

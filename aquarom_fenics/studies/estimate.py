@@ -17,6 +17,7 @@ from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS
 from aquarom_fenics.io.paths import bench_results
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.optimization.prom_builder import screens_tail
+from aquarom_fenics.physics.muscle import ActivationLaw
 from aquarom_fenics.reduction.basis import candidate_labels, response_labels, stroke_labels
 from aquarom_fenics.verification.local_stability import tail_sample_steps
 
@@ -135,7 +136,8 @@ def _bench_runs(name: str, keep) -> list[dict]:
 def expected_basis(scene: Scene, parametric: bool) -> list[str]:
     """Candidate basis vectors (SPEC §7); dependent ones are dropped at build time."""
     reduction = scene.reduction
-    actuation_modes = reduction.basis == "default" and scene.actuation.stiffness > 0 and scene.actuation.amplitude > 0
+    actuated = reduction.basis == "default" and scene.actuation.stiffness > 0 and scene.actuation.amplitude > 0
+    actuation_modes = len(ActivationLaw.of(scene).patterns()) if actuated else 0
     responses = response_labels(reduction.basis == "default" and reduction.response_vectors, actuation_modes,
                                 scene.fluid.thrust)
     responses += stroke_labels(reduction.basis == "default" and reduction.stroke_amplitude > 0, actuation_modes,

@@ -33,7 +33,8 @@ def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
     else:
         cached = block_cache_path(scene.mesh.level, scene.mesh.length, scene.mesh.width, scene.mesh.height,
                                   head_fraction=scene.regions.head_fraction,
-                                  muscle_range=scene.regions.muscle_range).exists()
+                                  muscle_range=scene.regions.muscle_range,
+                                  pairs=scene.regions.muscle_pairs).exists()
         lines.append(f"mesh: level {scene.mesh.level} (~{cells} cells), "
                      + ("reused from the mesh cache" if cached else "generated with gmsh and cached"))
     body, body_cells = planned_body(scene)

@@ -74,7 +74,8 @@ def measure(scene: Scene, fish: Fish | None = None) -> MeshCase:
         _, frequencies = vibration_modes(model, stiffness, 1)
         stiffness.destroy()
         peak = scene.actuation.amplitude
-        deflection = model.observables(model.static_response(peak, -peak))["tail_y"]
+        peak_activations = peak * model.muscle.law.patterns()[0]      # the pair: (A, -A)
+        deflection = model.observables(model.static_response(*peak_activations))["tail_y"]
         compliance = tail_compliances(model)["station" if model.station_averages is not None else "node"]
     finally:
         model.destroy()

@@ -355,6 +355,12 @@ def basis_vector_meaning(label: str, frequencies, shape_names) -> str:
         return "actuation mode ψ"
     if label == "theta_psi":
         return "modal derivative θψ of the actuation mode"
+    if kind == "psi" and len(numbers) == 1 and numbers[0].isdigit():
+        return f"actuation mode ψ of activation pattern {numbers[0]}"
+    if label.startswith("theta_psi_") and all(number.isdigit() for number in numbers[1:]):
+        return f"modal derivative θψ of activation pattern{'s' if len(numbers) > 2 else ''} {' and '.join(numbers[1:])}"
+    if label.startswith("psi_mass_"):
+        return f"inertia vector K⁻¹Mψ of activation pattern {numbers[-1]}"
     if kind == "mode" and len(numbers) == 1:
         mode = int(numbers[0])
         return f"vibration mode {mode} ({frequencies[mode - 1]:.2f} Hz)"

@@ -296,7 +296,8 @@ def test_a_key_added_later_keeps_the_hash_of_the_scenes_before_it_at_its_legacy_
     rear = scene.replace("fluid", spine_rule="rear")
     data = rear.to_dict()
     del data["fluid"]["spine_rule"]
-    for section, key in (("mesh", "axis"), ("mesh", "head_end"), ("regions", "head"), ("regions", "muscles")):   # later keys at their legacy values
+    for section, key in (("mesh", "axis"), ("mesh", "head_end"), ("regions", "head"), ("regions", "muscles"),
+                         ("regions", "muscle_pairs")):   # later keys at their legacy values
         del data[section][key]
     for key, legacy in legacy_values(ReductionSection).items():    # the CO scene sets some of them
         if data["reduction"][key] == legacy:
@@ -313,13 +314,14 @@ def test_the_region_axis_and_head_end_keys_keep_the_hashes_of_the_scenes_before_
     values change it."""
     from aquarom_fenics.io.scene_sections import LegacyValues, MeshSection, RegionsSection, legacy_values
 
-    assert legacy_values(RegionsSection) == {"head": "head", "muscles": ("left_muscle", "right_muscle")}
+    assert legacy_values(RegionsSection) == {"head": "head", "muscles": ("left_muscle", "right_muscle"),
+                                             "muscle_pairs": 1}
     assert legacy_values(MeshSection) == {"axis": "x", "head_end": LegacyValues(("", "+x"))}
     scene = Scene.load("nominal")
     data = scene.to_dict()
     for section, key in (("mesh", "axis"), ("mesh", "head_end"), ("regions", "head"), ("regions", "muscles"),
-                         ("reduction", "stroke_amplitude"), ("reduction", "validity_change"),
-                         ("reduction", "stroke_sensitivities")):   # later keys at their legacy values
+                         ("regions", "muscle_pairs"), ("reduction", "stroke_amplitude"),
+                         ("reduction", "validity_change"), ("reduction", "stroke_sensitivities")):   # later keys at their legacy values
         del data[section][key]
     assert scene.hash == scene._digest(data)
     written = scene_from_dict(tomllib.loads(scene.to_toml()), source=scene.source, base_dir=scene.base_dir)

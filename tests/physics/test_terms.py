@@ -12,7 +12,7 @@ import aquarom_fenics.forms
 from aquarom_fenics.physics.drag import DragTensors, drag_force, drag_velocity_jacobian
 from aquarom_fenics.physics.elastic import ElasticTensors
 from aquarom_fenics.physics.inertia import InertiaTensors, rayleigh_damping
-from aquarom_fenics.physics.muscle import MuscleTensors, activations, unit_activations
+from aquarom_fenics.physics.muscle import ActivationLaw, MuscleTensors, activations, unit_activations
 from aquarom_fenics.physics.thrust_reduced import ThrustTensors
 from aquarom_fenics.physics.taylor import Taylor
 
@@ -137,15 +137,42 @@ def test_reduced_elastic_tangent_and_xi_derivative(rng):
                  central_parameter_derivative(lambda d: tensors.at(d).force(eta)))
 
 
-def test_reduced_muscle_tangent_amplitude_and_xi_derivatives(rng):
-    tensors = MuscleTensors(random_taylor(rng, (2, M)), random_taylor(rng, (2, M, M)))
+@pytest.mark.parametrize("law", [ActivationLaw.antagonist(1.0),
+                                 ActivationLaw((1.0, -0.5, 2.0), (0.0, 2.1, -1.0), (1.0, 1.0, 1.7), 0.2)])
+def test_reduced_muscle_tangent_amplitude_and_xi_derivatives(rng, law):
+    """The pair and three muscles of other scales, phases and frequencies (a ramp on)."""
+    n = law.size
+    tensors = MuscleTensors(random_taylor(rng, (n, M)), random_taylor(rng, (n, M, M)))
     eta, time = state(rng)[0], 0.13
-    term = tensors.at(np.full(P, 0.2), 0.3, 1.0)
+    term = tensors.at(np.full(P, 0.2), 0.3, law)
     assert_close(term.tangents(time, eta, eta, eta)[0], central_jacobian(lambda x: -term.force(time, x), eta))
     assert_close(term.parameter_derivative(time, eta, eta, eta),
-                 central_parameter_derivative(lambda d: -tensors.at(d, 0.3, 1.0).force(time, eta)))
-    by_amplitude = [-tensors.at(np.full(P, 0.2), 0.3 + s, 1.0).force(time, eta) for s in (STEP, -STEP)]
+                 central_parameter_derivative(lambda d: -tensors.at(d, 0.3, law).force(time, eta)))
+    by_amplitude = [-tensors.at(np.full(P, 0.2), 0.3 + s, law).force(time, eta) for s in (STEP, -STEP)]
     assert_close(term.amplitude_derivative(time, eta), (by_amplitude[0] - by_amplitude[1]) / (2 * STEP))
+
+
+def test_the_activation_law_of_each_muscle_and_its_independent_patterns():
+    """a_j = A s_j r(t) sin(2π f_j t + φ_j); the pair's law is the antagonist one bit for bit and has one
+    pattern (1, -1); a travelling wave at one frequency has two (its sin and cos parts), which span a(t)."""
+    time, frequency = 0.37, 1.3
+    pair = ActivationLaw.antagonist(frequency)
+    np.testing.assert_array_equal(pair.unit(time), unit_activations(frequency, time))
+    assert len(pair.patterns()) == 1 and np.array_equal(pair.patterns()[0], [1.0, -1.0])
+    by_phase = ActivationLaw((1.0, 1.0), (0.0, np.pi), (frequency, frequency))
+    np.testing.assert_allclose(by_phase.unit(time), pair.unit(time), rtol=0, atol=1e-15)
+    lags = np.arange(3) * 2 * np.pi / 3
+    wave = ActivationLaw((1.0,) * 3 + (-1.0,) * 3, tuple(lags) * 2, (frequency,) * 6, 0.4)
+    expected = [0.5 * 2.0 * np.sin(2 * np.pi * frequency * time + lag) * side for side in (1, -1) for lag in lags]
+    ramp = np.sin(0.5 * np.pi * time / 0.4) ** 2
+    np.testing.assert_allclose(wave.unit(time), ramp * np.array(expected), rtol=1e-14)
+    patterns = wave.patterns()
+    assert len(patterns) == 2
+    coefficients, residual, *_ = np.linalg.lstsq(np.column_stack(patterns), wave.unit(time), rcond=None)
+    assert residual.size == 0 or residual[0] < 1e-28
+    np.testing.assert_allclose(np.column_stack(patterns) @ coefficients, wave.unit(time), atol=1e-14)
+    two_frequencies = ActivationLaw((1.0, 1.0), (0.0, 0.5), (1.0, 2.0))
+    assert len(two_frequencies.patterns()) == 2          # one muscle per frequency: sin and cos of each span 2
 
 
 def test_reduced_inertia_xi_derivative_includes_the_rayleigh_damping(rng):

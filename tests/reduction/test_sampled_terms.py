@@ -9,6 +9,7 @@ from aquarom_fenics.physics.muscle import MuscleTensors
 from aquarom_fenics.reduction.basis import build_basis
 from aquarom_fenics.physics.taylor import stack_taylor
 from aquarom_fenics.reduction.projection import Projector
+from aquarom_fenics.io.scene import scene_from_dict
 from conftest import coarse_scene
 from prom_checks import SO1_SHAPES
 
@@ -47,12 +48,30 @@ def test_sampled_muscle_tensors_equal_the_projected_assembled_forms(degree, orde
                 assert np.abs(value - reference).max() <= 1e-11 * scale, (part, name)
 
 
+def test_sampled_tensors_of_several_muscles_with_their_own_fibres():
+    """Three muscles of the block's segments, one with an oblique and one with a reversed fibre."""
+    fibres = ([1.0, 0.0, 0.0], [0.6, 0.0, 0.8], [-1.0, 0.0, 0.0])
+    scene = scene_from_dict({"mesh": {"level": 1}, "shapes": SO1_SHAPES, "regions": {"muscle_pairs": 3},
+                             "muscles": [{"region": region, "fibre": fibre, "phase": 60 * k}
+                                         for k, (region, fibre) in enumerate(zip(("left_1", "right_2", "left_3"), fibres))]},
+                            source="<test>")
+    model = FullOrderModel(scene, load_fish(scene), np.array([0.1, -0.2, 0.05]))
+    projector = Projector(model, build_basis(model, 3).vectors, 3, 1)
+    expected, sampled = projected_muscle_tensors(model, projector), model.muscle.reduce(projector)
+    assert sampled.constant.constant.shape[0] == 3
+    for part in ("constant", "linear"):
+        scale = np.abs(getattr(expected, part).constant).max()
+        for name in ("constant", "first"):
+            reference, value = getattr(getattr(expected, part), name), getattr(getattr(sampled, part), name)
+            assert np.abs(value - reference).max() <= 1e-11 * scale, (part, name)
+
+
 def projected_muscle_tensors(model, projector) -> MuscleTensors:
     """b_j, B_j projected from the assembled force and tangent forms of muscle j alone (a_j = 1) at rest."""
     muscle = model.muscle
     model.set_displacement(np.zeros(model.n_owned_dofs))
     constant_parts, linear_parts = [], []
-    for unit in np.eye(2):
+    for unit in np.eye(len(muscle.measures)):
         muscle.set_activations(unit)
         constant_parts.append(projector.taylor(muscle.negative_force_form))
         linear_parts.append(projector.taylor(muscle.tangent_form))
