@@ -202,6 +202,12 @@ def _snapped(points: np.ndarray, x_planes: np.ndarray, scale: float) -> np.ndarr
     return snapped
 
 
+def as_written(points: np.ndarray) -> np.ndarray:
+    """Coordinates rounded to 16 significant digits, as gmsh writes them to an ASCII .msh (%.16g), so
+    that a mesh and its file read back are equal (within 1 ulp otherwise)."""
+    return np.char.mod("%.16g", points).astype(float)
+
+
 def fish_atoms(regions: FishRegions) -> tuple[str, ...]:
     """Names of the disjoint regions, in file order: head, left_1 … left_n, right_1 … right_n, body."""
     pairs = range(1, regions.pairs + 1)
@@ -215,8 +221,8 @@ def fish_unions(regions: FishRegions) -> dict[str, tuple[str, ...]]:
 
 
 def generate_fish(level: int, recipe: dict = FISH_RECIPE) -> FishMesh:
-    """The fish of a level: the gmsh quarter mirrored in y, then in z, with its regions
-    (``fish_atoms`` and ``fish_unions``) as sorted cell indices."""
+    """The fish of a level: the gmsh quarter mirrored in y, then in z, coordinates ``as_written``,
+    with its regions (``fish_atoms`` and ``fish_unions``) as sorted cell indices."""
     size = level_size(level, recipe)
     profile, regions = fish_profile(recipe), fish_regions(recipe)
     points, cells, names = _quarter_fish(profile, regions, size, recipe["gmsh"])
@@ -226,6 +232,7 @@ def generate_fish(level: int, recipe: dict = FISH_RECIPE) -> FishMesh:
     n_quarter = len(cells)
     points, cells = mirrored(points, cells, axis=1)
     points, cells = mirrored(points, cells, axis=2)
+    points = as_written(points)
     names = np.tile(names, 4)
     left = np.tile(np.arange(2 * n_quarter) < n_quarter, 2)
     by_name = {"head": names == "head", "body": names == "body"}
