@@ -127,7 +127,7 @@ def test_fish_scenes_name_the_shipped_mesh_and_its_unions():
         scene = Scene.load(name)
         assert scene.mesh_file == shipped_fish_path(1).resolve()
         assert scene.regions.head == "head" and tuple(scene.regions.muscles) == ("left_muscle", "right_muscle")
-    assert Scene.load("fish_optimize").shape_names == ["z_tail", "y_thin", "y_lin_long_tail"]
+    assert Scene.load("fish_optimize").shape_names == ["z_tail", "z_head", "y_thin"]
 
 
 def test_short_simulate_of_the_fish_scene_swims_forward(tmp_path, capsys):
