@@ -24,7 +24,9 @@ Studies (SPEC §11 "Validation studies", the validation issue):
   fish_mesh_convergence
           the same for the shipped fish (scenes/fish.toml, degree 2) on its shipped meshes
           meshes/fish_l1.msh … fish_l4.msh (levels 1–3 with --quick); checks: the reference distance's
-          estimated error and the finest level's error against it, each within 1 %.
+          estimated error and the finest level's error against it, each within 1 % (the reference:
+          Richardson's, or without an observed order the finest level with the three finest levels'
+          spread as its error).
 
 The studies, the case cache and the report live in `aquarom_fenics.verification.validation`;
 this script parses the command line.

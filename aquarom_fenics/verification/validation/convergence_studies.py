@@ -209,7 +209,25 @@ def study_fish_mesh_convergence(runner: Runner, settings: Settings) -> dict:
     result = {"levels": levels, "tolerance": FISH_TOLERANCE, "failed": failed}
     if len(measured) < 3:
         return result | {"rows": [], "reference": {}}
-    return mesh_convergence(measured) | result
+    study = mesh_convergence(measured) | result
+    study["distance_reference"] = distance_reference(study["reference"]["distance"], study["rows"])
+    for row in study["rows"]:
+        row["distance_error"] = row["distance"] / study["distance_reference"]["value"] - 1.0
+    return study
+
+
+def distance_reference(richardson_reference: dict, rows: list[dict]) -> dict:
+    """The reference distance of a convergence series: Richardson's when the series shows an order;
+    otherwise (differences that stall or change sign, as re-meshed unstructured levels give once
+    converged) the finest level's distance, with the spread of the three finest levels as its error."""
+    if richardson_reference.get("value") is not None:
+        return {"value": richardson_reference["value"], "estimated_error": richardson_reference["estimated_error"],
+                "method": f"Richardson, observed order {richardson_reference['observed_order']:.2f}"}
+    finest = sorted(rows, key=lambda row: row["cells"])[-3:]
+    values = [row["distance"] for row in finest]
+    return {"value": values[-1], "estimated_error": max(values) - min(values),
+            "method": "finest level, error: the spread of the three finest levels (no Richardson order: "
+                      f"{richardson_reference.get('reason', 'none')})"}
 
 
 def study_stations(runner: Runner, settings: Settings) -> dict:
