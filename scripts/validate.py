@@ -21,6 +21,12 @@ Studies (SPEC §11 "Validation studies", the validation issue):
           amplitude, first frequency, static peak-muscle tail deflection, wall time; Richardson
           reference per quantity (observed order, error estimate) and the cheapest (degree, level)
           within 3% of the reference distance (`aquarom_fenics.verification.convergence`).
+  fish_mesh_convergence
+          the same for the shipped fish (scenes/fish.toml, degree 2) on its shipped meshes
+          meshes/fish_l1.msh … fish_l4.msh (levels 1–3 with --quick); checks: the reference distance's
+          estimated error and the finest level's error against it, each within 1 % (the reference:
+          Richardson's, or without an observed order the finest level with the three finest levels'
+          spread as its error).
 
 The studies, the case cache and the report live in `aquarom_fenics.verification.validation`;
 this script parses the command line.

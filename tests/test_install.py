@@ -39,3 +39,6 @@ def test_wheel_installs_into_a_fresh_environment_and_simulates_from_another_fold
                    "import aquarom_fenics, pathlib; print(pathlib.Path(aquarom_fenics.__file__).parent)"],
                   cwd=elsewhere)
     assert str(environment) in package.stdout          # the installed copy ran, not the checkout
+    fish = run([str(environment / "bin" / "aquarom"), "mesh", "fish"], cwd=elsewhere, env=variables)
+    assert fish.returncode == 0, fish.stderr          # the shipped fish's mesh is package data beside its scene
+    assert "fish_l1.msh" in fish.stdout and str(environment) in fish.stdout and "(tagged)" in fish.stdout

@@ -139,7 +139,7 @@ def _quarter_block(size: float, length: float, width: float, height: float, plan
     return points, cells, np.concatenate(regions)
 
 
-def _mirrored(points: np.ndarray, cells: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
+def mirrored(points: np.ndarray, cells: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
     """The mesh together with its mirror image about the plane where coordinate `axis` is 0.
 
     Nodes on that plane (coordinate exactly 0) are shared with the mirror image; mirrored cells get
@@ -175,8 +175,8 @@ def _generate_block(level: int, length: float, width: float, height: float, head
     points = _snap_to_box(points, lower, upper, planes)
     cells = oriented_positively(points, cells)
     n_quarter = len(cells)
-    points, cells = _mirrored(points, cells, axis=1)
-    points, cells = _mirrored(points, cells, axis=2)
+    points, cells = mirrored(points, cells, axis=1)
+    points, cells = mirrored(points, cells, axis=2)
     region = np.tile(quarter_regions, 4)
     left_half = np.tile(np.arange(2 * n_quarter) < n_quarter, 2)
     muscle = region == QUARTER_REGIONS.index("muscle")

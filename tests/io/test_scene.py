@@ -130,7 +130,9 @@ def test_shipped_scene_loads_by_name_and_by_path(name):
     assert by_name == by_path
     assert by_name.hash == by_path.hash
     assert by_name.description
-    assert by_name.mesh_file is None
+    # the block, or a mesh shipped beside the scenes (the fish, meshes/fish.toml)
+    assert by_name.mesh_file is None or by_name.mesh_file.parent == SCENES_DIR.resolve().parent / "meshes"
+    assert by_name.mesh_file is None or by_name.mesh_file.is_file()
     assert all(shape.start == 0.0 for shape in by_name.shapes)
 
 

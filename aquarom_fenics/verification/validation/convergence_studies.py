@@ -1,7 +1,7 @@
 """Convergence studies of the validation: time step (study d) and mesh (SPEC §11)."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -11,7 +11,7 @@ from aquarom_fenics.verification.convergence import QUANTITIES, MeshCase, mesh_c
 from aquarom_fenics.verification.validation.cases import fom_case, mesh_case, reduced_case
 from aquarom_fenics.verification.validation.report_format import RATIO_RANGE
 from aquarom_fenics.verification.validation.runner import Runner
-from aquarom_fenics.verification.validation.settings import Settings, base_scene
+from aquarom_fenics.verification.validation.settings import Settings, base_scene, fish_scene
 
 
 @dataclass(frozen=True)
@@ -188,6 +188,46 @@ def study_mesh_convergence(runner: Runner, settings: Settings) -> dict:
     failed = [{"label": record["label"], "status": record["status"], "message": record.get("message")}
               for record in records if record["status"] != "completed"]
     return mesh_convergence(measured) | {"failed": failed}
+
+
+FISH_TOLERANCE = 0.01
+"""The shipped fish's mesh convergence: its reference distance is known to 1 % (estimated error), and
+its finest level lies within 1 % of it."""
+
+
+def study_fish_mesh_convergence(runner: Runner, settings: Settings) -> dict:
+    """Mesh convergence of the shipped fish (``scenes/fish.toml``, degree 2) over its shipped levels
+    (``meshes/fish_l<level>.msh``): the quantities of the block's study and a Richardson reference."""
+    levels = list(settings.fish_levels)
+    cases = [mesh_case(f"fish, degree 2, level {level}", fish_scene(settings, level)) for level in levels]
+    records = runner.run("fish_mesh_convergence", cases)
+    fields = MeshCase.__dataclass_fields__
+    measured = [replace(MeshCase(**{name: record[name] for name in fields}), level=level)
+                for level, record in zip(levels, records) if record["status"] == "completed"]
+    failed = [{"label": record["label"], "status": record["status"], "message": record.get("message")}
+              for record in records if record["status"] != "completed"]
+    result = {"levels": levels, "tolerance": FISH_TOLERANCE, "failed": failed}
+    if len(measured) < 3:
+        return result | {"rows": [], "reference": {}}
+    study = mesh_convergence(measured) | result
+    study["distance_reference"] = distance_reference(study["reference"]["distance"], study["rows"])
+    for row in study["rows"]:
+        row["distance_error"] = row["distance"] / study["distance_reference"]["value"] - 1.0
+    return study
+
+
+def distance_reference(richardson_reference: dict, rows: list[dict]) -> dict:
+    """The reference distance of a convergence series: Richardson's when the series shows an order;
+    otherwise (differences that stall or change sign, as re-meshed unstructured levels give once
+    converged) the finest level's distance, with the spread of the three finest levels as its error."""
+    if richardson_reference.get("value") is not None:
+        return {"value": richardson_reference["value"], "estimated_error": richardson_reference["estimated_error"],
+                "method": f"Richardson, observed order {richardson_reference['observed_order']:.2f}"}
+    finest = sorted(rows, key=lambda row: row["cells"])[-3:]
+    values = [row["distance"] for row in finest]
+    return {"value": values[-1], "estimated_error": max(values) - min(values),
+            "method": "finest level, error: the spread of the three finest levels (no Richardson order: "
+                      f"{richardson_reference.get('reason', 'none')})"}
 
 
 def study_stations(runner: Runner, settings: Settings) -> dict:

@@ -17,9 +17,10 @@ from aquarom_fenics.verification.validation.report_format import (BUILD_EXPONENT
                                                                    RUN_LIMITS, SOLVE_EXPONENT_MAX, TOLERANCE_LIST,
                                                                    TOLERANCE_REFERENCE, cases_above, fmt, link,
                                                                    load_studies, percent, reference_row, table)
-from aquarom_fenics.verification.validation.report_sections import (section_a, section_b, section_c, section_d,
-                                                                     section_e, section_mesh, section_stations,
-                                                                     section_stress)
+from aquarom_fenics.verification.validation.report_sections import (fish_mesh_checks, section_a, section_b,
+                                                                     section_c, section_d, section_e,
+                                                                     section_fish_mesh, section_mesh,
+                                                                     section_stations, section_stress)
 
 
 def checks(studies: dict, out: Path) -> list[list[str]]:
@@ -77,6 +78,7 @@ def checks(studies: dict, out: Path) -> list[list[str]]:
             rows.append([f"{b['models'].get(fit['model'], fit['model'])} {fit['quantity']} time ∝ cells^e",
                          fmt(exponent, ".3f"), ("< " if fit["quantity"] == "solve" else "≤ ") + f"{limit:g}",
                          verdict(ok)])
+    rows += fish_mesh_checks(studies.get("fish_mesh_convergence"))
     for run in (studies.get("history") or [])[-3:]:
         if run.get("quick"):
             continue
@@ -121,6 +123,7 @@ def write_report(out: Path, report: Path, studies_summary: Path | None = None) -
     section_stress(lines, studies.get("stress"), out, report)
     section_mesh(lines, studies.get("mesh_convergence"), out, report)
     section_stations(lines, studies.get("stations"))
+    section_fish_mesh(lines, studies.get("fish_mesh_convergence"))
     _section_validity(lines, out / "prom_validity.md", report)
     _section_optimisation(lines, studies_summary or report.parent / "studies" / "summary.md", report)
     lines += ["## Reproduce", "", "    make validate                                   # every study, cached per case",

@@ -313,3 +313,44 @@ def section_stress(lines, study, out, report):
                     f"{energy_share(worst['energy'], 'relative_imbalance', '.1e')} ({worst['id']}), the largest numerical "
                     f"dissipation {percent(most['energy'].get('numerical_dissipation_relative'), 3)} ({most['id']}).")
     lines += [""]
+
+
+def fish_mesh_checks(study) -> list[list[str]]:
+    """The shipped fish's "must show" rows: [check, measured, required, verdict]."""
+    required = f"within {100 * study.get('tolerance', 0.01):g}%" if study else "within 1%"
+    reference = (study or {}).get("distance_reference") or {}
+    if not study or reference.get("value") in (None, 0.0) or not study.get("rows"):
+        measured = "not run" if not study else "fewer than 3 levels completed"
+        return [["fish: estimated error of the reference distance", measured, required, "—"]]
+    tolerance = study.get("tolerance", 0.01)
+    estimated = reference["estimated_error"] / abs(reference["value"])
+    finest = max(study["rows"], key=lambda row: row["cells"])
+    verdict = {True: "pass", False: "**FAIL**"}
+    return [["fish: estimated error of the reference distance", f"{percent(estimated)} ({reference['method']})",
+             required, verdict[estimated <= tolerance]],
+            [f"fish: finest level ({finest['cells']} cells) against the reference distance",
+             percent(finest["distance_error"]), required, verdict[abs(finest["distance_error"]) <= tolerance]]]
+
+
+def section_fish_mesh(lines, study):
+    title = "## Mesh convergence of the shipped fish"
+    if not study or not study.get("rows"):
+        not_run(lines, title)
+        for failure in (study or {}).get("failed", []):
+            lines += [f"- {failure['label']}: {failure['status']}, {short(failure.get('message'))}", ""]
+        return
+    reference = study["distance_reference"]
+    lines += [title, "",
+              "The shipped fish (`scenes/fish.toml`, quadratic tetrahedra) on its shipped meshes "
+              "`meshes/fish_l<level>.msh` (recipe `meshes/fish.toml`): the quantities of the block's study above. "
+              f"Reference distance: {fmt(reference['value'], '.4g', 100.0)} cm ± "
+              f"{fmt(reference['estimated_error'], '.2g', 100.0)} cm ({reference['method']}).", ""]
+    lines += table(["level", "cells", "dofs", "distance [cm]", "error", "tail amplitude [cm]", "f_1 [Hz]",
+                    "static tail y [cm]", "wall time [s]"],
+                   [[str(row["level"]), str(row["cells"]), str(row["dofs"]), fmt(row["distance"], ".4g", 100.0),
+                     percent(row["distance_error"], 2), fmt(row["tail_amplitude"], ".4g", 100.0),
+                     fmt(row["first_frequency"], ".4g"), fmt(row["static_tail_deflection"], ".4g", 100.0),
+                     fmt(row["wall_time"], ".1f")] for row in study["rows"]])
+    lines += [""]
+    for failure in study.get("failed", []):
+        lines += [f"- {failure['label']}: {failure['status']}, {short(failure.get('message'))}"]

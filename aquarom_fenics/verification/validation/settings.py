@@ -31,6 +31,7 @@ class Settings:
     station_counts: tuple[int, ...] = (20, 40, 80, 160)      # N_s of the station study
     station_mesh: tuple[int, int] = (2, 1)                    # its (degree, level): the shipped default
     study_degree: int = 2                                     # element degree of studies a, b and e (the shipped one)
+    fish_levels: tuple[int, ...] = (1, 2, 3, 4)               # the shipped fish's meshes (meshes/fish.toml), degree 2
 
 
 FULL = Settings(quick=False, levels=(1, 2, 3), stiffnesses=(1.2e4, 2.5e4, 4e4, 6e4, 7.5e4), duration=2.0,
@@ -43,7 +44,7 @@ QUICK = Settings(quick=True, levels=(1, 2), stiffnesses=(1.2e4, 6e4, 7.5e4), dur
                  time_steps=(0.04, 0.02, 0.01, 0.005), convergence_steps=(0.02, 0.01, 0.005, 0.0025),
                  finer_convergence_steps=(("ROM", (0.00125,)),), convergence_mesh=(1, 1), mpi_levels=(1, 2), stress_level=1, fine_prom_level=2, time_limit=300.0,
                  mesh_series=((1, (1, 2, 3)), (2, (1,))), station_counts=(10, 20, 40), station_mesh=(1, 1),
-                 study_degree=1)
+                 study_degree=1, fish_levels=(1, 2, 3))
 
 
 def base_scene(settings: Settings, name: str = "nominal", level: int | None = None,
@@ -56,6 +57,16 @@ def base_scene(settings: Settings, name: str = "nominal", level: int | None = No
     scene = scene.replace("mesh", level=level or settings.reference_level, degree=degree)
     scene = scene.replace("actuation", stiffness=float(stiffness))
     scene = scene.replace("solver", duration=settings.duration, time_step=float(time_step), **(solver or {}))
+    return scene.replace("output", plots=False, render=False, xdmf=False)
+
+
+def fish_scene(settings: Settings, level: int) -> Scene:
+    """The shipped fish scene (``scenes/fish.toml``, degree 2) on the shipped mesh of ``level``
+    (``meshes/fish_l<level>.msh``) over the study's horizon."""
+    from aquarom_fenics.geometry.fish_recipe import shipped_fish_path
+
+    scene = Scene.load("fish").replace("mesh", file=str(shipped_fish_path(level)))
+    scene = scene.replace("solver", duration=settings.duration)
     return scene.replace("output", plots=False, render=False, xdmf=False)
 
 

@@ -1,7 +1,7 @@
 """The validation suite (`make validate`): every selected study, its JSON file, figures and report.
 
 Studies (SPEC §11): a accuracy, b cost, c run time against error, d time-step convergence, e MPI,
-stress tests, mesh convergence; cases are computed once and cached (:mod:`.cases`, :mod:`.runner`).
+stress tests, mesh convergence (the block's and the shipped fish's); cases are computed once and cached (:mod:`.cases`, :mod:`.runner`).
 """
 from __future__ import annotations
 
@@ -19,18 +19,20 @@ from aquarom_fenics.io.versions import software_versions
 
 from aquarom_fenics.io.persistence import write_json_atomic
 from aquarom_fenics.verification.validation.accuracy import study_a, study_b, study_c
-from aquarom_fenics.verification.validation.convergence_studies import (study_d, study_mesh_convergence,
-                                                                        study_stations, time_convergence_summary)
+from aquarom_fenics.verification.validation.convergence_studies import (study_d, study_fish_mesh_convergence,
+                                                                        study_mesh_convergence, study_stations,
+                                                                        time_convergence_summary)
 from aquarom_fenics.verification.validation.figures import make_figures
 from aquarom_fenics.verification.validation.report import write_report
 from aquarom_fenics.verification.validation.runner import CasesCollected, Runner, compute_in_parallel
 from aquarom_fenics.verification.validation.settings import Settings
 from aquarom_fenics.verification.validation.stability import study_e, study_stress
 
-STUDIES = ("a", "b", "c", "d", "e", "stress", "mesh_convergence", "stations")
+STUDIES = ("a", "b", "c", "d", "e", "stress", "mesh_convergence", "stations", "fish_mesh_convergence")
 
 STUDY_FUNCTIONS = {"a": study_a, "b": study_b, "c": study_c, "d": study_d, "e": study_e, "stress": study_stress,
-                   "mesh_convergence": study_mesh_convergence, "stations": study_stations}
+                   "mesh_convergence": study_mesh_convergence, "stations": study_stations,
+                   "fish_mesh_convergence": study_fish_mesh_convergence}
 
 
 def run(settings: Settings, out: Path, report_path: Path, studies=STUDIES, recompute_failed=False,
