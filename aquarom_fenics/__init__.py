@@ -8,7 +8,7 @@ from __future__ import annotations
 import logging
 import sys
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 __all__ = ["set_log_level", "__version__"]
 
