@@ -16,7 +16,11 @@ def ignore_sigterm_and_wait() -> int:
     return os.getpid()
 
 
-def test_a_local_worker_that_ignores_sigterm_is_killed_on_cancel():
+def test_a_local_worker_that_ignores_sigterm_is_killed_on_cancel(monkeypatch):
+    """With a 1 s grace instead of STOP_GRACE: the worker ignores SIGTERM however long the grace is."""
+    from aquarom_fenics.parallel import local
+
+    monkeypatch.setattr(local, "STOP_GRACE", 1.0)
     pool = LocalProcesses(1)
     pool.submit(ignore_sigterm_and_wait)
     deadline = time.monotonic() + 120

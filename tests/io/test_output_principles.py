@@ -68,8 +68,9 @@ def scenes(tmp_path_factory):
     return {"short": write_scene(directory, SHORT.format(duration=0.2, extra=""), "short.toml"),
             "long": write_scene(directory, SHORT.format(duration=40.0, extra=""), "long.toml"),
             "optimize": write_scene(directory, OPTIMIZE.format(iterations=3), "optimize.toml"),
-            "co": write_scene(directory, "[mesh]\nlevel = 1\n[cooptimization]\nenabled = true\n"
-                                         "weights = [0.5]\n[shapes]\nz_tail = { bounds = [-0.2, 0.2] }\n", "co.toml")}
+            "co": write_scene(directory, "[mesh]\nlevel = 1\n[solver]\nduration = 0.4\n[cooptimization]\n"
+                                         "enabled = true\nweights = [0.5]\n[shapes]\nz_tail = { bounds = [-0.2, 0.2] }\n",
+                              "co.toml")}
 
 
 @pytest.fixture(scope="module")
