@@ -357,7 +357,7 @@ def stroke_sensitivity(fom: FullOrderModel, k: int, plus: np.ndarray, minus: np.
     moved_xi = fom.xi.copy()
     moved_xi[k] += step
     moved = FullOrderModel(fom.scene, fom.fish, moved_xi, comm=fom.comm)
-    activations = fom.scene.reduction.stroke_amplitude * ANTAGONIST_PATTERN
+    activations = fom.scene.reduction.stroke_amplitude * fom.muscle.law.patterns()[0]
     try:
         responses = [fom.owned_values(moved.nodal_displacement(moved.static_response(*(sign * activations), start=start)))
                      for sign, start in ((1.0, plus), (-1.0, minus))]
