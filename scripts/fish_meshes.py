@@ -5,7 +5,8 @@
     .venv/bin/python scripts/fish_meshes.py --check      # exit 1 if a shipped file differs from its recipe
 
 Each file is gmsh format 4.1 (ASCII) with the volume physical groups head, left_1 … left_n,
-right_1 … right_n, body, and the unions left_muscle and right_muscle. The recipe's number of cells
+right_1 … right_n (numbered from the tail, as the block's: left_1/right_1 the rearmost pair, left_n/right_n
+on the head side), body, and the unions left_muscle and right_muscle. The recipe's number of cells
 per level is checked against what gmsh made (a different gmsh may mesh differently).
 """
 from __future__ import annotations

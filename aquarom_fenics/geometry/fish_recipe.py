@@ -73,15 +73,17 @@ class FishProfile:
 @dataclass(frozen=True)
 class FishRegions:
     """Head x ≥ -head L, muscles over muscles[0] L < x < muscles[1] L in ``pairs`` equal segments
-    (numbered front to back), left y > 0 and right y < 0, and the passive rest "body"."""
+    (numbered from the tail, as the block's: segment 1 the rearmost, segment ``pairs`` on the head
+    side), left y > 0 and right y < 0, and the passive rest "body"."""
 
     head: float
     muscles: tuple[float, float]
     pairs: int
 
     def segment_bounds(self) -> np.ndarray:
-        """x/L of the muscle segments' ends, front (muscles[1]) to back (muscles[0]): pairs + 1 values."""
-        return np.linspace(self.muscles[1], self.muscles[0], self.pairs + 1)
+        """x/L of the muscle segments' ends, back (muscles[0]) to front (muscles[1]): pairs + 1 values;
+        segment k spans bounds[k - 1] < x/L < bounds[k]."""
+        return np.linspace(self.muscles[0], self.muscles[1], self.pairs + 1)
 
     def planes(self) -> np.ndarray:
         """Sorted x/L of the interfaces strictly inside the body (-1, 0)."""
@@ -89,12 +91,13 @@ class FishRegions:
         return np.array(sorted(x for x in planes if -1.0 < x < 0.0))
 
     def slab_name(self, centre: float) -> str:
-        """"head", "muscle_<k>" (k = 1 front … pairs) or "body" for a slab with centre x/L."""
+        """"head", "muscle_<k>" (k = 1 at the tail … pairs on the head side) or "body" for a slab with
+        centre x/L."""
         if centre >= -self.head:
             return "head"
         bounds = self.segment_bounds()
         for k in range(self.pairs):
-            if bounds[k + 1] < centre < bounds[k]:
+            if bounds[k] < centre < bounds[k + 1]:
                 return f"muscle_{k + 1}"
         return "body"
 
@@ -226,7 +229,8 @@ def as_written(points: np.ndarray) -> np.ndarray:
 
 
 def fish_atoms(regions: FishRegions) -> tuple[str, ...]:
-    """Names of the disjoint regions, in file order: head, left_1 … left_n, right_1 … right_n, body."""
+    """Names of the disjoint regions, in file order: head, left_1 … left_n, right_1 … right_n, body
+    (segment 1 at the tail, n on the head side)."""
     pairs = range(1, regions.pairs + 1)
     return ("head", *(f"left_{k}" for k in pairs), *(f"right_{k}" for k in pairs), "body")
 

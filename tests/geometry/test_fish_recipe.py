@@ -65,7 +65,7 @@ def test_regions_conform_to_the_interface_planes_and_the_plane_y_0(fish):
     bounds = REGIONS.segment_bounds() * length
     slabs = {"head": (-REGIONS.head * length, 0.0), "body": (-length, REGIONS.muscles[0] * length)}
     for k in range(REGIONS.pairs):
-        slabs[f"left_{k + 1}"] = slabs[f"right_{k + 1}"] = (bounds[k + 1], bounds[k])
+        slabs[f"left_{k + 1}"] = slabs[f"right_{k + 1}"] = (bounds[k], bounds[k + 1])
     for name, (rear, front) in slabs.items():
         vertices = fish.points[fish.cells[fish.regions[name]]]
         assert vertices[..., 0].min() >= rear - tolerance and vertices[..., 0].max() <= front + tolerance, name
@@ -73,6 +73,18 @@ def test_regions_conform_to_the_interface_planes_and_the_plane_y_0(fish):
             assert vertices[..., 1].min() >= 0.0
         if name.startswith("right_"):
             assert vertices[..., 1].max() <= 0.0
+
+
+def test_segments_are_numbered_from_the_tail_like_the_block_s(fish):
+    """left_1/right_1 is the rearmost pair and left_n/right_n the one on the head side (the block's
+    convention, ``block_region_names``): the segments' mean x grows with k, on both sides."""
+    assert REGIONS.segment_bounds()[0] == REGIONS.muscles[0] and REGIONS.segment_bounds()[-1] == REGIONS.muscles[1]
+    for side in ("left", "right"):
+        mean_x = [fish.points[fish.cells[fish.regions[f"{side}_{k}"]]][..., 0].mean() for k in range(1, REGIONS.pairs + 1)]
+        assert np.all(np.diff(mean_x) > 0), (side, mean_x)
+    length = fish_profile().length
+    assert fish.points[fish.cells[fish.regions["left_1"]]][..., 0].min() == pytest.approx(REGIONS.muscles[0] * length)
+    assert fish.points[fish.cells[fish.regions["left_3"]]][..., 0].max() == pytest.approx(-REGIONS.head * length)
 
 
 def test_mesh_is_mirror_symmetric_and_tags_as_a_fish(fish):

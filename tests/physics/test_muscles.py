@@ -194,6 +194,38 @@ def test_the_travelling_wave_scene_runs_with_its_full_and_reduced_model(tmp_path
     assert reduced.tail_amplitude == pytest.approx(full.tail_amplitude, rel=0.03)  # measured: +0.6 %
 
 
+@pytest.fixture(scope="module")
+def fish_wave_runs():
+    """scenes/fish_wave.toml (the shipped fish, level 1, its 3 pairs at 120° per pair) over 0.3 s: FOM and ROM."""
+    wave = Scene.load("fish_wave").replace("solver", duration=0.3)
+    fish = load_fish(wave)
+    return fish, simulate(wave, fish=fish), simulate(wave, model="rom", fish=fish)
+
+
+def test_the_fish_wave_scene_drives_its_three_pairs_from_the_head_to_the_tail():
+    """left_k/right_k numbered from the tail (as the block's): the head-side pair leads by 120° per pair."""
+    wave = Scene.load("fish_wave")
+    assert [(m.region, m.scale, m.phase) for m in wave.muscles] == [
+        ("left_1", 1.0, 0.0), ("right_1", -1.0, 0.0), ("left_2", 1.0, 120.0), ("right_2", -1.0, 120.0),
+        ("left_3", 1.0, 240.0), ("right_3", -1.0, 240.0)]
+    assert len(ActivationLaw.of(wave).patterns()) == 2                  # the sin and cos parts of one frequency
+
+
+def test_the_fish_wave_scene_runs_with_its_full_and_reduced_model(fish_wave_runs):
+    fish, full, reduced = fish_wave_runs
+    assert len(fish.tags.muscle_cells) == 6
+    assert full.completed and reduced.completed
+    assert full.distance > 1e-3 and full.tail_amplitude > 1e-2       # measured: 4.83 mm forward, 1.95 cm
+
+
+@pytest.mark.xfail(strict=True, reason="measured over 0.3 s: the ROM's distance -11.5 %, tail amplitude -9.4 % "
+                                       "off the FOM (-7.6 % / -4.6 % with 10 vibration modes and the stroke vectors)")
+def test_the_fish_wave_rom_swims_within_3_percent_of_its_fom(fish_wave_runs):
+    _, full, reduced = fish_wave_runs
+    assert reduced.distance == pytest.approx(full.distance, rel=0.03)
+    assert reduced.tail_amplitude == pytest.approx(full.tail_amplitude, rel=0.03)
+
+
 def test_the_wave_basis_has_the_responses_of_each_activation_pattern():
     """Two patterns (the sin and cos parts): ψ, θ_ψ and ψ_m of each, θ_ψ12 and K_0⁻¹Mψ_k; the plan's
     estimate names the same candidates; the pair keeps its basis of one pattern."""
