@@ -43,6 +43,7 @@ from aquarom_fenics.errors import SolverError
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.fem.linear_solver import mumps_solver, upper_triangle_copy
+from aquarom_fenics.reduction.stroke_responses import stroke_response, stroke_sensitivity
 
 log = logging.getLogger("aquarom")
 
@@ -343,45 +344,6 @@ def stroke_vectors(fom: FullOrderModel, labels: tuple[str, ...], static_solve, v
     for k in sorted({int(label.rsplit("_", 1)[1]) - 1 for label in labels if label.startswith("dstroke_")}):
         vectors[f"dstroke_plus_{k + 1}"], vectors[f"dstroke_minus_{k + 1}"] = stroke_sensitivity(fom, k, plus, minus)
     return [vectors[label] for label in labels]
-
-
-SENSITIVITY_STEP = 0.01
-"""Forward-difference step of the stroke sensitivities, as a fraction of the parameter's range."""
-
-
-def stroke_sensitivity(fom: FullOrderModel, k: int, plus: np.ndarray, minus: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """∂u_s(±A_s)/∂ξ_k ≈ (u_s(ξ + h e_k) - u_s(ξ)) / h, h = SENSITIVITY_STEP × the range of ξ_k, towards the
-    middle of its bounds; each moved response by Newton from the response at ξ (same nominal mesh and dofs)."""
-    shape = fom.scene.shapes[k]
-    step = SENSITIVITY_STEP * (shape.upper - shape.lower) * (1.0 if fom.xi[k] <= 0.5 * (shape.lower + shape.upper) else -1.0)
-    moved_xi = fom.xi.copy()
-    moved_xi[k] += step
-    moved = FullOrderModel(fom.scene, fom.fish, moved_xi, comm=fom.comm)
-    activations = fom.scene.reduction.stroke_amplitude * fom.muscle.law.patterns()[0]
-    try:
-        responses = [fom.owned_values(moved.nodal_displacement(moved.static_response(*(sign * activations), start=start)))
-                     for sign, start in ((1.0, plus), (-1.0, minus))]
-    except SolverError as error:
-        raise SolverError(f"[reduction] stroke_sensitivities: the stroke response at {fom.fish.shape_names[k]} "
-                          f"moved by {step:g}: {error}") from None
-    finally:
-        moved.destroy()
-    return (responses[0] - plus) / step, (responses[1] - minus) / step
-
-
-def stroke_response(fom: FullOrderModel, amplitude: float, steps: int = 4) -> np.ndarray:
-    """u_s(a), the static response to the activations a P_1 (the first activation pattern; the pair's
-    (1, -1)): Newton from rest or, when that fails, by continuation in ``steps`` equal steps of a, each
-    Newton from the previous solution."""
-    activations = amplitude * fom.muscle.law.patterns()[0]
-    try:
-        return fom.static_response(*activations)
-    except SolverError:
-        log.info("basis: the static response at a = %g needs continuation (%d steps)", amplitude, steps)
-    u = None
-    for step in range(1, steps + 1):
-        u = fom.static_response(*(step / steps * activations), start=u)
-    return u
 
 
 def unit_actuation_force(fom: FullOrderModel, pattern: np.ndarray | None = None) -> np.ndarray:
