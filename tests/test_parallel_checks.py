@@ -88,3 +88,34 @@ def test_a_probe_that_fails_otherwise_is_one_line():
         usable_workers(client, SETTINGS, probe=os.getpid)
     message = str(refused.value)
     assert "\n" not in message and "no worker could run a task" in message and "probe not done" in message
+
+
+SIGTERM_IN_A_FINALISER = """
+import os, signal, time, weakref
+from aquarom_fenics.parallel.interface import local_worker_started, run_task
+
+class Resource:
+    pass
+
+def task():
+    resource = Resource()
+    weakref.finalize(resource, lambda: os.kill(os.getpid(), signal.SIGTERM))
+    del resource              # its finaliser runs, and SIGTERM arrives inside it
+    time.sleep(30)            # reached only if the stop was lost in the finaliser
+    return "completed"
+
+local_worker_started()
+print(run_task({}, task, ()))
+"""
+
+
+def test_sigterm_inside_a_finaliser_of_a_task_still_ends_the_worker_without_a_traceback():
+    """Python cannot raise from a finaliser: the stop is delivered again after it, not printed as an
+    'Exception ignored' traceback and lost (a pareto sweep's worker printed one on SIGTERM)."""
+    import subprocess
+    import sys
+
+    process = subprocess.run([sys.executable, "-c", SIGTERM_IN_A_FINALISER], capture_output=True, text=True,
+                             timeout=60)
+    assert process.returncode == 143, (process.returncode, process.stdout, process.stderr)
+    assert process.stdout == "" and process.stderr == "", process.stderr

@@ -76,10 +76,25 @@ class WorkerStopped(BaseException):
 
 
 def _stop_worker(number, frame) -> None:
-    """A local worker's SIGTERM handler: unwind the running task, or end at once when idle."""
+    """A local worker's SIGTERM handler (and SIGALRM's, for a stop re-raised after a finaliser): unwind the
+    running task, or end at once when idle."""
     if _IN_TASK:
         raise WorkerStopped("stopped by SIGTERM")
     os._exit(STOPPED_EXIT_CODE)
+
+
+def _unraisable_in_worker(unraisable) -> None:
+    """A local worker's ``sys.unraisablehook``: a :class:`WorkerStopped` raised where Python cannot
+    propagate it (a finaliser or ``__del__`` running when SIGTERM came) is not printed but raised
+    again 10 ms later (SIGALRM, once the finaliser has returned), so that it unwinds the task;
+    anything else is reported as usual."""
+    if isinstance(unraisable.exc_value, WorkerStopped):
+        import signal
+
+        signal.signal(signal.SIGALRM, _stop_worker)
+        signal.setitimer(signal.ITIMER_REAL, 0.01)
+        return
+    sys.__unraisablehook__(unraisable)
 
 
 def local_worker_started(on_start: Callable[[], None] | None = None) -> None:
@@ -98,6 +113,7 @@ def local_worker_started(on_start: Callable[[], None] | None = None) -> None:
 
     global _IN_LOCAL_WORKER
     _IN_LOCAL_WORKER = True
+    sys.unraisablehook = _unraisable_in_worker
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGTERM})   # a mask inherited from the spawning thread
     held: list[int] = []

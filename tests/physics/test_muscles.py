@@ -194,14 +194,6 @@ def test_the_travelling_wave_scene_runs_with_its_full_and_reduced_model(tmp_path
     assert reduced.tail_amplitude == pytest.approx(full.tail_amplitude, rel=0.03)  # measured: +0.6 %
 
 
-@pytest.fixture(scope="module")
-def fish_wave_runs():
-    """scenes/fish_wave.toml (the shipped fish, level 1, its 3 pairs at 120° per pair) over 0.3 s: FOM and ROM."""
-    wave = Scene.load("fish_wave").replace("solver", duration=0.3)
-    fish = load_fish(wave)
-    return fish, simulate(wave, fish=fish), simulate(wave, model="rom", fish=fish)
-
-
 def test_the_fish_wave_scene_drives_its_three_pairs_from_the_head_to_the_tail():
     """left_k/right_k numbered from the tail (as the block's): the head-side pair leads by 120° per pair."""
     wave = Scene.load("fish_wave")
@@ -211,19 +203,16 @@ def test_the_fish_wave_scene_drives_its_three_pairs_from_the_head_to_the_tail():
     assert len(ActivationLaw.of(wave).patterns()) == 2                  # the sin and cos parts of one frequency
 
 
-def test_the_fish_wave_scene_runs_with_its_full_and_reduced_model(fish_wave_runs):
-    fish, full, reduced = fish_wave_runs
+def test_the_fish_wave_scene_runs_with_its_full_and_reduced_model():
+    """scenes/fish_wave.toml over its first 0.1 s: both models complete and the fish starts to swim.
+    Its ROM is not within 3 % of the FOM (2 s: -6.0 % distance, -20 % tail amplitude; the scene's
+    comment and docs/your_own_swimmer.md), so no accuracy is asserted here."""
+    wave = Scene.load("fish_wave").replace("solver", duration=0.1)
+    fish = load_fish(wave)
+    full, reduced = simulate(wave, fish=fish), simulate(wave, model="rom", fish=fish)
     assert len(fish.tags.muscle_cells) == 6
     assert full.completed and reduced.completed
-    assert full.distance > 1e-3 and full.tail_amplitude > 1e-2       # measured: 4.83 mm forward, 1.95 cm
-
-
-@pytest.mark.xfail(strict=True, reason="measured over 0.3 s: the ROM's distance -11.5 %, tail amplitude -9.4 % "
-                                       "off the FOM (-7.6 % / -4.6 % with 10 vibration modes and the stroke vectors)")
-def test_the_fish_wave_rom_swims_within_3_percent_of_its_fom(fish_wave_runs):
-    _, full, reduced = fish_wave_runs
-    assert reduced.distance == pytest.approx(full.distance, rel=0.03)
-    assert reduced.tail_amplitude == pytest.approx(full.tail_amplitude, rel=0.03)
+    assert full.distance > 1e-4 and full.tail_amplitude > 5e-3       # measured: 0.34 mm forward, 1.04 cm
 
 
 def test_the_wave_basis_has_the_responses_of_each_activation_pattern():
