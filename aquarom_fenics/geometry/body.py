@@ -135,11 +135,6 @@ def in_swimming_frame(mesh: FishMesh, axis: str, head_end: str, head: str) -> Fi
     return FishMesh(points=points, cells=cells, source=mesh.source, regions=mesh.regions)
 
 
-def with_head_at_max_x(mesh: FishMesh, head_end: str, head: str) -> FishMesh:
-    """``in_swimming_frame`` of a body along x: ``head_end`` "+x" (as it is) or "-x" (mirrored in x)."""
-    return in_swimming_frame(mesh, "x", head_end, head)
-
-
 def body_lines(mesh: FishMesh, regions: dict[str, np.ndarray], how: str) -> list[str]:
     """Lines describing the body: length along x, volume and element count, then the volume of each
     region (the share of the body in per cent); ``how`` says where the regions come from."""

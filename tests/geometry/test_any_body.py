@@ -18,7 +18,7 @@ from aquarom_fenics.geometry.mesh import FishMesh, signed_cell_volumes
 from aquarom_fenics.geometry.shapes import CATALOG, shape_displacement
 
 from conftest import coarse_scene
-from test_mesh_regions import block_regions, mirrored, passive_cells, write_msh
+from test_mesh_regions import block_regions, gmsh_body, mirrored, passive_cells, write_msh
 
 L, W, H = 0.20, 0.04, 0.10
 SHORT = {"duration": 0.2}
@@ -38,24 +38,6 @@ def block_run():
     result = simulate(scene)
     assert result.completed and abs(result.distance) > 1e-6 and result.tail_amplitude > 1e-4
     return scene, result
-
-
-def gmsh_body(path, build, size):
-    """A .msh of the volume ``build(occ)`` makes, meshed with elements of at most ``size`` [m], without
-    any cutting plane: no nodes are placed on the axis y = z = 0 or on the plane y = 0."""
-    gmsh = gmsh_session.import_gmsh()
-    gmsh.initialize(readConfigFiles=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
-        gmsh.model.add("body")
-        build(gmsh.model.occ)
-        gmsh.model.occ.synchronize()
-        gmsh.model.mesh.generate(3)
-        gmsh.write(str(path))
-    finally:
-        gmsh.finalize()
-    return path
 
 
 def uncut_block(path):

@@ -10,7 +10,7 @@ from aquarom_fenics.cli import main
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry import gmsh_session
 from aquarom_fenics.geometry.block import block_mesh
-from aquarom_fenics.geometry.body import with_head_at_max_x
+from aquarom_fenics.geometry.body import in_swimming_frame
 from aquarom_fenics.geometry.mesh import FishMesh, signed_cell_volumes
 from aquarom_fenics.geometry.mesh_files import read_mesh
 from aquarom_fenics.geometry.tags import tag_fish
@@ -163,18 +163,18 @@ def mirrored(mesh: FishMesh) -> FishMesh:
 def test_head_end_minus_x_mirrors_the_body_back(block):
     mirror = mirrored(block)
     assert np.all(signed_cell_volumes(mirror.points, mirror.cells) > 0.0)
-    back = with_head_at_max_x(mirror, "-x", "head")
+    back = in_swimming_frame(mirror, "x", "-x", "head")
     np.testing.assert_array_equal(back.points, block.points)
     np.testing.assert_array_equal(back.cells, block.cells)
     assert np.all(signed_cell_volumes(back.points, back.cells) > 0.0)
-    assert with_head_at_max_x(block, "+x", "head") is block
+    assert in_swimming_frame(block, "x", "+x", "head") is block
 
 
 @pytest.mark.parametrize("mesh_of, declared, side", [(mirrored, "+x", "-x"), (lambda mesh: mesh, "-x", "+x")])
 def test_a_head_region_at_the_other_end_is_refused(block, mesh_of, declared, side):
     with pytest.raises(InputError, match=rf"its region 'head' lies at the \{side} end of the body, but \[mesh\] "
                                          rf"head_end = \"\{declared}\"; set \[mesh\] head_end = \"\{side}\"$"):
-        with_head_at_max_x(mesh_of(block), declared, "head")
+        in_swimming_frame(mesh_of(block), "x", declared, "head")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -237,22 +237,32 @@ def test_a_spine_with_a_gap_no_edge_spans_is_refused(block):
     assert not tag_fish(moved).has_spine           # the stations need no spine
 
 
-def half_cut_box(path):
-    """The block's box cut by the plane z = 0 only, meshed without any constraint on y = 0."""
+def gmsh_body(path, build, size):
+    """A .msh of the volume ``build(occ)`` makes, meshed with elements of at most ``size`` [m] and no
+    cutting plane but those ``build`` makes: without them no nodes are placed on the axis y = z = 0
+    or on the plane y = 0."""
     gmsh = gmsh_session.import_gmsh()
     gmsh.initialize(readConfigFiles=False)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.02)
-        gmsh.model.add("half_cut")
-        lower = gmsh.model.occ.addBox(-0.2, -0.02, -0.05, 0.2, 0.04, 0.05)
-        upper = gmsh.model.occ.addBox(-0.2, -0.02, 0.0, 0.2, 0.04, 0.05)
-        gmsh.model.occ.fragment([(3, lower)], [(3, upper)])
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        gmsh.model.add("body")
+        build(gmsh.model.occ)
         gmsh.model.occ.synchronize()
         gmsh.model.mesh.generate(3)
         gmsh.write(str(path))
     finally:
         gmsh.finalize()
+    return path
+
+
+def half_cut_box(path):
+    """The block's box cut by the plane z = 0 only, meshed without any constraint on y = 0."""
+    def halves(occ):
+        occ.fragment([(3, occ.addBox(-0.2, -0.02, -0.05, 0.2, 0.04, 0.05))],
+                     [(3, occ.addBox(-0.2, -0.02, 0.0, 0.2, 0.04, 0.05))])
+
+    return gmsh_body(path, halves, 0.02)
 
 
 def bad_mesh(kind, tmp_path, block):
