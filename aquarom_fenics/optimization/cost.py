@@ -247,14 +247,30 @@ class CostWeights:
         return self.alpha * amplitude ** 2
 
 
-def evaluate(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarray, weights: CostWeights) -> Evaluation:
-    """PROM simulation with sensitivities at z; raises SolverError if it stops or turns non-finite."""
-    xi = z[: space.n_shapes]
+def _prom_run(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarray, sensitivities: bool):
+    """The PROM's run at z (with dd/dz when ``sensitivities``); SolverError if it stops."""
     amplitude = float(z[-1]) if space.with_amplitude else None
-    result = simulate_reduced(prom, scene, xi, sensitivities=True, amplitude=amplitude,
-                              amplitude_sensitivity=space.with_amplitude)
+    result = simulate_reduced(prom, scene, z[: space.n_shapes], sensitivities=sensitivities, amplitude=amplitude,
+                              amplitude_sensitivity=sensitivities and space.with_amplitude)
     if not result.completed:
         raise SolverError(f"PROM simulation at {space.as_dict(z)} stopped: {result.error}")
+    return result
+
+
+def cost_value(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarray, weights: CostWeights) -> float:
+    """L at z without its gradient: a PROM run without sensitivities (a third cheaper; the same
+    trajectory, so the same L as :func:`evaluate`'s). Raises SolverError as :func:`evaluate`."""
+    cost = -weights.distance * _prom_run(prom, scene, space, z, sensitivities=False).distance
+    if space.with_amplitude:
+        cost += weights.energy * weights.energy_term(z[-1])
+    if not np.isfinite(cost):
+        raise SolverError(f"non-finite cost at {space.as_dict(z)}: {cost}")
+    return float(cost)
+
+
+def evaluate(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarray, weights: CostWeights) -> Evaluation:
+    """PROM simulation with sensitivities at z; raises SolverError if it stops or turns non-finite."""
+    result = _prom_run(prom, scene, space, z, sensitivities=True)
     distance_gradient = result.distance_gradient
     if distance_gradient is None:
         distance_gradient = np.zeros(len(z))

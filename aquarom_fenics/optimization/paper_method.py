@@ -347,8 +347,9 @@ def _best_amplitude(space: DesignSpace, builder: PromBuilder, prom, weights, z: 
     """z with A = argmin_{A ∈ [A_lo, A_hi]} L(ξ, A) on ``prom`` (shapes ξ of z fixed).
 
     L(A) = -w_1 d(ξ, A) + w_2 α A²; the PROM's reduced actuation is linear in A, so the PROM of ξ
-    answers for every A. Bounded Brent search (tolerance 1e-5 of A's range, so |∂L/∂A| left
-    over is far below the first-order tolerance), then each bound is compared. A design the
+    answers for every A. Bounded Brent search on L alone (PROM runs without sensitivities;
+    tolerance 1e-5 of A's range, so |∂L/∂A| left over is far below the first-order
+    tolerance), then each bound is compared. A design the
     PROM cannot simulate counts as L = +∞; an A* whose PROM gait the stability test refuses
     leaves z's amplitude unchanged."""
     if not space.with_amplitude or space.upper[-1] <= space.lower[-1]:
@@ -359,7 +360,7 @@ def _best_amplitude(space: DesignSpace, builder: PromBuilder, prom, weights, z: 
         trial = np.array(z, dtype=float)
         trial[-1] = amplitude
         try:
-            return builder.evaluate(prom, trial, weights).cost
+            return builder.cost(prom, trial, weights)
         except SolverError:
             return np.inf
 

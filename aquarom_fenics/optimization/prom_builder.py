@@ -10,7 +10,7 @@ from aquarom_fenics.dynamics.reduced_dynamics import reduced_stability
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.fish import Fish
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.optimization.cost import DesignSpace, Evaluation, evaluate
+from aquarom_fenics.optimization.cost import DesignSpace, Evaluation, cost_value, evaluate
 from aquarom_fenics.reduction.cache import cached_prom
 from aquarom_fenics.reduction.prom import ReducedModel
 from aquarom_fenics.reduction.reductor import build_prom
@@ -161,6 +161,14 @@ class PromBuilder:
         started = time.perf_counter()
         try:
             return evaluate(prom, self.scene, self.space, z, weights)
+        finally:
+            self.solve_time += time.perf_counter() - started
+
+    def cost(self, prom, z, weights) -> float:
+        """L at z without its gradient (:func:`cost_value`)."""
+        started = time.perf_counter()
+        try:
+            return cost_value(prom, self.scene, self.space, z, weights)
         finally:
             self.solve_time += time.perf_counter() - started
 

@@ -116,7 +116,7 @@ def _meshable_candidate(builder: PromBuilder, center, candidate, step_tolerance:
 
 
 def _surrogate_cost(builder: PromBuilder, prom, weights, z) -> float:
-    return builder.evaluate(prom, z, weights).cost
+    return builder.cost(prom, z, weights)
 
 
 def _build_or_stop(builder: PromBuilder, z: np.ndarray) -> ReducedModel:

@@ -18,7 +18,9 @@ cells: the rule converges with the mesh, like the rest of the discretisation).
 """
 from __future__ import annotations
 
+import hashlib
 import logging
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -135,12 +137,41 @@ def face_average_weights(mesh_points: np.ndarray, facets: np.ndarray, nodes: Lag
     return weights / areas.sum()
 
 
+_COMPUTED: OrderedDict[bytes, StationAverages] = OrderedDict()
+"""The last few station averages computed in this process, by a digest of their inputs: a fish read
+again from the same mesh (every run loads its own) gets the same maps without the integrals."""
+_COMPUTED_KEPT = 8
+
+
+def _digest(arrays, numbers) -> bytes:
+    digest = hashlib.blake2b(repr(numbers).encode(), digest_size=32)
+    for array in arrays:
+        array = np.ascontiguousarray(array)
+        digest.update(repr((array.dtype.str, array.shape)).encode())
+        digest.update(array.tobytes())
+    return digest.digest()
+
+
 def station_averages(mesh_points: np.ndarray, mesh_cells: np.ndarray, nodes: LagrangeNodes, box, n_stations: int,
                      head_cells: np.ndarray, tail_face: np.ndarray | None = None) -> StationAverages:
     """B and the head average on the nominal mesh (``box``: the fish's bounding box). With ``tail_face``
-    (the triangles of the end face x = -L) the tail station averages that face instead of its half-hat."""
+    (the triangles of the end face x = -L) the tail station averages that face instead of its half-hat.
+    The maps are read-only: the same inputs in the same process give the same (shared) maps."""
     if n_stations < 2:
         raise ValueError(f"need at least 2 station intervals, got {n_stations}")
+    key = _digest((mesh_points, mesh_cells, nodes.points, nodes.cell_nodes, head_cells,
+                   np.empty((0, 3), dtype=np.int64) if tail_face is None else tail_face),
+                  (float(box.length), float(box.x_tail), n_stations, nodes.degree, tail_face is None))
+    if key not in _COMPUTED:
+        _COMPUTED[key] = _station_averages(mesh_points, mesh_cells, nodes, box, n_stations, head_cells, tail_face)
+        while len(_COMPUTED) > _COMPUTED_KEPT:
+            _COMPUTED.popitem(last=False)
+    _COMPUTED.move_to_end(key)
+    return _COMPUTED[key]
+
+
+def _station_averages(mesh_points, mesh_cells, nodes: LagrangeNodes, box, n_stations: int, head_cells,
+                      tail_face) -> StationAverages:
     stations = station_positions(box.length, box.x_tail, n_stations)
     hat_integrals = weighted_node_integrals(mesh_points, mesh_cells, nodes,
                                             lambda x: hat_functions(x[:, 0], stations))
@@ -149,7 +180,11 @@ def station_averages(mesh_points: np.ndarray, mesh_cells: np.ndarray, nodes: Lag
         weights[0] = face_average_weights(mesh_points, tail_face, nodes)
     head_integrals = weighted_node_integrals(mesh_points, mesh_cells[head_cells], _cell_subset(nodes, head_cells),
                                              lambda x: np.ones((1, x.shape[0])))[0]
-    return StationAverages(stations, sparse.csr_matrix(weights), head_integrals / head_integrals.sum())
+    averages = StationAverages(stations, sparse.csr_matrix(weights), head_integrals / head_integrals.sum())
+    for array in (averages.stations, averages.weights.data, averages.weights.indices, averages.weights.indptr,
+                  averages.head_weights):
+        array.flags.writeable = False
+    return averages
 
 
 def averages_of(fish, n_stations: int, tail_station: str = "face") -> StationAverages:

@@ -69,3 +69,18 @@ def test_the_face_tail_station_averages_the_end_face(degree):
     np.testing.assert_allclose(face.average(fish.nodes.points)[0], [-0.2, 0.0, 0.0], atol=1e-12)
     slab = averages_of(fish, 10, "slab")
     assert (face.weights[1:] != slab.weights[1:]).nnz == 0
+
+
+def test_the_same_mesh_read_again_shares_its_read_only_maps_and_another_station_count_does_not(averages):
+    fish, stations = averages
+    again = load_fish(coarse_scene(mesh={"degree": fish.nodes.degree}))
+    assert again is not fish
+    mesh, tags = again.mesh, again.tags
+    shared = station_averages(mesh.points, mesh.cells, again.nodes, tags.box, 10, tags.head_cells)
+    assert shared is stations
+    with pytest.raises(ValueError):
+        shared.head_weights[0] = 1.0
+    with pytest.raises(ValueError):
+        shared.weights.data[0] = 1.0
+    coarser = station_averages(mesh.points, mesh.cells, again.nodes, tags.box, 5, tags.head_cells)
+    assert coarser.n_stations == 6 and coarser is not stations
