@@ -155,11 +155,12 @@ def fom_phrase(point: dict) -> str:
 
 def run_budget_front(args, scene) -> int:
     """``aquarom pareto --budgets``: max d subject to A ≤ A_k for each budget, in this process."""
-    from aquarom_fenics.studies.budget_front import budget_front, parse_budgets
+    from aquarom_fenics.studies.budget_front import CHECKPOINT, budget_front, parse_budgets
 
     budgets = parse_budgets(args.budgets, scene.cooptimization.amplitude_bounds)
-    out = claim_output(args, args.out or Path("results") / "pareto" / f"{scene.name}-budgets")
-    for point in budget_front(scene, out, budgets):
+    out = claim_output(args, args.out or Path("results") / "pareto" / f"{scene.name}-budgets", resume=args.resume,
+                       resume_file=CHECKPOINT)
+    for point in budget_front(scene, out, budgets, resume=args.resume):
         say(f"A ≤ {point['budget']:.3f}: amplitude {point['amplitude']:.3f}, {fom_phrase(point)}, PROM "
             f"{100 * point['prom_distance_m']:.3f} cm, {'converged' if point['converged'] else 'NOT converged'}")
     say(f"outputs in {shown(args, out)}/ (pareto.csv, pareto.png)")

@@ -98,9 +98,6 @@ def check_inputs(args, scene):
     if args.command == "pareto" and getattr(args, "budgets", None) is not None:
         from aquarom_fenics.studies.budget_front import parse_budgets
 
-        if args.resume:
-            raise InputError("--budgets with --resume: a budget front continues each budget from the previous "
-                             "optimum and is not resumable; run it again without --resume")
         parse_budgets(args.budgets, scene.cooptimization.amplitude_bounds)
     if args.command == "pareto":
         from aquarom_fenics.studies.study import require_distinct_weights

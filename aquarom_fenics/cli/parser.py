@@ -113,7 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
                                                "(default 1: the weights one after the other in this process)")
     pareto.add_argument("--resume", action="store_true",
                         help="continue the sweep in --out: keep the weights that completed, continue the others "
-                             "from their checkpoints")
+                             "from their checkpoints (with --budgets: keep the budgets done, continue from the last)")
     pareto.add_argument("--budgets", metavar="LOW:HIGH:COUNT",
                         help="trace the front by effort budgets instead of the weights: maximise the distance "
                              "subject to A ≤ A_k for COUNT budgets from LOW to HIGH (or a comma list A1,A2,...), "

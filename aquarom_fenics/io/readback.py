@@ -206,6 +206,18 @@ def load_checkpoint(path: Path, dimension: int, method: str, shapes: int | None 
     return load_json(path, checkpoint_schema(dimension, method, shapes), "checkpoint", "start without --resume")
 
 
+def budget_front_schema(dimension: int) -> record:
+    """budget_front.json of a budget front: the budgets done so far, each one's optimum (``dimension``
+    design variables, the amplitude last) and its pareto.csv row, for the scene of ``scene_hash``."""
+    return record({"scene_hash": TEXT, "budgets": list_of(FINITE), "optima": list_of(list_of(FINITE, dimension)),
+                   "rows": list_of(record({"budget": FINITE}))})
+
+
+def load_budget_front(path: Path, dimension: int) -> dict:
+    """budget_front.json, checked against :func:`budget_front_schema` (nothing is written before)."""
+    return load_json(path, budget_front_schema(dimension), "budget front checkpoint", "run without --resume")
+
+
 def optimization_summary_schema(names: list[str]) -> record:
     """summary.json of an optimisation over the design variables ``names``: a completed run, or
     one stopped early (``completed`` false, with its stop reason)."""

@@ -25,7 +25,8 @@ from mpi4py import MPI
 
 from aquarom_fenics.errors import InputError, SolverError
 from aquarom_fenics.geometry.fish import Fish, load_fish
-from aquarom_fenics.io.persistence import write_text_atomic
+from aquarom_fenics.io.persistence import write_json_atomic, write_text_atomic
+from aquarom_fenics.io.readback import load_budget_front
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.optimization.cost import CostWeights, DesignSpace
 from aquarom_fenics.optimization.optimize import OptimizationResult, optimization_space, optimize
@@ -38,6 +39,9 @@ log = logging.getLogger("aquarom")
 COLUMNS = ["mode", "w1", "budget", "amplitude", "energy", "distance_m", "prom_distance_m", "fom_check",
            "fom_check_reason", "converged", "first_order_measure", "stop_reason", "prom_builds", "seconds"]
 """pareto.csv's columns of a budget front before the shapes (``xi_<name>``); ``w1`` stays empty."""
+
+CHECKPOINT = "budget_front.json"
+"""What ``--resume`` reads: the budgets done, their optima and rows (written after every budget)."""
 
 
 def parse_budgets(text: str, bounds: tuple[float, float], where: str = "--budgets") -> tuple[float, ...]:
@@ -84,17 +88,21 @@ def continuation_start(space: DesignSpace, previous: np.ndarray | None) -> np.nd
     return start
 
 
-def budget_front(scene: Scene, out_dir: Path, budgets: tuple[float, ...], fish: Fish | None = None) -> list[dict]:
-    """max d subject to A ≤ A_k for every budget, each optimum FOM-checked; writes pareto.csv and
-    pareto.png in ``out_dir`` and returns the rows (:func:`budget_row`)."""
+def budget_front(scene: Scene, out_dir: Path, budgets: tuple[float, ...], fish: Fish | None = None,
+                 resume: bool = False) -> list[dict]:
+    """max d subject to A ≤ A_k for every budget, each optimum FOM-checked; returns the rows
+    (:func:`budget_row`). pareto.csv, pareto.png and :data:`CHECKPOINT` in ``out_dir`` are written
+    after every budget, so that a stopped front keeps the budgets it finished and ``resume``
+    continues it from the last one's optimum."""
     if not scene.cooptimization.enabled:
         raise InputError(f"scene {scene.source}: a budget front needs [cooptimization] enabled = true")
     fish = fish or load_fish(scene)
     space = optimization_space(scene, fish)
+    rows, optima = resumed_budgets(scene, Path(out_dir), budgets, len(space.names)) if resume else ([], [])
     builder = PromBuilder(scene, fish, space)
     weights = CostWeights(distance=1.0, energy=0.0, alpha=scene.cooptimization.energy_weight)
-    rows, previous = [], None
-    for budget in budgets:
+    previous = optima[-1] if optima else None
+    for budget in budgets[len(rows):]:
         started, builds = time.perf_counter(), builder.builds
         builder.space = budget_space(space, budget)
         result = optimize(scene, fish=fish, weights=weights, builder=builder, write_checkpoint=False,
@@ -106,9 +114,37 @@ def budget_front(scene: Scene, out_dir: Path, budgets: tuple[float, ...], fish: 
                  100 * result.evaluation.distance, "stopped" if distance is None else f"{100 * distance:.3f} cm",
                  "converged" if result.converged else f"not converged ({result.stop_reason})")
         previous = result.optimum
-    if MPI.COMM_WORLD.rank == 0:
-        write_front(rows, Path(out_dir))
+        optima.append(previous)
+        if MPI.COMM_WORLD.rank == 0:
+            write_front(rows, Path(out_dir))
+            write_json_atomic(Path(out_dir) / CHECKPOINT, {
+                "scene_hash": scene.hash, "budgets": [row["budget"] for row in rows],
+                "optima": [np.asarray(z, dtype=float).tolist() for z in optima], "rows": rows})
     return rows
+
+
+def resumed_budgets(scene: Scene, out_dir: Path, budgets: tuple[float, ...],
+                    dimension: int) -> tuple[list[dict], list[np.ndarray]]:
+    """The rows and optima of the budgets an earlier run of this front finished (its :data:`CHECKPOINT`);
+    InputError when it was another scene or its budgets do not begin ``budgets``."""
+    path = out_dir / CHECKPOINT
+    data = load_budget_front(path, dimension)
+    done = data["budgets"]
+    if data["scene_hash"] != scene.hash:
+        raise InputError(f"--resume: {path} was written for scene hash {data['scene_hash']}, not this scene "
+                         f"({scene.hash}); run without --resume")
+    if len(data["optima"]) != len(done) or len(data["rows"]) != len(done) \
+            or [row["budget"] for row in data["rows"]] != done:
+        raise InputError(f"--resume: {path} lists {len(done)} budgets but {len(data['optima'])} optima and "
+                         f"{len(data['rows'])} rows; run without --resume")
+    if done != list(budgets[: len(done)]):
+        raise InputError(f"--resume: {path} holds the budgets {', '.join(f'{b:g}' for b in done)}, which do not "
+                         f"begin the budgets asked for ({', '.join(f'{b:g}' for b in budgets)}); give a list "
+                         "that starts with them, or run without --resume")
+    rows = [{**row, "distance_m": float("nan") if row.get("distance_m") is None else row["distance_m"]}
+            for row in data["rows"]]
+    log.info("budget front: %d of %d budgets kept from %s", len(done), len(budgets), path)
+    return rows, [np.array(z, dtype=float) for z in data["optima"]]
 
 
 def _fom_distance(scene: Scene, fish: Fish, result: OptimizationResult) -> tuple[float | None, str | None]:

@@ -2,6 +2,7 @@
 each optimum FOM-checked (level 1, a 1 s horizon, three budgets)."""
 import csv
 import dataclasses
+import json
 import tomllib
 
 import numpy as np
@@ -77,3 +78,79 @@ def test_pareto_refuses_bad_budgets_in_one_line_and_writes_nothing(tmp_path, cap
     error = capsys.readouterr().err.strip()
     assert words in error and "\n" not in error and "Traceback" not in error
     assert not (tmp_path / "front").exists()
+
+
+class Stop(Exception):
+    """Stands for Ctrl-C in the middle of a budget."""
+
+
+def fake_optimizer(starts: list, stop_at: float | None = None):
+    """optimize() for the budget front without PROMs: the optimum is the start (A at the budget), its
+    distance 0.1 A; raises Stop at the budget ``stop_at``."""
+    from types import SimpleNamespace
+
+    def fake(scene, fish, weights, builder, write_checkpoint, start):
+        budget = builder.space.upper[-1]
+        if budget == stop_at:
+            raise Stop(budget)
+        starts.append(np.array(start))
+        optimum = np.array(start, dtype=float)
+        optimum[0] = -0.1 * len(starts)          # each optimum differs, so a continuation can be told apart
+        return SimpleNamespace(space=builder.space, optimum=optimum, evaluation=SimpleNamespace(distance=0.1 * budget),
+                               converged=True, optimality=SimpleNamespace(measure=0.0), stop_reason="fake")
+    return fake
+
+
+def test_a_stopped_front_keeps_its_budgets_and_resume_continues_from_the_last_optimum(tmp_path, monkeypatch):
+    from aquarom_fenics.studies import budget_front as module
+    from aquarom_fenics.studies.budget_front import CHECKPOINT, budget_space
+
+    scene = two_shape_co()
+    monkeypatch.setattr(module, "fom_distance", lambda scene, fish, shapes, amplitude: 0.1 * amplitude + 1e-3)
+    first = []
+    monkeypatch.setattr(module, "optimize", fake_optimizer(first, stop_at=0.3))
+    with pytest.raises(Stop):
+        budget_front(scene, tmp_path, (0.1, 0.2, 0.3))
+    table = list(csv.DictReader((tmp_path / "pareto.csv").open()))
+    assert [float(row["budget"]) for row in table] == [0.1, 0.2]
+    kept = (tmp_path / CHECKPOINT).read_text()
+
+    for other, words in (((0.1, 0.25, 0.3), "do not begin the budgets asked for (0.1, 0.25, 0.3)"),
+                         ((0.1,), "do not begin")):
+        with pytest.raises(InputError) as refused:
+            budget_front(scene, tmp_path, other, resume=True)
+        assert words in str(refused.value) and "\n" not in str(refused.value)
+    with pytest.raises(InputError, match="written for scene hash"):
+        budget_front(scene.replace("solver", duration=0.5), tmp_path, (0.1, 0.2, 0.3), resume=True)
+    assert (tmp_path / CHECKPOINT).read_text() == kept
+
+    resumed = []
+    monkeypatch.setattr(module, "optimize", fake_optimizer(resumed))
+    rows = budget_front(scene, tmp_path, (0.1, 0.2, 0.3), resume=True)
+    assert [row["budget"] for row in rows] == [0.1, 0.2, 0.3] and len(resumed) == 1
+    space = module.optimization_space(scene, module.load_fish(scene))
+    last = np.array(json.loads(kept)["optima"][-1])
+    assert last[0] == -0.2
+    np.testing.assert_array_equal(resumed[0], module.continuation_start(budget_space(space, 0.3), last))
+    table = list(csv.DictReader((tmp_path / "pareto.csv").open()))
+    assert [float(row["budget"]) for row in table] == [0.1, 0.2, 0.3]
+    assert [float(row["distance_m"]) for row in table] == pytest.approx([0.011, 0.021, 0.031])
+
+
+def test_the_real_front_resumed_with_its_own_budgets_runs_no_optimisation(front, monkeypatch):
+    from aquarom_fenics.studies import budget_front as module
+
+    rows, out = front
+    monkeypatch.setattr(module, "optimize", lambda *args, **kwargs: pytest.fail("a finished budget ran again"))
+    again = budget_front(two_shape_co(), out, (0.1, 0.2, 0.3), resume=True)
+    assert [row["distance_m"] for row in again] == [row["distance_m"] for row in rows]
+
+
+def test_pareto_budgets_resume_without_a_checkpoint_is_one_line(tmp_path, capsys):
+    from aquarom_fenics.cli import main
+
+    (tmp_path / "front").mkdir()
+    assert main(["pareto", "co", "--budgets", "0.1,0.2", "--resume", "--out", str(tmp_path / "front")]) \
+        == InputError.exit_code
+    error = capsys.readouterr().err.strip()
+    assert "budget_front.json" in error and "\n" not in error and "Traceback" not in error
