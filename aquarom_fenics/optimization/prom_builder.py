@@ -158,17 +158,18 @@ class PromBuilder:
             raise InputError(f"design {self.space.as_dict(z)} is infeasible: its PROM is unstable ({reason})")
 
     def evaluate(self, prom, z, weights) -> Evaluation:
-        started = time.perf_counter()
-        try:
-            return evaluate(prom, self.scene, self.space, z, weights)
-        finally:
-            self.solve_time += time.perf_counter() - started
+        """L, its gradient and d at z (:func:`evaluate`)."""
+        return self._solved(evaluate, prom, z, weights)
 
     def cost(self, prom, z, weights) -> float:
         """L at z without its gradient (:func:`cost_value`)."""
+        return self._solved(cost_value, prom, z, weights)
+
+    def _solved(self, solve, prom, z, weights):
+        """solve(prom, scene, space, z, weights), its time added to ``solve_time``."""
         started = time.perf_counter()
         try:
-            return cost_value(prom, self.scene, self.space, z, weights)
+            return solve(prom, self.scene, self.space, z, weights)
         finally:
             self.solve_time += time.perf_counter() - started
 
