@@ -257,12 +257,25 @@ def _prom_run(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarra
     return result
 
 
+def weighted_cost(space: DesignSpace, weights: CostWeights, z: np.ndarray, distance: float,
+                  distance_gradient: np.ndarray | None = None) -> tuple[float, np.ndarray | None]:
+    """L = -w_1 d + w_2 α A² at z and, given dd/dz, ∇L (None without)."""
+    cost = -weights.distance * distance
+    if space.with_amplitude:
+        cost += weights.energy * weights.energy_term(z[-1])
+    if distance_gradient is None:
+        return cost, None
+    gradient = -weights.distance * np.asarray(distance_gradient, dtype=float)
+    if space.with_amplitude:
+        gradient = gradient.copy()
+        gradient[-1] += weights.energy * 2 * weights.alpha * z[-1]
+    return cost, gradient
+
+
 def cost_value(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarray, weights: CostWeights) -> float:
     """L at z without its gradient: a PROM run without sensitivities (a third cheaper; the same
     trajectory, so the same L as :func:`evaluate`'s). Raises SolverError as :func:`evaluate`."""
-    cost = -weights.distance * _prom_run(prom, scene, space, z, sensitivities=False).distance
-    if space.with_amplitude:
-        cost += weights.energy * weights.energy_term(z[-1])
+    cost, _ = weighted_cost(space, weights, z, _prom_run(prom, scene, space, z, sensitivities=False).distance)
     if not np.isfinite(cost):
         raise SolverError(f"non-finite cost at {space.as_dict(z)}: {cost}")
     return float(cost)
@@ -274,12 +287,7 @@ def evaluate(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarray
     distance_gradient = result.distance_gradient
     if distance_gradient is None:
         distance_gradient = np.zeros(len(z))
-    cost = -weights.distance * result.distance
-    gradient = -weights.distance * distance_gradient
-    if space.with_amplitude:
-        cost += weights.energy * weights.energy_term(z[-1])
-        gradient = gradient.copy()
-        gradient[-1] += weights.energy * 2 * weights.alpha * z[-1]
+    cost, gradient = weighted_cost(space, weights, z, result.distance, distance_gradient)
     if not (np.isfinite(cost) and np.all(np.isfinite(gradient))):
         raise SolverError(f"non-finite cost or gradient at {space.as_dict(z)}: cost {cost}, gradient {gradient}")
     return Evaluation(z.copy(), float(cost), gradient, float(result.distance), distance_gradient)

@@ -27,7 +27,7 @@ from scipy.optimize import minimize_scalar
 from aquarom_fenics.errors import InputError, SolverError
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.optimization.cost import (CostWeights, DesignSpace, Evaluation, barrier_scale_at, first_order,
-                                              first_order_at, require_interior)
+                                              first_order_at, require_interior, weighted_cost)
 from aquarom_fenics.optimization.history import Checkpoint, Safeguard, history_row, optimality_reason, record
 from aquarom_fenics.optimization.paper_state import Linearisation, PaperState
 from aquarom_fenics.optimization.prom_builder import PromBuilder
@@ -176,7 +176,7 @@ class _PaperRun:
         parameters; the first-order measure (the amplitude's rows under no barrier)."""
         space, settings, z = self.space, self.settings, self.state.z
         distance, distance_gradient = self.state.center.at(z)
-        cost, gradient = _weighted_cost(space, self.weights, z, distance, distance_gradient)
+        cost, gradient = weighted_cost(space, self.weights, z, distance, distance_gradient)
         descent = _descent_space(space, z)
         _, barrier_gradient = barrier(descent, z)
         barrier_scale = barrier_scale_at(settings, cost)
@@ -387,16 +387,6 @@ def _strictly_inside(space: DesignSpace, z: np.ndarray) -> np.ndarray:
     if np.all(space.slacks(z)[space.barrier_rows] > 0):
         return z
     return 0.5 * (z + space.most_interior_point())
-
-
-def _weighted_cost(space, weights, z, distance, distance_gradient):
-    cost = -weights.distance * distance
-    gradient = -weights.distance * np.asarray(distance_gradient, dtype=float)
-    if space.with_amplitude:
-        cost += weights.energy * weights.energy_term(z[-1])
-        gradient = gradient.copy()
-        gradient[-1] += weights.energy * 2 * weights.alpha * z[-1]
-    return cost, gradient
 
 
 def _along_active_rows(space: DesignSpace, z, step, scaling, tolerance: float) -> np.ndarray:
