@@ -206,16 +206,17 @@ def load_checkpoint(path: Path, dimension: int, method: str, shapes: int | None 
     return load_json(path, checkpoint_schema(dimension, method, shapes), "checkpoint", "start without --resume")
 
 
-def budget_front_schema(dimension: int) -> record:
-    """budget_front.json of a budget front: the budgets done so far, each one's optimum (``dimension``
-    design variables, the amplitude last) and its pareto.csv row, for the scene of ``scene_hash``."""
-    return record({"scene_hash": TEXT, "budgets": list_of(FINITE), "optima": list_of(list_of(FINITE, dimension)),
-                   "rows": list_of(record({"budget": FINITE}))})
+def budget_front_schema(shape_names: list[str]) -> record:
+    """budget_front.json of a budget front: the pareto.csv rows of the budgets done so far, each with
+    its budget and optimum (``xi_<name>`` of each shape, the amplitude), for the scene of ``scene_hash``."""
+    optimum = {f"xi_{name}": FINITE for name in shape_names}
+    return record({"scene_hash": TEXT,
+                   "rows": list_of(record({"budget": FINITE, "amplitude": FINITE, **optimum}))})
 
 
-def load_budget_front(path: Path, dimension: int) -> dict:
+def load_budget_front(path: Path, shape_names: list[str]) -> dict:
     """budget_front.json, checked against :func:`budget_front_schema` (nothing is written before)."""
-    return load_json(path, budget_front_schema(dimension), "budget front checkpoint", "run without --resume")
+    return load_json(path, budget_front_schema(shape_names), "budget front checkpoint", "run without --resume")
 
 
 def optimization_summary_schema(names: list[str]) -> record:

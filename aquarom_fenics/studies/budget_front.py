@@ -41,7 +41,8 @@ COLUMNS = ["mode", "w1", "budget", "amplitude", "energy", "distance_m", "prom_di
 """pareto.csv's columns of a budget front before the shapes (``xi_<name>``); ``w1`` stays empty."""
 
 CHECKPOINT = "budget_front.json"
-"""What ``--resume`` reads: the budgets done, their optima and rows (written after every budget)."""
+"""What ``--resume`` reads: the scene's hash and the rows of the budgets done, each with its optimum
+(written after every budget)."""
 
 
 def parse_budgets(text: str, bounds: tuple[float, float], where: str = "--budgets") -> tuple[float, ...]:
@@ -98,10 +99,10 @@ def budget_front(scene: Scene, out_dir: Path, budgets: tuple[float, ...], fish: 
         raise InputError(f"scene {scene.source}: a budget front needs [cooptimization] enabled = true")
     fish = fish or load_fish(scene)
     space = optimization_space(scene, fish)
-    rows, optima = resumed_budgets(scene, Path(out_dir), budgets, len(space.names)) if resume else ([], [])
+    rows = resumed_budgets(scene, Path(out_dir), budgets, space) if resume else []
     builder = PromBuilder(scene, fish, space)
     weights = CostWeights(distance=1.0, energy=0.0, alpha=scene.cooptimization.energy_weight)
-    previous = optima[-1] if optima else None
+    previous = row_optimum(space, rows[-1]) if rows else None
     for budget in budgets[len(rows):]:
         started, builds = time.perf_counter(), builder.builds
         builder.space = budget_space(space, budget)
@@ -114,29 +115,26 @@ def budget_front(scene: Scene, out_dir: Path, budgets: tuple[float, ...], fish: 
                  100 * result.evaluation.distance, "stopped" if distance is None else f"{100 * distance:.3f} cm",
                  "converged" if result.converged else f"not converged ({result.stop_reason})")
         previous = result.optimum
-        optima.append(previous)
         if MPI.COMM_WORLD.rank == 0:
             write_front(rows, Path(out_dir))
-            write_json_atomic(Path(out_dir) / CHECKPOINT, {
-                "scene_hash": scene.hash, "budgets": [row["budget"] for row in rows],
-                "optima": [np.asarray(z, dtype=float).tolist() for z in optima], "rows": rows})
+            write_json_atomic(Path(out_dir) / CHECKPOINT, {"scene_hash": scene.hash, "rows": rows})
     return rows
 
 
-def resumed_budgets(scene: Scene, out_dir: Path, budgets: tuple[float, ...],
-                    dimension: int) -> tuple[list[dict], list[np.ndarray]]:
-    """The rows and optima of the budgets an earlier run of this front finished (its :data:`CHECKPOINT`);
+def row_optimum(space: DesignSpace, row: dict) -> np.ndarray:
+    """z of a budget's row: its shapes (``xi_<name>``), then its amplitude."""
+    return np.array([row[f"xi_{name}"] for name in space.names[: space.n_shapes]] + [row["amplitude"]], dtype=float)
+
+
+def resumed_budgets(scene: Scene, out_dir: Path, budgets: tuple[float, ...], space: DesignSpace) -> list[dict]:
+    """The rows of the budgets an earlier run of this front finished (its :data:`CHECKPOINT`);
     InputError when it was another scene or its budgets do not begin ``budgets``."""
     path = out_dir / CHECKPOINT
-    data = load_budget_front(path, dimension)
-    done = data["budgets"]
+    data = load_budget_front(path, space.names[: space.n_shapes])
+    done = [row["budget"] for row in data["rows"]]
     if data["scene_hash"] != scene.hash:
         raise InputError(f"--resume: {path} was written for scene hash {data['scene_hash']}, not this scene "
                          f"({scene.hash}); run without --resume")
-    if len(data["optima"]) != len(done) or len(data["rows"]) != len(done) \
-            or [row["budget"] for row in data["rows"]] != done:
-        raise InputError(f"--resume: {path} lists {len(done)} budgets but {len(data['optima'])} optima and "
-                         f"{len(data['rows'])} rows; run without --resume")
     if done != list(budgets[: len(done)]):
         raise InputError(f"--resume: {path} holds the budgets {', '.join(f'{b:g}' for b in done)}, which do not "
                          f"begin the budgets asked for ({', '.join(f'{b:g}' for b in budgets)}); give a list "
@@ -144,7 +142,7 @@ def resumed_budgets(scene: Scene, out_dir: Path, budgets: tuple[float, ...],
     rows = [{**row, "distance_m": float("nan") if row.get("distance_m") is None else row["distance_m"]}
             for row in data["rows"]]
     log.info("budget front: %d of %d budgets kept from %s", len(done), len(budgets), path)
-    return rows, [np.array(z, dtype=float) for z in data["optima"]]
+    return rows
 
 
 def _fom_distance(scene: Scene, fish: Fish, result: OptimizationResult) -> tuple[float | None, str | None]:

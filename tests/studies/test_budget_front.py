@@ -129,7 +129,7 @@ def test_a_stopped_front_keeps_its_budgets_and_resume_continues_from_the_last_op
     rows = budget_front(scene, tmp_path, (0.1, 0.2, 0.3), resume=True)
     assert [row["budget"] for row in rows] == [0.1, 0.2, 0.3] and len(resumed) == 1
     space = module.optimization_space(scene, module.load_fish(scene))
-    last = np.array(json.loads(kept)["optima"][-1])
+    last = module.row_optimum(space, json.loads(kept)["rows"][-1])
     assert last[0] == -0.2
     np.testing.assert_array_equal(resumed[0], module.continuation_start(budget_space(space, 0.3), last))
     table = list(csv.DictReader((tmp_path / "pareto.csv").open()))
