@@ -6,6 +6,7 @@ session, hence its own result cache; the tests marked ``mpi`` take turns (:func:
 """
 import fcntl
 import os
+import time
 
 # One BLAS thread per process, set before numpy loads OpenBLAS: the xdist workers (and the CLI
 # runs they start) already use both cores, and OpenBLAS threads waiting for a core spin in sched_yield.
@@ -70,6 +71,14 @@ def one_line(capsys) -> str:
     error = "\n".join(line for line in capsys.readouterr().err.strip().splitlines() if not line.startswith("warning:"))
     assert len(error.splitlines()) == 1 and "Traceback" not in error, error
     return error
+
+
+def wait_for(condition, timeout: float = 120.0, what: str = "timed out") -> None:
+    """Poll ``condition()`` every 0.05 s until it holds; fails with ``what`` after ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, what
+        time.sleep(0.05)
 
 
 def coarse_scene(**sections):

@@ -9,6 +9,8 @@ import pytest
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.parallel import ClusterSettings, LocalProcesses, STOP_GRACE, usable_workers
 
+from conftest import wait_for
+
 
 def ignore_sigterm_and_wait() -> int:
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
@@ -23,9 +25,7 @@ def test_a_local_worker_that_ignores_sigterm_is_killed_on_cancel(monkeypatch):
     monkeypatch.setattr(local, "STOP_GRACE", 1.0)
     pool = LocalProcesses(1)
     pool.submit(ignore_sigterm_and_wait)
-    deadline = time.monotonic() + 120
-    while not getattr(pool._pool, "_processes", None) and time.monotonic() < deadline:
-        time.sleep(0.1)
+    wait_for(lambda: getattr(pool._pool, "_processes", None), 120, "the worker did not start")
     processes = list(pool._pool._processes.values())
     time.sleep(2)                                   # inside the task, SIGTERM ignored
     started = time.monotonic()

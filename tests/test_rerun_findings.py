@@ -18,7 +18,7 @@ import pytest
 
 from aquarom_fenics.cli import main
 
-from conftest import one_line, write_short_scene as write_scene
+from conftest import one_line, wait_for, write_short_scene as write_scene
 
 
 @pytest.fixture
@@ -152,13 +152,11 @@ def write_atomically_while_stopped(folder: str) -> None:
     persistence.write_text_atomic(Path(folder) / "result.csv", "a,b\n1,2\n")
 
 
-def exit_codes(processes, within: float = 30.0) -> list:
-    """The processes' exit codes once each is known (at most ``within`` seconds). The pool's own
-    thread also reaps its workers: a join that loses that race returns before the exit code is
-    stored, so ``exitcode`` can still read None just after it."""
-    deadline = time.monotonic() + within
-    while any(process.exitcode is None for process in processes) and time.monotonic() < deadline:
-        time.sleep(0.05)
+def exit_codes(processes) -> list:
+    """The processes' exit codes once each is stored (at most 30 s). The pool's own thread also
+    reaps its workers: a join that loses that race returns before the exit code is stored, so
+    ``exitcode`` can still read None just after it."""
+    wait_for(lambda: all(process.exitcode is not None for process in processes), 30, "an exit code was not stored")
     return [process.exitcode for process in processes]
 
 
@@ -167,10 +165,7 @@ def test_sigterm_to_a_local_worker_runs_its_task_cleanups(tmp_path):
 
     pool = LocalProcesses(1)
     pool.submit(write_atomically_while_stopped, str(tmp_path))
-    deadline = time.monotonic() + 120
-    while not (tmp_path / "started").exists() and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert (tmp_path / "started").exists(), "the task did not start"
+    wait_for((tmp_path / "started").exists, 120, "the task did not start")
     processes = list(pool._pool._processes.values())
     started = time.monotonic()
     pool.shutdown(cancel=True)
@@ -291,10 +286,7 @@ def test_sigterm_during_a_local_workers_start_up_waits_for_its_end(tmp_path):
 
     pool = LocalProcesses(1, WorkerSetup(on_start=functools.partial(slow_start, str(tmp_path))))
     pool.submit(os.getpid)
-    deadline = time.monotonic() + 120
-    while not (tmp_path / "started").exists() and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert (tmp_path / "started").exists(), "the worker's start-up did not run"
+    wait_for((tmp_path / "started").exists, 120, "the worker's start-up did not run")
     processes = list(pool._pool._processes.values())
     for process in processes:
         os.kill(process.pid, signal.SIGTERM)

@@ -17,7 +17,7 @@ from aquarom_fenics.io import outputs as outputs_module
 from aquarom_fenics.io import tables as tables_module
 from aquarom_fenics.io.output_lock import LOCK_SUFFIX, lock_file_of
 
-from conftest import SHORT_SCENE as SHORT
+from conftest import SHORT_SCENE as SHORT, wait_for
 
 OPTIMIZE = """
 [mesh]
@@ -252,13 +252,6 @@ def test_a_refused_run_removes_the_parent_folders_it_created(scenes, tmp_path, c
 
 
 # ---------------------------------------------------------------------- 3. SIGTERM like Ctrl-C
-def wait_for(condition, timeout=120.0):
-    deadline = time.monotonic() + timeout
-    while not condition():
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.05)
-
-
 def temporary_folders() -> set[str]:
     return {name for name in os.listdir(tempfile.gettempdir()) if name.startswith("aquarom-")}
 
