@@ -267,7 +267,6 @@ def weighted_cost(space: DesignSpace, weights: CostWeights, z: np.ndarray, dista
         return cost, None
     gradient = -weights.distance * np.asarray(distance_gradient, dtype=float)
     if space.with_amplitude:
-        gradient = gradient.copy()
         gradient[-1] += weights.energy * 2 * weights.alpha * z[-1]
     return cost, gradient
 
