@@ -1,10 +1,10 @@
 """The order of the package's layers: a module imports from its own layer and the layers below.
 
-The data path reads bottom to top: files and scenes, the dolfinx adapter, the geometry, the force
-terms, the FOM, the basis and reduced model, the runs in time, the optimisers, the checks, the
-pictures, the studies of many runs, and the command line. ``tests/test_layers.py`` parses every
-module (imports inside functions included) and fails on an import that runs upward and on any
-import cycle between modules.
+The data path reads bottom to top: files and scenes, the dolfinx adapter (and the run files, whose
+XDMF meshes it makes), the geometry, the force terms, the FOM, the basis and reduced model, the runs
+in time, the optimisers, the checks, the pictures, the studies of many runs, and the command line.
+``tests/test_layers.py`` parses every module (imports inside functions included) and fails on an
+import that runs upward and on any import cycle between modules.
 
 A name is a module or a package of ``aquarom_fenics`` without the prefix; a module belongs to the
 layer of its longest listed name (``fem.dolfinx_adapter`` before ``fem``); ``""`` is the package's
@@ -18,7 +18,8 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("forms", ("forms", "scenes", "meshes")),
     ("shape catalogue", ("geometry.shapes", "geometry.shape_registry")),
     ("io", ("io",)),
-    ("discretisation", ("fem.dolfinx_adapter", "fem.cellwise")),
+    ("discretisation", ("fem.jit_cache", "fem.dolfinx_adapter", "fem.cellwise")),
+    ("run files", ("io.xdmf", "io.run_outputs")),
     ("geometry", ("geometry",)),
     ("physics", ("physics",)),
     ("fem", ("fem",)),

@@ -6,16 +6,23 @@ compiled forms; a migration to a newer dolfinx touches this module only.
 from __future__ import annotations
 
 import logging
+from contextlib import ExitStack
 from dataclasses import dataclass
 
 import basix
+import ffcx
+import ffcx.codegeneration.jit
+import ffcx.naming
 import numpy as np
 import ufl
-from dolfinx import fem
+from dolfinx import fem, io
+from dolfinx import jit as dolfinx_jit
 from dolfinx import mesh as dolfinx_mesh
 from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
+
+from aquarom_fenics.fem.jit_cache import JitCacheError, claimed, jit_cache_dir
 
 
 def create_tet_mesh(comm: MPI.Comm, points: np.ndarray, cells: np.ndarray):
@@ -27,15 +34,27 @@ def create_tet_mesh(comm: MPI.Comm, points: np.ndarray, cells: np.ndarray):
     return dolfinx_mesh.create_mesh(comm, np.asarray(cells, dtype=np.int64), np.asarray(points, dtype=np.float64), domain)
 
 
+def cell_tags(mesh, cells: np.ndarray, values: np.ndarray, name: str):
+    """Mesh tags ``name`` of the given local cells (sorted) with one integer value each."""
+    tags = dolfinx_mesh.meshtags(mesh, 3, cells, values)
+    tags.name = name
+    return tags
+
+
+def xdmf_writer(comm: MPI.Comm, path) -> io.XDMFFile:
+    """An XDMF file (with its .h5) opened for writing; use as a context manager."""
+    return io.XDMFFile(comm, str(path), "w")
+
+
 def vector_space(mesh, degree: int):
     """Vector Lagrange space of the displacement (degree 1 or 2)."""
-    return fem.VectorFunctionSpace(mesh, ("Lagrange", degree))
+    return function_space(mesh, ufl.VectorElement("Lagrange", mesh.ufl_cell(), degree))
 
 
 def quadrature_tensor_space(mesh, degree: int):
     """3×3 tensors held at the points of the default quadrature rule of ``degree`` (per cell)."""
     element = ufl.TensorElement("Quadrature", mesh.ufl_cell(), degree, quad_scheme="default", shape=(3, 3))
-    return fem.FunctionSpace(mesh, element)
+    return function_space(mesh, element)
 
 
 def quadrature_rule(degree: int) -> tuple[np.ndarray, np.ndarray]:
@@ -59,7 +78,7 @@ def local_cells(mesh) -> np.ndarray:
 def quadrature_points(mesh, degree: int) -> np.ndarray:
     """(n_local_cells, n_q, 3) physical coordinates of the quadrature points of every local cell."""
     points, _ = quadrature_rule(degree)
-    compiled = _quietly(fem.Expression, ufl.SpatialCoordinate(mesh), points)
+    compiled = compile_expression(ufl.SpatialCoordinate(mesh), points)
     return compiled.eval(local_cells(mesh)).reshape(-1, points.shape[0], 3)
 
 
@@ -70,7 +89,7 @@ def set_quadrature_values(function, values: np.ndarray) -> None:
 
 
 def cellwise_constant_space(mesh):
-    return fem.FunctionSpace(mesh, ("DG", 0))
+    return function_space(mesh, ufl.FiniteElement("DG", mesh.ufl_cell(), 0))
 
 
 def new_function(space, name: str = "f"):
@@ -144,14 +163,72 @@ def set_owned_values(function, owned: np.ndarray) -> None:
     function.x.scatter_forward()
 
 
+# Every FFCx compile of the toolkit goes through the three functions below: each names the module
+# FFCx will use for its object, holds that module's claim in the cache folder while dolfinx compiles
+# or loads it (fem/jit_cache.py), and passes dolfinx the folder and parameters the name was made of.
+FORM_COMPILER_PARAMETERS = {"scalar_type": "double"}
+
+
+def jit_parameters() -> dict:
+    """dolfinx's JIT parameters with the toolkit's cache folder (``AQUAROM_JIT_CACHE``)."""
+    return {"cache_dir": str(jit_cache_dir())}
+
+
+def ffcx_module_name(ufl_object, kind: str, jit_params: dict) -> str:
+    """The name FFCx gives the module of a form, element or expression (``kind``): a hash of the
+    object and of the parameters, as in ffcx.codegeneration.jit.compile_forms/elements/expressions."""
+    parameters = ffcx.get_parameters(dict(FORM_COMPILER_PARAMETERS))
+    jit = dolfinx_jit.get_parameters(jit_params)
+    tag = (ffcx.codegeneration.jit._compute_parameter_signature(parameters)
+           + str(jit["cffi_extra_compile_args"]) + str(jit["cffi_debug"]))
+    return f"libffcx_{kind}_" + ffcx.naming.compute_signature([ufl_object], tag)
+
+
+def _guarded(comm: MPI.Comm, ufl_object, kind: str, what: str, compile_function):
+    """``compile_function(jit_params)`` with the module's claim held by rank 0, which compiles first
+    (dolfinx's MPI JIT) while the other ranks wait to load it. The ranks agree whether the claim was
+    taken before any of them enters dolfinx's collective compile, so none waits for a failed one."""
+    jit_params = jit_parameters()
+    with ExitStack() as held:
+        failure = None
+        if comm.rank == 0:
+            try:
+                held.enter_context(claimed(jit_params["cache_dir"], ffcx_module_name(ufl_object, kind, jit_params), what))
+            except JitCacheError as error:
+                failure = str(error)
+        if comm.size > 1:
+            failure = comm.bcast(failure, root=0)
+        if failure is not None:
+            raise JitCacheError(failure)
+        return _quietly(compile_function, jit_params)
+
+
 def compile_form(form):
-    """JIT-compile a UFL form (cached by FFCx); the C compiler's INFO log lines are silenced."""
-    return _quietly(fem.form, form)
+    """JIT-compile a UFL form (cached by FFCx, guarded); the C compiler's INFO log lines are silenced."""
+    comm = form.ufl_domain().ufl_cargo().comm
+    return _guarded(comm, form, "forms", "a form",
+                    lambda jit: fem.form(form, form_compiler_params=dict(FORM_COMPILER_PARAMETERS), jit_params=jit))
+
+
+def compile_expression(expression, points: np.ndarray):
+    """JIT-compile a UFL expression evaluated at ``points`` (n, 3) of the reference cell."""
+    points = np.reshape(points, (points.shape[0] if points.ndim == 2 else 1, -1))
+    comm = expression.ufl_domain().ufl_cargo().comm
+    return _guarded(comm, (expression, points), "expressions", "an expression",
+                    lambda jit: fem.Expression(expression, points, form_compiler_params=dict(FORM_COMPILER_PARAMETERS),
+                                               jit_params=jit))
 
 
 def compile_quadrature_expression(expression, degree: int):
     """JIT-compile a UFL expression evaluated at the points of the default rule of ``degree``."""
-    return _quietly(fem.Expression, expression, quadrature_rule(degree)[0])
+    return compile_expression(expression, quadrature_rule(degree)[0])
+
+
+def function_space(mesh, element):
+    """The space of a UFL element on ``mesh``, its element and dofmap compiled (guarded)."""
+    return _guarded(mesh.comm, element, "elements", "a finite element",
+                    lambda jit: fem.FunctionSpace(mesh, element, form_compiler_params=dict(FORM_COMPILER_PARAMETERS),
+                                                  jit_params=jit))
 
 
 def evaluate_expression(compiled, cells: np.ndarray) -> np.ndarray:

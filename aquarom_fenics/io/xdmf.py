@@ -24,26 +24,14 @@ def cell_regions(tags, n_cells: int) -> np.ndarray:
     return region
 
 
-def _design_mesh(points: np.ndarray, cells: np.ndarray):
-    """A dolfinx mesh of linear tetrahedra on this process alone."""
-    import ufl
-    from dolfinx import mesh as dolfinx_mesh
-
-    domain = ufl.Mesh(ufl.VectorElement("Lagrange", ufl.tetrahedron, 1))
-    return dolfinx_mesh.create_mesh(MPI.COMM_SELF, np.asarray(cells, dtype=np.int64),
-                                    np.asarray(points, dtype=np.float64), domain)
-
-
 def _region_tags(mesh, regions: np.ndarray):
     """The cell tags ``regions`` from one value per input cell."""
-    from dolfinx import mesh as dolfinx_mesh
+    from aquarom_fenics.fem import dolfinx_adapter as adapter
 
     n_cells = mesh.topology.index_map(3).size_local
-    input_cell = np.asarray(mesh.topology.original_cell_index, dtype=np.int64)[:n_cells]
-    tags = dolfinx_mesh.meshtags(mesh, 3, np.arange(n_cells, dtype=np.int32),
-                                 np.asarray(regions, dtype=np.int32)[input_cell])
-    tags.name = "regions"
-    return tags
+    input_cell = adapter.input_cell_indices(mesh)[:n_cells]
+    return adapter.cell_tags(mesh, np.arange(n_cells, dtype=np.int32),
+                             np.asarray(regions, dtype=np.int32)[input_cell], "regions")
 
 
 def _input_vertex_of_dof(space) -> np.ndarray:
@@ -66,19 +54,19 @@ def write_design_xdmf(path: Path, points: np.ndarray, cells: np.ndarray, regions
     tetrahedra, ``regions`` one value of REGION_TAG_NAMES' index per cell, ``displacements``
     (n_samples, n_vertices, 3). Call on one process only.
     """
-    from dolfinx import fem, io
+    from aquarom_fenics.fem import dolfinx_adapter as adapter
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    mesh = _design_mesh(points, cells)
-    with io.XDMFFile(MPI.COMM_SELF, str(path), "w") as xdmf:
+    mesh = adapter.create_tet_mesh(MPI.COMM_SELF, points, cells)
+    with adapter.xdmf_writer(MPI.COMM_SELF, path) as xdmf:
         xdmf.write_mesh(mesh)
         if regions is not None:
             mesh.topology.create_connectivity(3, 0)
             xdmf.write_meshtags(_region_tags(mesh, regions))
         if displacements is not None:
-            space = fem.VectorFunctionSpace(mesh, ("Lagrange", 1))
-            field = fem.Function(space, name="displacement")
+            space = adapter.vector_space(mesh, 1)
+            field = adapter.new_function(space, "displacement")
             vertex_of_dof = _input_vertex_of_dof(space)
             for sample_time, values in zip(time, displacements):
                 field.x.array[:] = np.asarray(values)[vertex_of_dof].ravel()

@@ -299,7 +299,9 @@ def test_fields_interpolate_into_a_dolfinx_vector_space():
     domain = dolfinx.mesh.create_box(
         MPI.COMM_SELF, [np.array([-L, -W / 2, -H / 2]), np.array([0.0, W / 2, H / 2])], [10, 2, 2],
         dolfinx.mesh.CellType.tetrahedron)
-    space = dolfinx.fem.VectorFunctionSpace(domain, ("Lagrange", 1))
+    from aquarom_fenics.fem import dolfinx_adapter
+
+    space = dolfinx_adapter.vector_space(domain, 1)        # compiled through the toolkit's guarded cache
     nodes = space.tabulate_dof_coordinates()
     for name, field in CATALOG.items():
         displacement = dolfinx.fem.Function(space)
