@@ -2,11 +2,16 @@
 
 Messages go through the logger ``aquarom``: warnings (each distinct one once) on stderr by
 default; :func:`set_log_level` shows more (``"info"``: solver set-up, timings) or less.
+
+Importing the package sets two environment defaults (a value the user set is kept) so that a run
+writes nothing outside its output and the caches; see :func:`_third_party_files_in_place`.
 """
 from __future__ import annotations
 
 import logging
+import os
 import sys
+from pathlib import Path
 
 __version__ = "0.2.0"
 
@@ -74,3 +79,26 @@ def set_log_level(level: str | int = "warning") -> logging.Logger:
 
 
 set_log_level("warning")
+
+
+def _third_party_files_in_place() -> None:
+    """Environment defaults, set before the libraries load, that keep their files out of the user's
+    home and the temporary folder:
+
+    - ``OMPI_MCA_ess_singleton_isolated=1``: a process not started by mpirun runs as an isolated
+      Open MPI singleton, without the daemon whose session folder ($TMPDIR/ompi.<host>.<uid>/pid.<pid>)
+      Open MPI 4.1 leaves behind at every exit (it also starts 0.25 s sooner); processes started by
+      mpirun are not singletons and ignore it.
+    - ``MPLCONFIGDIR``: matplotlib creates its configuration folder ($XDG_CONFIG_HOME/matplotlib,
+      default ~/.config/matplotlib) when it is missing; then it is pointed to matplotlib's cache
+      folder ($XDG_CACHE_HOME/matplotlib), where matplotlib keeps its font list in any case.
+    """
+    os.environ.setdefault("OMPI_MCA_ess_singleton_isolated", "1")
+    if "MPLCONFIGDIR" not in os.environ:
+        config = Path(os.environ.get("XDG_CONFIG_HOME") or Path.home() / ".config") / "matplotlib"
+        if not config.is_dir():
+            os.environ["MPLCONFIGDIR"] = str(Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+                                             / "matplotlib")
+
+
+_third_party_files_in_place()

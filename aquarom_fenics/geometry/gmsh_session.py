@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import signal
+import tempfile
 import threading
 from contextlib import contextmanager
 
@@ -63,6 +64,32 @@ def gmsh_is_initialized(gmsh) -> bool:
 
 
 @contextmanager
+def _private_home():
+    """$HOME set to an empty temporary folder, restored and the folder removed afterwards.
+
+    gmsh.initialize() sets its default options, and General.Tooltips hands its value to FLTK, whose
+    first option query creates $HOME/.fltk/fltk.org/fltk.prefs (FLTK 1.3 takes the path from $HOME
+    alone; readConfigFiles=False and no gmsh option avoid it). Later queries in the process read
+    FLTK's memory, not the file, so only the initialization needs the private home."""
+    saved = os.environ.get("HOME")
+    with tempfile.TemporaryDirectory(prefix="aquarom-gmsh-home-") as home:
+        os.environ["HOME"] = home
+        try:
+            yield
+        finally:
+            if saved is None:
+                del os.environ["HOME"]
+            else:
+                os.environ["HOME"] = saved
+
+
+def initialize_gmsh(gmsh) -> None:
+    """gmsh.initialize() that reads no configuration file and writes nothing in the user's home."""
+    with _private_home():
+        gmsh.initialize(readConfigFiles=False)
+
+
+@contextmanager
 def gmsh_model(name: str, options: dict[str, float]):
     """A fresh gmsh model with the given options, removed afterwards.
 
@@ -72,7 +99,7 @@ def gmsh_model(name: str, options: dict[str, float]):
     gmsh = import_gmsh()
     started_here = not gmsh_is_initialized(gmsh)
     if started_here:
-        gmsh.initialize(readConfigFiles=False)
+        initialize_gmsh(gmsh)
     previous_model = gmsh.model.getCurrent()
     previous_options = {option: gmsh.option.getNumber(option) for option in options}
     try:

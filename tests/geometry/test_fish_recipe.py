@@ -9,7 +9,7 @@ from aquarom_fenics.cli import main
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.fish_recipe import (FISH_LEVELS, FISH_RECIPE, fish_atoms, fish_profile, fish_regions,
                                                  fish_unions, generate_fish, level_size, shipped_fish_path, write_msh)
-from aquarom_fenics.geometry.mesh import signed_cell_volumes
+from aquarom_fenics.geometry.mesh import FishMesh, signed_cell_volumes
 from aquarom_fenics.geometry.mesh_files import read_mesh
 from aquarom_fenics.geometry.tags import tag_fish
 from aquarom_fenics.io.scene import SCENES_DIR, Scene
@@ -100,19 +100,95 @@ def test_mesh_is_mirror_symmetric_and_tags_as_a_fish(fish):
     assert len(tags.spine_nodes) >= 10 and len(tags.dorsal_nodes) == len(tags.spine_nodes) - 1
 
 
+POINT_TOLERANCE = 1e-9
+"""How far [m per m of body length] a regenerated point may lie from the shipped one. gmsh's points
+are not bit-identical across machines (its floating-point sums, and the libm under them, may round
+otherwise: the last bits move, ~1e-16 L each, some 1e-13 L after the mesher's iterations); a change
+of the recipe (profile, sizes, planes) moves points by a fraction of a cell, >= 1e-3 L. 1e-9 L is
+also the recipe's own snapping tolerance (``_snapped``), below which two coordinates count as one."""
+
+
+def assert_same_mesh(mesh, reference, what: str) -> None:
+    """Same topology (cells, node numbering, physical groups with the same cells) and points within
+    :data:`POINT_TOLERANCE` of the body length."""
+    tolerance = POINT_TOLERANCE * fish_profile().length
+    assert mesh.points.shape == reference.points.shape, what
+    assert np.array_equal(mesh.cells, reference.cells), f"{what}: cells differ"
+    assert set(mesh.regions) == set(reference.regions), what
+    for name, cells in reference.regions.items():
+        assert np.array_equal(mesh.regions[name], cells), f"{what}: group {name}"
+    moved = np.abs(mesh.points - reference.points).max()
+    assert moved <= tolerance, f"{what}: a point {moved:.3g} m off (tolerance {tolerance:.3g} m)"
+
+
 def test_shipped_level_1_is_what_the_recipe_generates(fish):
     shipped = read_mesh(shipped_fish_path(1))
-    assert np.array_equal(shipped.points, fish.points)
-    assert np.array_equal(shipped.cells, fish.cells)
     assert set(shipped.regions) == set(ATOMS) | set(UNIONS)
-    for name, cells in fish.regions.items():
-        assert np.array_equal(shipped.regions[name], cells), name
+    assert_same_mesh(shipped, fish, "shipped fish_l1.msh against the recipe")
 
 
-def test_written_msh_is_byte_identical_to_the_shipped_level_1(fish, tmp_path):
+COORDINATE_SECTIONS = {"$Entities": "$EndEntities", "$Nodes": "$EndNodes"}
+"""The .msh sections that hold coordinates: the nodes' and the bounding boxes of the entities."""
+
+
+def msh_differences(text: str, reference: str, tolerance: float) -> list[str]:
+    """Lines where two .msh texts differ beyond ``tolerance`` [m]: outside the coordinate sections
+    every line must be equal; inside them a line may differ only in numbers, each within ``tolerance``
+    (a tag or count differs by 1 or more: refused)."""
+    lines, expected = text.splitlines(), reference.splitlines()
+    if len(lines) != len(expected):
+        return [f"{len(lines)} lines, {len(expected)} expected"]
+    differences, section_end = [], None
+    for number, (line, wanted) in enumerate(zip(lines, expected), start=1):
+        section_end = COORDINATE_SECTIONS.get(wanted, None if wanted == section_end else section_end)
+        if line == wanted:
+            continue
+        values, wanted_values = line.split(), wanted.split()
+        if not (section_end and len(values) == len(wanted_values)
+                and np.all(np.abs(np.array(values, float) - np.array(wanted_values, float)) <= tolerance)):
+            differences.append(f"line {number}: {line!r}, expected {wanted!r}")
+    return differences
+
+
+def test_written_msh_is_the_shipped_level_1_up_to_the_points_last_digits(fish, tmp_path):
     path = tmp_path / "fish_l1.msh"
     write_msh(fish, path, ATOMS, UNIONS)
-    assert path.read_bytes() == shipped_fish_path(1).read_bytes()
+    tolerance = POINT_TOLERANCE * fish_profile().length
+    assert msh_differences(path.read_text(), shipped_fish_path(1).read_text(), tolerance) == []
+    assert_same_mesh(read_mesh(path), read_mesh(shipped_fish_path(1)), "written fish_l1.msh against the shipped")
+
+
+def test_the_mesh_comparison_takes_last_bits_and_refuses_a_moved_point_or_cell(fish):
+    shipped = read_mesh(shipped_fish_path(1))
+    other_machine = FishMesh(points=fish.points * (1 + 4e-16), cells=fish.cells, source="", regions=fish.regions)
+    assert not np.array_equal(other_machine.points, shipped.points)
+    assert_same_mesh(other_machine, shipped, "last bits")
+    moved = fish.points.copy()
+    moved[7, 0] += 3 * POINT_TOLERANCE * fish_profile().length
+    with pytest.raises(AssertionError, match="a point"):
+        assert_same_mesh(FishMesh(points=moved, cells=fish.cells, source="", regions=fish.regions), shipped, "moved")
+    flipped = fish.cells.copy()
+    flipped[0, [0, 1]] = flipped[0, [1, 0]]
+    with pytest.raises(AssertionError, match="cells differ"):
+        assert_same_mesh(FishMesh(points=fish.points, cells=flipped, source="", regions=fish.regions), shipped, "cell")
+
+
+def test_the_msh_comparison_sees_a_moved_point_and_a_changed_group(tmp_path):
+    shipped = shipped_fish_path(1).read_text()
+    lines = shipped.splitlines()
+    start = lines.index("$Nodes")
+    coordinate = next(i for i in range(start, len(lines)) if len(lines[i].split()) == 3 and "." in lines[i])
+    x, y, z = (float(value) for value in lines[coordinate].split())
+    tolerance = POINT_TOLERANCE * fish_profile().length
+    nudged = lines.copy()
+    nudged[coordinate] = f"{x * (1 + 1e-15):.16g} {y} {z}"                     # last bits: accepted
+    assert msh_differences("\n".join(nudged), shipped, tolerance) == []
+    nudged[coordinate] = f"{x + 3 * tolerance:.16g} {y} {z}"                   # a real move: refused
+    assert len(msh_differences("\n".join(nudged), shipped, tolerance)) == 1
+    renamed = shipped.replace('"left_1"', '"left_9"')
+    assert len(msh_differences(renamed, shipped, tolerance)) == 1
+    regrouped = shipped.replace("\n3 2 \"left_1\"", "\n3 3 \"left_1\"")                 # outside the coordinates
+    assert len(msh_differences(regrouped, shipped, tolerance)) == 1
 
 
 @pytest.mark.parametrize("level", FISH_LEVELS)
