@@ -103,3 +103,31 @@ def test_a_module_name_that_is_not_there_and_one_the_scene_does_not_use(tmp_path
     assert main(["mesh", scene, "--shapes-module", module]) == 2
     assert (f"--shapes-module {module} registers z_taper; scene {scene} uses none of them ([shapes]: y_thin)"
             in one_line(capsys))
+
+
+@pytest.mark.mpi
+def test_every_mpi_rank_imports_the_module(tmp_path):
+    """``aquarom mesh`` builds U on every rank: a rank without the field would refuse the scene."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    if shutil.which("mpirun") is None:
+        pytest.skip("mpirun not installed")
+    scene, module = files(tmp_path)
+    completed = subprocess.run(["mpirun", "-n", "2", str(Path(sys.executable).with_name("aquarom")), "mesh", scene,
+                                "--shapes-module", module], capture_output=True, text=True, timeout=600, env=os.environ)
+    assert completed.returncode == 0, completed.stderr
+    assert "cells        1372" in completed.stdout
+
+
+def test_a_sweep_of_a_registered_field_runs_in_this_process(tmp_path, capsys):
+    scene, module = files(tmp_path)
+    grid = ["--grid", "z_taper=-0.1:0.1:3", "--shapes-module", module]
+    assert main(["sweep", scene, *grid, "--dry-run"]) == 0
+    assert "runs on: this process (one worker)" in capsys.readouterr().out
+    assert main(["sweep", scene, *grid, "--workers", "2", "--out", str(tmp_path / "sweep")]) == 2
+    assert "worker processes started afresh do not import: run its sweep tasks in this process" in one_line(capsys)
+    assert not (tmp_path / "sweep").exists()

@@ -88,6 +88,6 @@ def require_in_process(args, scene, workers: int, distributed: bool) -> None:
     from aquarom_fenics.geometry.shape_registry import uses_registered
 
     if uses_registered(scene.shape_names) and (workers > 1 or distributed):
-        raise InputError(f"aquarom {args.command}: scene {scene.source} uses shape fields registered by "
-                         f"--shapes-module, which worker processes do not import; run its tasks here "
-                         "(--workers 1, no --scheduler or [cluster] scheduler)")
+        raise InputError(f"scene {scene.source} uses shape fields registered by --shapes-module, which worker "
+                         f"processes started afresh do not import: run its {args.command} tasks in this process "
+                         "(--workers 1, and no --scheduler or [cluster] scheduler)")

@@ -5,8 +5,8 @@ rank holds the same small numpy description; dolfinx distributes the cells after
 """
 from __future__ import annotations
 
-import logging
 import json
+import logging
 from dataclasses import dataclass, field
 
 import numpy as np
