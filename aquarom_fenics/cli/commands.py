@@ -173,6 +173,7 @@ def open_work_pool(args, scene, tasks: int, default_workers: int):
     refused (InputError)."""
     from mpi4py import MPI
 
+    from aquarom_fenics.cli.shapes_module import require_in_process
     from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
     from aquarom_fenics.parallel import choose_cluster, open_pool
 
@@ -184,6 +185,7 @@ def open_work_pool(args, scene, tasks: int, default_workers: int):
         raise InputError(f"--workers {workers}: must be at least 1")
     if not cluster.distributed and min(workers, tasks) <= 1:
         return None
+    require_in_process(args, scene, min(workers, tasks), cluster.distributed)
     if MPI.COMM_WORLD.size > 1:
         raise InputError(f"aquarom {args.command} under mpirun runs its tasks one after the other; "
                          "drop --workers / --scheduler (or [cluster]) or run it without mpirun")

@@ -10,12 +10,20 @@ from aquarom_fenics.errors import InputError
 
 
 def load_scene(args):
-    """The scene named on the command line, with the --set, --level and --degree overrides applied."""
+    """The scene named on the command line, with the --set, --level and --degree overrides applied;
+    the module of ``--shapes-module`` is imported first (the shape fields it registers)."""
     from aquarom_fenics.io.scene import Scene
 
+    given = getattr(args, "shapes_module", None)
+    if given:
+        from aquarom_fenics.cli.shapes_module import import_shapes_module, require_used
+
+        registered = import_shapes_module(given)        # before the scene names its fields
     scene = Scene.load(args.scene)
     for setting in getattr(args, "settings", None) or []:
         scene = with_setting(scene, setting)
+    if given:
+        require_used(given, registered, scene)
     if args.level is not None:
         if scene.mesh.file:
             raise InputError(f"--level {args.level}: scene {scene.source} reads its mesh from the file "

@@ -21,7 +21,7 @@ EXAMPLES = {
     "animate": "aquarom animate results/nominal-fom --fps 20 --stride 2",
     "basis": "aquarom basis so1 --level 1 --out results/so1-basis",
     "check": "aquarom check so1 --level 1\n  aquarom check so1 --level 1 --degree 2\n"
-             "  aquarom check so1 --prom results/so1-prom.npz",
+             "  aquarom check so1 --prom results/so1-prom.npz\n  aquarom check my-scene.toml --shapes-module my_fields.py",
     "cache": "aquarom cache list\n  aquarom cache clear --kind prom",
     "sweep": "aquarom sweep so1 --grid z_tail=-0.3:0.3:5 --grid y_thin=0:0.1:3 --level 1 --out results/so1-sweep\n"
              "  aquarom sweep so1 --samples 200 --seed 1 --scheduler tcp://head-node:8786 --out results/so1-lhs\n"
@@ -68,6 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
         sub.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", dest="settings",
                          help="override one scene value, validated like the file (repeatable), "
                               "e.g. --set solver.duration=0.5 or --set shapes.z_tail.start=0.1")
+        sub.add_argument("--shapes-module", metavar="MODULE_OR_FILE.py",
+                         help="Python module (a file, or a module name on the Python path) that registers the "
+                              "scene's own shape fields with register_shape_field; imported before the scene is read")
         verbose_option(sub)
         if xi:
             sub.add_argument("--xi", action="append", metavar="NAME=VALUE", help=xi)

@@ -55,7 +55,9 @@ def run_record(args, scene) -> dict:
 
 
 def run_sweep(args) -> int:
+    from aquarom_fenics.cli.shapes_module import require_in_process
     from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
+    from aquarom_fenics.geometry.shape_registry import uses_registered
     from aquarom_fenics.parallel import choose_cluster, open_pool, shutting_down
     from aquarom_fenics.studies import sweep
 
@@ -70,7 +72,9 @@ def run_sweep(args) -> int:
     target = args.out or Path("results") / "sweep" / f"{scene.name}-{args.model}"
     kept = earlier_rows(args, scene, designs, target)
     missing = len(designs) - len(kept)
-    workers = min(args.workers or os.cpu_count() or 1, max(missing, 1))
+    in_process = uses_registered(scene.shape_names)        # fields of --shapes-module: not in new workers
+    workers = min(args.workers or (1 if in_process else os.cpu_count() or 1), max(missing, 1))
+    require_in_process(args, scene, workers, cluster.distributed)
     if args.dry_run:
         return dry_run(args, scene, designs, source, kept, cluster, workers)
     started = time.perf_counter()

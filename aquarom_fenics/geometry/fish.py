@@ -5,6 +5,7 @@ rank holds the same small numpy description; dolfinx distributes the cells after
 """
 from __future__ import annotations
 
+import json
 import logging
 from dataclasses import dataclass, field
 
@@ -19,8 +20,9 @@ from aquarom_fenics.geometry.mesh import FishMesh, LagrangeNodes, lagrange_nodes
 from aquarom_fenics.geometry.mesh_files import read_mesh
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.geometry.design_check import check_exact_design
+from aquarom_fenics.geometry.shape_registry import use_mesh_points
 from aquarom_fenics.geometry.shapes import design_points, reference_to_cells, shape_gradients, shape_matrix
-from aquarom_fenics.geometry.tags import FishTags, is_tagged, tag_fish
+from aquarom_fenics.geometry.tags import FishBox, FishTags, is_tagged, tag_fish
 
 
 log = logging.getLogger("aquarom")
@@ -42,6 +44,12 @@ def quadrature_degrees(degree: int) -> dict[str, int]:
     tangent at rest). "mass" (mass, centre of mass, total mass, drag): MASS_QUADRATURE_DEGREE.
     """
     return {"stiffness": max(1, 2 * (degree - 1)), "mass": MASS_QUADRATURE_DEGREE[degree]}
+
+
+def integration_points(mesh: FishMesh, degree: int) -> np.ndarray:
+    """(n_cells, n_q, 3) nominal positions of every quadrature point of the forms of degree ``degree``."""
+    reference = np.vstack([fx.quadrature_rule(q)[0] for q in quadrature_degrees(degree).values()])
+    return reference_to_cells(mesh.points, mesh.cells, reference)
 
 
 @dataclass(frozen=True)
@@ -99,8 +107,7 @@ class Fish:
         The rules used (degrees 1, 2, 6) are symmetric under permutations of the vertices, so these
         are the FOM's points whatever vertex order dolfinx keeps per cell.
         """
-        reference = np.vstack([fx.quadrature_rule(q)[0] for q in quadrature_degrees(self.degree).values()])
-        return reference_to_cells(self.mesh.points, self.mesh.cells, reference)
+        return integration_points(self.mesh, self.degree)
 
     def design(self, xi) -> np.ndarray:
         """Checked nodal positions x_0 + U ξ of the design.
@@ -221,3 +228,32 @@ def load_fish(scene: Scene, comm: MPI.Comm = MPI.COMM_WORLD) -> Fish:
     relative = tags.box.relative(nodes.points)
     matrix = shape_matrix(names, relative, tags.box) if names else np.zeros((nodes.points.size, 0))
     return Fish(mesh, tags, names, matrix, nodes)
+
+
+_MESH_POINTS: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+MESH_POINTS_KEPT = 4
+"""Meshes whose points :func:`mesh_points` keeps in this process (the last ones asked for)."""
+
+
+def mesh_points(scene: Scene) -> tuple[str, np.ndarray, np.ndarray]:
+    """(key, nodes, points) of the scene's mesh, relative to its box: the displacement nodes of
+    ``[mesh] degree`` (n, 3) and the quadrature points of the forms (m, 3), where the FOM reads a
+    shape field's value and its gradient; the key names the mesh (its sections, the file's size and
+    time). Every MPI rank reads the mesh (cached block or file) itself: a hash is no collective call."""
+    data = scene.to_dict()
+    stamp = None
+    if scene.mesh_file is not None and scene.mesh_file.exists():
+        status = scene.mesh_file.stat()
+        stamp = [status.st_size, status.st_mtime_ns]
+    key = json.dumps([data["mesh"], data["regions"], stamp], sort_keys=True, default=str)
+    if key not in _MESH_POINTS:
+        mesh = load_mesh(scene)
+        box = FishBox.of(mesh.points)
+        while len(_MESH_POINTS) >= MESH_POINTS_KEPT:
+            del _MESH_POINTS[next(iter(_MESH_POINTS))]
+        _MESH_POINTS[key] = (box.relative(lagrange_nodes(mesh, scene.mesh.degree).points),
+                             box.relative(integration_points(mesh, scene.mesh.degree).reshape(-1, 3)))
+    return (key, *_MESH_POINTS[key])
+
+
+use_mesh_points(mesh_points)

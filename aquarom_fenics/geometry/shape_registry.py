@@ -9,11 +9,19 @@ and the forms use F_1 = I + Σ_k ξ_k ∇U_k at their quadrature points (SPEC §
 be the value's: ``aquarom_fenics.verification.shape_fields`` checks it with a Taylor test.
 
 A registered field lives in the Python process that registered it: the Python API runs it, the
-command line and worker processes started afresh (parallel sweeps, multistart pools) do not know it.
+command line imports the module that registers it (``--shapes-module``), worker processes started
+afresh (parallel sweeps, multistart pools) do not know it.
+
+A scene's hash includes :func:`registered_fingerprint`: the digest of each registered field it uses
+at the scene's own mesh, the value U at every displacement node (vertices, and edge midpoints at
+degree 2) and the gradient ∇U at every quadrature point of the forms; so two fields that move any
+node, or change F_1 anywhere, differently give two hashes. The geometry layer, which reads meshes,
+provides those points (:func:`use_mesh_points`).
 """
 from __future__ import annotations
 
 import hashlib
+import itertools
 import re
 from dataclasses import dataclass
 from typing import Callable
@@ -65,15 +73,36 @@ def evaluated(name: str, what: str, function, points: np.ndarray, tail: tuple[in
     return result
 
 
+MeshPoints = Callable[[object], tuple[str, np.ndarray, np.ndarray]]
+"""scene -> (key of its mesh, (n, 3) relative displacement nodes, (m, 3) relative quadrature points)."""
+
+_MESH_POINTS: list[MeshPoints] = []
+_SERIALS = itertools.count(1)
+
+
+def use_mesh_points(function: MeshPoints) -> None:
+    """Take the scene's nodes and quadrature points from ``function`` (set by ``geometry.fish``)."""
+    _MESH_POINTS[:] = [function]
+
+
 @dataclass(frozen=True)
 class RegisteredField:
-    """A user's shape field; ``fingerprint`` digests its name and its value and gradient at the
-    probe points, so that a scene's hash (and so every cache entry) changes with the field."""
+    """A user's shape field; ``serial`` tells this registration from any other of the process
+    (the same name registered again gets a new one)."""
 
     name: str
     value: Value
     gradient: Gradient
-    fingerprint: str
+    serial: int
+
+    def fingerprint_at(self, nodes: np.ndarray, points: np.ndarray) -> str:
+        """SHA-256 (16 hex digits) of the name, U at the (n, 3) relative ``nodes`` and ∇U at the
+        (m, 3) relative quadrature ``points`` (and of the points themselves)."""
+        digest = hashlib.sha256(self.name.encode())
+        for array in (nodes, evaluated(self.name, "value", self.value, nodes, (3,)),
+                      points, evaluated(self.name, "gradient", self.gradient, points, (3, 3))):
+            digest.update(np.ascontiguousarray(array, dtype="<f8").tobytes())
+        return digest.hexdigest()[:16]
 
     def displacement(self, x, y, z, box) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The catalogue's signature: (x, y, z) arrays of one shape -> (dx, dy, dz) of that shape."""
@@ -120,12 +149,9 @@ def register_shape_field(name: str, value: Value, gradient: Gradient, points=Non
     if probe.ndim != 2 or probe.shape[1] != 3 or len(probe) == 0 or not np.all(np.isfinite(probe)):
         raise InputError(f"shape field '{name}': points must be a finite (n, 3) array of relative positions, "
                          f"got shape {probe.shape}")
-    u = evaluated(name, "value", value, probe, (3,))
-    g = evaluated(name, "gradient", gradient, probe, (3, 3))
-    digest = hashlib.sha256(name.encode())
-    for array in (probe, u, g):
-        digest.update(np.ascontiguousarray(array, dtype="<f8").tobytes())
-    field = RegisteredField(name, value, gradient, digest.hexdigest()[:16])
+    evaluated(name, "value", value, probe, (3,))
+    evaluated(name, "gradient", gradient, probe, (3, 3))
+    field = RegisteredField(name, value, gradient, next(_SERIALS))
     _FIELDS[name] = field
     shapes.REGISTERED[name] = (field.displacement, field.field_gradient)
     return field
@@ -136,8 +162,10 @@ def unregister_shape_field(name: str) -> None:
     if name not in _FIELDS:
         raise InputError(f"shape field '{name}': not registered in this process "
                          f"(registered: {', '.join(_FIELDS) or 'none'})")
-    del _FIELDS[name]
+    serial = _FIELDS.pop(name).serial
     del shapes.REGISTERED[name]
+    for key in [key for key in _DIGESTS if key[0] == serial]:
+        del _DIGESTS[key]
 
 
 def registered_fields() -> dict[str, RegisteredField]:
@@ -145,6 +173,32 @@ def registered_fields() -> dict[str, RegisteredField]:
     return dict(_FIELDS)
 
 
-def registered_fingerprint(names) -> str:
-    """The fingerprints of the registered fields among ``names``, joined ('' when there are none)."""
-    return ";".join(f"{name}={_FIELDS[name].fingerprint}" for name in names if name in _FIELDS)
+def uses_registered(names) -> bool:
+    """Whether any of ``names`` is a field registered in this process."""
+    return any(name in _FIELDS for name in names)
+
+
+def registered_identity(names) -> str:
+    """Which registrations of this process the registered fields among ``names`` are ('' when none)."""
+    return ";".join(f"{name}#{_FIELDS[name].serial}" for name in names if name in _FIELDS)
+
+
+_DIGESTS: dict[tuple[int, str], str] = {}
+"""Fingerprints by (serial, mesh key): a scene's hash is asked for often, its mesh read once."""
+
+
+def registered_fingerprint(names, scene) -> str:
+    """The fingerprints (:meth:`RegisteredField.fingerprint_at`) of the registered fields among
+    ``names`` at the nodes and quadrature points of ``scene``'s mesh, joined ('' when there are none:
+    a scene of the catalogue's fields reads no mesh for its hash)."""
+    used = [_FIELDS[name] for name in names if name in _FIELDS]
+    if not used:
+        return ""
+    if not _MESH_POINTS:
+        raise RuntimeError("a scene with a registered shape field is hashed at its mesh's points: import "
+                           "aquarom_fenics.api (or aquarom_fenics.geometry.fish) first")
+    key, nodes, points = _MESH_POINTS[0](scene)
+    for field in used:
+        if (field.serial, key) not in _DIGESTS:
+            _DIGESTS[(field.serial, key)] = field.fingerprint_at(nodes, points)
+    return ";".join(f"{field.name}={_DIGESTS[(field.serial, key)]}" for field in used)

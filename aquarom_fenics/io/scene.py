@@ -147,7 +147,7 @@ class Scene:
         from aquarom_fenics.geometry.shape_registry import registered_fingerprint
 
         digest = hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode())
-        digest.update(registered_fingerprint(self.shape_names).encode())    # a registered field's definition
+        digest.update(registered_fingerprint(self.shape_names, self).encode())  # a registered field on this mesh
         if self.mesh_file is None:
             digest.update((shipped_meshes() / "block.toml").read_bytes())  # the block's meshing recipe
         elif self.mesh_file.exists() or self.mesh_file.is_symlink():

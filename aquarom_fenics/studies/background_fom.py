@@ -77,9 +77,9 @@ def start_if_useful(scene: Scene, design: dict[str, float], amplitude: float | N
     core, inside a worker of a parallel sweep (the other workers use the cores), when the start
     distance is in the cache already, or for a scene with a shape field registered in this process
     (a fresh worker process does not know it)."""
-    from aquarom_fenics.geometry.shape_registry import registered_fingerprint
+    from aquarom_fenics.geometry.shape_registry import uses_registered
 
     if cached or MPI.COMM_WORLD.size > 1 or (os.cpu_count() or 1) < 2 or in_worker() \
-            or registered_fingerprint(scene.shape_names):
+            or uses_registered(scene.shape_names):
         return None
     return BackgroundFom(scene, design, amplitude)

@@ -12,13 +12,13 @@ _FISH: dict = {}
 
 def fish_key(scene: Scene) -> str:
     """What a fish is made of: the scene's [mesh] and [regions] sections, its muscles' regions and its
-    shape names (with the definition of those registered in this process)."""
-    from aquarom_fenics.geometry.shape_registry import registered_fingerprint
+    shape names (with the registration of those registered in this process)."""
+    from aquarom_fenics.geometry.shape_registry import registered_identity
 
     data = scene.to_dict()
     muscles = [muscle.region for muscle in scene.actuated_muscles]
     return json.dumps([data["mesh"], data["regions"], muscles, scene.shape_names,
-                       registered_fingerprint(scene.shape_names)], sort_keys=True)
+                       registered_identity(scene.shape_names)], sort_keys=True)
 
 
 def shared_fish(scene: Scene):

@@ -173,3 +173,90 @@ def test_no_fresh_worker_process_runs_a_scene_with_a_registered_field(registry, 
 
     registry("my_tail", *copy_of("z_tail", box))
     assert start_if_useful(one_shape_scene("my_tail"), {"my_tail": 0.0}, None, cached=False) is None
+
+
+# ---------------------------------------------------------------------------------------------
+# The fingerprint is taken at the scene's mesh, the Taylor test at every quadrature point
+
+
+def tail_tip(scale):
+    """(U, ∇U) of Δz = scale z ((x + 0.19) / 0.01)² behind x = -0.19 m, 0 elsewhere: the tail's
+    last 5 %, which the probe box (x ≥ -0.18 m) never reaches."""
+    def value(X):
+        U = np.zeros_like(X)
+        U[:, 2] = scale * X[:, 2] * np.where(X[:, 0] < -0.19, (X[:, 0] + 0.19) / 0.01, 0.0) ** 2
+        return U
+
+    def gradient(X):
+        s = np.where(X[:, 0] < -0.19, (X[:, 0] + 0.19) / 0.01, 0.0)
+        G = np.zeros((len(X), 3, 3))
+        G[:, 2, 0] = scale * X[:, 2] * 2 * s / 0.01
+        G[:, 2, 2] = scale * s ** 2
+        return G
+    return value, gradient
+
+
+@pytest.mark.parametrize("degree", [1, 2])
+def test_fields_equal_on_the_probe_box_but_not_on_the_mesh_hash_apart(registry, degree):
+    """Three times larger behind the probe box: another hash, FOM hash and fish (so no cache entry
+    of the first definition answers for the second)."""
+    from aquarom_fenics.studies.fish_cache import fish_key
+
+    small, large = tail_tip(1.0), tail_tip(3.0)
+    np.testing.assert_array_equal(small[0](probe_points()), large[0](probe_points()))
+    np.testing.assert_array_equal(small[1](probe_points()), large[1](probe_points()))
+    hashes = []
+    for value, gradient in (small, large, small):
+        registry("tip", value, gradient)
+        scene = one_shape_scene("tip").replace("mesh", degree=degree)
+        hashes.append((scene.hash, scene.fom_hash, fish_key(scene)))
+        unregister_shape_field("tip")
+    assert all(a != b for a, b in zip(hashes[0], hashes[1]))
+    assert hashes[2][:2] == hashes[0][:2]                     # the same definition: the same hashes again
+
+
+def test_the_fingerprint_of_a_quadratic_scene_sees_its_edge_midpoints(registry, box):
+    """A field zero at every vertex but not at the edge midpoints: what a linear scene reads of it
+    (U at the vertices, ∇U at the quadrature points) is the zero field's, a quadratic one's is not."""
+    vertices = {tuple(point) for point in np.round(box.relative(load_fish(coarse_scene()).mesh.points), 12)}
+
+    def between(X):
+        U = np.zeros_like(X)
+        U[:, 2] = [0.0 if tuple(point) in vertices else 1e-3 for point in np.round(X, 12)]
+        return U
+
+    hashes = []
+    for value in (flat, between):
+        registry("bump", value, flat_gradient)
+        hashes.append([one_shape_scene("bump").replace("mesh", degree=degree).fom_hash for degree in (1, 2)])
+        unregister_shape_field("bump")
+    assert hashes[0][0] == hashes[1][0] and hashes[0][1] != hashes[1][1]
+
+
+def wrong_at_the_tail_end(L, share=0.012):
+    """(U, ∇U) of Δz = z (x/L)² over the whole body, with ∂U_z/∂x 10 % too large on its last 1.2 %
+    (x < -0.988 L), on the quarter y > 0, z > 0 of the cross-section: 66 of the 6860 quadrature
+    points of level 1, under the 1 % a share-based test lets pass."""
+    def value(X):
+        U = np.zeros_like(X)
+        U[:, 2] = X[:, 2] * (X[:, 0] / L) ** 2
+        return U
+
+    def gradient(X):
+        wrong = (X[:, 0] < -(1 - share) * L) & (X[:, 1] > 0) & (X[:, 2] > 0)
+        G = np.zeros((len(X), 3, 3))
+        G[:, 2, 0] = 2 * X[:, 2] * X[:, 0] / L ** 2 * np.where(wrong, 1.1, 1.0)
+        G[:, 2, 2] = (X[:, 0] / L) ** 2
+        return G
+    return value, gradient
+
+
+def test_a_gradient_wrong_on_the_last_cells_of_the_tail_fails_the_taylor_test(registry, box):
+    registry("right", *wrong_at_the_tail_end(box.length, share=0.0))
+    registry("wrong", *wrong_at_the_tail_end(box.length))
+    right, wrong = check_shape_fields(one_shape_scene("right"), ["right", "wrong"])
+    assert right.passed and right.order == "2.00", table_row(right)
+    assert wrong.passed is False, table_row(wrong)
+    assert wrong.measured.startswith("66 of 6860") and "not h²: the gradient is not that of the value" in wrong.note
+    x = float(wrong.note.split("at X = (")[1].split(",")[0])
+    assert x < -0.988 * box.length
