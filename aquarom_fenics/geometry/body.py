@@ -26,6 +26,9 @@ def check_body_length(length: float, source: str, block: bool = False, axis: str
         return
     if block:
         hint = "give [mesh] length, width and height in metres"
+    elif length > 1000 * high:
+        hint = ("no unit of length makes it a swimmer (it would be over 5 m even in millimetres); check its "
+                "coordinates and [mesh] scale")
     elif length > high:
         hint = ("its coordinates are probably in millimetres or centimetres: set [mesh] scale = 0.001 (mm) or "
                 "0.01 (cm)")
