@@ -123,7 +123,8 @@ def load_mesh(scene: Scene) -> FishMesh:
     """The scene's mesh in the swimming frame (along x, head at the largest x): the block, or the file's
     mesh scaled, translated and turned from its ``[mesh] axis`` and head end (``in_swimming_frame``:
     declared, or inferred from the head region); InputError for a body outside 1 mm–5 m along its
-    axis, an ambiguous head end or a head region at the other end than the declared one."""
+    axis or longer along another axis, a head region that does not reach exactly one end of the body,
+    or reaches the other end than the declared one (and for the file checks of ``read_mesh``)."""
     axis, head_end = scene.mesh.axis, scene.mesh.head_end
     if scene.mesh_file is not None and scene.regions.muscle_pairs > 1:
         raise InputError(f"scene {scene.source}: [regions] muscle_pairs = {scene.regions.muscle_pairs} splits the "

@@ -80,7 +80,8 @@ def transformed_points(path, raw: np.ndarray, cells: np.ndarray, factor: float, 
         node = int(np.argmax(outside))
         raise InputError(f"mesh file {path}: {_node_in_file(raw, cells, node)} lies far from the rest of the body: "
                          f"{outside[node]:.3g} beyond the box of the other nodes, which is {size:.3g} across (in the "
-                         f"file's units; nodes so far out: {int((outside > far).sum())}); correct the file's coordinates")
+                         f"file's units; nodes so far out: {int((outside > far).sum())}); correct the file's "
+                         "coordinates")
     extents = np.ptp(raw, axis=0) * factor
     body = float(extents.max())
     check_body_length(body, f"file {path}", axis=AXES[int(np.argmax(extents))])

@@ -1,5 +1,6 @@
 """A body mesh of the user's own is refused (one line, exit code 2) with the real cause named: pieces that
-share no faces, inverted or tangled tetrahedra, cells other than tetrahedra, absurd coordinates (SPEC §3)."""
+share no faces, inverted or tangled tetrahedra, cells other than tetrahedra, absurd coordinates, and a head
+region or axis that do not tell where the head is (SPEC §3)."""
 import textwrap
 
 import meshio
@@ -10,7 +11,8 @@ from aquarom_fenics.cli import main
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry import gmsh_session
 from aquarom_fenics.geometry.block import block_mesh
-from aquarom_fenics.geometry.mesh import cell_quality
+from aquarom_fenics.geometry.body import in_swimming_frame
+from aquarom_fenics.geometry.mesh import FishMesh, cell_quality
 from aquarom_fenics.geometry.mesh_files import read_mesh
 from aquarom_fenics.geometry.tags import skin_facets
 
@@ -178,7 +180,8 @@ def test_a_msh_with_hexahedra_beside_its_tetrahedra_is_refused_naming_them(tmp_p
 
 @pytest.mark.parametrize("kind, keys, words", [
     ("times 1e200", "", ["the body is 2e+199 m long along x", "check its coordinates and [mesh] scale"]),
-    ("one node far away", "", ["lies far from the rest of the body", "the node at (-0.11, 0, 1e+30) (of tetrahedron number "]),
+    ("one node far away", "", ["lies far from the rest of the body",
+                               "the node at (-0.11, 0, 1e+30) (of tetrahedron number "]),
     ("translated far", "translate = [1e16, 0, 0]", ["translate = [1e+16, 0, 0] moves the body 1e+16 m from the origin",
                                                     "lose their precision"]),
     ("not a number", "", ["non-finite node coordinates", "the node at (-0.11, 0, nan)"]),
@@ -199,3 +202,53 @@ def test_absurd_coordinates_are_named_before_the_volumes(kind, keys, words, tmp_
     assert "zero volume" not in line, line
     for word in words:
         assert word in line, (word, line)
+
+
+# ---------------------------------------------------------------------------------------------
+# The head region and the axis
+
+
+def with_head(block, head):
+    regions = {name: np.setdiff1d(cells, head) for name, cells in block.regions.items()} | {"head": head}
+    return FishMesh(points=block.points, cells=block.cells, source="regions", regions=regions)
+
+
+def test_a_head_region_reaching_both_ends_is_refused_whatever_the_declared_end(block):
+    """The head group of the head and the tail pieces: its centroid lies at +x, but it reaches both ends."""
+    x = block.points[block.cells].mean(axis=1)[:, 0]
+    mesh = with_head(block, np.union1d(block.regions["head"], np.flatnonzero(x < -0.9 * L)))
+    for declared in ("-x", "+x", ""):
+        with pytest.raises(InputError, match=r"^mesh regions: the region 'head' \(\[regions\] head\) reaches both ends "
+                                             r"of the body along x \(it spans -0.2 to 0 m, the body -0.2 to 0 m\)"):
+            in_swimming_frame(mesh, "x", declared, "head")
+
+
+@pytest.mark.parametrize("offset", [0.0, 0.005 * L])
+def test_a_head_region_in_the_middle_is_refused_whatever_the_declared_end(block, offset):
+    """A head group around the middle (exactly, or a little towards +x) reaches neither end."""
+    x = block.points[block.cells].mean(axis=1)[:, 0]
+    mesh = with_head(block, np.flatnonzero(np.abs(x + L / 2 - offset) < 0.1 * L))
+    for declared in ("-x", "+x", ""):
+        with pytest.raises(InputError, match=r"^mesh regions: the region 'head' \(\[regions\] head\) reaches neither "
+                                             r"end of the body along x"):
+            in_swimming_frame(mesh, "x", declared, "head")
+
+
+@pytest.mark.parametrize("declared", ["+z", "-z", ""])
+def test_an_axis_along_which_the_body_is_not_longest_is_refused(block, declared):
+    with pytest.raises(InputError, match=r"^mesh block level 1 \(.*\): \[mesh\] axis = \"z\", but the body is 0.1 m "
+                                         r"long along z and 0.2 m along x; .*set \[mesh\] axis = \"x\""):
+        in_swimming_frame(block, "z", declared, "head")
+
+
+def test_the_head_region_and_axis_messages_reach_the_command_line(tmp_path, block, capfd):
+    x = block.points[block.cells].mean(axis=1)[:, 0]
+    head = np.union1d(block.regions["head"], np.flatnonzero(x < -0.9 * L))
+    regions = {name: np.setdiff1d(cells, head) for name, cells in block_regions(block).items()} | {"head": head}
+    path = tmp_path / "head_and_tail.msh"
+    write_msh(path, block.points, block.cells, regions,
+              passive=np.setdiff1d(np.arange(len(block.cells)), np.concatenate(list(regions.values()))))
+    line = one_error_line(capfd, ["simulate", scene_file(tmp_path, path, 'head_end = "-x"'), "--dry-run"])
+    assert "the region 'head' ([regions] head) reaches both ends of the body along x" in line, line
+    line = one_error_line(capfd, ["mesh", scene_file(tmp_path, path, 'axis = "z"\nhead_end = "+z"')])
+    assert '[mesh] axis = "z", but the body is 0.1 m long along z and 0.2 m along x' in line, line
