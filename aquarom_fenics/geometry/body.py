@@ -60,6 +60,16 @@ _HEAD_END_TOLD: set[tuple[str, str]] = set()
 """(mesh, statement) already logged (a study loads one mesh many times)."""
 
 
+def check_block_sides(length: float, width: float, height: float) -> None:
+    """InputError unless the built-in block is longest along x, the axis it swims along (within
+    HEAD_END_TOLERANCE of its length), as ``check_axis_is_longest`` asks of a mesh file's body."""
+    side, size = max((("width", width), ("height", height)), key=lambda pair: pair[1])
+    if size > (1.0 + HEAD_END_TOLERANCE) * length:
+        raise InputError(f"mesh block: [mesh] {side} = {size:g} m is over its length = {length:g} m; the block swims "
+                         "along x, its longest side: give [mesh] length, width and height so that length is the "
+                         "longest")
+
+
 def check_axis_is_longest(mesh: FishMesh, axis: str) -> None:
     """InputError unless the body is longest along ``axis`` (within HEAD_END_TOLERANCE of its length
     there): a body lies along its length, and the stations, the shapes and the head end are taken

@@ -241,6 +241,17 @@ def test_an_axis_along_which_the_body_is_not_longest_is_refused(block, declared)
         in_swimming_frame(block, "z", declared, "head")
 
 
+@pytest.mark.parametrize("command", [["mesh"], ["simulate", "--dry-run"]])
+def test_a_block_taller_than_long_is_refused_as_a_block(command, tmp_path, capfd):
+    """The block lies along x: its own message, not the mesh file's advice to change [mesh] axis."""
+    scene = tmp_path / "scene.toml"
+    scene.write_text("[mesh]\nlevel = 1\nlength = 0.2\nwidth = 0.04\nheight = 0.3\n")
+    line = one_error_line(capfd, [command[0], scene, *command[1:]])
+    assert line == (f"aquarom {command[0]}: error: mesh block: [mesh] height = 0.3 m is over its length = 0.2 m; the "
+                    "block swims along x, its longest side: give [mesh] length, width and height so that length is "
+                    "the longest"), line
+
+
 def test_the_head_region_and_axis_messages_reach_the_command_line(tmp_path, block, capfd):
     x = block.points[block.cells].mean(axis=1)[:, 0]
     head = np.union1d(block.regions["head"], np.flatnonzero(x < -0.9 * L))
