@@ -80,8 +80,9 @@ MESSAGES = quoted_messages(PAGE.read_text(encoding="utf-8"))
 def test_the_page_lists_the_messages_of_every_kind_of_bad_input():
     assert len(MESSAGES) >= 40
     for words in ("--level", "unsupported suffix", "no tetrahedra: its physical groups", "netCDF4",
-                  "m long along x, outside 1 mm to 5 m", "so the head end is ambiguous", "[[muscles]] 1: unknown key",
-                  "misses the body", "overlap"):
+                  "m long along x, outside 1 mm to 5 m", "reaches both ends", "[[muscles]] 1: unknown key",
+                  "misses the body", "overlap", "separate solids", "reaches neither end", "is the body's longest",
+                  "inverted or tangled", "lies far from the rest", "besides its"):
         assert any(words in message for message in MESSAGES), words
 
 

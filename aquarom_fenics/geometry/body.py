@@ -26,6 +26,9 @@ def check_body_length(length: float, source: str, block: bool = False, axis: str
         return
     if block:
         hint = "give [mesh] length, width and height in metres"
+    elif length > 1000 * high:
+        hint = ("no unit of length makes it a swimmer (it would be over 5 m even in millimetres); check its "
+                "coordinates and [mesh] scale")
     elif length > high:
         hint = ("its coordinates are probably in millimetres or centimetres: set [mesh] scale = 0.001 (mm) or "
                 "0.01 (cm)")
@@ -50,83 +53,102 @@ TO_SWIMMING_FRAME = {
 where the body lies along x with its head at +x (the frame of the block, the tags and the physics)."""
 
 HEAD_END_TOLERANCE = 1e-6
-"""How near an end of the body (a fraction of its length) the head region must reach to be at that end."""
+"""How near an end of the body (a fraction of its length along the axis) the head region must reach to be at
+that end; also how much longer (the same fraction) than along its axis a body may be along another axis."""
 
 _HEAD_END_TOLD: set[tuple[str, str]] = set()
 """(mesh, statement) already logged (a study loads one mesh many times)."""
 
 
-def head_side(mesh: FishMesh, head: str, axis: str = "x") -> str | None:
-    """"+axis" or "-axis": the end of the body along ``axis`` nearer the volume centroid of the region
-    ``head``; "middle" when it is at the middle, None when the mesh has no such region."""
+def check_block_sides(length: float, width: float, height: float) -> None:
+    """InputError unless the built-in block is longest along x, the axis it swims along (within
+    HEAD_END_TOLERANCE of its length), as ``check_axis_is_longest`` asks of a mesh file's body."""
+    side, size = max((("width", width), ("height", height)), key=lambda pair: pair[1])
+    if size > (1.0 + HEAD_END_TOLERANCE) * length:
+        raise InputError(f"mesh block: [mesh] {side} = {size:g} m is over its length = {length:g} m; the block swims "
+                         "along x, its longest side: give [mesh] length, width and height so that length is the "
+                         "longest")
+
+
+def check_axis_is_longest(mesh: FishMesh, axis: str) -> None:
+    """InputError unless the body is longest along ``axis`` (within HEAD_END_TOLERANCE of its length
+    there): a body lies along its length, and the stations, the shapes and the head end are taken
+    along that axis."""
+    extents = np.ptp(mesh.points, axis=0)
+    column, longest = AXES.index(axis), int(np.argmax(extents))
+    if extents[longest] > (1.0 + HEAD_END_TOLERANCE) * extents[column]:
+        other = AXES[longest]
+        raise InputError(f"mesh {mesh.source}: [mesh] axis = \"{axis}\", but the body is {extents[column]:.4g} m long "
+                         f"along {axis} and {extents[longest]:.4g} m along {other}; the axis is the body's longest "
+                         f"dimension: set [mesh] axis = \"{other}\" (and head_end \"+{other}\" or \"-{other}\")")
+
+
+def head_end_of_region(mesh: FishMesh, head: str, axis: str) -> str | None:
+    """"+axis" or "-axis": the one end of the body along ``axis`` that the region ``head`` reaches (its
+    nodes within HEAD_END_TOLERANCE of the length of that end), None when the mesh has no such region.
+    InputError when the region reaches both ends (the head and other pieces in one group, or the whole
+    body) or neither (a region in the middle): a head is at one end."""
     cells = np.asarray(mesh.regions.get(head, ()), dtype=np.int64)
     if cells.size == 0:
         return None
-    column = AXES.index(axis)
-    volumes = np.abs(signed_cell_volumes(mesh.points, mesh.cells[cells]))
-    centre = float(np.average(mesh.points[mesh.cells[cells]].mean(axis=1)[:, column], weights=volumes))
-    low, high = float(mesh.points[:, column].min()), float(mesh.points[:, column].max())
-    offset = centre - 0.5 * (low + high)
-    if abs(offset) <= 1e-9 * (high - low):
-        return "middle"
-    return f"+{axis}" if offset > 0.0 else f"-{axis}"
+    coordinates = mesh.points[:, AXES.index(axis)]
+    low, high = float(coordinates.min()), float(coordinates.max())
+    reach = HEAD_END_TOLERANCE * (high - low)
+    head_coordinates = coordinates[np.unique(mesh.cells[cells])]
+    front, rear = float(head_coordinates.max()), float(head_coordinates.min())
+    ends = [end for end, reached in ((f"+{axis}", front >= high - reach), (f"-{axis}", rear <= low + reach)) if reached]
+    if len(ends) == 1:
+        return ends[0]
+    where, remedy = (("both ends", "give the head alone its group (not with the tail or the whole body)")
+                     if ends else ("neither end", "group the piece at the head end of the body as the head"))
+    raise InputError(f"mesh {mesh.source}: the region '{head}' ([regions] head) reaches {where} of the body along "
+                     f"{axis} (it spans {rear:.4g} to {front:.4g} m, the body {low:.4g} to {high:.4g} m); the head "
+                     f"region must reach exactly one end, where the head is: {remedy}, or name that group in "
+                     "[regions] head")
 
 
 def inferred_head_end(mesh: FishMesh, head: str, axis: str) -> str:
     """The head end of a mesh whose scene does not give [mesh] head_end: the end of the body along
-    ``axis`` that its region ``head`` reaches (within HEAD_END_TOLERANCE of the length), said in one
-    log line. InputError when that is ambiguous: no such region, or one that reaches both ends or
-    neither (a head in the middle)."""
-    remedy = f"set [mesh] head_end = \"+{axis}\" or \"-{axis}\""
-    cells = np.asarray(mesh.regions.get(head, ()), dtype=np.int64)
-    if cells.size == 0:
+    ``axis`` that its region ``head`` reaches (``head_end_of_region``), said in one log line.
+    InputError when the mesh has no such region."""
+    end = head_end_of_region(mesh, head, axis)
+    if end is None:
         present = ", ".join(f"'{name}'" for name in mesh.regions if len(mesh.regions[name])) or "none"
         raise InputError(f"mesh {mesh.source}: [mesh] head_end is not given and there is no region '{head}' "
-                         f"([regions] head) to tell it from (its regions are {present}); {remedy}")
-    column = AXES.index(axis)
-    coordinates = mesh.points[:, column]
-    low, high = float(coordinates.min()), float(coordinates.max())
-    reach = HEAD_END_TOLERANCE * (high - low)
-    head_coordinates = coordinates[np.unique(mesh.cells[cells])]
-    ends = [end for end, reached in ((f"+{axis}", head_coordinates.max() >= high - reach),
-                                     (f"-{axis}", head_coordinates.min() <= low + reach)) if reached]
-    if len(ends) != 1:
-        where = "both ends" if ends else "neither end"
-        raise InputError(f"mesh {mesh.source}: [mesh] head_end is not given and the region '{head}' reaches {where} "
-                         f"of the body along {axis} ({low:.4g} to {high:.4g} m), so the head end is ambiguous; {remedy}")
-    statement = (f"mesh {mesh.source}: the head is at its {ends[0]} end, where the region '{head}' lies ([mesh] "
+                         f"([regions] head) to tell it from (its regions are {present}); set [mesh] head_end = "
+                         f"\"+{axis}\" or \"-{axis}\"")
+    statement = (f"mesh {mesh.source}: the head is at its {end} end, where the region '{head}' lies ([mesh] "
                  f"head_end not given; set it to say so)")
     if (mesh.source, statement) not in _HEAD_END_TOLD:
         _HEAD_END_TOLD.add((mesh.source, statement))
         log.warning("%s", statement)
-    return ends[0]
+    return end
 
 
 def in_swimming_frame(mesh: FishMesh, axis: str, head_end: str, head: str) -> FishMesh:
     """The mesh in the swimming frame: its body along x with the head at the largest x, where the tags
     and the physics expect it.
 
-    ``axis`` ("x", "y", "z") is the body's axis in the mesh and ``head_end`` ("+axis" or "-axis", or ""
-    to infer it from the region ``head``, ``inferred_head_end``) the end its head lies at. The
-    points go through TO_SWIMMING_FRAME[head_end] (a quarter turn for y and z, a mirror in x for
-    "-x"); a mirror swaps every cell's vertices 2 and 3 so that it stays positively oriented (the
-    regions keep their cells). InputError when the declared end is not along ``axis`` or the mesh's
-    region ``head`` lies at the other end (or the middle).
+    ``axis`` ("x", "y", "z") is the body's axis in the mesh, its longest dimension, and ``head_end``
+    ("+axis" or "-axis", or "" to infer it from the region ``head``, ``inferred_head_end``) the end its
+    head lies at. The points go through TO_SWIMMING_FRAME[head_end] (a quarter turn for y and z, a
+    mirror in x for "-x"); a mirror swaps every cell's vertices 2 and 3 so that it stays positively
+    oriented (the regions keep their cells). InputError when the body is longer along another axis,
+    the declared end is not along ``axis``, or the mesh's region ``head`` does not reach exactly one
+    end (``head_end_of_region``) or reaches the other one.
     """
     if axis not in AXES:
         raise InputError(f"mesh {mesh.source}: [mesh] axis = {axis!r}; it must be \"x\", \"y\" or \"z\"")
-    if not head_end:
-        head_end = inferred_head_end(mesh, head, axis)
-    if head_end not in (f"+{axis}", f"-{axis}"):
+    if head_end and head_end not in (f"+{axis}", f"-{axis}"):
         raise InputError(f"mesh {mesh.source}: [mesh] head_end = {head_end!r} is not an end along [mesh] axis = "
                          f"\"{axis}\"; it must be \"+{axis}\" or \"-{axis}\" (or left out, to be inferred)")
-    side = head_side(mesh, head, axis)
+    check_axis_is_longest(mesh, axis)
+    if not head_end:
+        head_end = inferred_head_end(mesh, head, axis)
+    side = head_end_of_region(mesh, head, axis)
     if side is not None and side != head_end:
-        where = "at the middle of the body" if side == "middle" else f"at the {side} end of the body"
-        remedy = (f"set [mesh] head_end = \"{side}\"" if side != "middle"
-                  else "the head must be at one end of the body")
-        raise InputError(f"mesh {mesh.source}: its region '{head}' lies {where}, but [mesh] head_end = "
-                         f"\"{head_end}\"; {remedy}")
+        raise InputError(f"mesh {mesh.source}: its region '{head}' lies at the {side} end of the body, but [mesh] "
+                         f"head_end = \"{head_end}\"; set [mesh] head_end = \"{side}\"")
     if head_end == "+x":
         return mesh
     transform = TO_SWIMMING_FRAME[head_end]

@@ -15,7 +15,8 @@ from mpi4py import MPI
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS, block_cache_path, block_mesh, block_region_names
-from aquarom_fenics.geometry.body import AXES, block_lines, body_lines, check_body_length, in_swimming_frame
+from aquarom_fenics.geometry.body import (AXES, block_lines, body_lines, check_block_sides, check_body_length,
+                                          in_swimming_frame)
 from aquarom_fenics.geometry.mesh import FishMesh, LagrangeNodes, lagrange_nodes
 from aquarom_fenics.geometry.mesh_files import read_mesh
 from aquarom_fenics.io.scene import Scene
@@ -130,7 +131,8 @@ def load_mesh(scene: Scene) -> FishMesh:
     """The scene's mesh in the swimming frame (along x, head at the largest x): the block, or the file's
     mesh scaled, translated and turned from its ``[mesh] axis`` and head end (``in_swimming_frame``:
     declared, or inferred from the head region); InputError for a body outside 1 mm–5 m along its
-    axis, an ambiguous head end or a head region at the other end than the declared one."""
+    axis or longer along another axis, a head region that does not reach exactly one end of the body,
+    or reaches the other end than the declared one (and for the file checks of ``read_mesh``)."""
     axis, head_end = scene.mesh.axis, scene.mesh.head_end
     if scene.mesh_file is not None and scene.regions.muscle_pairs > 1:
         raise InputError(f"scene {scene.source}: [regions] muscle_pairs = {scene.regions.muscle_pairs} splits the "
@@ -142,6 +144,7 @@ def load_mesh(scene: Scene) -> FishMesh:
             raise InputError(f"scene {scene.source}: [mesh] axis = \"{axis}\", head_end = \"{head_end}\": the "
                              "built-in block lies along x with its head at +x; axis and head_end describe a mesh file")
         check_body_length(scene.mesh.length, "block", block=True)
+        check_block_sides(scene.mesh.length, scene.mesh.width, scene.mesh.height)
         mesh = block_mesh(scene.mesh.level, scene.mesh.length, scene.mesh.width, scene.mesh.height,
                           head_fraction=scene.regions.head_fraction, muscle_range=scene.regions.muscle_range,
                           pairs=scene.regions.muscle_pairs)
@@ -186,6 +189,7 @@ def planned_body(scene: Scene) -> tuple[list[str], int]:
         if not cached:
             check_block_muscles(scene)
             check_body_length(mesh.length, "block", block=True)
+            check_block_sides(mesh.length, mesh.width, mesh.height)
             cells = LEVEL_TARGET_CELLS[mesh.level]
             return block_lines(mesh.length, mesh.width, mesh.height, scene.regions.head_fraction,
                                scene.regions.muscle_range, cells, mesh.level), cells

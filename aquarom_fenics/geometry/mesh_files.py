@@ -10,7 +10,8 @@ import numpy as np
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.gmsh_session import GMSH_TETRAHEDRON, gmsh_model, points_and_cells_from_gmsh
-from aquarom_fenics.geometry.meshio_files import MESHIO_READERS
+from aquarom_fenics.geometry.mesh_checks import check_solid, other_volume_cells, transformed_points
+from aquarom_fenics.geometry.meshio_files import MESHIO_READERS, refuse_other_volume_cells
 from aquarom_fenics.geometry.mesh import (FishMesh, mean_edge_length, oriented_positively, signed_cell_volumes,
                                            used_nodes_only)
 from aquarom_fenics.io.readback import MAX_MESH_FILE_BYTES, require_regular_file
@@ -49,7 +50,8 @@ def _group_name(gmsh, dim: int, tag: int) -> str:
 
 def _gmsh_contents(gmsh):
     """(node tags, coordinates, tetrahedron tags, tetrahedron node tags, {volume group: tetrahedron
-    tags}, the quoted names of the other groups, element types present) of the current gmsh model."""
+    tags}, the quoted names of the other groups, element types present, {name: count} of the volume
+    elements other than linear tetrahedra) of the current gmsh model."""
     node_tags, coordinates, _ = gmsh.model.mesh.getNodes()
     element_tags, element_nodes = gmsh.model.mesh.getElementsByType(GMSH_TETRAHEDRON)
     volume_groups: dict[str, list[np.ndarray]] = {}
@@ -64,7 +66,12 @@ def _gmsh_contents(gmsh):
             volume_groups.setdefault(name, []).append(np.asarray(tags, dtype=np.int64))
     groups = {name: np.concatenate(parts) for name, parts in volume_groups.items()}
     element_types = set(int(kind) for kind in gmsh.model.mesh.getElementTypes())
-    return node_tags, coordinates, element_tags, element_nodes, groups, other_groups, element_types
+    others = {}
+    for kind in sorted(element_types - {GMSH_TETRAHEDRON}):
+        name, dimension = gmsh.model.mesh.getElementProperties(kind)[:2]
+        if dimension == 3:
+            others[name] = len(gmsh.model.mesh.getElementsByType(kind)[0])
+    return node_tags, coordinates, element_tags, element_nodes, groups, other_groups, element_types, others
 
 
 def _no_tetrahedra(path: Path, groups, other_groups, element_types) -> InputError:
@@ -89,11 +96,14 @@ def _read_gmsh(path: Path):
     try:
         with gmsh_model("aquarom_read", _GMSH_READ_OPTIONS) as gmsh:
             gmsh.merge(str(path))
-            node_tags, coordinates, element_tags, element_nodes, groups, others, kinds = _gmsh_contents(gmsh)
+            node_tags, coordinates, element_tags, element_nodes, groups, others, kinds, cells = _gmsh_contents(gmsh)
     except Exception as error:
         raise InputError(f"mesh file {path}: gmsh cannot read it ({error})") from None
     if len(element_tags) == 0:
         raise _no_tetrahedra(path, groups, others, kinds)
+    error = other_volume_cells(path, len(element_tags), cells)
+    if error is not None:
+        raise error
     element_tags = np.asarray(element_tags, dtype=np.int64)
     order = np.argsort(element_tags, kind="stable")
     element_nodes = np.asarray(element_nodes, dtype=np.int64).reshape(-1, 4)[order]
@@ -127,6 +137,7 @@ def _read_abaqus(path: Path):
         kinds = ", ".join(sorted({block.type for block in mesh.cells})) or "none"
         raise InputError(f"mesh file {path}: no *Element, type=C3D4 section (elements found: {kinds}); "
                          "expected first-order tetrahedra")
+    refuse_other_volume_cells(path, mesh, blocks)
     offsets = dict(zip(blocks, np.cumsum([0] + [len(mesh.cells[index].data) for index in blocks[:-1]])))
     cells = np.vstack([np.asarray(mesh.cells[index].data, dtype=np.int64) for index in blocks])
     regions = {}
@@ -206,9 +217,7 @@ def read_mesh(path, scale: float = 1.0, translate=(0.0, 0.0, 0.0)) -> FishMesh:
     cells, regions = _unique_cells(cells, regions)
     if points.ndim != 2 or points.shape[1] != 3:
         raise InputError(f"mesh file {path}: its nodes have {points.shape[-1]} coordinates; expected x, y, z")
-    points = points * factor + shift
-    if not np.all(np.isfinite(points)):
-        raise InputError(f"mesh file {path}: non-finite node coordinates")
+    points = transformed_points(path, points, cells, factor, shift)
     volumes = np.abs(signed_cell_volumes(points, cells))
     degenerate = volumes <= 1e-12 * mean_edge_length(points, cells) ** 3
     if np.any(degenerate):
@@ -217,4 +226,5 @@ def read_mesh(path, scale: float = 1.0, translate=(0.0, 0.0, 0.0)) -> FishMesh:
             f"mesh file {path}: {int(degenerate.sum())} tetrahedra have zero volume "
             f"(the first is tetrahedron number {first} of the file)"
         )
+    check_solid(path, points, cells)
     return FishMesh(points=points, cells=oriented_positively(points, cells), source=str(path), regions=regions)

@@ -22,6 +22,7 @@ import numpy as np
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.mesh import used_nodes_only
+from aquarom_fenics.geometry.mesh_checks import other_volume_cells
 
 REGION_ARRAYS = ("gmsh:physical", "CellEntityIds", "region", "regions", "medit:ref")
 """Names of the integer cell-data array that holds a .vtu file's regions, in order of preference."""
@@ -43,10 +44,29 @@ def _read_with(path: Path, module, format_name: str):
         raise InputError(f"mesh file {path}: meshio cannot read it as {format_name} ({problem})") from None
 
 
+_VOLUME_KINDS = ("tetra", "hexahedron", "wedge", "pyramid", "vtk_lagrange_tetrahedron", "vtk_lagrange_hexahedron",
+                 "vtk_lagrange_wedge", "vtk_lagrange_pyramid")
+"""Beginnings of the names of meshio's volume cell types (tetra10, hexahedron20, wedge15, … included)."""
+
+
+def refuse_other_volume_cells(path: Path, mesh, blocks: list[int]) -> None:
+    """InputError naming the volume cells other than first-order tetrahedra beside the tetrahedra of
+    ``blocks`` (``mesh_checks.other_volume_cells``)."""
+    others: dict[str, int] = {}
+    for block in mesh.cells:
+        if block.type != "tetra" and block.type.lower().startswith(_VOLUME_KINDS):
+            others[block.type] = others.get(block.type, 0) + len(block.data)
+    error = other_volume_cells(path, sum(len(mesh.cells[index].data) for index in blocks), others)
+    if error is not None:
+        raise error
+
+
 def _tetra_blocks(path: Path, mesh) -> list[int]:
-    """Indices of the mesh's blocks of first-order tetrahedra; InputError when there are none."""
+    """Indices of the mesh's blocks of first-order tetrahedra; InputError when there are none, or when
+    there are volume cells of other types beside them."""
     blocks = [index for index, block in enumerate(mesh.cells) if block.type == "tetra"]
     if blocks:
+        refuse_other_volume_cells(path, mesh, blocks)
         return blocks
     kinds = sorted({block.type for block in mesh.cells})
     if "tetra10" in kinds:

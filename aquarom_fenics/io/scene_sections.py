@@ -107,7 +107,7 @@ class MeshSection:
     width: float = _spec(0.04, _positive, "block width W along y [m]")
     height: float = _spec(0.10, _positive, "block height H along z [m]")
     axis: str = _spec("x", _one_of("x", "y", "z"), "the axis the body lies along in the mesh file (its swimming direction); \"y\" and \"z\" turn the mesh a quarter turn (about z, or about y) so that the body lies along x; the block lies along x", legacy="x")
-    head_end: str = _spec("", _one_of("", "+x", "-x", "+y", "-y", "+z", "-z"), "where the head lies along [mesh] axis: \"+x\" (at the largest x, as the block) or \"-x\" (the mesh is then mirrored in x, so that it swims towards +x); \"+y\", \"-y\", \"+z\", \"-z\" with axis = \"y\" or \"z\". Left out (\"\"): the end the head region reaches, said in one line, and refused when ambiguous (no head region, or one reaching both ends or neither); refused when the head region lies at the other end", legacy=LegacyValues(("", "+x")))
+    head_end: str = _spec("", _one_of("", "+x", "-x", "+y", "-y", "+z", "-z"), "where the head lies along [mesh] axis: \"+x\" (at the largest x, as the block) or \"-x\" (the mesh is then mirrored in x, so that it swims towards +x); \"+y\", \"-y\", \"+z\", \"-z\" with axis = \"y\" or \"z\". Left out (\"\"): the end the head region reaches, said in one line, refused without a head region. Declared or not, a head region must reach exactly one end along the axis (refused when it reaches both ends or neither), and a declared end must be that one", legacy=LegacyValues(("", "+x")))
 
 
 @dataclass(frozen=True)
