@@ -10,13 +10,11 @@ from typing import TYPE_CHECKING
 
 from aquarom_fenics.geometry.body import LENGTH_RANGE
 from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.io.scene_muscles import FULL_ACTIVATION, YOUNG_MODULUS_RANGE, activation_ratio, driven_muscles
 
 if TYPE_CHECKING:
     from aquarom_fenics.geometry.fish import Fish
     from aquarom_fenics.fem.fom import FullOrderModel
-
-YOUNG_MODULUS_RANGE = (1e3, 1e9)
-"""Plausible Young's modulus of a soft swimmer [Pa]: 1 kPa (gel) to 1 GPa (stiff plastic)."""
 
 DENSITY_RANGE = (100.0, 20000.0)
 """Plausible density of a body or a fluid [kg/m³]."""
@@ -91,14 +89,20 @@ def time_step_hint(scene: Scene) -> str:
 
 
 def muscle_stiffness_hint(scene: Scene) -> str | None:
-    """Softer muscles when the peak muscle stress k·A [Pa] is large against E [Pa]."""
+    """Weaker muscles when the peak muscle stress k A |s_j| [Pa] is large against E [Pa]: a lower
+    [actuation] amplitude when A is above full activation (1), else a lower stiffness k."""
     actuation, young_modulus = scene.actuation, scene.material.young_modulus
-    stress = actuation.stiffness * actuation.amplitude
-    if stress <= MUSCLE_STRESS_LIMIT * young_modulus:
+    scale = max((abs(muscle.scale) for _, muscle in driven_muscles(scene)), default=0.0)
+    ratio = activation_ratio(actuation.stiffness, actuation.amplitude, scale, young_modulus)
+    if ratio <= MUSCLE_STRESS_LIMIT:
         return None
-    limit = MUSCLE_STRESS_LIMIT * young_modulus / actuation.amplitude
-    return (f"the peak muscle stress k·A = {stress:.3g} Pa is {100 * stress / young_modulus:.0f}% of "
-            f"E = {young_modulus:.3g} Pa: try a lower muscle stiffness, [actuation] stiffness <= {limit:.3g}")
+    stress = (f"the peak muscle stress k·A{'' if scale == 1.0 else '·|s|'} = {ratio * young_modulus:.3g} Pa is "
+              f"{100 * ratio:.0f}% of E = {young_modulus:.3g} Pa")
+    if actuation.amplitude > FULL_ACTIVATION:
+        limit = MUSCLE_STRESS_LIMIT * young_modulus / (actuation.stiffness * scale)
+        return f"{stress}: try a lower amplitude, [actuation] amplitude <= {limit:.3g}"
+    limit = MUSCLE_STRESS_LIMIT * young_modulus / (actuation.amplitude * scale)
+    return f"{stress}: try a lower muscle stiffness, [actuation] stiffness <= {limit:.3g}"
 
 
 def natural_frequency_hint(scene: Scene, model: "FullOrderModel") -> str | None:

@@ -229,6 +229,9 @@ def tagged_regions(mesh: FishMesh, names=TAGGED_REGIONS, muscle_key="[regions] m
         if cells.min() < 0 or cells.max() >= len(mesh.cells):
             raise InputError(f"mesh {mesh.source}: region {name} names cells outside the mesh")
     for i, j in ((i, j) for j in range(len(names)) for i in range(j)):
+        if names[i] == names[j]:
+            raise InputError(f"mesh {mesh.source}: {keys[i]} and {keys[j]} both name region '{names[i]}'; head "
+                             "and muscles must be different regions (disjoint sets of cells)")
         if len(np.intersect1d(regions[i], regions[j])):
             raise InputError(f"mesh {mesh.source}: the regions {names[i]} and {names[j]} overlap; head and muscles "
                              "must be disjoint sets of cells")

@@ -25,7 +25,7 @@ from aquarom_fenics.io.scene_sections import (SECTIONS, ActuationSection, Coopti
                                               LinearConstraint, MaterialSection, MeshSection, MuscleSpec,
                                               OptimizerSection, OutputSection, ReductionSection, RegionsSection,
                                               ShapeSpec, SolverSection, at_legacy, legacy_values)
-from aquarom_fenics.io.scene_muscles import default_muscles, muscles_from_list
+from aquarom_fenics.io.scene_muscles import check_actuation, default_muscles, muscles_from_list
 
 SCENES_DIR = shipped_scenes()
 
@@ -56,6 +56,9 @@ class Scene:
     cluster: ClusterSettings = ClusterSettings()
     """Where many-run commands (``aquarom sweep``) send their work; not part of the study (the
     hashes and ``to_dict`` leave it out)."""
+
+    def __post_init__(self):
+        check_actuation(self)       # across sections: muscles against the head, the time step and E
 
     @classmethod
     def load(cls, path: str | Path) -> "Scene":

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.io.scene_sections import MuscleSpec, RegionsSection
+from aquarom_fenics.io.scene_sections import ActuationSection, MuscleSpec, RegionsSection
 
 MUSCLE_KEYS = ("region", "fibre", "scale", "phase", "frequency")
 """The keys of a ``[[muscles]]`` table."""
@@ -34,16 +34,22 @@ def _number(value, where: str) -> float:
 
 
 def _fibre(value, where: str) -> tuple[float, float, float]:
-    """A direction [m_x, m_y, m_z], normalised to unit length; a zero vector is refused."""
+    """A direction [m_x, m_y, m_z], normalised to unit length; a zero vector is refused.
+
+    The norm is taken of the components divided by the largest |m_i| first, so that no square
+    overflows (1e200) or underflows (1e-200): any finite non-zero vector has its direction."""
     if not isinstance(value, (list, tuple)) or len(value) != 3:
         raise InputError(f"{where} must be a direction [m_x, m_y, m_z] of 3 numbers, got {value!r}")
     components = [_number(component, where) for component in value]
-    norm = math.sqrt(sum(c * c for c in components))
-    if not norm > 0.0 or not math.isfinite(norm):
+    largest = max(abs(c) for c in components)
+    if largest == 0.0:
         raise InputError(f"{where} = {value!r} has no direction (zero length); give e.g. [1, 0, 0] (the body axis)")
+    norm = math.sqrt(sum(c * c for c in components))
     if abs(norm - 1.0) <= 4 * _EPSILON:        # already unit: kept, so that a written scene reads back the same
         return tuple(components)
-    return tuple(c / norm for c in components)
+    scaled = [c / largest for c in components]
+    norm = math.sqrt(sum(c * c for c in scaled))
+    return tuple(c / norm for c in scaled)
 
 
 def muscle_from_table(item, where: str) -> MuscleSpec:
@@ -87,3 +93,137 @@ def muscles_from_list(items, regions: RegionsSection, where: str) -> tuple[Muscl
         raise InputError(f"{where}: [regions] muscles = {list(regions.muscles)!r} and [[muscles]] both name the "
                          "muscles; give the regions in the [[muscles]] tables only")
     return muscles
+
+
+MIN_STEPS_PER_PERIOD = 10
+"""Fewest time steps h per activation period 1/f_j: below, the steps sample sin(2π f_j t) too
+coarsely, and far below they alias it (f = 1e9 Hz at h = 0.02 s drives a slow wave of another
+frequency)."""
+
+YOUNG_MODULUS_RANGE = (1e3, 1e9)
+"""Plausible Young's modulus of a soft swimmer [Pa]: 1 kPa (gel) to 1 GPa (stiff plastic)."""
+
+FULL_ACTIVATION = 1.0
+"""An amplitude A up to this is taken as a plausible activation level: a peak muscle stress too
+large at such an A blames [actuation] stiffness (or E outside :data:`YOUNG_MODULUS_RANGE`), above
+it [actuation] amplitude."""
+
+
+def fibre_modulus(material) -> float:
+    """M = λ + 2μ = E (1 - ν) / ((1 + ν)(1 - 2ν)) [Pa]: the body's small-strain stiffness along a
+    fibre held laterally by the tissue around it (E for a free fibre, ν = 0)."""
+    nu = material.poisson_ratio
+    return material.young_modulus * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu))
+
+
+def activation_ratio(stiffness: float, amplitude: float, scale: float, modulus: float) -> float:
+    """Peak muscle stress over a modulus, k A |s| / modulus (0 when a factor is 0; inf on overflow).
+
+    Along its fibres a muscle at activation a has the stiffness M + k a (the energy ½ k a |F m|²
+    adds k a): the muscle driven at a = -A |s| (every muscle of an antagonist pair, half of each
+    period) has none left at k A |s| = M. Measured on the level-1 block (k A = 12 kPa): E = 8 kPa
+    (k A / M = 0.7) swims to the end, E = 6 kPa (0.93) stops the PROM near t = 0.96 s."""
+    if stiffness == 0.0 or amplitude == 0.0 or scale == 0.0:
+        return 0.0
+    return stiffness / modulus * amplitude * abs(scale)
+
+
+def scales(largest: float) -> str:
+    """' (largest muscle |scale| s)' when it is not 1, for messages."""
+    return "" if largest == 1.0 else f" (largest muscle |scale| {largest:g})"
+
+
+
+def _activation_key(number: int | None, muscle) -> str:
+    """The key that sets a muscle's frequency: its own, or [actuation] frequency."""
+    if muscle.frequency is not None:
+        return f"[[muscles]] {number} (region '{muscle.region}') frequency"
+    return "[actuation] frequency" + (f" (of [[muscles]] {number}, region '{muscle.region}')" if number else "")
+
+
+def driven_muscles(scene) -> list[tuple[int | None, MuscleSpec]]:
+    """(table number or None for the [regions] pair, muscle) of each muscle the scene drives: none
+    when k or A is zero, and never a muscle of scale 0."""
+    if not (scene.actuation.stiffness > 0 and scene.actuation.amplitude > 0):
+        return []
+    numbered = enumerate(scene.muscles, start=1) if scene.muscles else ((None, m) for m in scene.actuated_muscles)
+    return [(number, muscle) for number, muscle in numbered if muscle.scale != 0.0]
+
+
+def check_actuation(scene) -> None:
+    """InputError naming the key at fault: a muscle that is the head region, a driven muscle whose
+    period 1/f_j spans fewer than :data:`MIN_STEPS_PER_PERIOD` time steps, or a peak muscle stress
+    k A |s_j| of the body's fibre stiffness M or more (:func:`activation_ratio`; of [actuation]
+    amplitude or stiffness, a muscle's scale, [material] young_modulus, [cooptimization]
+    amplitude_bounds or [reduction] stroke_amplitude)."""
+    where = f"scene {scene.source}"
+    if not scene.muscles and scene.regions.head in scene.regions.muscles:
+        raise InputError(f"{where}: [regions] muscles = {list(scene.regions.muscles)!r} names the stiff head "
+                         f"([regions] head = '{scene.regions.head}'); the muscles must be regions other than the head")
+    for number, muscle in enumerate(scene.muscles, start=1):
+        if muscle.region == scene.regions.head:
+            raise InputError(f"{where}: [[muscles]] {number} names region '{muscle.region}', the stiff head "
+                             f"([regions] head); a muscle must be a region of the body other than the head")
+    _check_periods(scene, where)
+    _check_activation_strain(scene, where)
+
+
+def _check_periods(scene, where: str) -> None:
+    step = scene.solver.time_step
+    largest = 1.0 / (MIN_STEPS_PER_PERIOD * step)
+    for number, muscle in driven_muscles(scene):
+        frequency = scene.actuation.frequency if muscle.frequency is None else muscle.frequency
+        if frequency * step * MIN_STEPS_PER_PERIOD > 1.0 + 1e-9:
+            raise InputError(f"{where}: {_activation_key(number, muscle)} = {frequency:g} Hz has a period of "
+                             f"{1.0 / frequency:.3g} s, fewer than {MIN_STEPS_PER_PERIOD} time steps of [solver] "
+                             f"time_step = {step:g} s (the steps would alias the activation); give frequency <= "
+                             f"{largest:.4g} Hz or time_step <= {1.0 / (MIN_STEPS_PER_PERIOD * frequency):.3g} s")
+
+
+def _check_activation_strain(scene, where: str) -> None:
+    actuation, modulus = scene.actuation, fibre_modulus(scene.material)
+    driven = driven_muscles(scene)
+    largest_scale = max((abs(muscle.scale) for _, muscle in driven), default=1.0)
+    over = [(number, muscle) for number, muscle in driven
+            if activation_ratio(actuation.stiffness, actuation.amplitude, muscle.scale, modulus) >= 1.0]
+    if over:
+        raise InputError(f"{where}: {_strain_problem(scene, *over[0], largest_scale)}")
+    for key, value, on in (("[cooptimization] amplitude_bounds upper bound", scene.cooptimization.amplitude_bounds[1],
+                            scene.cooptimization.enabled),
+                           ("[reduction] stroke_amplitude", scene.reduction.stroke_amplitude, True)):
+        if on and activation_ratio(actuation.stiffness, value, largest_scale, modulus) >= 1.0:
+            raise InputError(f"{where}: {key} = {value:g}{scales(largest_scale)} with [actuation] stiffness k = "
+                             f"{actuation.stiffness:g} Pa: {_limit(scene)} at that amplitude; give a value below "
+                             f"{modulus / actuation.stiffness / largest_scale:.3g}")
+
+
+def _limit(scene) -> str:
+    material = scene.material
+    return (f"the peak muscle stress k A |s_j| must stay below the body's fibre stiffness M = E (1 - ν) / "
+            f"((1 + ν)(1 - 2ν)) = {fibre_modulus(material):.3g} Pa (E = {material.young_modulus:g} Pa, "
+            f"ν = {material.poisson_ratio:g}), or the muscle driven at a = -A |s_j| has no stiffness left")
+
+
+def _strain_problem(scene, number, muscle, largest_scale: float) -> str:
+    """What is at fault when a driven muscle's stress k A |s_j| reaches M: its scale when A and k are
+    fine at s = 1; else E when outside :data:`YOUNG_MODULUS_RANGE`, k when A is a plausible
+    activation level (<= 1), else A."""
+    actuation, material = scene.actuation, scene.material
+    modulus, limit = fibre_modulus(material), _limit(scene)
+    stress = f"[actuation] stiffness k = {actuation.stiffness:g} Pa and amplitude A = {actuation.amplitude:g}"
+    if activation_ratio(actuation.stiffness, actuation.amplitude, 1.0, modulus) < 1.0:
+        return (f"[[muscles]] {number} (region '{muscle.region}') scale = {muscle.scale:g} with {stress}: {limit}; "
+                f"give |scale| < {modulus / actuation.stiffness / actuation.amplitude:.3g}")
+    low, high = YOUNG_MODULUS_RANGE
+    if not low <= material.young_modulus <= high:
+        return (f"[material] young_modulus = {material.young_modulus:g} Pa with {stress}{scales(largest_scale)}: "
+                f"{limit}; E is in pascals (260 kPa = 260e3), plausible {low:g}-{high:g} Pa")
+    if actuation.amplitude <= FULL_ACTIVATION:
+        ceiling = modulus / actuation.amplitude / largest_scale
+        return (f"[actuation] stiffness = {actuation.stiffness:g} Pa with amplitude A = {actuation.amplitude:g}"
+                f"{scales(largest_scale)}: {limit}; give stiffness in [0, {ceiling:.3g}) Pa (default "
+                f"{ActuationSection().stiffness:g})")
+    ceiling = modulus / actuation.stiffness / largest_scale
+    return (f"[actuation] amplitude = {actuation.amplitude:g}{scales(largest_scale)} with stiffness k = "
+            f"{actuation.stiffness:g} Pa: {limit}; give amplitude in [0, {ceiling:.3g}) (default "
+            f"{ActuationSection().amplitude:g})")

@@ -54,9 +54,11 @@ class ActivationLaw:
 
     @classmethod
     def of(cls, scene) -> "ActivationLaw":
-        """The law of the scene's muscles (``Scene.actuated_muscles``; phases given in degrees)."""
+        """The law of the scene's muscles (``Scene.actuated_muscles``; phases given in degrees, reduced
+        to (-360°, 360°) first, exactly: a phase of 1e300° keeps its angle, no digit is lost to 2π)."""
         muscles, actuation = scene.actuated_muscles, scene.actuation
-        return cls(tuple(muscle.scale for muscle in muscles), tuple(math.radians(muscle.phase) for muscle in muscles),
+        return cls(tuple(muscle.scale for muscle in muscles),
+                   tuple(math.radians(math.fmod(muscle.phase, 360.0)) for muscle in muscles),
                    tuple(actuation.frequency if muscle.frequency is None else muscle.frequency for muscle in muscles),
                    actuation.start_ramp)
 

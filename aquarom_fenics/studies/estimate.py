@@ -133,23 +133,33 @@ def _bench_runs(name: str, keep) -> list[dict]:
         return []
 
 
-def expected_basis(scene: Scene, parametric: bool) -> list[str]:
-    """Candidate basis vectors (SPEC §7); dependent ones are dropped at build time."""
+def actuation_modes(scene: Scene) -> int:
+    """Number of actuation modes of the basis: the independent activation patterns of the muscles
+    (``ActivationLaw.patterns``: one per frequency, two where its phases are not all 0° or 180°);
+    0 with basis = 'paper' or without actuation."""
     reduction = scene.reduction
     actuated = reduction.basis == "default" and scene.actuation.stiffness > 0 and scene.actuation.amplitude > 0
-    actuation_modes = len(ActivationLaw.of(scene).patterns()) if actuated else 0
-    responses = response_labels(reduction.basis == "default" and reduction.response_vectors, actuation_modes,
+    return len(ActivationLaw.of(scene).patterns()) if actuated else 0
+
+
+def expected_basis(scene: Scene, parametric: bool, modes: int | None = None) -> list[str]:
+    """Candidate basis vectors (SPEC §7); dependent ones are dropped at build time. ``modes``: that
+    many actuation modes instead of the scene's."""
+    reduction = scene.reduction
+    count = actuation_modes(scene) if modes is None else modes
+    responses = response_labels(reduction.basis == "default" and reduction.response_vectors, count,
                                 scene.fluid.thrust)
-    responses += stroke_labels(reduction.basis == "default" and reduction.stroke_amplitude > 0, actuation_modes,
+    responses += stroke_labels(reduction.basis == "default" and reduction.stroke_amplitude > 0, count,
                                scene.fluid.thrust, responses,
                                len(scene.shapes) if parametric and reduction.stroke_sensitivities else 0)
     return candidate_labels(reduction.vibration_modes, reduction.modal_derivatives,
-                            len(scene.shapes) if parametric else 0, actuation_modes, responses)
+                            len(scene.shapes) if parametric else 0, count, responses)
 
 
-def reduced_tensor_bytes(scene: Scene, parametric: bool = True) -> float:
+def reduced_tensor_bytes(scene: Scene, parametric: bool = True, modes: int | None = None) -> float:
     """Memory of the reduced internal-force tensor [bytes]: 8 m⁴ for its cubic part, times 1 + p
-    for its first ξ-derivatives (and + p² at Taylor order 2), m the candidate basis size."""
-    size = len(expected_basis(scene, parametric))
+    for its first ξ-derivatives (and + p² at Taylor order 2), m the candidate basis size (with
+    ``modes`` actuation modes instead of the scene's)."""
+    size = len(expected_basis(scene, parametric, modes))
     p = len(scene.shapes) if parametric else 0
     return 8.0 * size ** 4 * (1 + p + (p * p if scene.reduction.taylor_order == 2 else 0))

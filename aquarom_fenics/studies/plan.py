@@ -15,8 +15,8 @@ from aquarom_fenics.geometry.block import block_cache_path
 from aquarom_fenics.geometry.fish import planned_body
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.optimization.prom_builder import stability_plan
-from aquarom_fenics.studies.estimate import (REFERENCE_CELLS, basis_seconds, expected_basis, fom_seconds, level_cells,
-                                             prom_build_seconds, reduced_tensor_bytes, scene_cells, tail_screen_seconds)
+from aquarom_fenics.studies.estimate import (REFERENCE_CELLS, actuation_modes, basis_seconds, expected_basis,
+                                             fom_seconds, level_cells, prom_build_seconds, reduced_tensor_bytes, scene_cells, tail_screen_seconds)
 
 
 def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
@@ -184,10 +184,18 @@ def check_plan_bounds(command: str, scene: Scene, model: str | None = None) -> N
         needed = reduced_tensor_bytes(scene, parametric)
         if needed > MAX_TENSOR_BYTES:
             size = len(expected_basis(scene, parametric))
+            tensors = (f"makes a basis of up to {size} vectors, whose reduced tensors would take ~{needed / 1e9:.3g} GB "
+                       f"(limit {MAX_TENSOR_BYTES / 1e9:g} GB)")
+            modes = actuation_modes(scene)
+            if modes > 1 and reduced_tensor_bytes(scene, parametric, 1) <= MAX_TENSOR_BYTES:
+                fit = max(k for k in range(1, modes) if reduced_tensor_bytes(scene, parametric, k) <= MAX_TENSOR_BYTES)
+                raise InputError(f"scene {scene.source}: its {len(scene.actuated_muscles)} muscles make {modes} actuation "
+                                 f"modes (activation patterns: one per frequency, two where its phases are not all "
+                                 f"0° or 180°), each with its own basis vectors (ψ, θ_ψ and their products), which "
+                                 f"{tensors}; at most {fit} actuation modes fit: give the muscles fewer frequencies, "
+                                 f"set [reduction] basis = \"paper\" (no actuation modes), run the FOM or pass {OVERRIDE}")
             raise InputError(f"scene {scene.source}: [reduction] vibration_modes = {scene.reduction.vibration_modes} "
-                             f"makes a basis of up to {size} vectors, whose reduced tensors would take "
-                             f"~{needed / 1e9:.3g} GB (limit {MAX_TENSOR_BYTES / 1e9:g} GB); use fewer modes or "
-                             f"pass {OVERRIDE}")
+                             f"{tensors}; use fewer modes or pass {OVERRIDE}")
     runs = len(scene.cooptimization.weights) if command == "pareto" else 1
     seconds = plan_seconds(command, scene, model) / runs      # one run: a simulation, a build, one weight's optimisation
     if seconds > MAX_PLAN_SECONDS:

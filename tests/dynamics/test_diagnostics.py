@@ -18,6 +18,9 @@ from aquarom_fenics.geometry.design_check import cell_region, check_design
 from aquarom_fenics.dynamics.simulate import simulate_fom
 from conftest import coarse_scene
 
+WEAK_MUSCLES = {"stiffness": 300.0}
+"""k A = 60 Pa, 12 % of E = 500 Pa: the muscles' defaults (k A = 12 kPa) would be refused on so soft a body."""
+
 REGION_NAMED = re.compile(r"cell (\d+) \((head|left muscle|right muscle|passive)\) at x=")
 
 
@@ -47,14 +50,14 @@ def test_hints_without_a_model_come_from_the_scene():
     assert newton_failure_hints(nominal) == ["try a smaller time step, [solver] time_step = 0.01 (h/2 of 0.02 s)"]
     stiff_muscles = newton_failure_hints(coarse_scene(actuation={"stiffness": 1e6}))
     assert any("k·A = 2e+05 Pa is 77% of E" in hint for hint in stiff_muscles)
-    soft = newton_failure_hints(coarse_scene(material={"young_modulus": 500.0}))
+    soft = newton_failure_hints(coarse_scene(material={"young_modulus": 500.0}, actuation=WEAK_MUSCLES))
     assert soft[0].startswith("[material] young_modulus = 500 Pa")
 
 
 def test_scene_warnings_flag_suspicious_units_and_spare_the_nominal_scene():
     assert scene_warnings(Scene.load("nominal")) == []
     assert scene_warnings(coarse_scene()) == []
-    (soft,) = scene_warnings(coarse_scene(material={"young_modulus": 500.0}))
+    (soft,) = scene_warnings(coarse_scene(material={"young_modulus": 500.0}, actuation=WEAK_MUSCLES))
     assert "young_modulus = 500 Pa" in soft and "pascals" in soft
     (millimetres,) = scene_warnings(coarse_scene(mesh={"length": 200.0}))
     assert "body length 200 m" in millimetres and "did you give the mesh in millimetres?" in millimetres

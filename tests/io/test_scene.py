@@ -367,7 +367,7 @@ def test_replace_changes_one_value_and_keeps_the_rest():
     shifted = scene.replace("regions", muscle_range=(-0.9, -0.4))
     assert shifted.regions.muscle_range == (-0.9, -0.4)
     assert scene.replace("cooptimization", weights=[0.5]).cooptimization.weights == (0.5,)
-    assert scene.replace("solver", time_step=1).solver.time_step == 1.0
+    assert scene.replace("solver", duration=3).solver.duration == 3.0      # an integer for a float
 
 
 @pytest.mark.parametrize("section, values, name", [
