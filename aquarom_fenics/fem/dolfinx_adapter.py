@@ -22,7 +22,8 @@ from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from aquarom_fenics.fem.jit_cache import JitCacheError, claimed, jit_cache_dir
+from aquarom_fenics.fem.jit_cache import JitCacheError, claimed
+from aquarom_fenics.io.paths import forms_cache
 
 
 def create_tet_mesh(comm: MPI.Comm, points: np.ndarray, cells: np.ndarray):
@@ -171,7 +172,7 @@ FORM_COMPILER_PARAMETERS = {"scalar_type": "double"}
 
 def jit_parameters() -> dict:
     """dolfinx's JIT parameters with the toolkit's cache folder (``AQUAROM_JIT_CACHE``)."""
-    return {"cache_dir": str(jit_cache_dir())}
+    return {"cache_dir": str(forms_cache())}
 
 
 def ffcx_module_name(ufl_object, kind: str, jit_params: dict) -> str:

@@ -28,11 +28,9 @@ from pathlib import Path
 from cffi import VerificationError
 
 from aquarom_fenics.errors import InputError
+from aquarom_fenics.io.paths import FORMS_CACHE_VARIABLE as CACHE_VARIABLE
 
 logger = logging.getLogger("aquarom")
-
-CACHE_VARIABLE = "AQUAROM_JIT_CACHE"
-"""Environment variable naming the folder of the compiled forms (default: FFCx's, ~/.cache/fenics)."""
 
 WAIT_SECONDS = 600.0
 """The longest wait for another process's compile of the same module [s]."""
@@ -42,15 +40,6 @@ POLL_SECONDS = 0.05
 
 class JitCacheError(InputError):
     """The folder of the compiled forms cannot be used (not writable, full, or held too long)."""
-
-
-def jit_cache_dir() -> Path:
-    """The folder of the compiled forms: ``$AQUAROM_JIT_CACHE``, else dolfinx's default
-    ``$XDG_CACHE_HOME/fenics`` (``~/.cache/fenics``), so that forms compiled before are reused."""
-    chosen = os.environ.get(CACHE_VARIABLE)
-    if chosen:
-        return Path(chosen).expanduser()
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "fenics"
 
 
 def module_files(cache_dir: Path, module: str) -> dict[str, Path]:

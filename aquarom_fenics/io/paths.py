@@ -55,8 +55,16 @@ def mesh_cache() -> Path:
     return root / "meshes" / "cache" if root else user_cache() / "meshes"
 
 
+FORMS_CACHE_VARIABLE = "AQUAROM_JIT_CACHE"
+"""Environment variable naming the folder of the compiled forms."""
+
+
 def forms_cache() -> Path:
-    """FFCx's cache of compiled forms: $XDG_CACHE_HOME/fenics, default ~/.cache/fenics."""
+    """The folder of the compiled forms: $AQUAROM_JIT_CACHE, else FFCx's own default
+    $XDG_CACHE_HOME/fenics (~/.cache/fenics), so that forms compiled before are reused."""
+    chosen = os.environ.get(FORMS_CACHE_VARIABLE)
+    if chosen:
+        return Path(chosen).expanduser()
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "fenics"
 
 

@@ -11,10 +11,11 @@ from aquarom_fenics.io.paths import forms_cache
 from conftest import write_short_scene
 
 
-def excluded_caches(home: Path, xdg_cache: Path, toolkit_cache: Path) -> list[Path]:
-    """The folders a command may write besides its output: the compiled forms' cache (default
-    ~/.cache/fenics, or under $XDG_CACHE_HOME) and the toolkit's cache ($AQUAROM_CACHE)."""
-    return [home / ".cache" / "fenics", xdg_cache, toolkit_cache]
+def excluded_caches(forms: Path, xdg_cache: Path, toolkit_cache: Path) -> list[Path]:
+    """The folders a command may write besides its output: the compiled forms' cache
+    ($AQUAROM_JIT_CACHE), the user's cache folder ($XDG_CACHE_HOME: matplotlib's font list) and the
+    toolkit's cache ($AQUAROM_CACHE)."""
+    return [forms, xdg_cache, toolkit_cache]
 
 
 def files_under(folder: Path, excluded: list[Path]) -> set[str]:
@@ -32,11 +33,11 @@ def test_mesh_and_simulate_leave_home_temporary_folder_and_working_directory_as_
     for folder in (home, temporary, here):
         folder.mkdir()
     (home / ".profile").write_text("# the user's own\n")
-    xdg_cache = forms_cache().parent            # the compiled forms are reused: the run stays short
-    toolkit_cache = tmp_path / "cache"
-    excluded = excluded_caches(home, xdg_cache, toolkit_cache)
+    forms = forms_cache()                       # the compiled forms are reused: the run stays short
+    xdg_cache, toolkit_cache = tmp_path / "xdg-cache", tmp_path / "cache"
+    excluded = excluded_caches(forms, xdg_cache, toolkit_cache)
     environment = dict(os.environ, HOME=str(home), TMPDIR=str(temporary), XDG_CACHE_HOME=str(xdg_cache),
-                       AQUAROM_CACHE=str(toolkit_cache))
+                       AQUAROM_CACHE=str(toolkit_cache), AQUAROM_JIT_CACHE=str(forms))
     environment.pop("DISPLAY", None)
     scene = write_short_scene(tmp_path, duration=0.1)
     before = {folder: files_under(folder, excluded) for folder in (home, temporary, here)}
