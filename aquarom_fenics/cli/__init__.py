@@ -16,7 +16,7 @@ import traceback
 from mpi4py import MPI
 
 from aquarom_fenics import set_log_level
-from aquarom_fenics.cli.commands import COMMANDS, run_dry
+from aquarom_fenics.cli.commands import COMMANDS
 from aquarom_fenics.cli.outputs import os_error_text, settle_output
 from aquarom_fenics.cli.parser import build_parser
 from aquarom_fenics.errors import InputError, Interrupted, SolverError
@@ -70,7 +70,7 @@ def run_and_settle(args) -> tuple[int, str | None]:
     line = None
     try:
         with progress_shown(not getattr(args, "no_progress", False)):
-            code = run_dry(args) if getattr(args, "dry_run", False) else COMMANDS[args.command](args)
+            code = COMMANDS[args.command](args)          # a dry run too: each command makes its checks first
     except (Exception, KeyboardInterrupt) as error:
         code, line = describe_failure(args, error)
     with stop_between_steps() as stop_requested:

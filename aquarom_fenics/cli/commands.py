@@ -6,7 +6,8 @@ from pathlib import Path
 
 from mpi4py import MPI
 
-from aquarom_fenics.cli.inputs import check_inputs, load_scene, say
+from aquarom_fenics.cli.inputs import (check_design_space, check_plan, check_time_runs, checked, design_values,
+                                       load_scene, say)
 from aquarom_fenics.cli.outputs import claim_output, claim_output_file, shown
 from aquarom_fenics.cli.runs import run_build, run_compare, run_simulate
 from aquarom_fenics.cli.sweep import run_sweep
@@ -14,24 +15,16 @@ from aquarom_fenics.errors import InputError, SolverError
 from aquarom_fenics.parallel import shutting_down
 
 
-def run_dry(args) -> int:
-    from aquarom_fenics.studies.plan import plan
-
-    if args.command == "sweep":          # its plan needs the designs: the command makes it
-        return run_sweep(args)
-    scene, _ = check_inputs(args, load_scene(args))
-    lines = plan(args.command, scene, getattr(args, "model", None))      # refuses a bad mesh before printing
-    say(f"plan for `aquarom {args.command}` (dry run, nothing is written):")
-    for line in lines:
-        say(f"  {line}")
-    return 0
+def mesh_inputs(args):
+    """``mesh``: the scene alone (its mesh checked against its level by :func:`load_scene`)."""
+    return load_scene(args), {}
 
 
-def run_mesh(args) -> int:
+@checked(mesh_inputs)
+def run_mesh(args, scene, xi) -> int:
     from aquarom_fenics.geometry.fish import body_summary, load_fish
     from aquarom_fenics.geometry.mesh import cell_quality
 
-    scene = load_scene(args)
     fish = load_fish(scene)
     mesh, tags = fish.mesh, fish.tags
     quality = cell_quality(mesh.points, mesh.cells)
@@ -83,13 +76,35 @@ def thrust_points(scene, fish) -> list[tuple[str, str]]:
     return rows
 
 
-def run_shapes(args) -> int:
+def shapes_inputs(args):
+    """``shapes``: the scene with shapes or an --xi design (a warning where a parameter left out takes 0
+    outside its bounds)."""
+    scene = load_scene(args)
+    xi = design_values(args, scene)
+    if not xi and not scene.shapes:
+        raise InputError(f"scene {scene.source} has no [shapes]: nothing to show (add shape variations or use --xi)")
+    if xi:
+        warn_about_unnamed_parameters(scene, xi)
+    return scene, xi
+
+
+def warn_about_unnamed_parameters(scene, xi: dict) -> None:
+    """``shapes --xi`` draws the design of the given values, the other parameters at 0 (a run takes
+    their start values, see :func:`run_design`); say so when 0 is outside the scene's bounds."""
+    import logging
+
+    for shape in scene.shapes:
+        if shape.name not in xi and not shape.lower <= 0.0 <= shape.upper:
+            logging.getLogger("aquarom").warning(
+                "%s is not given with --xi: the design takes %s = 0, outside the scene's bounds [%g, %g]",
+                shape.name, shape.name, shape.lower, shape.upper)
+
+
+@checked(shapes_inputs)
+def run_shapes(args, scene, xi) -> int:
     from aquarom_fenics.viz.render import render_design, render_shape_sheet
     from aquarom_fenics.geometry.fish import load_fish
 
-    scene, xi = check_inputs(args, load_scene(args))
-    if not xi and not scene.shapes:
-        raise InputError(f"scene {scene.source} has no [shapes]: nothing to show (add shape variations or use --xi)")
     fish = load_fish(scene)
     out = claim_output(args, args.out or Path("results") / "shapes" / scene.name)
     if xi:
@@ -101,13 +116,34 @@ def run_shapes(args) -> int:
     return 0
 
 
-def run_optimize(args) -> int:
+def optimize_inputs(args):
+    """``optimize``: the scene with --method, its shapes and time grid, --weight and --max-time, its
+    design space and the size of the plan."""
+    scene = load_scene(args)
+    check_time_runs(args, scene)
+    if args.method:
+        scene = scene.replace("optimizer", method=args.method)
+    if not scene.shapes:
+        raise InputError(f"scene {scene.source} has no [shapes] to optimise")
+    if args.weight is not None and not scene.cooptimization.enabled:
+        raise InputError(f"--weight {args.weight}: scene {scene.source} does not co-optimise the amplitude "
+                         "([cooptimization] enabled = false), so its cost is -d alone; leave --weight out")
+    if args.weight is not None and not 0.0 <= args.weight <= 1.0:
+        raise InputError(f"--weight {args.weight}: must be in [0, 1]")
+    if args.max_time is not None and not args.max_time > 0:
+        raise InputError(f"--max-time {args.max_time}: must be a positive number of seconds")
+    check_design_space(scene)
+    check_plan(args, "optimize", scene)
+    return scene, {}
+
+
+@checked(optimize_inputs)
+def run_optimize(args, scene, xi) -> int:
     from aquarom_fenics.cli.parser import DEFAULT_WEIGHT
     from aquarom_fenics.optimization.cost import CostWeights
     from aquarom_fenics.optimization.optimize import DEFAULT_MAX_TIME
     from aquarom_fenics.studies.study import checkpoint_pattern, run_optimization
 
-    scene, _ = check_inputs(args, load_scene(args))
     weights = CostWeights()
     if scene.cooptimization.enabled:
         weight = DEFAULT_WEIGHT if args.weight is None else args.weight
@@ -129,10 +165,28 @@ def run_optimize(args) -> int:
     return 0
 
 
-def run_pareto(args) -> int:
+def pareto_inputs(args):
+    """``pareto``: a co-optimisation scene with its time grid, --budgets or distinct weights, its
+    design space and the size of the plan."""
+    from aquarom_fenics.studies.budget_front import parse_budgets
+    from aquarom_fenics.studies.study import require_distinct_weights
+
+    scene = load_scene(args)
+    check_time_runs(args, scene)
+    if not scene.cooptimization.enabled:
+        raise InputError(f"scene {scene.source}: [cooptimization] enabled = true is needed for a Pareto sweep")
+    if args.budgets is not None:
+        parse_budgets(args.budgets, scene.cooptimization.amplitude_bounds)
+    require_distinct_weights(scene.cooptimization.weights, f"scene {scene.source}")
+    check_design_space(scene)
+    check_plan(args, "pareto", scene)
+    return scene, {}
+
+
+@checked(pareto_inputs)
+def run_pareto(args, scene, xi) -> int:
     from aquarom_fenics.studies.study import checkpoint_pattern, pareto_sweep
 
-    scene, _ = check_inputs(args, load_scene(args))
     if args.budgets is not None:
         return run_budget_front(args, scene)
     with shutting_down(open_work_pool(args, scene, len(scene.cooptimization.weights), default_workers=1)) as pool:
@@ -217,12 +271,21 @@ def run_animate(args) -> int:
     return 0
 
 
-def run_basis(args) -> int:
+def reduced_basis_inputs(command: str):
+    """``basis`` and ``check``: the scene, and the size of the PROM they build."""
+    def inputs(args):
+        scene = load_scene(args)
+        check_plan(args, command, scene)
+        return scene, {}
+    return inputs
+
+
+@checked(reduced_basis_inputs("basis"))
+def run_basis(args, scene, xi) -> int:
     from aquarom_fenics.viz.animate import render_basis_sheet
     from aquarom_fenics.geometry.fish import load_fish
     from aquarom_fenics.reduction.reductor import build_prom
 
-    scene = load_scene(args)
     fish = load_fish(scene)
     out = claim_output(args, args.out or Path("results") / "basis" / scene.name)
     prom = build_prom(scene, xi_center={s.name: s.start for s in scene.shapes}, fish=fish)
@@ -233,7 +296,8 @@ def run_basis(args) -> int:
     return 0
 
 
-def run_check(args) -> int:
+@checked(reduced_basis_inputs("check"))
+def run_check(args, scene, xi) -> int:
     from itertools import chain
 
     from aquarom_fenics.verification.check import run_checks, table_header, table_row
@@ -242,7 +306,6 @@ def run_check(args) -> int:
     from aquarom_fenics.reduction.prom import ReducedModel
     from aquarom_fenics.reduction.reductor import build_prom
 
-    scene = load_scene(args)
     fish = load_fish(scene)
     if args.prom is not None:
         prom = ReducedModel.load(args.prom, scene_hash=scene.hash)

@@ -1,6 +1,12 @@
-"""The scene a command runs on and the checks it makes before its work."""
+"""The scene a command runs on, and the checks commands share before their work.
+
+Each command declares its own checks beside it (``@checked(inputs)``): ``inputs(args)`` reads the
+scene and refuses what the run would refuse, so ``--dry-run`` makes the same checks before it
+prints the plan.
+"""
 from __future__ import annotations
 
+import functools
 import os
 import sys
 
@@ -33,11 +39,9 @@ def load_scene(args):
     if args.degree is not None:
         scene = scene.replace("mesh", degree=args.degree)
     if not getattr(args, "allow_large", False):
-        from aquarom_fenics.studies.plan import check_mesh_bounds, check_plan_bounds
+        from aquarom_fenics.studies.plan import check_mesh_bounds
 
         check_mesh_bounds(scene)
-        if args.command in ("basis", "check"):
-            check_plan_bounds(args.command, scene)
     args.scene_used = scene
     return scene
 
@@ -70,57 +74,73 @@ def with_setting(scene, setting: str):
         raise InputError(f"--set {setting}: {error}") from None
 
 
-def check_inputs(args, scene):
-    """The checks a command makes before its work (arguments against the scene, time grid, design
-    space), so a dry run refuses what the run would refuse; returns the scene the command uses and
-    the --xi values."""
-    from aquarom_fenics.optimization.cost import design_space, require_interior
-    from aquarom_fenics.io.scene import parse_xi_assignments
-    from aquarom_fenics.dynamics.simulate import check_time_grid
+def checked(inputs):
+    """Declare a command's input checks: the command runs as ``run(args, scene, xi)`` after
+    ``inputs(args)`` returned the scene it uses and the --xi values; with --dry-run the same checks
+    are made and the plan is printed instead of the work."""
+    def declare(run):
+        @functools.wraps(run)
+        def command(args) -> int:
+            scene, xi = inputs(args)
+            if getattr(args, "dry_run", False):
+                return print_plan(args, scene)
+            return run(args, scene, xi)
+        return command
+    return declare
 
-    xi = parse_xi_assignments(getattr(args, "xi", None), scene)
-    if args.command == "shapes" and xi:
-        warn_about_unnamed_parameters(scene, xi)
+
+def print_plan(args, scene) -> int:
+    """The dry run of a command whose input checks passed: what it would build, reuse and skip."""
+    from aquarom_fenics.studies.plan import plan
+
+    lines = plan(args.command, scene, getattr(args, "model", None))      # refuses a bad mesh before printing
+    say(f"plan for `aquarom {args.command}` (dry run, nothing is written):")
+    for line in lines:
+        say(f"  {line}")
+    return 0
+
+
+def design_values(args, scene) -> dict[str, float]:
+    """The --xi values (none where the command has no --xi), checked against the scene's shapes."""
+    from aquarom_fenics.io.scene import parse_xi_assignments
+
+    return parse_xi_assignments(getattr(args, "xi", None), scene)
+
+
+def check_prom_option(args) -> None:
+    """--prom goes with --model prom only."""
     if getattr(args, "prom", None) is not None and getattr(args, "model", "prom") != "prom":
         raise InputError(f"--prom {args.prom} is used by --model prom only (this run: --model {args.model})")
-    if args.command in ("simulate", "compare", "optimize", "pareto", "sweep"):
-        check_time_grid(scene)
-        if not getattr(args, "allow_large", False):
-            from aquarom_fenics.studies.plan import check_run_bounds
 
-            check_run_bounds(scene)
-    if args.command == "optimize":
-        if args.method:
-            scene = scene.replace("optimizer", method=args.method)
-        if not scene.shapes:
-            raise InputError(f"scene {scene.source} has no [shapes] to optimise")
-        if args.weight is not None and not scene.cooptimization.enabled:
-            raise InputError(f"--weight {args.weight}: scene {scene.source} does not co-optimise the amplitude "
-                             "([cooptimization] enabled = false), so its cost is -d alone; leave --weight out")
-        if args.weight is not None and not 0.0 <= args.weight <= 1.0:
-            raise InputError(f"--weight {args.weight}: must be in [0, 1]")
-        if args.max_time is not None and not args.max_time > 0:
-            raise InputError(f"--max-time {args.max_time}: must be a positive number of seconds")
-    if args.command == "pareto" and not scene.cooptimization.enabled:
-        raise InputError(f"scene {scene.source}: [cooptimization] enabled = true is needed for a Pareto sweep")
-    if args.command == "pareto" and getattr(args, "budgets", None) is not None:
-        from aquarom_fenics.studies.budget_front import parse_budgets
 
-        parse_budgets(args.budgets, scene.cooptimization.amplitude_bounds)
-    if args.command == "pareto":
-        from aquarom_fenics.studies.study import require_distinct_weights
+def check_time_runs(args, scene) -> None:
+    """A command that runs a model in time: the scene's time grid, and (without --allow-large) the
+    size of one run (steps × dofs)."""
+    from aquarom_fenics.dynamics.simulate import check_time_grid
 
-        require_distinct_weights(scene.cooptimization.weights, f"scene {scene.source}")
-    if args.command in ("optimize", "pareto"):
-        space = design_space(scene)
-        if scene.optimizer.method == "paper":
-            require_interior(space, scene)
-    if args.command in ("simulate", "compare", "optimize", "pareto", "build", "sweep") \
-            and not getattr(args, "allow_large", False):
+    check_time_grid(scene)
+    if not getattr(args, "allow_large", False):
+        from aquarom_fenics.studies.plan import check_run_bounds
+
+        check_run_bounds(scene)
+
+
+def check_plan(args, command: str, scene) -> None:
+    """Without --allow-large: the reduced tensors of ``command``'s basis fit in memory and its plan
+    is estimated under the time limit (:func:`aquarom_fenics.studies.plan.check_plan_bounds`)."""
+    if not getattr(args, "allow_large", False):
         from aquarom_fenics.studies.plan import check_plan_bounds
 
-        check_plan_bounds(args.command, scene, getattr(args, "model", None))
-    return scene, xi
+        check_plan_bounds(command, scene, getattr(args, "model", None))
+
+
+def check_design_space(scene) -> None:
+    """An optimisation's design space, with a start inside its bounds for the paper's method."""
+    from aquarom_fenics.optimization.cost import design_space, require_interior
+
+    space = design_space(scene)
+    if scene.optimizer.method == "paper":
+        require_interior(space, scene)
 
 
 def run_design(scene, xi: dict[str, float]) -> dict[str, float]:
@@ -143,15 +163,3 @@ def say(text: str) -> None:
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         except (OSError, ValueError, AttributeError):
             pass
-
-
-def warn_about_unnamed_parameters(scene, xi: dict) -> None:
-    """``shapes --xi`` draws the design of the given values, the other parameters at 0 (a run takes
-    their start values, see :func:`run_design`); say so when 0 is outside the scene's bounds."""
-    import logging
-
-    for shape in scene.shapes:
-        if shape.name not in xi and not shape.lower <= 0.0 <= shape.upper:
-            logging.getLogger("aquarom").warning(
-                "%s is not given with --xi: the design takes %s = 0, outside the scene's bounds [%g, %g]",
-                shape.name, shape.name, shape.lower, shape.upper)

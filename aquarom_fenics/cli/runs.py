@@ -7,15 +7,37 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-from aquarom_fenics.cli.inputs import check_inputs, load_scene, run_design, say
+from aquarom_fenics.cli.inputs import (check_plan, check_prom_option, check_time_runs, checked, design_values,
+                                       load_scene, run_design, say)
 from aquarom_fenics.cli.outputs import claim_output, claim_output_file, shown
 from aquarom_fenics.errors import InputError, SolverError
 
 
-def run_simulate(args) -> int:
+def model_run_inputs(command: str):
+    """``simulate`` and ``compare``: the scene and the --xi design, --prom with the PROM only, the
+    time grid, and the sizes of one run and of the plan."""
+    def inputs(args):
+        scene = load_scene(args)
+        xi = design_values(args, scene)
+        check_prom_option(args)
+        check_time_runs(args, scene)
+        check_plan(args, command, scene)
+        return scene, xi
+    return inputs
+
+
+def build_inputs(args):
+    """``build``: the scene, the --xi building point and the size of the PROM."""
+    scene = load_scene(args)
+    xi = design_values(args, scene)
+    check_plan(args, "build", scene)
+    return scene, xi
+
+
+@checked(model_run_inputs("simulate"))
+def run_simulate(args, scene, xi) -> int:
     from aquarom_fenics.dynamics.simulate import simulate_fom
 
-    scene, xi = check_inputs(args, load_scene(args))
     design = run_design(scene, xi)
     out = claim_output(args, args.out or Path("results") / "simulate" / f"{scene.name}-{args.model}")
     if args.model == "fom":
@@ -96,12 +118,12 @@ def run_reduced_model(scene, xi: dict, model: str, prom_file: Path | None, out: 
     return result
 
 
-def run_build(args) -> int:
+@checked(build_inputs)
+def run_build(args, scene, xi) -> int:
     from aquarom_fenics.reduction.cache import cached_prom
     from aquarom_fenics.geometry.fish import load_fish
     from aquarom_fenics.reduction.reductor import build_prom
 
-    scene, xi = check_inputs(args, load_scene(args))
     xi = {s.name: s.start for s in scene.shapes} | xi
     out = claim_output_file(args, args.out or Path("results") / "build" / f"{scene.name}-prom.npz")
     fish = load_fish(scene)
@@ -125,13 +147,13 @@ def run_build(args) -> int:
     return 0
 
 
-def run_compare(args) -> int:
+@checked(model_run_inputs("compare"))
+def run_compare(args, scene, xi) -> int:
     from aquarom_fenics.verification.compare import model_errors
     from aquarom_fenics.io.plots import plot_comparison
     from aquarom_fenics.io.persistence import write_json_atomic
     from aquarom_fenics.dynamics.simulate import simulate_fom
 
-    scene, xi = check_inputs(args, load_scene(args))
     design = run_design(scene, xi)
     out = claim_output(args, args.out or Path("results") / "compare" / scene.name)
     reduced = run_reduced_model(scene, design, args.model, args.prom, out / args.model)

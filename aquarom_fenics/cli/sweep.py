@@ -7,7 +7,7 @@ from pathlib import Path
 
 from mpi4py import MPI
 
-from aquarom_fenics.cli.inputs import check_inputs, load_scene, say
+from aquarom_fenics.cli.inputs import check_plan, check_time_runs, load_scene, say
 from aquarom_fenics.cli.outputs import claim_output, shown
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.io.run_record import check_run_record, write_run_record
@@ -54,6 +54,20 @@ def run_record(args, scene) -> dict:
     return {"command": "sweep", "scene_hash": scene.hash, "model": args.model}
 
 
+def sweep_inputs(args):
+    """``sweep``: not under mpirun, --workers ≥ 1, the scene's time grid and the sizes of one run and of
+    the plan (the designs are read next; a dry run needs them for its plan, see :func:`dry_run`)."""
+    if MPI.COMM_WORLD.size > 1:
+        raise InputError("aquarom sweep spreads its designs over workers itself; run it without mpirun "
+                         "(--workers N, or --scheduler for a Dask cluster)")
+    if args.workers is not None and args.workers < 1:
+        raise InputError(f"--workers {args.workers}: must be at least 1")
+    scene = load_scene(args)
+    check_time_runs(args, scene)
+    check_plan(args, "sweep", scene)
+    return scene
+
+
 def run_sweep(args) -> int:
     from aquarom_fenics.cli.shapes_module import require_in_process
     from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
@@ -61,12 +75,7 @@ def run_sweep(args) -> int:
     from aquarom_fenics.parallel import choose_cluster, open_pool, shutting_down
     from aquarom_fenics.studies import sweep
 
-    if MPI.COMM_WORLD.size > 1:
-        raise InputError("aquarom sweep spreads its designs over workers itself; run it without mpirun "
-                         "(--workers N, or --scheduler for a Dask cluster)")
-    if args.workers is not None and args.workers < 1:
-        raise InputError(f"--workers {args.workers}: must be at least 1")
-    scene, _ = check_inputs(args, load_scene(args))
+    scene = sweep_inputs(args)
     designs, source = sweep_designs(args, scene)
     cluster = choose_cluster(args.scheduler, args.scheduler_file, scene.cluster, args.connect_timeout)
     target = args.out or Path("results") / "sweep" / f"{scene.name}-{args.model}"

@@ -11,9 +11,9 @@ object with required and optional keys; other keys are allowed).
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
-import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -21,13 +21,11 @@ from typing import Callable
 import numpy as np
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.files import require_regular_file  # noqa: F401  (the readers below and their users)
+from aquarom_fenics.files import read_text_file, require_regular_file  # noqa: F401  (require_: for their users)
 from aquarom_fenics.io.tables import TRAJECTORY_COLUMNS, TRAJECTORY_FILE_COLUMNS
 
-MAX_JSON_BYTES = 256 * 1024 * 1024
-"""Largest JSON file read back [bytes] (a checkpoint of a long optimisation is a few MB)."""
-MAX_JSON_DEPTH = 64
-"""Deepest nesting of arrays and objects accepted in a JSON file read back."""
+MAX_READBACK_BYTES = 256 * 1024 * 1024
+"""Largest JSON or CSV file read back [bytes] (a checkpoint of a long optimisation is a few MB)."""
 MAX_MESH_FILE_BYTES = 2 * 1024 ** 3
 """Largest mesh file read (any format) [bytes]: checked by the reader and by the scene's hash."""
 
@@ -102,59 +100,17 @@ class record:
 def load_json(path: Path, schema: Check, kind: str, remedy: str = "") -> dict:
     """The JSON file ``path`` checked against ``schema``; InputError "KIND PATH: what; remedy"."""
     path = Path(path)
-    remedy = f"; {remedy}" if remedy else ""
-    data = _read_json(path, kind, remedy)
+    hint = f"; {remedy}" if remedy else ""
+    text = read_text_file(path, kind, MAX_READBACK_BYTES, remedy, nesting="json")
+    try:
+        data = json.loads(text)
+    except ValueError as error:
+        raise InputError(f"{kind} {path}: not valid JSON ({error}){hint}") from None
     try:
         schema(data, "")
     except SchemaError as error:
-        raise InputError(f"{kind} {path}: {error}{remedy}") from None
+        raise InputError(f"{kind} {path}: {error}{hint}") from None
     return data
-
-
-def _read_json(path: Path, kind: str, remedy: str):
-    try:
-        details = path.stat()
-        if stat.S_ISREG(details.st_mode) is False and not stat.S_ISDIR(details.st_mode):
-            raise InputError(f"{kind} {path}: not a regular file (a FIFO, socket or device){remedy}")
-        if details.st_size > MAX_JSON_BYTES:
-            raise InputError(f"{kind} {path}: larger than {MAX_JSON_BYTES // 2**20} MB{remedy}")
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{kind} {path}: missing{remedy}") from None
-    except IsADirectoryError:
-        raise InputError(f"{kind} {path}: a folder, not a file{remedy}") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{kind} {path}: not UTF-8 text{remedy}") from None
-    except OSError as error:
-        raise InputError(f"{kind} {path}: cannot be read ({error.strerror}){remedy}") from None
-    if _nesting(text) > MAX_JSON_DEPTH:
-        raise InputError(f"{kind} {path}: nested deeper than {MAX_JSON_DEPTH} levels{remedy}")
-    try:
-        return json.loads(text)
-    except ValueError as error:
-        raise InputError(f"{kind} {path}: not valid JSON ({error}){remedy}") from None
-
-
-def _nesting(text: str) -> int:
-    """Upper bound of the nesting depth of JSON text (brackets counted outside strings)."""
-    depth = deepest = 0
-    in_string = escaped = False
-    for character in text:
-        if in_string:
-            if escaped:
-                escaped = False
-            elif character == "\\":
-                escaped = True
-            elif character == '"':
-                in_string = False
-        elif character == '"':
-            in_string = True
-        elif character in "[{":
-            depth += 1
-            deepest = max(deepest, depth)
-        elif character in "]}":
-            depth -= 1
-    return deepest
 
 
 # ---------------------------------------------------------------------- the file kinds
@@ -281,16 +237,12 @@ def load_csv_table(path: Path, columns: tuple[str, ...] | list[str], kind: str, 
     """A CSV file with a header holding ``columns`` (others allowed) and at least one row; numbers
     in every column but ``text_columns`` (an empty cell is NaN)."""
     path = Path(path)
+    text = read_text_file(path, kind, MAX_READBACK_BYTES, remedy)
     remedy = f"; {remedy}" if remedy else ""
     try:
-        with open(path, newline="", encoding="utf-8") as stream:
-            rows = list(csv.reader(stream))
-    except FileNotFoundError:
-        raise InputError(f"{kind} {path}: missing{remedy}") from None
-    except (UnicodeDecodeError, csv.Error) as error:
-        raise InputError(f"{kind} {path}: not a CSV text file ({error}){remedy}") from None
-    except OSError as error:
-        raise InputError(f"{kind} {path}: cannot be read ({error.strerror}){remedy}") from None
+        rows = list(csv.reader(io.StringIO(text, newline="")))
+    except csv.Error as error:
+        raise InputError(f"{kind} {path}: not a CSV file ({error}){remedy}") from None
     if not rows:
         raise InputError(f"{kind} {path}: empty (no header {','.join(columns)}){remedy}")
     header = rows[0]

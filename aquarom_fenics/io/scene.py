@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from aquarom_fenics.errors import InputError
+from aquarom_fenics.files import is_regular_file, read_text_file, require_regular_file
 from aquarom_fenics.parallel.settings import ClusterSettings, cluster_from_table
 from aquarom_fenics.io.paths import shipped_meshes, shipped_scenes
 from aquarom_fenics.io.scene_sections import (SECTIONS, ActuationSection, CooptimizationSection, FluidSection,
@@ -64,20 +65,13 @@ class Scene:
     def load(cls, path: str | Path) -> "Scene":
         """Read and validate a scene file; a bare name like ``so1`` means ``scenes/so1.toml``."""
         path = resolve_scene_path(path)
+        text = read_text_file(path, "scene", MAX_SCENE_BYTES, nesting="toml")
         try:
-            text = path.read_text(encoding="utf-8").removeprefix("\ufeff")    # a byte-order mark is no statement
-            if _nesting_depth(text) > MAX_NESTING:
-                raise InputError(f"scene {path}: arrays or tables nested deeper than {MAX_NESTING} levels; "
-                                 "a scene needs at most 3")
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as error:
             raise InputError(f"scene {path}: malformed TOML ({error})") from None
         except RecursionError:
             raise InputError(f"scene {path}: nested too deeply to read; a scene needs at most 3 levels") from None
-        except UnicodeDecodeError:
-            raise InputError(f"scene {path}: not a UTF-8 text file") from None
-        except OSError as error:
-            raise InputError(f"scene {path}: cannot be read ({error.strerror})") from None
         return scene_from_dict(data, source=str(path), base_dir=str(path.parent))
 
     @property
@@ -154,7 +148,7 @@ class Scene:
         if self.mesh_file is None:
             digest.update((shipped_meshes() / "block.toml").read_bytes())  # the block's meshing recipe
         elif self.mesh_file.exists() or self.mesh_file.is_symlink():
-            from aquarom_fenics.io.readback import MAX_MESH_FILE_BYTES, require_regular_file
+            from aquarom_fenics.io.readback import MAX_MESH_FILE_BYTES
 
             require_regular_file(self.mesh_file, "mesh file", MAX_MESH_FILE_BYTES)   # no FIFO, device or link loop
             digest.update(self.mesh_file.read_bytes())
@@ -209,8 +203,8 @@ def _toml_value(value) -> str:
     raise TypeError(f"no TOML literal for {value!r}")
 
 
-MAX_NESTING = 32
-"""Deepest nesting of arrays and inline tables read from a scene file (a scene needs 3)."""
+MAX_SCENE_BYTES = 4 * 1024 ** 2
+"""Largest scene file read [bytes] (a scene is a few kB)."""
 
 
 def resolve_scene_path(path: str | Path) -> Path:
@@ -218,47 +212,13 @@ def resolve_scene_path(path: str | Path) -> Path:
     the shipped scene: a folder is no scene file)."""
     candidate = Path(path)
     shipped_file = SCENES_DIR / f"{candidate}.toml"
-    if candidate.suffix == "" and len(candidate.parts) == 1 and shipped_file.exists() and not candidate.is_file():
+    if candidate.suffix == "" and len(candidate.parts) == 1 and is_regular_file(shipped_file) \
+            and not is_regular_file(candidate):
         return shipped_file
-    if candidate.is_file():
-        return candidate
-    shipped = ", ".join(sorted(p.stem for p in SCENES_DIR.glob("*.toml")))
-    hint = f"give a path to a .toml file or one of: {shipped}"
-    if candidate.is_dir():
-        raise InputError(f"scene {path}: a folder, not a scene file ({hint})")
-    if candidate.is_symlink():
-        raise InputError(f"scene {path}: a symbolic link that leads to no file (a loop or a missing target); {hint}")
-    if candidate.exists():
-        raise InputError(f"scene {path}: not a regular file ({hint})")
-    raise InputError(f"scene {path}: file not found ({hint})")
-
-
-def _nesting_depth(text: str) -> int:
-    """Upper bound of how deeply arrays and inline tables nest in TOML text (brackets and braces
-    counted outside quoted strings and comments)."""
-    depth = deepest = 0
-    quote = None
-    comment = escaped = False
-    for character in text:
-        if comment:
-            comment = character != "\n"
-        elif quote:
-            if escaped:
-                escaped = False
-            elif character == "\\" and quote == '"':
-                escaped = True
-            elif character == quote:
-                quote = None
-        elif character in "\"'":
-            quote = character
-        elif character == "#":
-            comment = True
-        elif character in "[{":
-            depth += 1
-            deepest = max(deepest, depth)
-        elif character in "]}":
-            depth = max(depth - 1, 0)
-    return deepest
+    if not is_regular_file(candidate):
+        shipped = ", ".join(sorted(p.stem for p in SCENES_DIR.glob("*.toml")))
+        require_regular_file(candidate, "scene", MAX_SCENE_BYTES, f"give a path to a .toml file or one of: {shipped}")
+    return candidate
 
 
 def scene_from_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str = ".") -> Scene:

@@ -11,7 +11,7 @@ import json
 from pathlib import Path
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.files import require_regular_file
+from aquarom_fenics.files import read_text_file
 
 SCHEMES = ("tcp", "tls")
 """Dask protocols connected with (ucx:// needs packages that are not installed)."""
@@ -55,15 +55,9 @@ def scheduler_file_address(path: Path) -> str:
 
 
 def _read_json(path: Path, where: str, remedy: str):
-    """The JSON value of ``path``, read only if it is a regular file of bounded size (a FIFO would
-    block the reader, a device such as /dev/zero never ends)."""
-    require_regular_file(path, "scheduler file", MAX_SCHEDULER_FILE_BYTES, remedy)
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except UnicodeDecodeError:
-        raise InputError(f"{where}: not UTF-8 text; {remedy}") from None
-    except OSError as error:
-        raise InputError(f"{where}: cannot be read ({error.strerror}); {remedy}") from None
+    """The JSON value of ``path``, read as untrusted text (:func:`read_text_file`: a regular file of
+    bounded size, UTF-8, arrays and objects nested at most ``files.MAX_NESTING`` deep)."""
+    text = read_text_file(path, "scheduler file", MAX_SCHEDULER_FILE_BYTES, remedy, nesting="json")
     try:
         return json.loads(text)
     except (ValueError, RecursionError) as error:

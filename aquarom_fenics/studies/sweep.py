@@ -24,6 +24,7 @@ from typing import Callable
 import numpy as np
 
 from aquarom_fenics.errors import InputError
+from aquarom_fenics.files import read_text_file
 from aquarom_fenics.parallel import run_all, worker_name
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.studies.fish_cache import shared_fish
@@ -138,7 +139,7 @@ def read_rows(path: Path, scene: Scene) -> list[dict]:
     damaged is an InputError naming the line and column."""
     remedy = "run without --resume, or into another --out"
     where = f"--resume: {path}"
-    text = _sweep_text(path, where, remedy)
+    text = read_text_file(path, "--resume:", MAX_SWEEP_FILE_BYTES, remedy)
     lines = text.splitlines(keepends=True)
     if len(lines) > 1 and not lines[-1].endswith(("\n", "\r")):
         log.warning("--resume: %s: partial last line %d dropped (a run stopped while writing it); its design "
@@ -154,20 +155,6 @@ def read_rows(path: Path, scene: Scene) -> list[dict]:
     return [_parsed_row(dict(zip(header, cells)), number, scene, f"{where} line {number}", remedy)
             for number, cells in enumerate(table[1:], start=2) if cells and _cell_count(cells, header, number,
                                                                                       where, remedy)]
-
-
-def _sweep_text(path: Path, where: str, remedy: str) -> str:
-    try:
-        if path.stat().st_size > MAX_SWEEP_FILE_BYTES:
-            raise InputError(f"{where}: larger than {MAX_SWEEP_FILE_BYTES // 2**20} MB; {remedy}")
-        text = path.read_bytes().decode("utf-8")
-    except UnicodeDecodeError:
-        raise InputError(f"{where}: not UTF-8 text (binary bytes); {remedy}") from None
-    except OSError as error:
-        raise InputError(f"{where}: cannot be read ({error.strerror}); {remedy}") from None
-    if "\0" in text:
-        raise InputError(f"{where}: holds NUL bytes, not a CSV text file; {remedy}")
-    return text
 
 
 def _cell_count(cells: list[str], header: list[str], number: int, where: str, remedy: str) -> bool:

@@ -4,6 +4,7 @@ At most :data:`MAX_DESIGNS` designs, checked before any is made."""
 from __future__ import annotations
 
 import csv
+import io
 import itertools
 import math
 from pathlib import Path
@@ -11,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.io.readback import require_regular_file
+from aquarom_fenics.files import read_text_file
 from aquarom_fenics.io.scene import Scene, parse_number
 
 MAX_DESIGNS = 100_000
@@ -67,16 +68,11 @@ def grid_designs(specs: list[str], scene: Scene) -> list[dict[str, float]]:
 def csv_designs(path: Path, scene: Scene) -> list[dict[str, float]]:
     """The rows of a CSV file whose header names shapes of the scene (each at most once)."""
     _require_shapes(scene)
-    require_regular_file(path, "--designs", MAX_DESIGN_FILE_BYTES)
+    text = read_text_file(path, "--designs", MAX_DESIGN_FILE_BYTES)      # a byte-order mark is allowed
     try:
-        with open(path, newline="", encoding="utf-8-sig") as stream:      # a byte-order mark is allowed
-            rows = _bounded_rows(csv.reader(stream), path)
-    except UnicodeDecodeError:
-        raise InputError(f"--designs {path}: not a UTF-8 text file") from None
+        rows = _bounded_rows(csv.reader(io.StringIO(text, newline="")), path)
     except csv.Error as error:
         raise InputError(f"--designs {path}: not a CSV file ({error})") from None
-    except OSError as error:
-        raise InputError(f"--designs {path}: cannot be read ({error.strerror})") from None
     if len(rows) < 2:
         raise InputError(f"--designs {path}: needs a header of shape names and at least one row of values")
     header = [cell.strip() for cell in rows[0]]

@@ -266,7 +266,7 @@ def test_cache_that_is_a_file_is_refused_before_the_build(tmp_path, capsys, monk
 
 def test_unreadable_scene_file_is_one_line(tmp_path, capsys):
     assert main(["mesh", str(tmp_path)]) == 2                  # a folder where the scene should be
-    assert "a folder, not a scene file" in one_line(capsys)
+    assert "a folder, not a file" in one_line(capsys)
     (tmp_path / "binary.toml").write_bytes(b"\xff\xfe\x00")
     assert main(["mesh", str(tmp_path / "binary.toml")]) == 2
     assert "UTF-8" in one_line(capsys)
