@@ -8,6 +8,7 @@ from __future__ import annotations
 import logging
 from contextlib import ExitStack
 from dataclasses import dataclass
+from pathlib import Path
 
 import basix
 import ffcx
@@ -22,7 +23,7 @@ from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from aquarom_fenics.fem.jit_cache import JitCacheError, claimed
+from aquarom_fenics.fem.jit_cache import JitCacheError, claimed, is_complete
 from aquarom_fenics.io.paths import forms_cache
 
 
@@ -193,8 +194,10 @@ def _guarded(comm: MPI.Comm, ufl_object, kind: str, what: str, compile_function)
     with ExitStack() as held:
         failure = None
         if comm.rank == 0:
+            module = ffcx_module_name(ufl_object, kind, jit_params)
             try:
-                held.enter_context(claimed(jit_params["cache_dir"], ffcx_module_name(ufl_object, kind, jit_params), what))
+                if not is_complete(Path(jit_params["cache_dir"]), module):   # a finished module is only loaded
+                    held.enter_context(claimed(jit_params["cache_dir"], module, what))
             except JitCacheError as error:
                 failure = str(error)
         if comm.size > 1:
