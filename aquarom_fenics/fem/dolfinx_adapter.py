@@ -1,7 +1,9 @@
 """Every dolfinx-version-specific call of the toolkit (written against dolfinx 0.5.2).
 
 The rest of the package sees plain numpy arrays of *owned* degrees of freedom, PETSc objects and
-compiled forms; a migration to a newer dolfinx touches this module only.
+compiled forms; a migration to a newer dolfinx touches this module only. It is also the only caller of
+FFCx, the form compiler: every form, element and expression is compiled here, in the folder of
+``io.paths.forms_cache`` and under the claim of ``fem.jit_cache``.
 """
 from __future__ import annotations
 
