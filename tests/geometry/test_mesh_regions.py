@@ -306,7 +306,7 @@ def test_a_bad_mesh_is_one_line_and_exit_code_2(kind, command, tmp_path, block, 
         {keys}
         [solver]
         duration = 0.2
-        """))
+        """) + ("[shapes]\nz_tail = { bounds = [-0.2, 0.2] }\n" if command[0] == "shapes" else ""))
     out_dir = tmp_path / "out"
     extra = ["--out", out_dir] if command == ["simulate"] else []
     code = main([command[0], str(scene), *command[1:], *map(str, extra)])
