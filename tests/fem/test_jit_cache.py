@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 import pytest
-import ufl
+from mpi4py import MPI
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.fem.jit_cache import CACHE_VARIABLE, JitCacheError, claimed, is_complete
@@ -61,16 +61,10 @@ def probe_modules(scratch: Path) -> list[str]:
     cache folder); its element is compiled in the cache folder ``scratch`` on the way."""
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv(CACHE_VARIABLE, str(scratch))
-        space = fx.vector_space(probe_mesh(ufl_comm()), 2)
+        space = fx.vector_space(probe_mesh(MPI.COMM_SELF), 2)
         jit = fx.jit_parameters()
         return [fx.ffcx_module_name(space.ufl_element(), "elements", jit),
                 fx.ffcx_module_name(stiffness_form(space), "forms", jit)]
-
-
-def ufl_comm():
-    from mpi4py import MPI
-
-    return MPI.COMM_SELF
 
 
 def stop_once_claimed(process: subprocess.Popen, cache: Path, number: int) -> str:
@@ -159,7 +153,7 @@ def test_the_module_names_are_ffcx_own(tmp_path, monkeypatch):
     """The guard claims the module FFCx compiles: after a compile, each claim has its finished module."""
     modules = probe_modules(tmp_path / "jit")
     monkeypatch.setenv(CACHE_VARIABLE, str(tmp_path / "jit"))
-    space = fx.vector_space(probe_mesh(ufl_comm()), 2)
+    space = fx.vector_space(probe_mesh(MPI.COMM_SELF), 2)
     fx.compile_form(stiffness_form(space))
     cache = tmp_path / "jit"
     assert all(is_complete(cache, module) for module in modules)
