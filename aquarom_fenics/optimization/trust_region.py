@@ -86,7 +86,7 @@ def trust_region(scene, space, builder, weights, history, checkpoint, state, saf
             prom, current, measure = _recentred(scene, space, builder, weights, prom, current, measure)
         state.update(center=center.tolist(), radius=radius, iteration=iteration, cuts=[cut.tolist() for cut in cuts])
         checkpoint.save(state, history, builder)
-        if np.all(radius * half_widths < settings.step_tolerance):
+        if measure > settings.optimality_tolerance and np.all(radius * half_widths < settings.step_tolerance):
             reason = f"trust radius {radius:.2e} of the validity box below the step tolerance"
             break
     return center, current, reason
