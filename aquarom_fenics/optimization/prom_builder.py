@@ -128,6 +128,11 @@ class PromBuilder:
         return prom is not None and bool(np.all(np.abs(z[: self.space.n_shapes] - prom.xi_center)
                                                 <= prom.validity_radius))
 
+    @staticmethod
+    def shares_basis(prom: ReducedModel, other: ReducedModel) -> bool:
+        """Whether two PROMs project on the same basis vectors V (a reused basis, or one PROM)."""
+        return prom is other or (prom.basis.shape == other.basis.shape and np.array_equal(prom.basis, other.basis))
+
     def refuse_infeasible(self, prom: ReducedModel, z: np.ndarray) -> None:
         """The checks of a build at z without building: InputError if the design check refuses z
         or the PROM's gait at z is unstable."""

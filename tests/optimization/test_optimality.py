@@ -58,6 +58,11 @@ class AnalyticBuilder(PromBuilder):
     def refuse_infeasible(self, prom, z):
         pass
 
+    @staticmethod
+    def shares_basis(prom, other):
+        """One analytic cost: every 'PROM' on the same (no) basis."""
+        return True
+
 
 def toy(method, **optimizer):
     """The toy scene; the paper method's linearised steps re-linearise within a tenth of the wells' spacing."""
