@@ -235,8 +235,16 @@ class BatchedSystem:
     def newton_matrix(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
         """S = (1 - α_f) K_t + (1 - α_f)(γ/(βh)) C_t + ((1 - α_m)/(βh²)) M_t, (B, m, m)."""
         scheme = self.scheme
-        stiffness, damping, mass = self.tangents(time, eta, eta_dot, eta_ddot)
-        return scheme.stiffness_factor * stiffness + scheme.velocity_factor * damping + scheme.acceleration_factor * mass
+        factors = (scheme.stiffness_factor, scheme.velocity_factor, scheme.acceleration_factor)
+        stiffness = self.elastic.tangent(eta) + self._muscle_stiffness(time)[1]
+        damping = self.damping
+        if self.drag is not None:
+            direction, _, row = self.drag
+            damping = damping + (-2.0 * (eta_dot @ row)[:, None] * direction)[:, :, None] * row
+        matrix = factors[0] * stiffness + factors[1] * damping + factors[2] * self.mass
+        if self.thrust is not None:
+            matrix += self.thrust.newton_part(factors, eta, eta_dot, eta_ddot)
+        return matrix
 
     def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
         """∂r/∂ξ_k at fixed (η, η̇, η̈), (B, m, p)."""

@@ -13,7 +13,7 @@ import numpy as np
 from aquarom_fenics.physics.thrust import (SegmentState, SpineGeometry, derivative_weights, segment_state_of,
                                            segment_weighted_force, thrust_force_of_state, virtual_mass,
                                            virtual_mass_gradient)
-from aquarom_fenics.physics.thrust_jacobians import thrust_jacobian_blocks
+from aquarom_fenics.physics.thrust_jacobians import SegmentBlocks, thrust_jacobian_blocks
 from aquarom_fenics.physics.thrust_projection import block_kinds, block_products, project_jacobians
 from aquarom_fenics.physics.thrust_reduced import ThrustTensors
 
@@ -122,6 +122,14 @@ class BatchedThrust:
         projected = project_jacobians(self._jacobian_blocks(eta, eta_dot, eta_ddot), self.block_products,
                                       self.block_kinds)
         return tuple(-projected[:, slot].reshape(batch, m, m) for slot in range(3))
+
+    def newton_part(self, factors, eta, eta_dot, eta_ddot) -> np.ndarray:
+        """k_u K_t + k_v C_t + k_a M_t of the thrust for ``factors`` (k_u, k_v, k_a), (B, m, m): the segment blocks
+        combined before their one projection."""
+        batch, m = eta.shape
+        combined = [SegmentBlocks(*(None if values is None else factor * values for values in part))
+                    for factor, parts in zip(factors, self._jacobian_blocks(eta, eta_dot, eta_ddot)) for part in parts]
+        return -project_jacobians((combined,), self.block_products, self.block_kinds)[:, 0].reshape(batch, m, m)
 
     def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
         """-Wᵀ ∂f/∂ξ_k, (B, p, m) (see ``ReducedThrust.parameter_derivative``)."""
