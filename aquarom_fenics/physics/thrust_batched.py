@@ -61,8 +61,9 @@ class BatchedThrust:
         rest_xy = np.broadcast_to(data.rest_xy, (batch,) + data.rest_xy.shape)
         if self.moving_rest:
             rest_xy = rest_xy + np.einsum("ncp,bp->bnc", data.rest_xy_gradient, deltas)
-        self.spine = spine = BatchedSpine(rest_xy, virtual_mass(dorsal_z, data.fluid_density), spine_force,
-                                          virtual_mass(front_z, data.fluid_density) if trapezoid else None)
+        self.spine = spine = BatchedSpine(rest_xy, np.asfortranarray(virtual_mass(dorsal_z, data.fluid_density)),
+                                          spine_force, np.asfortranarray(virtual_mass(front_z, data.fluid_density))
+                                          if trapezoid else None)
         self.rows = data.rows.reshape(-1, m)                                   # (2 n_points, m): W
         rear, front = data.rows[:-1], data.rows[1:]
         length = spine.rest_length                                             # (B, n_segments)
@@ -74,6 +75,8 @@ class BatchedThrust:
             self.half_rest_tangent = np.concatenate([rest_tangent, -rest_tangent[:, ::-1]], axis=-2)
             difference_rows = np.concatenate([difference_rows, -difference_rows[::-1]])
             own_rows = np.concatenate([rear, front[::-1]])
+        self.half_rest_length = np.asfortranarray(self.half_rest_length)
+        self.half_rest_tangent = np.asfortranarray(self.half_rest_tangent)
         self.difference_rows = difference_rows.reshape(-1, m)
         self.rear_rows = own_rows.reshape(-1, m)
         single = SpineGeometry(data.rest_xy, virtual_mass(data.dorsal_z, data.fluid_density), spine_force,
@@ -95,13 +98,11 @@ class BatchedThrust:
         """The (B, n_half_segments, ...) segment state of the reduced kinematics, kept for the same point."""
         point = (eta.tobytes(), eta_dot.tobytes(), eta_ddot.tobytes())
         if point != self._point:
-            batch = eta.shape[0]
             scale = self.half_rest_length[..., None]
-            tangent = self.half_rest_tangent + (eta @ self.difference_rows.T).reshape(batch, -1, 2) / scale
-            tangent_rate = (eta_dot @ self.difference_rows.T).reshape(batch, -1, 2) / scale
+            tangent = self.half_rest_tangent + _rows_times(self.difference_rows, eta) / scale
+            tangent_rate = _rows_times(self.difference_rows, eta_dot) / scale
             self._state = segment_state_of(self.half_rest_length, tangent, tangent_rate,
-                                           (eta_dot @ self.rear_rows.T).reshape(batch, -1, 2),
-                                           (eta_ddot @ self.rear_rows.T).reshape(batch, -1, 2))
+                                           _rows_times(self.rear_rows, eta_dot), _rows_times(self.rear_rows, eta_ddot))
             self._point, self._blocks = point, None
         return self._state
 
@@ -143,3 +144,10 @@ class BatchedThrust:
             projected = project_jacobians((stiffness,), self.rest_products, self.block_kinds)[:, 0]
             derivative -= np.swapaxes(projected.reshape(batch, -1, p), 1, 2)
         return derivative
+
+
+def _rows_times(rows: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """(R values_b) of every design as (B, n, 2) x-y pairs, laid out with the batch axis contiguous: numpy's
+    element-wise products of the segments' 2-vectors and 2x2 blocks then loop over the designs, not over
+    axes of length 2 (ten times faster at B = 100)."""
+    return (rows @ values.T).T.reshape(values.shape[0], -1, 2)
