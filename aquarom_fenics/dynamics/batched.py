@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from aquarom_fenics.dynamics.batched_system import BatchedSystem, norms2
+from aquarom_fenics.dynamics.batched_system import BatchedSystem, design_rows, norms2
 from aquarom_fenics.dynamics.integrator import NewtonSettings
 from aquarom_fenics.dynamics.reduced_dynamics import one_blas_thread, simulate_reduced
 from aquarom_fenics.dynamics.trajectory import AMPLITUDE_WINDOW, DISTANCE_WINDOW, window_mask
@@ -68,7 +68,7 @@ def simulate_batch(prom: ReducedModel, scene: Scene, xis, sensitivities: bool = 
 
     started = clock.perf_counter()
     n_steps = check_time_grid(scene)
-    xis = np.asarray(xis, dtype=float).reshape(-1, prom.n_parameters)
+    xis = design_rows(xis, prom.n_parameters)
     batch = xis.shape[0]
     amplitudes = (np.full(batch, scene.actuation.amplitude) if amplitudes is None
                   else np.asarray(amplitudes, dtype=float).reshape(batch))

@@ -160,7 +160,7 @@ class BatchedSystem:
     def __init__(self, prom: ReducedModel, scene: Scene, xis: np.ndarray, scheme: TimeScheme,
                  amplitudes: np.ndarray | None = None):
         self.prom, self.scheme = prom, scheme
-        xis = np.atleast_2d(np.asarray(xis, dtype=float)).reshape(-1, prom.n_parameters)
+        xis = design_rows(xis, prom.n_parameters)
         self.deltas = d = np.array([prom.delta(xi) for xi in xis]).reshape(xis.shape)
         batch = d.shape[0]
         self.elastic = BatchedElastic(prom, d)
@@ -274,6 +274,12 @@ class BatchedSystem:
     def observables(self, eta) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(head x, tail y, centre-of-mass x) [m] of every design, each (B,)."""
         return eta @ self.head_row, eta @ self.tail_row, np.einsum("bk,bk->b", self.com_weights, eta)
+
+
+def design_rows(xis, p: int) -> np.ndarray:
+    """Designs as rows (B, p); one design (p,) is a batch of one."""
+    xis = np.asarray(xis, dtype=float)
+    return xis.reshape(1, p) if xis.ndim < 2 else xis.reshape(xis.shape[0], p)
 
 
 def norms2(vectors: np.ndarray) -> np.ndarray:
