@@ -153,7 +153,10 @@ class _BatchedNewton:
         self.have_factors = np.zeros(batch, bool)
 
     def solve_step(self, scheme: TimeScheme, time: float, old, failed: np.ndarray):
-        """(u, u̇, ü)_{n+1} of every design; designs whose Newton fails are marked in ``failed`` (in place)."""
+        """(u, u̇, ü)_{n+1} of every design; designs whose Newton fails are marked in ``failed`` (in place).
+
+        Each iteration evaluates the residual of the designs still iterating only, and the Newton matrix of
+        those whose factors are refreshed only."""
         settings, system = self.settings, self.system
         u_predicted, v_predicted = scheme.predict(*old)
         u_new = u_predicted.copy()
@@ -161,44 +164,51 @@ class _BatchedNewton:
         with_factors = np.zeros(failed.size, int)
         previous_norm = np.full(failed.size, np.inf)
         for iteration in range(settings.max_iterations + 1):
-            v_new, a_new = scheme.correct(u_new, u_predicted, v_predicted)
-            point = scheme.evaluation_point(time, old, (u_new, v_new, a_new))
-            residual, scale = system.residual(*point)
+            rows = np.flatnonzero(pending)
+            if rows.size == 0:
+                break
+            v_new, a_new = scheme.correct(u_new[rows], u_predicted[rows], v_predicted[rows])
+            point = scheme.evaluation_point(time, tuple(values[rows] for values in old), (u_new[rows], v_new, a_new))
+            residual, scale = system.select(rows).residual(*point)
             residual_norm = np.sqrt(norms2(residual))
-            diverged = pending & ~np.isfinite(residual_norm)
-            failed |= diverged
-            pending &= ~diverged & (residual_norm > settings.tolerance * np.maximum(scale, settings.force_floor))
-            if not pending.any():
+            diverged = ~np.isfinite(residual_norm)
+            failed[rows[diverged]] = True
+            going = ~diverged & (residual_norm > settings.tolerance * np.maximum(scale, settings.force_floor))
+            pending[rows[~going]] = False
+            if not going.any():
                 break
             if iteration == settings.max_iterations:
-                failed |= pending
+                failed[rows[going]] = True
                 break
-            slow = residual_norm > settings.contraction_to_refactor * previous_norm
-            worn = with_factors >= settings.iterations_per_factorization
-            refresh = pending & (~self.have_factors | slow | worn)
+            rows, residual, residual_norm = rows[going], residual[going], residual_norm[going]
+            point = (point[0],) + tuple(values[going] for values in point[1:])
+            slow = residual_norm > settings.contraction_to_refactor * previous_norm[rows]
+            worn = with_factors[rows] >= settings.iterations_per_factorization
+            refresh = ~self.have_factors[rows] | slow | worn
             if refresh.any():
-                self.matrices[refresh] = system.newton_matrix(*point)[refresh]
-                self.have_factors |= refresh
-                with_factors[refresh] = 0
-            with_factors[pending] += 1
-            previous_norm[pending] = residual_norm[pending]
-            u_new[pending] -= _solve(self.matrices, residual, pending, failed)
+                renewed = rows[refresh]
+                self.matrices[renewed] = system.select(renewed).newton_matrix(
+                    point[0], *(values[refresh] for values in point[1:]))
+                self.have_factors[renewed] = True
+                with_factors[renewed] = 0
+            with_factors[rows] += 1
+            previous_norm[rows] = residual_norm
+            u_new[rows] -= _solve(self.matrices, residual, rows, failed)
         v_new, a_new = scheme.correct(u_new, u_predicted, v_predicted)
         return u_new, v_new, a_new
 
 
 def _solve(matrices: np.ndarray, rhs: np.ndarray, rows: np.ndarray, failed: np.ndarray) -> np.ndarray:
-    """S_b⁻¹ rhs_b of the designs ``rows``; a design whose S is singular (or not finite) is marked failed, its
+    """S_b⁻¹ rhs of the designs ``rows`` (rhs (len(rows), m)); a design whose S is singular is marked failed, its
     update zero."""
     selected = matrices[rows]
-    right = rhs[rows]
     try:
-        return np.linalg.solve(selected, right[..., None])[..., 0]
+        return np.linalg.solve(selected, rhs[..., None])[..., 0]
     except np.linalg.LinAlgError:
-        updates = np.zeros_like(right)
-        for n, b in enumerate(np.flatnonzero(rows)):
+        updates = np.zeros_like(rhs)
+        for n, b in enumerate(rows):
             try:
-                updates[n] = np.linalg.solve(selected[n], right[n])
+                updates[n] = np.linalg.solve(selected[n], rhs[n])
             except np.linalg.LinAlgError:
                 failed[b] = True
         return updates

@@ -14,6 +14,7 @@ m = 24, B = 1000).
 """
 from __future__ import annotations
 
+import copy
 import functools
 import itertools
 import math
@@ -123,6 +124,13 @@ class BatchedElastic:
         index = {tuple(pair): n for n, pair in enumerate(self.pairs.tolist())}
         self._pair_of_triple = np.array([index[(k, l)] for k, l, _ in self.triples.tolist()], dtype=int)
 
+    def select(self, rows: np.ndarray) -> "BatchedElastic":
+        """The term of the designs ``rows``."""
+        part = copy.copy(self)
+        part.weights, part.weight_derivatives, part.linear = (self.weights[rows], self.weight_derivatives[rows],
+                                                              self.linear[rows])
+        return part
+
     def monomials(self, eta: np.ndarray) -> np.ndarray:
         """(η_k; η_k η_l, k ≤ l; η_k η_l η_n, k ≤ l ≤ n) of every design, (B, n_monomials)."""
         products = eta[:, self.pairs[:, 0]] * eta[:, self.pairs[:, 1]]
@@ -194,6 +202,23 @@ class BatchedSystem:
     @property
     def size(self) -> int:
         return self.deltas.shape[0]
+
+    PER_DESIGN = ("deltas", "mass", "damping", "com_weights", "mass_gradient", "damping_gradient", "com_gradient",
+                  "amplitudes", "muscle_constant", "muscle_linear", "muscle_constant_gradient", "muscle_linear_gradient")
+    """The attributes with one entry per design (leading axis)."""
+
+    def select(self, rows: np.ndarray) -> "BatchedSystem":
+        """The system of the designs ``rows`` (indices; itself for all of them, in order)."""
+        if rows.size == self.size and np.array_equal(rows, np.arange(self.size)):
+            return self
+        part = copy.copy(self)
+        for name in self.PER_DESIGN:
+            setattr(part, name, getattr(self, name)[rows])
+        part.elastic = self.elastic.select(rows)
+        part.thrust = self.thrust.select(rows) if self.thrust is not None else None
+        if self.drag is not None:
+            part.drag = (self.drag[0][rows], self.drag[1][rows], self.drag[2])
+        return part
 
     def set_time_step(self, scheme: TimeScheme) -> None:
         self.scheme = scheme

@@ -6,6 +6,7 @@ lengths) is the design's. Arrays are (B, ...) with B designs.
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
@@ -94,6 +95,17 @@ class BatchedThrust:
         self.derivative_weights = derivative_weights(spine, mass_gradient, length_gradient, front_gradient)
         self._point, self._state, self._blocks = None, None, None
 
+    def select(self, rows: np.ndarray) -> "BatchedThrust":
+        """The term of the designs ``rows`` (indices)."""
+        part = copy.copy(self)
+        spine = self.spine
+        part.spine = BatchedSpine(spine.rest_xy[rows], _take(spine.virtual_mass, rows), spine.spine_force,
+                                  None if spine.front_mass is None else _take(spine.front_mass, rows))
+        part.half_rest_length, part.half_rest_tangent = _take(self.half_rest_length, rows), _take(self.half_rest_tangent, rows)
+        part.derivative_weights = tuple(None if weights is None else weights[rows] for weights in self.derivative_weights)
+        part._point, part._state, part._blocks = None, None, None
+        return part
+
     def segment_state(self, eta, eta_dot, eta_ddot) -> SegmentState:
         """The (B, n_half_segments, ...) segment state of the reduced kinematics, kept for the same point."""
         point = (eta.tobytes(), eta_dot.tobytes(), eta_ddot.tobytes())
@@ -151,3 +163,8 @@ def _rows_times(rows: np.ndarray, values: np.ndarray) -> np.ndarray:
     element-wise products of the segments' 2-vectors and 2x2 blocks then loop over the designs, not over
     axes of length 2 (ten times faster at B = 100)."""
     return (rows @ values.T).T.reshape(values.shape[0], -1, 2)
+
+
+def _take(values: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """The designs ``rows`` of per-design values, batch axis contiguous (see ``_rows_times``)."""
+    return np.asfortranarray(values[rows])
