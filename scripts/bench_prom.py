@@ -7,15 +7,21 @@ optimisation), the later build's split (FOM set-up, vibration modes, static solv
 internal-force tensors, other tensors), basis time, tensor time, number of form evaluations
 (vector/matrix assemblies and cell-wise expression evaluations), reduced solve time with and
 without sensitivities (fastest and median of 20), and the FOM time on the same mesh.
-Writes results/bench/prom.json.
+
+The reduced solves (``--only solve``, quick: level-1 PROMs, no FOM): one ``simulate_reduced`` with
+sensitivities (fastest and median of 20) and ``simulate_batch`` per design for batches of 1, 10, 100 and
+1000 designs with sensitivities (fastest of a few runs), for SO1, SO2, SO3 and bases of 24 and 26 vectors.
+Writes results/bench/prom.json (``--only solve`` its "reduced_solves" entry, the rest kept).
 """
 import argparse
+import json
 import os
 import time
 from pathlib import Path
 
 import numpy as np
 
+from aquarom_fenics.dynamics.batched import simulate_batch
 from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
 from aquarom_fenics.dynamics.simulate import simulate_fom
 from aquarom_fenics.fem import dolfinx_adapter as adapter
@@ -67,12 +73,70 @@ class EvaluationCounter:
         return counts
 
 
+SOLVE_SCENES = {"so1": {}, "so2": {}, "so3": {}, "wave-24": {"vibration_modes": 4}, "so1-26": {"vibration_modes": 4}}
+"""Scenes of the reduced-solve benchmark and their [reduction] changes (wave-24: 24 basis vectors, no shape parameter; so1-26: 26 and SO1's three)."""
+BATCH_SIZES = (1, 10, 100, 1000)
+
+
+def random_designs(prom, count: int, seed: int = 0) -> np.ndarray:
+    """``count`` designs uniform in the PROM's validity box."""
+    rng = np.random.default_rng(seed)
+    return prom.xi_center + prom.validity_radius * rng.uniform(-1.0, 1.0, (count, prom.n_parameters))
+
+
+def batch_seconds(prom, scene, xis, repeats: int) -> float:
+    """The fastest of ``repeats`` runs of ``simulate_batch`` with sensitivities, per design [s]."""
+    times = []
+    for _ in range(repeats):
+        result = simulate_batch(prom, scene, xis, sensitivities=True)
+        assert result.completed.all(), [error for error in result.errors if error]
+        times.append(result.wall_time / len(xis))
+    return min(times)
+
+
+def reduced_solves() -> list[dict]:
+    """One reduced solve and batched solves per design, with sensitivities, per scene of SOLVE_SCENES."""
+    solves = []
+    for label, reduction in SOLVE_SCENES.items():
+        scene = Scene.load(label.split("-")[0]).replace("mesh", level=1)
+        if reduction:
+            scene = scene.replace("reduction", **reduction)
+        prom = build_prom(scene)
+        simulate_reduced(prom, scene, sensitivities=True)                      # first-call set-up
+        fastest, median = timed_runs(SOLVE_REPEATS, lambda: simulate_reduced(prom, scene, sensitivities=True))
+        entry = {"scene": label, "reduced_size": prom.size, "parameters": prom.n_parameters,
+                 "solve_time_with_sensitivities": fastest.wall_time,
+                 "solve_time_with_sensitivities_median": median, "batched_time_per_design": {}}
+        for size in BATCH_SIZES:
+            xis = random_designs(prom, size)
+            repeats = 5 if size < 100 else 2 if prom.size <= 13 else 1       # a large basis: minutes per batch
+            entry["batched_time_per_design"][str(size)] = batch_seconds(prom, scene, xis, repeats)
+        solves.append(entry)
+        print(entry, flush=True)
+    return solves
+
+
+def write_reduced_solves(path: Path) -> None:
+    """The "reduced_solves" entry of the benchmark file, its other entries kept."""
+    record = json.loads(path.read_text()) if path.exists() else {"benchmark": "prom"}
+    record["reduced_solves"] = {"runs": reduced_solves(), "cores": os.cpu_count(), "load_average": os.getloadavg(),
+                                "threads": {name: os.environ.get(name) for name in ("OMP_NUM_THREADS",
+                                                                                    "OPENBLAS_NUM_THREADS")},
+                                "date": time.strftime("%Y-%m-%d %H:%M:%S")}
+    write_json_atomic(path, record)
+    print(f"wrote {path}")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--only", choices=["solve"], help="only the reduced solves (single and batched)")
     parser.add_argument("--levels", type=int, nargs="*", default=[1, 2, 3, 4, 5], help="levels at degree 1")
     parser.add_argument("--quadratic-levels", type=int, nargs="*", default=[1, 2, 3], help="levels at degree 2")
     parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "bench" / "prom.json")
     args = parser.parse_args()
+    if args.only == "solve":
+        write_reduced_solves(args.out)
+        return
     counter = EvaluationCounter()
     runs = []
     cases = [(1, level) for level in args.levels] + [(2, level) for level in args.quadratic_levels]
@@ -110,8 +174,10 @@ def main():
             print({key: runs[-1][key] for key in ("degree", "level", "cells", "parameters", "reduced_size",
                                                   "build_time", "solve_time", "solve_time_with_sensitivities", "fom_time")},
                   flush=True)
+    previous = json.loads(args.out.read_text()) if args.out.exists() else {}
     write_json_atomic(args.out, {"benchmark": "prom", "runs": runs, "cores": os.cpu_count(),
-                                 "versions": software_versions(), "date": time.strftime("%Y-%m-%d %H:%M:%S")})
+                                 "versions": software_versions(), "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+                                 "reduced_solves": previous.get("reduced_solves")})
     print(f"wrote {args.out}")
 
 

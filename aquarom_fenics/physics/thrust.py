@@ -135,7 +135,7 @@ def virtual_mass_gradient(dorsal_z, dorsal_z_gradient, fluid_density: float) -> 
 
     dorsal_z_gradient: (n_segments, p) ∂z_dorsal/∂ξ_k [m].
     """
-    return 2 * np.pi * fluid_density * np.asarray(dorsal_z, dtype=float)[:, None] * dorsal_z_gradient
+    return 2 * np.pi * fluid_density * np.asarray(dorsal_z, dtype=float)[..., None] * dorsal_z_gradient
 
 
 def segment_difference(nodal: np.ndarray) -> np.ndarray:
@@ -222,27 +222,27 @@ def _check_nodal(geometry, *nodal_fields):
 
 
 def _row_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a_i·b_i of (n, 2) rows."""
-    return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]
+    """a_i·b_i of (..., n, 2) rows."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]
 
 
 def _tail_force_per_mass(state: SegmentState) -> np.ndarray:
-    """f_tail / m̃_0 = ½ (v·n)² t with segment 0's t, n and the tail node's v, (2,) [m²/s²]."""
-    normal_velocity = state.rear_velocity[0] @ state.normal[0]
+    """f_tail / m̃_0 = ½ (v·n)² t with segment 0's t, n and the tail node's v, (..., 2) [m²/s²]."""
+    normal_velocity = state.v_dot_n[..., 0]
     # f_tail / m̃ = ½ (v·n)² t
-    return 0.5 * normal_velocity**2 * state.tangent[0]
+    return 0.5 * (normal_velocity**2)[..., None] * state.tangent[..., 0, :]
 
 
 def _spine_force_per_mass(state: SegmentState) -> np.ndarray:
-    """f_spine / m̃ = -ℓ_0 [(a·n) n + (v·ṅ) n + (v·n) ṅ] per segment, (n_segments, 2) [m²/s²]."""
+    """f_spine / m̃ = -ℓ_0 [(a·n) n + (v·ṅ) n + (v·n) ṅ] per segment, (..., n_segments, 2) [m²/s²]."""
     # f_spine / m̃ = -ℓ_0 [ (a·n + v·ṅ) n + (v·n) ṅ ]
-    bracket = (state.a_dot_n + state.v_dot_ndot)[:, None] * state.normal + state.v_dot_n[:, None] * state.normal_rate
-    return -state.rest_length[:, None] * bracket
+    bracket = (state.a_dot_n + state.v_dot_ndot)[..., None] * state.normal + state.v_dot_n[..., None] * state.normal_rate
+    return -state.rest_length[..., None] * bracket
 
 
 def _position_force_per_mass(state: SegmentState) -> np.ndarray:
-    """g / m̃ = (v·n) Rᵀ v per segment (∂T_a/∂x_f / m̃, = -∂T_a/∂x_r / m̃), (n_segments, 2) [m²/s²]."""
-    return state.v_dot_n[:, None] * rotate_back(state.rear_velocity)
+    """g / m̃ = (v·n) Rᵀ v per segment (∂T_a/∂x_f / m̃, = -∂T_a/∂x_r / m̃), (..., n_segments, 2) [m²/s²]."""
+    return state.v_dot_n[..., None] * rotate_back(state.rear_velocity)
 
 
 def segment_weighted_force(geometry: SpineGeometry, state: SegmentState, spine_weight: np.ndarray,
@@ -262,7 +262,7 @@ def segment_weighted_force(geometry: SpineGeometry, state: SegmentState, spine_w
         spine_weight = 0.5 * np.concatenate([spine_weight, np.asarray(front_weight)[..., ::-1]], axis=-1)
     # w f_spine/m̃ on each (half-)segment's own node: the rear node, or the front node for the mirrored half
     per_segment = spine_weight[..., :, None] * _spine_force_per_mass(state)
-    force = np.zeros(spine_weight.shape[:-1] + (geometry.n_nodes, 2))
+    force = np.zeros(per_segment.shape[:-2] + (geometry.n_nodes, 2))
     force[..., :-1, :] = per_segment[..., :n_segments, :]
     if geometry.trapezoid:
         force[..., 1:, :] += per_segment[..., :n_segments - 1:-1, :]
@@ -293,7 +293,7 @@ def thrust_force(geometry: SpineGeometry, displacement, velocity, acceleration) 
 def thrust_force_of_state(geometry: SpineGeometry, state: SegmentState) -> np.ndarray:
     """``thrust_force`` from the segment state."""
     mass = geometry.virtual_mass
-    return segment_weighted_force(geometry, state, mass, mass[0], geometry.front_mass)
+    return segment_weighted_force(geometry, state, mass, mass[..., 0], geometry.front_mass)
 
 
 def thrust_force_per_virtual_mass(
@@ -335,14 +335,14 @@ def derivative_weights(geometry: SpineGeometry, mass_gradient: np.ndarray,
     ∝ ℓ_0⁻¹ and f_tail ∝ ℓ_0⁻³, so ∂f/∂ℓ_0 = -(3 f_tail + f_spine ± g)/ℓ_0 at fixed positions: w gains
     -m̃ (∂ℓ_0/∂ξ_k)/ℓ_0, three times that on f_tail (and -m̃_f (∂ℓ_0/∂ξ_k)/ℓ_0 on the front half).
     """
-    spine_weight = mass_gradient.T
-    tail_weight = spine_weight[:, 0]
-    front_weight = front_mass_gradient.T if geometry.trapezoid else None
+    spine_weight = np.swapaxes(mass_gradient, -1, -2)
+    tail_weight = spine_weight[..., 0]
+    front_weight = np.swapaxes(front_mass_gradient, -1, -2) if geometry.trapezoid else None
     if length_gradient is not None:
-        relative_length = length_gradient.T / geometry.rest_length
-        length_weight = -geometry.virtual_mass * relative_length
+        relative_length = np.swapaxes(length_gradient, -1, -2) / geometry.rest_length[..., None, :]
+        length_weight = -geometry.virtual_mass[..., None, :] * relative_length
         spine_weight = spine_weight + length_weight
-        tail_weight = tail_weight + 3.0 * length_weight[:, 0]
+        tail_weight = tail_weight + 3.0 * length_weight[..., 0]
         if front_weight is not None:
-            front_weight = front_weight - geometry.front_mass * relative_length
+            front_weight = front_weight - geometry.front_mass[..., None, :] * relative_length
     return spine_weight, tail_weight, front_weight

@@ -16,13 +16,13 @@ _IDENTITY_2 = np.eye(2)
 
 
 def _outer(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a_i b_iᵀ of (n, 2) rows, (n, 2, 2)."""
-    return a[:, :, None] * b[:, None, :]
+    """a_i b_iᵀ of (..., n, 2) rows, (..., n, 2, 2) (of (..., 2) vectors: (..., 2, 2))."""
+    return a[..., :, None] * b[..., None, :]
 
 
-def _outer_2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a bᵀ of two 2-vectors (np.outer without its reshaping)."""
-    return a[:, None] * b
+def _column(values) -> np.ndarray:
+    """(...) values as (..., 1, 1), to scale a stack of 2x2 blocks."""
+    return np.asarray(values)[..., None, None]
 
 
 class SegmentBlocks(NamedTuple):
@@ -62,9 +62,9 @@ def thrust_jacobian_blocks(geometry: SpineGeometry, state: SegmentState) -> tupl
     parts whose sum it is (the source's form, then the lagrangian term's; for the trapezoid rule the rear
     half's, then the front half's)."""
     if not geometry.trapezoid:
-        return _rear_rule_blocks(state, geometry.virtual_mass, geometry.virtual_mass[0], geometry.lagrangian)
-    masses = 0.5 * np.concatenate([geometry.virtual_mass, geometry.front_mass[::-1]])
-    halves = _rear_rule_blocks(state, masses, geometry.virtual_mass[0], geometry.lagrangian)
+        return _rear_rule_blocks(state, geometry.virtual_mass, geometry.virtual_mass[..., 0], geometry.lagrangian)
+    masses = 0.5 * np.concatenate([geometry.virtual_mass, geometry.front_mass[..., ::-1]], axis=-1)
+    halves = _rear_rule_blocks(state, masses, geometry.virtual_mass[..., 0], geometry.lagrangian)
     n_segments = geometry.n_nodes - 1
     return tuple([_half_blocks(part, slice(0, n_segments)) for part in parts]
                  + [_mirrored_blocks(_half_blocks(part, slice(n_segments, None))) for part in parts]
@@ -73,14 +73,14 @@ def thrust_jacobian_blocks(geometry: SpineGeometry, state: SegmentState) -> tupl
 
 def _half_blocks(blocks: SegmentBlocks, rows: slice) -> SegmentBlocks:
     """The blocks of the half-segments ``rows`` (the rear half or the mirrored half)."""
-    return SegmentBlocks(*(None if values is None else values[rows] for values in blocks))
+    return SegmentBlocks(*(None if values is None else values[..., rows, :, :] for values in blocks))
 
 
 def _mirrored_blocks(blocks: SegmentBlocks) -> SegmentBlocks:
     """The blocks of the mirrored spine's segments on the spine's own segments: the mirrored rear node
     is the front node, and segment s is mirrored segment n_segments - 1 - s."""
     def back(values):
-        return None if values is None else values[::-1]
+        return None if values is None else values[..., ::-1, :, :]
     return SegmentBlocks(rear_rear=back(blocks.front_front), rear_front=back(blocks.front_rear),
                          front_rear=back(blocks.rear_front), front_front=back(blocks.rear_rear))
 
@@ -89,8 +89,8 @@ def _rear_rule_blocks(state: SegmentState, spine_mass: np.ndarray, tail_mass: fl
                       lagrangian: bool) -> tuple[list[SegmentBlocks], ...]:
     """The rear-node rule's Jacobian blocks with segment masses ``spine_mass`` and the tail force's
     ``tail_mass`` (None: no tail force)."""
-    negative_mass = -spine_mass[:, None, None]
-    negative_mass_length = negative_mass * state.rest_length[:, None, None]
+    negative_mass = -_column(spine_mass)
+    negative_mass_length = negative_mass * _column(state.rest_length)
     n, n_rate = state.normal, state.normal_rate
     v, a = state.rear_velocity, state.rear_acceleration
     v_dot_n = state.v_dot_n
@@ -98,14 +98,14 @@ def _rear_rule_blocks(state: SegmentState, spine_mass: np.ndarray, tail_mass: fl
     # Spine force, B = (a·n) n + (v·ṅ) n + (v·n) ṅ, f_spine = -m̃ ℓ_0 B.
     # ∂B/∂n = (a·n + v·ṅ) I + n aᵀ + ṅ vᵀ;  ∂n/∂u_f = -∂n/∂u_r = R/ℓ_0
     # => ∂f_spine/∂u_f = -m̃ (∂B/∂n) R,  ∂f_spine/∂u_r = +m̃ (∂B/∂n) R
-    db_dn = (state.a_dot_n + state.v_dot_ndot)[:, None, None] * _IDENTITY_2 + _outer(n, a) + _outer(n_rate, v)
+    db_dn = _column(state.a_dot_n + state.v_dot_ndot) * _IDENTITY_2 + _outer(n, a) + _outer(n_rate, v)
     stiffness_front = negative_mass * rotate_back(db_dn)             # (∂B/∂n) R: rows of ∂B/∂n times R
     stiffness_rear = -stiffness_front
 
     # ∂B/∂ṅ = n vᵀ + (v·n) I;  ∂ṅ/∂u̇_f = -∂ṅ/∂u̇_r = R/ℓ_0;  ∂B/∂v (explicit) = n ṅᵀ + ṅ nᵀ
     # => ∂f_spine/∂u̇_f = -m̃ (∂B/∂ṅ) R
     #    ∂f_spine/∂u̇_r = -m̃ ℓ_0 (n ṅᵀ + ṅ nᵀ) + m̃ (∂B/∂ṅ) R
-    db_dndot = _outer(n, v) + v_dot_n[:, None, None] * _IDENTITY_2
+    db_dndot = _outer(n, v) + _column(v_dot_n) * _IDENTITY_2
     damping_front = negative_mass * rotate_back(db_dndot)
     damping_rear = negative_mass_length * (_outer(n, n_rate) + _outer(n_rate, n)) - damping_front
 
@@ -117,14 +117,14 @@ def _rear_rule_blocks(state: SegmentState, spine_mass: np.ndarray, tail_mass: fl
     # => ∂f_tail/∂u_1 = -∂f_tail/∂u_0 = (m̃/ℓ_0) [ (v·n) t (Rᵀ v)ᵀ + ½ (v·n)² I ]
     #    ∂f_tail/∂u̇_0 = m̃ (v·n) t nᵀ
     if tail_mass is not None:
-        tail_length = state.rest_length[0]
-        tail_t, tail_n, tail_v, tail_v_dot_n = state.tangent[0], n[0], v[0], v_dot_n[0]
-        tail_stiffness_front = (tail_mass / tail_length) * (
-            tail_v_dot_n * _outer_2(tail_t, rotate_back(tail_v)) + 0.5 * tail_v_dot_n**2 * _IDENTITY_2
+        tail_length = state.rest_length[..., 0]
+        tail_t, tail_n, tail_v, tail_v_dot_n = state.tangent[..., 0, :], n[..., 0, :], v[..., 0, :], v_dot_n[..., 0]
+        tail_stiffness_front = _column(tail_mass / tail_length) * (
+            _column(tail_v_dot_n) * _outer(tail_t, rotate_back(tail_v)) + _column(0.5 * tail_v_dot_n**2) * _IDENTITY_2
         )
-        stiffness_front[0] += tail_stiffness_front
-        stiffness_rear[0] -= tail_stiffness_front
-        damping_rear[0] += tail_mass * tail_v_dot_n * _outer_2(tail_t, tail_n)
+        stiffness_front[..., 0, :, :] += tail_stiffness_front
+        stiffness_rear[..., 0, :, :] -= tail_stiffness_front
+        damping_rear[..., 0, :, :] += _column(tail_mass * tail_v_dot_n) * _outer(tail_t, tail_n)
 
     blocks = ([SegmentBlocks(rear_rear=stiffness_rear, rear_front=stiffness_front)],
               [SegmentBlocks(rear_rear=damping_rear, rear_front=damping_front)],
@@ -142,7 +142,7 @@ def _position_force_stiffness(spine_mass: np.ndarray, state: SegmentState) -> Se
     """
     v = state.rear_velocity
     rotated = rotate_back(v)                       # rows Rᵀ v
-    block = (spine_mass / state.rest_length)[:, None, None] * _outer(rotated, rotated)
+    block = _column(spine_mass / state.rest_length) * _outer(rotated, rotated)
     # vᵀ R = (Rᵀ v)ᵀ, so Rᵀ v vᵀ R = (Rᵀ v)(Rᵀ v)ᵀ
     return SegmentBlocks(rear_rear=block, rear_front=-block, front_rear=-block, front_front=block)
 
@@ -150,8 +150,8 @@ def _position_force_stiffness(spine_mass: np.ndarray, state: SegmentState) -> Se
 def _position_force_damping(spine_mass: np.ndarray, state: SegmentState) -> SegmentBlocks:
     """∂(±g)/∂u̇_r of g = m̃ (v·n) Rᵀ v: ∂g/∂v = m̃ [Rᵀ v nᵀ + (v·n) Rᵀ]."""
     v, n = state.rear_velocity, state.normal
-    mass = spine_mass[:, None, None]
-    block = mass * (_outer(rotate_back(v), n) + state.v_dot_n[:, None, None] * ROTATION_90.T)
+    mass = _column(spine_mass)
+    block = mass * (_outer(rotate_back(v), n) + _column(state.v_dot_n) * ROTATION_90.T)
     return SegmentBlocks(rear_rear=-block, front_rear=block)
 
 

@@ -21,14 +21,17 @@ def block_products(left_rear: np.ndarray, left_front: np.ndarray, right_rear: np
 def project_jacobians(jacobians, products: np.ndarray, kinds) -> np.ndarray:
     """Lᵀ J R flattened, (n_jacobians, k l), of each Jacobian J = Σ parts (a list of ``SegmentBlocks`` with blocks
     of the given ``kinds`` only) in ``jacobians``: Σ_s L_rᵀ J_rr R_r + L_rᵀ J_rf R_f + L_fᵀ J_fr R_r + L_fᵀ J_ff R_f,
-    one matrix product with the ``products`` of :func:`block_products` for those kinds."""
-    values = np.zeros((len(jacobians), len(kinds), products.shape[0] // len(kinds)))
-    for jacobian_values, parts in zip(values, jacobians):
+    one matrix product with the ``products`` of :func:`block_products` for those kinds. Blocks with leading
+    (batch) axes, (..., n_segments, 2, 2), give (..., n_jacobians, k l)."""
+    lead = next(part[kind] for parts in jacobians for part in parts for kind in kinds
+                if part[kind] is not None).shape[:-3]
+    values = np.zeros(lead + (len(jacobians), len(kinds), products.shape[0] // len(kinds)))
+    for jacobian, parts in enumerate(jacobians):
         for part in parts:
-            for kind_values, kind in zip(jacobian_values, kinds):
+            for slot, kind in enumerate(kinds):
                 if part[kind] is not None:
-                    kind_values += part[kind].reshape(-1)
-    return values.reshape(len(jacobians), -1) @ products
+                    values[..., jacobian, slot, :] += part[kind].reshape(lead + (-1,))
+    return (values.reshape(-1, products.shape[0]) @ products).reshape(lead + (len(jacobians), -1))
 
 
 def block_kinds(spine: SpineGeometry) -> tuple[int, ...]:

@@ -113,6 +113,68 @@ def _reduced_answer(task: SweepTask) -> dict:
     return {"distance_m": result.distance, "tail_amplitude_m": result.tail_amplitude}
 
 
+BATCH_ROWS = 256
+"""Designs of a PROM sweep integrated together in one task (``simulate_batch``)."""
+
+
+@dataclass(frozen=True)
+class SweepBatch:
+    """Designs of a PROM sweep answered together: their tasks (one scene, model "prom")."""
+
+    tasks: tuple
+
+    @property
+    def index(self) -> int:
+        return self.tasks[0].index
+
+
+def evaluate_batch(batch: SweepBatch) -> list[dict]:
+    """The rows of a batch of PROM designs: those inside the PROM's validity radius integrated at once
+    (``simulate_batch``; a design whose steps fail there is integrated alone, with step cutting), the others
+    refused, as :func:`evaluate` would give them one by one. The batch's wall time is shared among its rows."""
+    from aquarom_fenics.dynamics.batched import simulate_batch
+    from aquarom_fenics.reduction.prom import ReducedModel
+
+    started = time.perf_counter()
+    scene = batch.tasks[0].scene
+    rows = [{"design": task.index, **task.design, "status": "completed", "distance_m": None,
+             "tail_amplitude_m": None, "cached": False, "reason": ""} for task in batch.tasks]
+    prom = reduced_model(scene, {s.name: s.start for s in scene.shapes}, "prom")
+    fish = shared_fish(scene)
+    inside = []
+    for row, task in zip(rows, batch.tasks):
+        try:
+            ReducedModel.refuse_outside_radius(scene.shape_names, fish.parameter_vector(task.design),
+                                               prom.xi_center, prom.validity_radius)
+            inside.append((row, task))
+        except InputError as refused:
+            row.update(status="refused", reason=str(refused))
+    if inside:
+        xis = np.array([[task.design[name] for name in prom.shape_names] for _, task in inside])
+        result = simulate_batch(prom, scene, xis)
+        for b, (row, _) in enumerate(inside):
+            if result.completed[b]:
+                row.update(distance_m=float(result.distance[b]), tail_amplitude_m=float(result.tail_amplitude[b]))
+            else:
+                row.update(status="stopped", reason=result.errors[b])
+    share = (time.perf_counter() - started) / len(rows)
+    for row in rows:
+        row.update(wall_time_s=share, worker=worker_name())
+    return rows
+
+
+def _answered(item, answer, error, batched: bool) -> list[tuple[SweepTask, dict | None]]:
+    """(task, row) of each design of a finished task or batch; row None where it failed."""
+    tasks = item.tasks if batched else (item,)
+    if error is not None:
+        return [(task, None) for task in tasks]
+    return list(zip(tasks, answer if batched else [answer]))
+
+
+def _batches(tasks: list[SweepTask]) -> list[SweepBatch]:
+    return [SweepBatch(tuple(tasks[start:start + BATCH_ROWS])) for start in range(0, len(tasks), BATCH_ROWS)]
+
+
 # ---------------------------------------------------------------------- the sweep
 def columns(scene: Scene) -> list[str]:
     return ["design", *scene.shape_names, "status", "distance_m", "tail_amplitude_m", "wall_time_s", "cached",
@@ -253,17 +315,20 @@ def run_sweep(scene: Scene, designs: list[dict], model: str, out: Path, pool, re
     prepare(scene, model)
     table = SweepCSV(path, scene, list(earlier.values()))
     rows = dict(earlier)
+    batched = model == "prom"           # a PROM's designs are integrated many at once
     try:
-        for task, row, error in run_all(pool, evaluate, tasks, key=lambda task: task.index):
+        for item, answer, error in run_all(pool, evaluate_batch if batched else evaluate,
+                                           _batches(tasks) if batched else tasks, key=lambda item: item.index):
             if isinstance(error, OSError):      # a cache or output write that failed: the sweep stops
                 raise error
-            if error is not None:
-                row = {"design": task.index, **task.design, "status": "error", "cached": False, "worker": "",
-                       "reason": f"{type(error).__name__}: {error}".splitlines()[0]}
-            rows[task.index] = row
-            table.write(row)
-            if on_row is not None:
-                on_row(row)
+            for task, row in _answered(item, answer, error, batched):
+                if row is None:
+                    row = {"design": task.index, **task.design, "status": "error", "cached": False, "worker": "",
+                           "reason": f"{type(error).__name__}: {error}".splitlines()[0]}
+                rows[task.index] = row
+                table.write(row)
+                if on_row is not None:
+                    on_row(row)
     finally:
         table.close()
     ordered = [rows[k] for k in sorted(rows)]

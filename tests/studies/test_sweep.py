@@ -255,3 +255,30 @@ def test_the_sweep_figure_for_one_two_and_more_parameters(tmp_path, names):
     assert varying(rows, names) == names
     path = plot_sweep(rows, names, tmp_path / "sweep.png", "test")
     assert path.stat().st_size > 10_000
+
+
+def test_a_prom_sweep_answers_its_designs_in_a_batch_as_single_runs_would(tmp_path, monkeypatch):
+    """The designs inside the validity radius are integrated together (``simulate_batch``), not one
+    ``simulate_reduced`` each, and their rows are the single runs' answers to 1e-12."""
+    from aquarom_fenics.dynamics import batched, reduced_dynamics
+
+    path = write_scene(tmp_path)
+    scene = Scene.load(path)
+    designs = sweep.grid_designs(["z_tail=-0.04:0.04:3", "y_thin=0:0.02:2"], scene)
+    prom = sweep.reduced_model(scene, designs[0], "prom")
+    expected = [reduced_dynamics.simulate_reduced(prom, scene, np.array([d[n] for n in prom.shape_names]))
+                for d in designs]
+
+    def one_by_one(*args, **kwargs):
+        raise AssertionError("a design inside the validity radius was integrated alone")
+
+    monkeypatch.setattr(reduced_dynamics, "simulate_reduced", one_by_one)
+    monkeypatch.setattr(batched, "simulate_reduced", one_by_one)
+    out = tmp_path / "out"
+    assert main(["sweep", str(path), "--grid", "z_tail=-0.04:0.04:3", "--grid", "y_thin=0:0.02:2",
+                 "--model", "prom", "--workers", "1", "--out", str(out)]) == 0
+    rows = read_csv(out / "sweep.csv")
+    assert [row["status"] for row in rows] == ["completed"] * 6, [row["reason"] for row in rows]
+    for row, single in zip(rows, expected):
+        assert abs(float(row["distance_m"]) - single.distance) <= 1e-12 * abs(single.distance)
+        assert abs(float(row["tail_amplitude_m"]) - single.tail_amplitude) <= 1e-12 * single.tail_amplitude
