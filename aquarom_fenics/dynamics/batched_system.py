@@ -174,12 +174,11 @@ class BatchedSystem:
         self.elastic = BatchedElastic(prom, d)
         inertia = prom.inertia
         self.mass = taylor_at(inertia.mass, d)
-        self.damping = inertia.rayleigh_alpha * self.mass + inertia.rayleigh_beta * self.elastic.linear
+        self.damping = inertia.damping(self.mass, self.elastic.linear)
         total_mass = taylor_at(inertia.total_mass, d)
         self.com_weights = taylor_at(inertia.mass_moment_x, d) / total_mass[:, None]
         self.mass_gradient = taylor_gradient(inertia.mass, d)                              # (B, p, m, m)
-        self.damping_gradient = (inertia.rayleigh_alpha * self.mass_gradient
-                                 + inertia.rayleigh_beta * taylor_gradient(prom.elastic.linear, d))
+        self.damping_gradient = inertia.damping(self.mass_gradient, taylor_gradient(prom.elastic.linear, d))
         if inertia.mass_moment_x.first is None:
             self.com_gradient = np.zeros((batch, d.shape[1], prom.size))
         else:

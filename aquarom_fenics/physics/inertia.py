@@ -149,6 +149,10 @@ class InertiaTensors:
         """At Δξ, with the Taylor of K_0,r and its value at Δξ."""
         return ReducedInertia(self, delta, rest_stiffness, rest_stiffness_value)
 
+    def damping(self, mass, rest_stiffness):
+        """C_r = α_R M_r + β_R K1 (or ∂C_r/∂ξ_k from ∂M_r/∂ξ_k, ∂K1/∂ξ_k), of arrays with any leading axes."""
+        return rayleigh_damping(self.rayleigh_alpha, mass, self.rayleigh_beta, rest_stiffness)
+
 
 class ReducedInertia:
     """The reduced inertia and damping at one design ξ (a :class:`ReducedTerm`)."""
