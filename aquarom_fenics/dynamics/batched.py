@@ -17,9 +17,10 @@ import numpy as np
 
 from aquarom_fenics.dynamics.batched_system import BatchedSystem, design_rows, norms2
 from aquarom_fenics.dynamics.integrator import NewtonSettings
-from aquarom_fenics.dynamics.reduced_dynamics import one_blas_thread, simulate_reduced
+from aquarom_fenics.dynamics.reduced_dynamics import (newton_matrix, one_blas_thread, sensitivity_rhs,
+                                                       simulate_reduced)
 from aquarom_fenics.dynamics.trajectory import AMPLITUDE_WINDOW, DISTANCE_WINDOW, window_mask
-from aquarom_fenics.fem.time_scheme import TimeScheme, between
+from aquarom_fenics.fem.time_scheme import TimeScheme
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.reduction.prom import ReducedModel
 
@@ -225,16 +226,8 @@ def _propagate(system: BatchedSystem, scheme: TimeScheme, time: float, old, new,
         parts.append(system.amplitude_derivative(point[0], point[1])[:, :, None])
     derivative = np.concatenate(parts, axis=2)
     stiffness, damping, mass = system.tangents(*point)
-    u_old, v_old, a_old = previous
-    u_predicted, v_predicted = scheme.predict(*previous)
-    rhs = (-derivative
-           - damping @ (between(v_old, v_predicted, scheme.alpha_f) - scheme.velocity_factor * u_predicted)
-           + scheme.acceleration_factor * (mass @ u_predicted))
-    if scheme.alpha_f:
-        rhs -= scheme.alpha_f * (stiffness @ u_old)
-    if scheme.alpha_m:
-        rhs -= scheme.alpha_m * (mass @ a_old)
-    matrix = scheme.stiffness_factor * stiffness + scheme.velocity_factor * damping + scheme.acceleration_factor * mass
+    rhs, u_predicted, v_predicted = sensitivity_rhs(scheme, stiffness, damping, mass, previous, derivative)
+    matrix = newton_matrix(scheme, stiffness, damping, mass)
     matrix[failed] = np.eye(matrix.shape[-1])
     rhs[failed] = 0.0
     try:

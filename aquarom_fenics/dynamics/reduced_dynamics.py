@@ -257,6 +257,15 @@ def propagate_sensitivity(system: ReducedSystem, scheme: TimeScheme, point, prev
                      + a_f M_t η'_p - α_m M_t η̈'_n
     """
     stiffness, damping, mass = system.tangents(*point)
+    rhs, u_predicted, v_predicted = sensitivity_rhs(scheme, stiffness, damping, mass, previous, parameter_derivative)
+    u_new = np.linalg.solve(newton_matrix(scheme, stiffness, damping, mass), rhs)
+    v_new, a_new = scheme.correct(u_new, u_predicted, v_predicted)
+    return u_new, v_new, a_new
+
+
+def sensitivity_rhs(scheme: TimeScheme, stiffness, damping, mass, previous, parameter_derivative):
+    """(right-hand side, η'_p, η̇'_p) of ``propagate_sensitivity``'s step; the arrays may carry a leading batch
+    axis (tangents (..., m, m), sensitivities and ∂r/∂ξ (..., m, columns))."""
     u_old, v_old, a_old = previous
     u_predicted, v_predicted = scheme.predict(*previous)
     rhs = (-parameter_derivative
@@ -266,9 +275,7 @@ def propagate_sensitivity(system: ReducedSystem, scheme: TimeScheme, point, prev
         rhs -= scheme.alpha_f * (stiffness @ u_old)
     if scheme.alpha_m:
         rhs -= scheme.alpha_m * (mass @ a_old)
-    u_new = np.linalg.solve(newton_matrix(scheme, stiffness, damping, mass), rhs)
-    v_new, a_new = scheme.correct(u_new, u_predicted, v_predicted)
-    return u_new, v_new, a_new
+    return rhs, u_predicted, v_predicted
 
 
 def distance_gradient(system: ReducedSystem, time, states, sensitivities, weights_gradient) -> np.ndarray:
