@@ -9,8 +9,9 @@ internal-force tensors, other tensors), basis time, tensor time, number of form 
 without sensitivities (fastest and median of 20), and the FOM time on the same mesh.
 
 The reduced solves (``--only solve``, quick: level-1 PROMs, no FOM): one ``simulate_reduced`` with
-sensitivities (fastest and median of 20) and ``simulate_batch`` per design for batches of 1, 10, 100 and
-1000 designs with sensitivities (fastest of a few runs), for SO1, SO2, SO3 and bases of 24 and 26 vectors.
+sensitivities (fastest and median of 20) and ``simulate_batch`` per design with the compiled kernel for batches
+of 1, 10, 100 and 1000 designs with sensitivities, and for 100 designs without them and with the numpy engine
+(fastest of a few runs), for SO1, SO2, SO3 and bases of 24 and 26 vectors.
 Writes results/bench/prom.json (``--only solve`` its "reduced_solves" entry, the rest kept).
 """
 import argparse
@@ -84,11 +85,11 @@ def random_designs(prom, count: int, seed: int = 0) -> np.ndarray:
     return prom.xi_center + prom.validity_radius * rng.uniform(-1.0, 1.0, (count, prom.n_parameters))
 
 
-def batch_seconds(prom, scene, xis, repeats: int) -> float:
-    """The fastest of ``repeats`` runs of ``simulate_batch`` with sensitivities, per design [s]."""
+def batch_seconds(prom, scene, xis, repeats: int, engine: str = "compiled", sensitivities: bool = True) -> float:
+    """The fastest of ``repeats`` runs of ``simulate_batch``, per design [s]."""
     times = []
     for _ in range(repeats):
-        result = simulate_batch(prom, scene, xis, sensitivities=True)
+        result = simulate_batch(prom, scene, xis, sensitivities=sensitivities, engine=engine)
         assert result.completed.all(), [error for error in result.errors if error]
         times.append(result.wall_time / len(xis))
     return min(times)
@@ -103,6 +104,7 @@ def reduced_solves() -> list[dict]:
             scene = scene.replace("reduction", **reduction)
         prom = build_prom(scene)
         simulate_reduced(prom, scene, sensitivities=True)                      # first-call set-up
+        simulate_batch(prom, scene, random_designs(prom, 1), sensitivities=True)   # the kernel loaded
         fastest, median = timed_runs(SOLVE_REPEATS, lambda: simulate_reduced(prom, scene, sensitivities=True))
         entry = {"scene": label, "reduced_size": prom.size, "parameters": prom.n_parameters,
                  "solve_time_with_sensitivities": fastest.wall_time,
@@ -111,6 +113,9 @@ def reduced_solves() -> list[dict]:
             xis = random_designs(prom, size)
             repeats = 5 if size < 100 else 2 if prom.size <= 13 else 1       # a large basis: minutes per batch
             entry["batched_time_per_design"][str(size)] = batch_seconds(prom, scene, xis, repeats)
+        xis = random_designs(prom, 100)
+        entry["batched_time_per_design_no_sensitivities"] = {"100": batch_seconds(prom, scene, xis, 2, sensitivities=False)}
+        entry["batched_time_per_design_numpy"] = {"100": batch_seconds(prom, scene, xis, 1, engine="numpy")}
         solves.append(entry)
         print(entry, flush=True)
     return solves

@@ -9,7 +9,7 @@ cd "$(dirname "$0")/.."
 APT_PACKAGES=(
     python3-dolfinx-real python3-petsc4py-real python3-slepc4py-real python3-gmsh
     python3-venv python3-pip python3-numpy python3-scipy python3-matplotlib python3-h5py
-    python3-tqdm python3-threadpoolctl python3-pytest python3-pytest-xdist python3-hypothesis python3-distributed python3-meshio python3-netcdf4 openmpi-bin
+    python3-tqdm python3-threadpoolctl python3-numba python3-pytest python3-pytest-xdist python3-hypothesis python3-distributed python3-meshio python3-netcdf4 openmpi-bin
     libopenblas0-pthread xvfb xauth libgl1-mesa-dri libxrender1 python3-sphinx python3-myst-parser
 )
 
@@ -42,3 +42,7 @@ print(f"setup: dolfinx {dolfinx.__version__}, numpy {numpy.__version__}, petsc4p
 PY
     touch "$stamp"
 fi
+
+# The compiled reduced kernel (numba): compiled once into numba's cache beside its module (about half a
+# minute), loaded from there afterwards (a second or two).
+.venv/bin/python -m aquarom_fenics.dynamics.reduced_kernel

@@ -27,6 +27,15 @@ from aquarom_fenics.reduction.prom import ReducedModel
 CHUNK_SIZE = 1024
 """Designs integrated together at most (the batch's arrays grow with it, its per-step overhead shrinks)."""
 
+ENGINES = ("compiled", "numpy")
+"""How a batch is integrated: the compiled kernel (``reduced_kernel``, numba), or numpy vectorised over the batch."""
+
+
+def default_engine() -> str:
+    """The compiled kernel where numba is installed (``make setup`` installs it), numpy otherwise."""
+    from aquarom_fenics.dynamics import reduced_kernel
+    return "compiled" if reduced_kernel.available() else "numpy"
+
 
 @dataclass
 class BatchedResult:
@@ -58,14 +67,21 @@ class BatchedResult:
 
 @one_blas_thread
 def simulate_batch(prom: ReducedModel, scene: Scene, xis, sensitivities: bool = False, amplitudes=None,
-                   amplitude_sensitivity: bool = False, chunk_size: int = CHUNK_SIZE) -> BatchedResult:
+                   amplitude_sensitivity: bool = False, chunk_size: int = CHUNK_SIZE,
+                   engine: str | None = None) -> BatchedResult:
     """Integrate the PROM at the designs ``xis`` (B, p) (amplitudes A_b: ``amplitudes`` (B,), default the
     scene's) over the scene's horizon, as ``simulate_reduced`` would one by one.
 
     With ``sensitivities`` the gradient dd/dξ of each design, with ``amplitude_sensitivity`` one more column
-    dd/dA. InputError (as ``simulate_reduced``) for a design beyond the PROM's validity radius.
+    dd/dA. InputError (as ``simulate_reduced``) for a design beyond the PROM's validity radius. ``engine``: one
+    of ``ENGINES``, default ``default_engine()``; both give the same numbers to rounding.
     """
+    from aquarom_fenics.dynamics import reduced_kernel
     from aquarom_fenics.dynamics.simulate import check_time_grid
+
+    engine = default_engine() if engine is None else engine
+    if engine not in ENGINES:
+        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
 
     started = clock.perf_counter()
     n_steps = check_time_grid(scene)
@@ -80,7 +96,11 @@ def simulate_batch(prom: ReducedModel, scene: Scene, xis, sensitivities: bool = 
     for start in range(0, batch, chunk_size):
         part = slice(start, min(start + chunk_size, batch))
         system = BatchedSystem(prom, scene, xis[part], TimeScheme.from_solver(scene.solver), amplitudes[part])
-        outcome = _integrate(system, scene, n_steps, sensitivities, amplitude_sensitivity)
+        if engine == "compiled":
+            outcome = reduced_kernel.integrate_packed(reduced_kernel.pack(system, scene, n_steps, sensitivities,
+                                                                          amplitude_sensitivity))
+        else:
+            outcome = _integrate(system, scene, n_steps, sensitivities, amplitude_sensitivity)
         result.distance[part], result.tail_amplitude[part], failed = outcome[:3]
         if columns:
             result.distance_gradient[part] = outcome[3]

@@ -122,7 +122,7 @@ class BatchedElastic:
         self.linear = taylor_at(tensors.linear, deltas)                                     # K1 = K_0,r (B, m, m)
 
         index = {tuple(pair): n for n, pair in enumerate(self.pairs.tolist())}
-        self._pair_of_triple = np.array([index[(k, l)] for k, l, _ in self.triples.tolist()], dtype=int)
+        self.pair_of_triple = np.array([index[(k, l)] for k, l, _ in self.triples.tolist()], dtype=int)
 
     def select(self, rows: np.ndarray) -> "BatchedElastic":
         """The term of the designs ``rows``."""
@@ -134,7 +134,7 @@ class BatchedElastic:
     def monomials(self, eta: np.ndarray) -> np.ndarray:
         """(η_k; η_k η_l, k ≤ l; η_k η_l η_n, k ≤ l ≤ n) of every design, (B, n_monomials)."""
         products = eta[:, self.pairs[:, 0]] * eta[:, self.pairs[:, 1]]
-        return np.concatenate([eta, products, products[:, self._pair_of_triple] * eta[:, self.triples[:, 2]]], axis=1)
+        return np.concatenate([eta, products, products[:, self.pair_of_triple] * eta[:, self.triples[:, 2]]], axis=1)
 
     def tangent_monomials(self, eta: np.ndarray) -> np.ndarray:
         """(1; η_l; η_l η_n, l ≤ n) of every design, (B, 1 + m + m(m+1)/2)."""

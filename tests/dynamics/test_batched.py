@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from aquarom_fenics.dynamics.batched import simulate_batch
+from aquarom_fenics.dynamics import reduced_kernel
+from aquarom_fenics.dynamics.batched import ENGINES, simulate_batch
 from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
 from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.reduction.reductor import build_prom
@@ -34,10 +35,18 @@ def relative(actual, expected) -> float:
     return float(np.max(np.abs(np.asarray(actual) - expected)) / np.max(np.abs(expected)))
 
 
-def test_a_batch_agrees_with_single_runs_in_distance_amplitude_and_gradient(scene, prom):
+@pytest.fixture(params=ENGINES)
+def engine(request):
+    if request.param == "compiled" and not reduced_kernel.available():
+        pytest.skip("numba is not installed")
+    return request.param
+
+
+def test_a_batch_agrees_with_single_runs_in_distance_amplitude_and_gradient(scene, prom, engine):
     xis = designs(prom, 5)
     amplitudes = scene.actuation.amplitude * np.array([1.0, 0.8, 1.1, 0.9, 1.2])
-    batch = simulate_batch(prom, scene, xis, sensitivities=True, amplitudes=amplitudes, amplitude_sensitivity=True)
+    batch = simulate_batch(prom, scene, xis, sensitivities=True, amplitudes=amplitudes, amplitude_sensitivity=True,
+                           engine=engine)
     assert batch.completed.all() and not batch.alone.any()
     for b, xi in enumerate(xis):
         single = simulate_reduced(prom, scene, xi, sensitivities=True, amplitude=amplitudes[b],
@@ -48,20 +57,20 @@ def test_a_batch_agrees_with_single_runs_in_distance_amplitude_and_gradient(scen
         assert batch.summary(b)["stop_reason"] == "completed"
 
 
-def test_a_batch_of_one_is_the_single_run(scene, prom):
+def test_a_batch_of_one_is_the_single_run(scene, prom, engine):
     xi = designs(prom, 2)[1]
-    batch = simulate_batch(prom, scene, xi[None], sensitivities=True)
+    batch = simulate_batch(prom, scene, xi[None], sensitivities=True, engine=engine)
     single = simulate_reduced(prom, scene, xi, sensitivities=True)
     assert relative(batch.distance[0], single.distance) < 1e-12
     assert relative(batch.distance_gradient[0], single.distance_gradient) < 1e-12
 
 
-def test_a_design_whose_step_fails_in_the_batch_is_integrated_alone_with_step_cutting(prom):
+def test_a_design_whose_step_fails_in_the_batch_is_integrated_alone_with_step_cutting(prom, engine):
     """Two Newton iterations per step are too few for a full step: every design leaves the batch and gets
     the single run's line search and cut steps, its answer that of ``simulate_reduced``."""
     scene = coarse_scene(shapes=SO1_SHAPES, solver={**SHORT, "max_iterations": 2})
     xis = designs(prom, 3)
-    batch = simulate_batch(prom, scene, xis, sensitivities=True)
+    batch = simulate_batch(prom, scene, xis, sensitivities=True, engine=engine)
     assert batch.alone.all()
     for b, xi in enumerate(xis):
         single = simulate_reduced(prom, scene, xi, sensitivities=True)

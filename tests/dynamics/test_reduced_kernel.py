@@ -1,0 +1,60 @@
+"""The compiled reduced kernel (``reduced_kernel``) against ``simulate_reduced`` on every variant of the thrust law
+(rear and trapezoid rules, the source's and the lagrangian spine force, fixed and moving rest stations) and
+without drag; and its one compiled signature."""
+import numpy as np
+import pytest
+
+from aquarom_fenics.dynamics import reduced_kernel
+from aquarom_fenics.dynamics.batched import simulate_batch
+from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
+from aquarom_fenics.geometry.fish import load_fish
+from aquarom_fenics.reduction.reductor import build_prom
+from conftest import coarse_scene
+
+pytestmark = pytest.mark.skipif(not reduced_kernel.available(), reason="numba is not installed")
+
+SHORT = {"duration": 0.3}
+MOVING_TAIL = {"xz_concave_tail": {"bounds": [-0.01, 0.2]}, "y_thin": {"bounds": [-0.15, 0.15]}}
+"""Two shape parameters, the first of which moves the tail's rest stations (x and z), the second only widths."""
+
+
+def relative(actual, expected) -> float:
+    return float(np.max(np.abs(np.asarray(actual) - expected)) / np.max(np.abs(expected)))
+
+
+@pytest.mark.parametrize("fluid", [
+    {"spine_force": "lagrangian", "spine_rule": "rear"},
+    {"spine_force": "lagrangian", "spine_rule": "trapezoid", "drag": False},
+    {"spine_force": "source", "spine_rule": "rear", "drag": False},
+], ids=["lagrangian-rear", "lagrangian-trapezoid-no-drag", "source-rear-no-drag"])
+def test_the_kernel_agrees_with_single_runs_on_each_thrust_variant(fluid):
+    scene = coarse_scene(shapes=MOVING_TAIL, solver=SHORT, fluid=fluid)
+    prom = build_prom(scene, fish=load_fish(scene))
+    assert prom.thrust is not None and np.any(prom.thrust.rest_xy_gradient)        # the rest stations move
+    xis = prom.xi_center + prom.validity_radius * np.array([[0.0, 0.0], [0.9, -0.7], [-0.8, 0.6]])
+    amplitudes = scene.actuation.amplitude * np.array([1.0, 1.1, 0.9])
+    batch = simulate_batch(prom, scene, xis, sensitivities=True, amplitudes=amplitudes, amplitude_sensitivity=True,
+                           engine="compiled")
+    assert batch.completed.all() and not batch.alone.any()
+    for b, xi in enumerate(xis):
+        single = simulate_reduced(prom, scene, xi, sensitivities=True, amplitude=amplitudes[b],
+                                  amplitude_sensitivity=True)
+        assert relative(batch.distance[b], single.distance) < 1e-12
+        assert relative(batch.tail_amplitude[b], single.tail_amplitude) < 1e-12
+        assert relative(batch.distance_gradient[b], single.distance_gradient) < 1e-12
+
+
+def test_the_kernel_has_one_compiled_signature_for_a_real_batch_and_the_warm_up():
+    """``make setup`` compiles the kernel once on a synthetic batch (``warm_up``); a real batch must reuse that
+    machine code, not compile a second signature (half a minute on a user's first sweep)."""
+    reduced_kernel.warm_up()
+    scene = coarse_scene(solver={"duration": 0.1})
+    prom = build_prom(scene, fish=load_fish(scene))
+    simulate_batch(prom, scene, np.zeros((2, 0)), engine="compiled")
+    assert len(reduced_kernel.integrate_all.signatures) == 1
+
+
+def test_an_unknown_engine_is_refused():
+    scene = coarse_scene(solver={"duration": 0.1})
+    with pytest.raises(ValueError, match="engine must be one of"):
+        simulate_batch(None, scene, np.zeros((1, 0)), engine="fortran")
