@@ -587,14 +587,8 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
             a_new[i] = (u_new[i] - u_pred[i]) * (1.0 / (beta * h * h))
             v_new[i] = v_pred[i] + gamma * h * a_new[i]
         if columns:
-            # the converged step differentiated (reduced_dynamics.propagate_sensitivity)
-            between(u, u_new, alpha_f, eu)
-            between(v, v_new, alpha_f, ev)
-            between(a, a_new, alpha_m, ea)
-            residual_at(eu, ev, ea, residual[:, 0], activations, mono, tangent_mono, pairs, pair_of_triple,
-                        triples, elastic_force, mass, damping, muscle_constant, muscle_linear, has_thrust,
-                        lagrangian, rows, own_node, other_node, length, rest_tangent, thrust_weights, tail_weight, state,
-                        per_mass, has_drag, drag_direction, drag_row)
+            # the converged step differentiated (reduced_dynamics.propagate_sensitivity) at its evaluation point
+            # (eu, ev, ea), where the last residual was evaluated: its monomials and thrust state are current
             tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass, damping, muscle_linear,
                         has_drag, drag_direction, drag_row, stiffness, damping_t, mass_t)
             if has_thrust:
