@@ -12,7 +12,7 @@ from scipy.optimize import linprog, nnls
 
 from aquarom_fenics.errors import InputError, SolverError
 from aquarom_fenics.reduction.prom import ReducedModel
-from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
+from aquarom_fenics.dynamics.batched import simulate_batch
 from aquarom_fenics.io.scene import Scene
 
 
@@ -247,14 +247,25 @@ class CostWeights:
         return self.alpha * amplitude ** 2
 
 
-def _prom_run(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarray, sensitivities: bool):
-    """The PROM's run at z (with dd/dz when ``sensitivities``); SolverError if it stops."""
-    amplitude = float(z[-1]) if space.with_amplitude else None
-    result = simulate_reduced(prom, scene, z[: space.n_shapes], sensitivities=sensitivities, amplitude=amplitude,
-                              amplitude_sensitivity=sensitivities and space.with_amplitude)
-    if not result.completed:
-        raise SolverError(f"PROM simulation at {space.as_dict(z)} stopped: {result.error}")
-    return result
+@dataclass(frozen=True)
+class PromRun:
+    """What the cost reads of a PROM run: d [m] and dd/dz (None without sensitivities or design variables)."""
+
+    distance: float
+    distance_gradient: np.ndarray | None
+
+
+def _prom_run(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarray, sensitivities: bool) -> PromRun:
+    """The PROM's run at z (with dd/dz when ``sensitivities``); SolverError if it stops. A batch of one design
+    (``simulate_batch``: the compiled kernel where numba is installed; a step that fails there is integrated by
+    ``simulate_reduced`` with its step control, as a single run would be)."""
+    amplitudes = [float(z[-1])] if space.with_amplitude else None
+    batch = simulate_batch(prom, scene, z[None, : space.n_shapes], sensitivities=sensitivities, amplitudes=amplitudes,
+                           amplitude_sensitivity=sensitivities and space.with_amplitude)
+    if not batch.completed[0]:
+        raise SolverError(f"PROM simulation at {space.as_dict(z)} stopped: {batch.errors[0]}")
+    gradient = None if batch.distance_gradient is None else batch.distance_gradient[0]
+    return PromRun(float(batch.distance[0]), gradient)
 
 
 def weighted_cost(space: DesignSpace, weights: CostWeights, z: np.ndarray, distance: float,
