@@ -338,13 +338,13 @@ def project_blocks(blocks, n_pairs, rows, own_node, other_node, right, factor, o
 @_jit
 def rows_times(rows, values, out):
     """out (n_points, 2, c) = W (n_points, 2, m) @ values (m, c)."""
+    out[:] = 0.0
     for point in range(rows.shape[0]):
         for i in range(2):
-            for j in range(values.shape[1]):
-                total = 0.0
-                for k in range(rows.shape[2]):
-                    total += rows[point, i, k] * values[k, j]
-                out[point, i, j] = total
+            for k in range(rows.shape[2]):
+                weight = rows[point, i, k]
+                for j in range(values.shape[1]):
+                    out[point, i, j] += weight * values[k, j]
 
 @_jit
 def residual_at(eu, ev, ea, out, activations, mono, tangent_mono, pairs, pair_of_triple, triples, elastic_force,
@@ -364,11 +364,14 @@ def residual_at(eu, ev, ea, out, activations, mono, tangent_mono, pairs, pair_of
     if has_drag:
         for k in range(m):
             speed += drag_row[k] * ev[k]
+    internal_force = np.zeros(m)
+    for q in range(mono.size):                  # rows of F contiguous: the products over i vectorise
+        value = mono[q]
+        for i in range(m):
+            internal_force[i] += value * elastic_force[q, i]
     internal_norm, external_norm, inertia_norm, norm = 0.0, 0.0, 0.0, 0.0
     for i in range(m):
-        internal = 0.0
-        for q in range(mono.size):
-            internal += mono[q] * elastic_force[q, i]
+        internal = internal_force[i]
         muscle = 0.0
         for n in range(activations.size):
             total = muscle_constant[n, i]
@@ -394,15 +397,17 @@ def tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass,
                 has_drag, drag_direction, drag_row, stiffness, damping_out, mass_out):
     """(K_t, C_t, M_t) of every term but the thrust (whose blocks ``half_blocks`` gives)."""
     m = eu.size
+    elastic = np.zeros(m * m)
+    for q in range(tangent_mono.size):          # rows of T contiguous: the products over (i, k) vectorise
+        value = tangent_mono[q]
+        for index in range(m * m):
+            elastic[index] += value * elastic_tangent[q, index]
     for i in range(m):
         for k in range(m):
-            total = 0.0
-            for q in range(tangent_mono.size):
-                total += tangent_mono[q] * elastic_tangent[q, i * m + k]
             muscle = 0.0
             for n in range(activations.size):
                 muscle += activations[n] * muscle_linear[n, i, k]
-            stiffness[i, k] = total + muscle
+            stiffness[i, k] = elastic[i * m + k] + muscle
             damping_out[i, k] = damping[i, k]
             mass_out[i, k] = mass[i, k]
     if has_drag:
@@ -433,11 +438,15 @@ def derivative_at(parameter_terms, eu, ev, ea, activations, units, mono, elastic
         tail_x, tail_y = 0.0, 0.0
         if has_thrust:
             tail_x, tail_y = half_forces(state, length, lagrangian, per_mass)
+        elastic = np.zeros(m)
         for c in range(p):
+            elastic[:] = 0.0
+            for q in range(mono.size):
+                value = mono[q]
+                for i in range(m):
+                    elastic[i] += value * elastic_gradient[c, q, i]
             for i in range(m):
-                total = 0.0
-                for q in range(mono.size):
-                    total += mono[q] * elastic_gradient[c, q, i]
+                total = elastic[i]
                 for n in range(activations.size):
                     muscle = muscle_constant_gradient[c, n, i]
                     for k in range(m):
