@@ -9,7 +9,8 @@
    (d_PROM - d_FOM) / |d_FOM|, and the largest, against the limit 3 % (the atlas's radius is set so that
    it holds: aquarom_fenics.studies.atlas.RADIUS_SCALE).
 
-Writes results/validation/atlas.json (and results/bench/atlas_sweep.json: the sweep's time and builds).
+Writes results/validation/atlas.json (and results/bench/atlas_sweep.json: the sweep's time and builds;
+`--sweep-only`, as `make bench` runs it, skips the FOM check and writes only that).
 
     .venv/bin/python scripts/validate_atlas.py            # ~4 min of sweep and ~2 min of FOM runs on 2 idle cores
 """
@@ -101,6 +102,8 @@ def main() -> int:
     parser.add_argument("--check-seed", type=int, default=0, help="seed of the random designs checked (default 0)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "validation" / "atlas.json")
+    parser.add_argument("--sweep-only", action="store_true",
+                        help="the atlas sweep only (results/bench/atlas_sweep.json), no FOM check")
     parser.add_argument("--bench", type=Path, default=REPOSITORY / "results" / "bench" / "atlas_sweep.json")
     args = parser.parse_args()
     for variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
@@ -121,17 +124,21 @@ def main() -> int:
         print(f"atlas sweep: {len(designs)} designs, {counts}, {totals['centres']} centres built "
               f"({totals['build_time_s']:.1f} s of builds), {sweep['wall_time']:.1f} s", flush=True)
         load_after_sweep = os.getloadavg()
+        common = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "machine": machine(), "versions": software_versions(),
+                  "scene": args.scene, "samples": args.samples, "seed": args.seed, "workers": args.workers,
+                  "load_average_before": load_before, "load_average_after_sweep": load_after_sweep}
+        sweep_record = {"wall_time_s": sweep["wall_time"], "counts": counts, "every_design_answered":
+                        counts["completed"] == len(designs), "centres": totals["centres"],
+                        "build_time_s": totals["build_time_s"], "cells_in_box": sweep["atlas"]["cells_in_box"],
+                        "seconds_per_design": sweep["wall_time"] / len(designs)}
+        write_json_atomic(args.bench, common | {"sweep": sweep_record})
+        if args.sweep_only:
+            print(f"wrote {args.bench}")
+            return 0
         checked = checked_designs(scene, sweep["rows"], args.random, args.farthest, args.check_seed)
         results = fom_check(scene, checked, args.workers, Path(scratch))
     errors = [abs(entry["relative_error"]) for entry in results if "relative_error" in entry]
     worst = max(results, key=lambda entry: abs(entry.get("relative_error", np.inf)))
-    common = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "machine": machine(), "versions": software_versions(),
-              "scene": args.scene, "samples": args.samples, "seed": args.seed, "workers": args.workers,
-              "load_average_before": load_before, "load_average_after_sweep": load_after_sweep}
-    sweep_record = {"wall_time_s": sweep["wall_time"], "counts": counts, "every_design_answered":
-                    counts["completed"] == len(designs), "centres": totals["centres"],
-                    "build_time_s": totals["build_time_s"], "cells_in_box": sweep["atlas"]["cells_in_box"],
-                    "seconds_per_design": sweep["wall_time"] / len(designs)}
     report = common | {"sweep": sweep_record, "atlas": {key: value for key, value in sweep["atlas"].items()},
                        "check": {"random": args.random, "farthest": args.farthest, "check_seed": args.check_seed,
                                  "designs": results, "checked": len(results), "fom_completed": len(errors),
@@ -139,7 +146,6 @@ def main() -> int:
                                  "largest_at": worst["design"], "limit": LIMIT,
                                  "within_limit": len(errors) == len(results) and max(errors) <= LIMIT}}
     write_json_atomic(args.out, report)
-    write_json_atomic(args.bench, common | {"sweep": sweep_record})
     print(f"FOM check: {len(errors)} of {len(results)} designs, largest relative distance error "
           f"{100 * worst.get('relative_error', np.nan):+.2f} % at {worst['design']} (limit {100 * LIMIT:g} %); "
           f"wrote {args.out}")

@@ -179,7 +179,14 @@ def dry_run(args, scene, designs, source, kept, cluster, workers) -> int:
     where = cluster.describe() if cluster.distributed else (f"{workers} local worker process(es)" if workers > 1
                                                             else "this process (one worker)")
     say(f"  runs on: {where}")
-    seconds = estimate(scene, missing, args.model, 1 if cluster.distributed else workers)
+    centres = 0
+    if args.model == "prom":
+        from aquarom_fenics.studies.atlas import assign, cover
+
+        centres = len(assign(cover(scene), todo))
+        say(f"  PROM atlas: {centres} centre(s) to build or take from the PROM cache "
+            f"({cover(scene).box_cells()} cells in the box)")
+    seconds = estimate(scene, missing, args.model, 1 if cluster.distributed else workers, centres)
     say(f"  estimate: ~{seconds:.0f} s" + (" on one worker (divided by the number of the cluster's workers)"
                                           if cluster.distributed else ""))
     return 0

@@ -334,8 +334,15 @@ def summary(rows: list[dict]) -> dict:
             "cached": sum(bool(row.get("cached")) for row in rows)}
 
 
-def estimate(scene: Scene, missing: int, model: str, workers: int) -> float:
-    """Estimated wall time [s] of the missing designs on ``workers`` workers (:mod:`~aquarom_fenics.studies.estimate`)."""
+BATCHED_SECONDS_PER_DESIGN = 0.03
+"""A design's share of a batched reduced solve (the 2 s swim, level 1): 0.025 s on an idle two-core host, 0.031 s
+in a 20,000-design atlas sweep of SO1 on a loaded one (docs/devlog.md)."""
+
+
+def estimate(scene: Scene, missing: int, model: str, workers: int, centres: int = 1) -> float:
+    """Estimated wall time [s] of the missing designs on ``workers`` workers (:mod:`~aquarom_fenics.studies.estimate`);
+    model prom: ``centres`` PROM builds of the atlas, shared by the workers, and
+    :data:`BATCHED_SECONDS_PER_DESIGN` per design."""
     from aquarom_fenics.studies.estimate import fom_seconds, prom_build_seconds, scene_cells
 
     cells = scene_cells(scene)
@@ -346,7 +353,8 @@ def estimate(scene: Scene, missing: int, model: str, workers: int) -> float:
         return start_up + math.ceil(missing / workers) * per_design
     if model == "rom":
         return start_up + math.ceil(missing / workers) * (prom_build_seconds(cells, 0, degree) + 0.2)
-    return prom_build_seconds(cells, len(scene.shapes), degree) + start_up + math.ceil(missing / workers) * 0.2
+    return (math.ceil(centres / workers) * prom_build_seconds(cells, len(scene.shapes), degree) + start_up
+            + math.ceil(missing / workers) * BATCHED_SECONDS_PER_DESIGN)
 
 
 def cached_designs(scene: Scene, designs: list[dict], model: str) -> int:
