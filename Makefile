@@ -21,6 +21,7 @@ bench: setup
 	$(PYTHON) scripts/bench_prom.py
 	$(PYTHON) scripts/bench_optimize.py
 	$(PYTHON) scripts/bench_sweep.py
+	$(PYTHON) scripts/validate_atlas.py --sweep-only
 
 study: setup
 	$(PYTHON) scripts/study.py $(if $(SCHEDULER),--scheduler $(SCHEDULER)) $(if $(SCHEDULER_FILE),--scheduler-file $(SCHEDULER_FILE))

@@ -45,7 +45,7 @@ def earlier_rows(args, scene, designs, target: Path) -> dict:
     if not path.is_file():
         raise InputError(f"--resume: no sweep.csv in {target}; run without --resume")
     check_run_record(target, run_record(args, scene))
-    return resumed_rows(path, scene, designs)
+    return resumed_rows(path, scene, designs, args.model)
 
 
 def run_record(args, scene) -> dict:
@@ -103,13 +103,31 @@ def run_sweep(args) -> int:
                                      "backend": backend, "kept_from_resume": len(kept), "counts": result["counts"],
                                      "answered_from_cache": result["cached"]}}
     counts = ", ".join(f"{n} {status}" for status, n in result["counts"].items() if n)
+    atlas = atlas_line(out) if args.model == "prom" else None
+    if atlas:
+        args.manifest_extra["sweep"]["atlas"] = atlas[1]
+        say(atlas[0])
     say(f"{len(rows)} designs: {counts}; outputs in {shown(args, out)}/ (sweep.csv, manifest.json"
-        + (", sweep.png)" if scene.output.plots else ")"))
+        + (", atlas.json" if atlas else "") + (", sweep.png)" if scene.output.plots else ")"))
     if result["best"] is not None:
         best = result["best"]
         say("farthest: " + ", ".join(f"{n} = {best[n]:.4g}" for n in scene.shape_names)
             + f" ({100 * best['distance_m']:.3f} cm)")
     return 0
+
+
+def atlas_line(out: Path) -> tuple[str, dict] | None:
+    """The PROM atlas of a sweep, one line, and its totals (atlas.json's)."""
+    import json
+
+    from aquarom_fenics.studies.atlas import ATLAS_FILE
+
+    path = out / ATLAS_FILE
+    if not path.is_file():
+        return None
+    totals = json.loads(path.read_text())["totals"]
+    return (f"PROM atlas: {totals['centres']} centre(s) used, {totals['built']} built "
+            f"({totals['build_time_s']:.1f} s of builds), {totals['from_the_cache']} from the PROM cache"), totals
 
 
 def describe_backend(pool, cluster) -> str:
@@ -161,7 +179,14 @@ def dry_run(args, scene, designs, source, kept, cluster, workers) -> int:
     where = cluster.describe() if cluster.distributed else (f"{workers} local worker process(es)" if workers > 1
                                                             else "this process (one worker)")
     say(f"  runs on: {where}")
-    seconds = estimate(scene, missing, args.model, 1 if cluster.distributed else workers)
+    centres = 0
+    if args.model == "prom":
+        from aquarom_fenics.studies.atlas import assign, cover
+
+        centres = len(assign(cover(scene), todo))
+        say(f"  PROM atlas: {centres} centre(s) to build or take from the PROM cache "
+            f"({cover(scene).box_cells()} cells in the box)")
+    seconds = estimate(scene, missing, args.model, 1 if cluster.distributed else workers, centres)
     say(f"  estimate: ~{seconds:.0f} s" + (" on one worker (divided by the number of the cluster's workers)"
                                           if cluster.distributed else ""))
     return 0

@@ -2,13 +2,14 @@
 
 Designs come from a CSV file (one column per shape name), a grid (``name=lo:hi:n`` per shape) or
 a seeded Latin hypercube over the scene's bounds; a shape a source does not set keeps its start
-value. Each design is one task (:func:`evaluate`) on a backend of :mod:`aquarom_fenics.parallel`;
-its row is written to ``sweep.csv`` as it finishes. The FOM's answer at a design is cached in the
+value. Each design is one task (:func:`evaluate`) on a backend of :mod:`aquarom_fenics.parallel`
+(model prom: the designs of one centre of the PROM atlas, :mod:`~aquarom_fenics.studies.atlas`, are one
+task, integrated together, and atlas.json lists the centres); its row is written to ``sweep.csv`` as it finishes. The FOM's answer at a design is cached in the
 FOM cache (:func:`aquarom_fenics.studies.fom_cache.fom_answer`, one entry format shared with the
 optimiser's FOM checks), so a re-run computes only what is missing; ``--resume`` keeps the rows already in
 ``sweep.csv`` and runs the designs it lacks.
 
-A design the design check refuses, a PROM outside its validity radius, a FOM that stops or a task
+A design the design check refuses, a PROM that cannot be built or is outside its validity radius, a FOM that stops or a task
 that fails is a row with its status and reason, never the end of the sweep.
 """
 from __future__ import annotations
@@ -86,21 +87,26 @@ def _fom_answer(task: SweepTask) -> dict:
 
 
 def reduced_model(scene: Scene, design: dict, model: str):
-    """The ROM built at the design, or the scene's PROM at its start values (both through the PROM cache).
+    """The ROM built at the design, or the PROM of the atlas centre whose cell holds it (both through the
+    PROM cache; :mod:`~aquarom_fenics.studies.atlas`).
 
-    InputError for a design beyond the PROM's validity radius."""
+    InputError for a design beyond that PROM's validity radius."""
     from aquarom_fenics.reduction.cache import cached_prom
     from aquarom_fenics.reduction.prom import ReducedModel
     from aquarom_fenics.reduction.reductor import build_prom
+    from aquarom_fenics.studies import atlas
 
     fish = shared_fish(scene)
-    parametric = model == "prom"
-    center = fish.parameter_vector({s.name: s.start for s in scene.shapes} if parametric else design)
-    if parametric:
-        ReducedModel.refuse_outside_radius(scene.shape_names, fish.parameter_vector(design), center,
-                                           np.array(scene.validity_radii()))
-    return cached_prom(scene, center, lambda: build_prom(scene, xi_center=center, fish=fish, parametric=parametric),
-                       parametric=parametric)
+    if model == "prom":
+        grid = atlas.cover(scene)
+        cell = grid.cells(np.array([design[name] for name in grid.names]))[0]
+        prom, _ = atlas.center_prom(scene, dict(zip(grid.names, grid.center(cell).tolist())))
+        ReducedModel.refuse_outside_radius(prom.shape_names, fish.parameter_vector(design), prom.xi_center,
+                                           prom.validity_radius)
+        return prom
+    center = fish.parameter_vector(design)
+    return cached_prom(scene, center, lambda: build_prom(scene, xi_center=center, fish=fish, parametric=False),
+                       parametric=False)
 
 
 def _reduced_answer(task: SweepTask) -> dict:
@@ -113,72 +119,11 @@ def _reduced_answer(task: SweepTask) -> dict:
     return {"distance_m": result.distance, "tail_amplitude_m": result.tail_amplitude}
 
 
-BATCH_ROWS = 256
-"""Designs of a PROM sweep integrated together in one task (``simulate_batch``)."""
-
-
-@dataclass(frozen=True)
-class SweepBatch:
-    """Designs of a PROM sweep answered together: their tasks (one scene, model "prom")."""
-
-    tasks: tuple
-
-    @property
-    def index(self) -> int:
-        return self.tasks[0].index
-
-
-def evaluate_batch(batch: SweepBatch) -> list[dict]:
-    """The rows of a batch of PROM designs: those inside the PROM's validity radius integrated at once
-    (``simulate_batch``; a design whose steps fail there is integrated alone, with step cutting), the others
-    refused, as :func:`evaluate` would give them one by one. The batch's wall time is shared among its rows."""
-    from aquarom_fenics.dynamics.batched import simulate_batch
-    from aquarom_fenics.reduction.prom import ReducedModel
-
-    started = time.perf_counter()
-    scene = batch.tasks[0].scene
-    rows = [{"design": task.index, **task.design, "status": "completed", "distance_m": None,
-             "tail_amplitude_m": None, "cached": False, "reason": ""} for task in batch.tasks]
-    prom = reduced_model(scene, {s.name: s.start for s in scene.shapes}, "prom")
-    fish = shared_fish(scene)
-    inside = []
-    for row, task in zip(rows, batch.tasks):
-        try:
-            ReducedModel.refuse_outside_radius(scene.shape_names, fish.parameter_vector(task.design),
-                                               prom.xi_center, prom.validity_radius)
-            inside.append((row, task))
-        except InputError as refused:
-            row.update(status="refused", reason=str(refused))
-    if inside:
-        xis = np.array([[task.design[name] for name in prom.shape_names] for _, task in inside])
-        result = simulate_batch(prom, scene, xis)
-        for b, (row, _) in enumerate(inside):
-            if result.completed[b]:
-                row.update(distance_m=float(result.distance[b]), tail_amplitude_m=float(result.tail_amplitude[b]))
-            else:
-                row.update(status="stopped", reason=result.errors[b])
-    share = (time.perf_counter() - started) / len(rows)
-    for row in rows:
-        row.update(wall_time_s=share, worker=worker_name())
-    return rows
-
-
-def _answered(item, answer, error, batched: bool) -> list[tuple[SweepTask, dict | None]]:
-    """(task, row) of each design of a finished task or batch; row None where it failed."""
-    tasks = item.tasks if batched else (item,)
-    if error is not None:
-        return [(task, None) for task in tasks]
-    return list(zip(tasks, answer if batched else [answer]))
-
-
-def _batches(tasks: list[SweepTask]) -> list[SweepBatch]:
-    return [SweepBatch(tuple(tasks[start:start + BATCH_ROWS])) for start in range(0, len(tasks), BATCH_ROWS)]
-
-
 # ---------------------------------------------------------------------- the sweep
-def columns(scene: Scene) -> list[str]:
+def columns(scene: Scene, model: str = "fom") -> list[str]:
+    """sweep.csv's header; a PROM sweep's rows also name the atlas centre that answered them (``prom_center``)."""
     return ["design", *scene.shape_names, "status", "distance_m", "tail_amplitude_m", "wall_time_s", "cached",
-            "worker", "reason"]
+            "worker", "reason", *(["prom_center"] if model == "prom" else [])]
 
 
 def _cell(value) -> str:
@@ -194,7 +139,7 @@ MAX_SWEEP_FILE_BYTES = 256 * 1024 * 1024
 """Largest sweep.csv read back by --resume [bytes]."""
 
 
-def read_rows(path: Path, scene: Scene) -> list[dict]:
+def read_rows(path: Path, scene: Scene, model: str = "fom") -> list[dict]:
     """The rows of a sweep.csv, schema-checked (numbers as floats, empty cells None): a whole
     design number, finite shape values, a known status, a completed row's distance and amplitude.
     A last line cut short (a run killed while writing it) is dropped with a note; anything else
@@ -212,7 +157,7 @@ def read_rows(path: Path, scene: Scene) -> list[dict]:
     except csv.Error as error:
         raise InputError(f"{where}: not a CSV file ({error}); {remedy}") from None
     header = table[0] if table else []
-    if header != columns(scene):
+    if header != columns(scene, model):
         raise InputError(f"{where} has the columns {header}, not those of scene {scene.name}'s sweep; {remedy}")
     return [_parsed_row(dict(zip(header, cells)), number, scene, f"{where} line {number}", remedy)
             for number, cells in enumerate(table[1:], start=2) if cells and _cell_count(cells, header, number,
@@ -258,11 +203,11 @@ def _parsed_row(row: dict, number: int, scene: Scene, where: str, remedy: str) -
     return parsed
 
 
-def resumed_rows(path: Path, scene: Scene, designs: list[dict]) -> dict[int, dict]:
+def resumed_rows(path: Path, scene: Scene, designs: list[dict], model: str = "fom") -> dict[int, dict]:
     """The rows of an earlier run of the same designs, by design number; InputError when the file
     was made for other designs."""
     kept = {}
-    for row in read_rows(path, scene):
+    for row in read_rows(path, scene, model):
         index = row["design"]
         if not 0 <= index < len(designs) or any(row[n] != designs[index][n] for n in scene.shape_names):
             raise InputError(f"--resume: {path} row of design {index} does not match this sweep's designs "
@@ -277,10 +222,10 @@ class SweepCSV:
     """sweep.csv, one row per design as it finishes (flushed at once, so an interrupted sweep keeps
     its rows for --resume)."""
 
-    def __init__(self, path: Path, scene: Scene, earlier: list[dict]):
+    def __init__(self, path: Path, scene: Scene, earlier: list[dict], model: str = "fom"):
         from aquarom_fenics.io.tables import IncrementalCSV
 
-        self.header = columns(scene)
+        self.header = columns(scene, model)
         self.table = IncrementalCSV(path, self.header)
         for row in earlier:
             self.write(row)
@@ -293,50 +238,91 @@ class SweepCSV:
 
 
 def prepare(scene: Scene, model: str) -> None:
-    """What every worker would otherwise do at once: refuse an unwritable cache, build the PROM
-    (model prom) here once, so that the workers read it from the PROM cache."""
+    """What every worker would otherwise find out at once: an unwritable cache is refused here."""
     from aquarom_fenics.io.persistence import require_cache_writable
 
     require_cache_writable("fom" if model == "fom" else "prom")
-    if model == "prom":
-        start = {s.name: s.start for s in scene.shapes}
-        reduced_model(scene, start, "prom")
 
 
 def run_sweep(scene: Scene, designs: list[dict], model: str, out: Path, pool, resume: bool = False,
               on_row: Callable[[dict], None] | None = None) -> list[dict]:
-    """Every design on ``pool``: sweep.csv (rows as they finish), sweep.png; the rows by design number.
+    """Every design on ``pool``: sweep.csv (rows as they finish), sweep.png, and for model prom atlas.json
+    (:mod:`~aquarom_fenics.studies.atlas`: one task per centre of the atlas); the rows by design number.
 
     ``on_row(row)`` is called after each new row is written (progress lines)."""
     out = Path(out)
     path = out / "sweep.csv"
-    earlier = resumed_rows(path, scene, designs) if resume and path.exists() else {}
+    earlier = resumed_rows(path, scene, designs, model) if resume and path.exists() else {}
     tasks = [SweepTask(k, design, model, scene) for k, design in enumerate(designs) if k not in earlier]
     prepare(scene, model)
-    table = SweepCSV(path, scene, list(earlier.values()))
+    atlas = _AtlasFile(out, scene, resume, earlier.values()) if model == "prom" else None
+    table = SweepCSV(path, scene, list(earlier.values()), model)
     rows = dict(earlier)
-    batched = model == "prom"           # a PROM's designs are integrated many at once
+    items = atlas.tasks(tasks) if atlas else tasks
     try:
-        for item, answer, error in run_all(pool, evaluate_batch if batched else evaluate,
-                                           _batches(tasks) if batched else tasks, key=lambda item: item.index):
+        for item, answer, error in run_all(pool, atlas.function if atlas else evaluate, items,
+                                           key=lambda item: item.index):
             if isinstance(error, OSError):      # a cache or output write that failed: the sweep stops
                 raise error
-            for task, row in _answered(item, answer, error, batched):
+            for number, design, row in (atlas.answered(item, answer, error) if atlas else
+                                        [(item.index, item.design, answer if error is None else None)]):
                 if row is None:
-                    row = {"design": task.index, **task.design, "status": "error", "cached": False, "worker": "",
-                           "reason": f"{type(error).__name__}: {error}".splitlines()[0]}
-                rows[task.index] = row
+                    row = _error_row(number, design, error)
+                rows[number] = row
                 table.write(row)
                 if on_row is not None:
                     on_row(row)
+            if atlas:
+                atlas.write(rows.values())
     finally:
         table.close()
     ordered = [rows[k] for k in sorted(rows)]
+    if atlas:
+        atlas.write(ordered)
     if scene.output.plots:
         from aquarom_fenics.viz.sweep_plot import plot_sweep
 
         plot_sweep(ordered, scene.shape_names, out / "sweep.png", f"{scene.name}: {model.upper()} design sweep")
     return ordered
+
+
+def _error_row(number: int, design: dict, error: BaseException) -> dict:
+    """The row of a design whose task failed."""
+    return {"design": number, **design, "status": "error", "cached": False, "worker": "",
+            "reason": f"{type(error).__name__}: {error}".splitlines()[0]}
+
+
+class _AtlasFile:
+    """A PROM sweep's atlas: its tasks (per centre), and atlas.json rewritten after each centre's task with
+    every centre the rows use (an earlier run's records kept by --resume)."""
+
+    def __init__(self, out: Path, scene: Scene, resume: bool, earlier_rows):
+        from aquarom_fenics.studies import atlas
+
+        self.atlas, self.scene, self.path = atlas, scene, out / atlas.ATLAS_FILE
+        self.grid = atlas.cover(scene)
+        self.records = atlas.read_records(self.path) if resume and any(True for _ in earlier_rows) else {}
+        self.function = atlas.evaluate_center
+
+    def tasks(self, tasks: list[SweepTask]):
+        return self.atlas.center_tasks(self.scene, [(task.index, task.design) for task in tasks])
+
+    def answered(self, item, answer, error) -> list[tuple[int, dict, dict | None]]:
+        """(number, design, row) of each design of a finished centre task; row None where it failed."""
+        name = self.atlas.center_id(item.cell)
+        if error is not None:
+            self.records[name] = self.atlas.merged_record(self.records.get(name), {
+                "id": name, "cell": list(item.cell), "center": item.center,
+                "status": f"error: {type(error).__name__}: {error}".splitlines()[0]})
+            return [(number, design, _error_row(number, design, error) | {"prom_center": name})
+                    for number, design in item.designs]
+        self.records[name] = self.atlas.merged_record(self.records.get(name), answer["record"])
+        return [(number, design, row) for (number, design), row in zip(item.designs, answer["rows"])]
+
+    def write(self, rows) -> None:
+        from aquarom_fenics.io.persistence import write_json_atomic
+
+        write_json_atomic(self.path, self.atlas.atlas_report(self.scene, self.grid, self.records, list(rows)))
 
 
 def summary(rows: list[dict]) -> dict:
@@ -348,8 +334,15 @@ def summary(rows: list[dict]) -> dict:
             "cached": sum(bool(row.get("cached")) for row in rows)}
 
 
-def estimate(scene: Scene, missing: int, model: str, workers: int) -> float:
-    """Estimated wall time [s] of the missing designs on ``workers`` workers (:mod:`~aquarom_fenics.studies.estimate`)."""
+BATCHED_SECONDS_PER_DESIGN = 0.03
+"""A design's share of a batched reduced solve (the 2 s swim, level 1): 0.025 s on an idle two-core host, 0.031 s
+in a 20,000-design atlas sweep of SO1 on a loaded one (docs/devlog.md)."""
+
+
+def estimate(scene: Scene, missing: int, model: str, workers: int, centres: int = 1) -> float:
+    """Estimated wall time [s] of the missing designs on ``workers`` workers (:mod:`~aquarom_fenics.studies.estimate`);
+    model prom: ``centres`` PROM builds of the atlas, shared by the workers, and
+    :data:`BATCHED_SECONDS_PER_DESIGN` per design."""
     from aquarom_fenics.studies.estimate import fom_seconds, prom_build_seconds, scene_cells
 
     cells = scene_cells(scene)
@@ -360,7 +353,8 @@ def estimate(scene: Scene, missing: int, model: str, workers: int) -> float:
         return start_up + math.ceil(missing / workers) * per_design
     if model == "rom":
         return start_up + math.ceil(missing / workers) * (prom_build_seconds(cells, 0, degree) + 0.2)
-    return prom_build_seconds(cells, len(scene.shapes), degree) + start_up + math.ceil(missing / workers) * 0.2
+    return (math.ceil(centres / workers) * prom_build_seconds(cells, len(scene.shapes), degree) + start_up
+            + math.ceil(missing / workers) * BATCHED_SECONDS_PER_DESIGN)
 
 
 def cached_designs(scene: Scene, designs: list[dict], model: str) -> int:

@@ -234,15 +234,18 @@ def test_a_local_worker_killed_mid_sweep_loses_no_design(tmp_path, monkeypatch):
     assert sorted(int(row["design"]) for row in read_csv(tmp_path / "out" / "sweep.csv")) == list(range(4))
 
 
-def test_a_prom_sweep_refuses_designs_beyond_the_validity_radius_as_rows(tmp_path, capsys):
+def test_a_prom_sweep_answers_designs_beyond_one_validity_radius(tmp_path, capsys):
+    """z_tail = ±0.2 lie beyond the radius 0.075 of a PROM at the start design: the atlas answers them from
+    the centres of their cells (tests/studies/test_atlas.py tests the atlas itself)."""
     scene = str(write_scene(tmp_path))
     out = tmp_path / "out"
     assert main(["sweep", scene, "--grid", "z_tail=-0.2:0.2:3", "--model", "prom", "--workers", "1",
                  "--out", str(out)]) == 0
     rows = read_csv(out / "sweep.csv")
-    assert [row["status"] for row in rows] == ["refused", "completed", "refused"]
-    assert all("outside the PROM's validity radius" in rows[k]["reason"] for k in (0, 2))
-    assert float(rows[1]["tail_amplitude_m"]) > 0
+    assert [row["status"] for row in rows] == ["completed"] * 3, [row["reason"] for row in rows]
+    assert [row["prom_center"] for row in rows] == ["0_0", "2_0", "3_0"]
+    assert all(float(row["tail_amplitude_m"]) > 0 for row in rows)
+    assert "PROM atlas: 3 centre(s) used" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("names", [["z_tail"], ["z_tail", "y_thin"], ["z_tail", "y_thin", "z_head"]])
@@ -258,19 +261,20 @@ def test_the_sweep_figure_for_one_two_and_more_parameters(tmp_path, names):
 
 
 def test_a_prom_sweep_answers_its_designs_in_a_batch_as_single_runs_would(tmp_path, monkeypatch):
-    """The designs inside the validity radius are integrated together (``simulate_batch``), not one
+    """The designs of each atlas centre are integrated together (``simulate_batch``), not one
     ``simulate_reduced`` each, and their rows are the single runs' answers to 1e-12."""
     from aquarom_fenics.dynamics import batched, reduced_dynamics
 
     path = write_scene(tmp_path)
     scene = Scene.load(path)
     designs = sweep.grid_designs(["z_tail=-0.04:0.04:3", "y_thin=0:0.02:2"], scene)
-    prom = sweep.reduced_model(scene, designs[0], "prom")
+    proms = [sweep.reduced_model(scene, design, "prom") for design in designs]     # two centres: z_tail < 0, ≥ 0
+    assert len({tuple(prom.xi_center) for prom in proms}) == 2
     expected = [reduced_dynamics.simulate_reduced(prom, scene, np.array([d[n] for n in prom.shape_names]))
-                for d in designs]
+                for prom, d in zip(proms, designs)]
 
     def one_by_one(*args, **kwargs):
-        raise AssertionError("a design inside the validity radius was integrated alone")
+        raise AssertionError("a design of an atlas centre was integrated alone")
 
     monkeypatch.setattr(reduced_dynamics, "simulate_reduced", one_by_one)
     monkeypatch.setattr(batched, "simulate_reduced", one_by_one)

@@ -1,0 +1,156 @@
+"""The PROM atlas of `aquarom sweep --model prom` on SO1's whole design box: its time and its accuracy.
+
+1. The atlas sweep: the Latin hypercube of --samples designs (default 20 000, seed 0) over SO1's box on
+   --workers local worker processes, from an empty PROM cache (the mesh cache copied in): wall time
+   including worker start-up and every build, centres built, designs answered.
+2. Its accuracy against the FOM: the FOM (through the FOM cache, on the same kind of pool) at --random
+   designs of the sweep drawn with --check-seed and at the --farthest designs farthest from their
+   centre relative to the cell's half-width (the atlas's radius); per design the relative distance error
+   (d_PROM - d_FOM) / |d_FOM|, and the largest, against the limit 3 % (the atlas's radius is set so that
+   it holds: aquarom_fenics.studies.atlas.RADIUS_SCALE).
+
+Writes results/validation/atlas.json (and results/bench/atlas_sweep.json: the sweep's time and builds;
+`--sweep-only`, as `make bench` runs it, skips the FOM check and writes only that).
+
+    .venv/bin/python scripts/validate_atlas.py            # ~4 min of sweep and ~2 min of FOM runs on 2 idle cores
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPOSITORY = Path(__file__).resolve().parents[1]
+LIMIT = 0.03
+"""Largest relative distance error of the atlas against the FOM."""
+
+
+def atlas_sweep(scene, designs, workers: int, folder: Path) -> dict:
+    """The PROM sweep of ``designs`` from an empty PROM cache in ``folder``: wall time, rows, atlas.json."""
+    from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
+    from aquarom_fenics.io.paths import mesh_cache
+    from aquarom_fenics.parallel import open_pool, shutting_down
+    from aquarom_fenics.studies.sweep import run_sweep
+
+    meshes = mesh_cache()
+    previous = os.environ.get("AQUAROM_CACHE")
+    os.environ["AQUAROM_CACHE"] = str(folder / "cache")          # the workers, spawned next, read it too
+    if meshes.is_dir():
+        shutil.copytree(meshes, folder / "cache" / "meshes")
+    try:
+        started = time.perf_counter()
+        with shutting_down(open_pool(workers, None, SWIMMER_WORKERS)) as pool:
+            rows = run_sweep(scene, designs, "prom", folder / "sweep", pool)
+        wall = time.perf_counter() - started
+    finally:
+        if previous is None:
+            os.environ.pop("AQUAROM_CACHE")
+        else:
+            os.environ["AQUAROM_CACHE"] = previous
+    return {"wall_time": wall, "rows": rows, "atlas": json.loads((folder / "sweep" / "atlas.json").read_text())}
+
+
+def checked_designs(scene, rows: list[dict], random: int, farthest: int, seed: int) -> list[tuple[str, dict]]:
+    """(why, row) of ``random`` completed rows drawn with ``seed`` and the ``farthest`` completed rows
+    farthest from their centre (max_k |ξ_k - c_k| / h_k), none twice."""
+    from aquarom_fenics.studies.atlas import cover
+
+    grid = cover(scene)
+    completed = [row for row in rows if row["status"] == "completed"]
+    xis = np.array([[row[name] for name in grid.names] for row in completed])
+    reach = np.array([grid.scaled_distance(xi, grid.cells(xi)[0])[0] for xi in xis])
+    drawn = np.random.default_rng(seed).choice(len(completed), size=random, replace=False).tolist()
+    far = [k for k in np.argsort(-reach, kind="stable").tolist() if k not in drawn][:farthest]
+    return [("random", completed[k] | {"reach": float(reach[k])}) for k in drawn] + \
+           [("farthest", completed[k] | {"reach": float(reach[k])}) for k in far]
+
+
+def fom_check(scene, checked: list[tuple[str, dict]], workers: int, folder: Path) -> list[dict]:
+    """The FOM at the checked designs (a FOM sweep through the FOM cache) against the atlas's answers."""
+    from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
+    from aquarom_fenics.parallel import open_pool, shutting_down
+    from aquarom_fenics.studies.sweep import run_sweep
+
+    designs = [{name: row[name] for name in scene.shape_names} for _, row in checked]
+    with shutting_down(open_pool(min(workers, len(designs)), None, SWIMMER_WORKERS)) as pool:
+        fom_rows = run_sweep(scene, designs, "fom", folder / "fom", pool)
+    results = []
+    for (why, row), fom in zip(checked, fom_rows):
+        entry = {"why": why, "design": {name: row[name] for name in scene.shape_names},
+                 "sweep_row": row["design"], "prom_center": row["prom_center"], "reach": row["reach"],
+                 "prom_distance_m": row["distance_m"], "fom_status": fom["status"],
+                 "fom_distance_m": fom.get("distance_m"), "fom_cached": fom.get("cached")}
+        if fom["status"] == "completed":
+            entry["relative_error"] = (row["distance_m"] - fom["distance_m"]) / abs(fom["distance_m"])
+        results.append(entry)
+    return results
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scene", default="so1")
+    parser.add_argument("--samples", type=int, default=20_000)
+    parser.add_argument("--seed", type=int, default=0, help="seed of the Latin hypercube (default 0)")
+    parser.add_argument("--random", type=int, default=20, help="random designs checked with the FOM (default 20)")
+    parser.add_argument("--farthest", type=int, default=5, help="farthest designs checked with the FOM (default 5)")
+    parser.add_argument("--check-seed", type=int, default=0, help="seed of the random designs checked (default 0)")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "validation" / "atlas.json")
+    parser.add_argument("--sweep-only", action="store_true",
+                        help="the atlas sweep only (results/bench/atlas_sweep.json), no FOM check")
+    parser.add_argument("--bench", type=Path, default=REPOSITORY / "results" / "bench" / "atlas_sweep.json")
+    args = parser.parse_args()
+    for variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[variable] = "1"
+    from aquarom_fenics.io.persistence import write_json_atomic
+    from aquarom_fenics.io.scene import Scene
+    from aquarom_fenics.io.versions import software_versions
+    from aquarom_fenics.studies.sweep import latin_hypercube, summary
+    from aquarom_fenics.verification.validation.suite import machine
+
+    scene = Scene.load(args.scene).replace("output", plots=False)
+    designs = latin_hypercube(scene, args.samples, args.seed)
+    load_before = os.getloadavg()
+    with tempfile.TemporaryDirectory(prefix="validate-atlas-") as scratch:
+        sweep = atlas_sweep(scene, designs, args.workers, Path(scratch))
+        counts = summary(sweep["rows"])["counts"]
+        totals = sweep["atlas"]["totals"]
+        print(f"atlas sweep: {len(designs)} designs, {counts}, {totals['centres']} centres built "
+              f"({totals['build_time_s']:.1f} s of builds), {sweep['wall_time']:.1f} s", flush=True)
+        load_after_sweep = os.getloadavg()
+        common = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "machine": machine(), "versions": software_versions(),
+                  "scene": args.scene, "samples": args.samples, "seed": args.seed, "workers": args.workers,
+                  "load_average_before": load_before, "load_average_after_sweep": load_after_sweep}
+        sweep_record = {"wall_time_s": sweep["wall_time"], "counts": counts, "every_design_answered":
+                        counts["completed"] == len(designs), "centres": totals["centres"],
+                        "build_time_s": totals["build_time_s"], "cells_in_box": sweep["atlas"]["cells_in_box"],
+                        "seconds_per_design": sweep["wall_time"] / len(designs)}
+        write_json_atomic(args.bench, common | {"sweep": sweep_record})
+        if args.sweep_only:
+            print(f"wrote {args.bench}")
+            return 0
+        checked = checked_designs(scene, sweep["rows"], args.random, args.farthest, args.check_seed)
+        results = fom_check(scene, checked, args.workers, Path(scratch))
+    errors = [abs(entry["relative_error"]) for entry in results if "relative_error" in entry]
+    worst = max(results, key=lambda entry: abs(entry.get("relative_error", np.inf)))
+    report = common | {"sweep": sweep_record, "atlas": {key: value for key, value in sweep["atlas"].items()},
+                       "check": {"random": args.random, "farthest": args.farthest, "check_seed": args.check_seed,
+                                 "designs": results, "checked": len(results), "fom_completed": len(errors),
+                                 "largest_relative_error": worst.get("relative_error"),
+                                 "largest_at": worst["design"], "limit": LIMIT,
+                                 "within_limit": len(errors) == len(results) and max(errors) <= LIMIT}}
+    write_json_atomic(args.out, report)
+    print(f"FOM check: {len(errors)} of {len(results)} designs, largest relative distance error "
+          f"{100 * worst.get('relative_error', np.nan):+.2f} % at {worst['design']} (limit {100 * LIMIT:g} %); "
+          f"wrote {args.out}")
+    return 0 if report["check"]["within_limit"] else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
