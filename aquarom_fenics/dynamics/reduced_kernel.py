@@ -364,11 +364,7 @@ def residual_at(eu, ev, ea, out, activations, mono, tangent_mono, pairs, pair_of
     if has_drag:
         for k in range(m):
             speed += drag_row[k] * ev[k]
-    internal_force = np.zeros(m)
-    for q in range(mono.size):                  # rows of F contiguous: the products over i vectorise
-        value = mono[q]
-        for i in range(m):
-            internal_force[i] += value * elastic_force[q, i]
+    internal_force = np.dot(mono, elastic_force)        # BLAS: n_mono = m + m(m+1)/2 + m(m+1)(m+2)/6 rows
     internal_norm, external_norm, inertia_norm, norm = 0.0, 0.0, 0.0, 0.0
     for i in range(m):
         internal = internal_force[i]
@@ -397,11 +393,7 @@ def tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass,
                 has_drag, drag_direction, drag_row, stiffness, damping_out, mass_out):
     """(K_t, C_t, M_t) of every term but the thrust (whose blocks ``half_blocks`` gives)."""
     m = eu.size
-    elastic = np.zeros(m * m)
-    for q in range(tangent_mono.size):          # rows of T contiguous: the products over (i, k) vectorise
-        value = tangent_mono[q]
-        for index in range(m * m):
-            elastic[index] += value * elastic_tangent[q, index]
+    elastic = np.dot(tangent_mono, elastic_tangent)    # BLAS: (1 + m + m(m+1)/2) × m² coefficients
     for i in range(m):
         for k in range(m):
             muscle = 0.0
@@ -438,13 +430,8 @@ def derivative_at(parameter_terms, eu, ev, ea, activations, units, mono, elastic
         tail_x, tail_y = 0.0, 0.0
         if has_thrust:
             tail_x, tail_y = half_forces(state, length, lagrangian, per_mass)
-        elastic = np.zeros(m)
         for c in range(p):
-            elastic[:] = 0.0
-            for q in range(mono.size):
-                value = mono[q]
-                for i in range(m):
-                    elastic[i] += value * elastic_gradient[c, q, i]
+            elastic = np.dot(mono, elastic_gradient[c])        # BLAS, as the force
             for i in range(m):
                 total = elastic[i]
                 for n in range(activations.size):
