@@ -168,3 +168,20 @@ def is_export_file(path: Path) -> bool:
 def bounding_box(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(lower, upper) corners of the points."""
     return points.min(axis=0), points.max(axis=0)
+
+
+def write_design_stl(scene, fish, xi: dict[str, float], path: Path, units: str = "mm") -> Path | None:
+    """Write the checked body surface of the design ``xi`` to ``path`` (binary STL in ``units``, atomically);
+    a design whose surface fails a check is logged as a warning and not written (None)."""
+    import logging
+
+    from aquarom_fenics.io.persistence import write_bytes_atomic
+
+    try:
+        body = design_body(scene, fish, xi)
+        surface = checked_surface(body.points, body.cells, f"design {path.name}")
+    except (InputError, SolverError) as problem:
+        logging.getLogger("aquarom").warning("%s not written: %s", path, problem)
+        return None
+    write_bytes_atomic(path, stl_bytes(surface, units))
+    return path
