@@ -122,3 +122,12 @@ def test_bad_inputs_are_one_line_and_write_nothing(tmp_path, capsys, arguments, 
     assert main(["export", "so1", *LEVEL, *arguments]) == 2
     assert message in one_line(capsys)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_design_whose_straight_sided_cells_fold_is_refused(tmp_path, capsys):
+    # on level 2 the SO1 optimum (z_head at its bound) folds four tetrahedra at the head's corners
+    # between their vertices, though det F of the exact shape field is positive at every quadrature point
+    assert main(["export", "so1", "--level", "2", *SO1_OPTIMUM, "--out", str(tmp_path / "so1.stl")]) == 2
+    line = one_line(capsys)
+    assert "design: 4 tetrahedra of the design mesh x_0 + U ξ are inverted or flat" in line
+    assert list(tmp_path.iterdir()) == []

@@ -57,7 +57,11 @@ def design_body(scene, fish, xi: dict[str, float]) -> DesignBody:
     cells = np.asarray(fish.mesh.cells, dtype=np.int64)
     inverted = signed_cell_volumes(points, cells) <= 0.0
     if inverted.any():
-        raise InputError(f"design: {int(inverted.sum())} tetrahedra of the design mesh are inverted or flat")
+        where = fish.tags.box.relative(fish.mesh.points[cells[np.flatnonzero(inverted)[0]]].mean(axis=0))[0]
+        raise InputError(f"design: {int(inverted.sum())} tetrahedra of the design mesh x_0 + U ξ are inverted or flat "
+                         f"(the first near x, y, z = {where[0]:.4g}, {where[1]:.4g}, {where[2]:.4g} m from the head "
+                         "face's centre): its straight-sided cells fold, so it has no surface to export; "
+                         "move the design away from its bounds or use a coarser mesh")
     return DesignBody(points, cells, scene_regions(scene, fish))
 
 
