@@ -131,3 +131,21 @@ def test_a_design_whose_straight_sided_cells_fold_is_refused(tmp_path, capsys):
     line = one_line(capsys)
     assert "design: 4 tetrahedra of the design mesh x_0 + U ξ are inverted or flat" in line
     assert list(tmp_path.iterdir()) == []
+
+
+def test_an_exported_mesh_is_a_scene_mesh_and_regions_need_tags(tmp_path, capsys):
+    import meshio
+
+    assert main(["export", "nominal", *LEVEL, "--out", str(tmp_path / "body.msh")]) == 0
+    (tmp_path / "tagged.toml").write_text('[mesh]\nfile = "body.msh"\nscale = 0.001\nhead_end = "+x"\n')
+    assert main(["export", str(tmp_path / "tagged.toml"), "--units", "m", "--regions",
+                 "--out", str(tmp_path / "again")]) == 0
+    assert "volume 8.000000e-04 m³" in capsys.readouterr().out
+    assert len(list((tmp_path / "again").glob("*.stl"))) == 4
+    read = meshio.read(tmp_path / "body.msh")
+    meshio.write(tmp_path / "plain.vtu", meshio.Mesh(read.points, [("tetra", read.cells_dict["tetra"])]))
+    (tmp_path / "plain.toml").write_text('[mesh]\nfile = "plain.vtu"\nscale = 0.001\nhead_end = "+x"\n')
+    assert main(["export", str(tmp_path / "plain.toml"), "--regions", "--out", str(tmp_path / "parts")]) == 2
+    error = capsys.readouterr().err.strip().splitlines()      # after the warning of a mesh without tags
+    assert error[-1].startswith("aquarom export: error: --regions:") and "has no tagged regions" in error[-1]
+    assert not (tmp_path / "parts").exists()
