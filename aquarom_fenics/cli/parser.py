@@ -22,6 +22,9 @@ EXAMPLES = {
     "basis": "aquarom basis so1 --level 1 --out results/so1-basis",
     "check": "aquarom check so1 --level 1\n  aquarom check so1 --level 1 --degree 2\n"
              "  aquarom check so1 --prom results/so1-prom.npz\n  aquarom check my-scene.toml --shapes-module my_fields.py",
+    "export": "aquarom export so1 --xi y_thin=0.1 --out results/so1-thin.stl\n"
+              "  aquarom export nominal --regions --out results/nominal-parts\n"
+              "  aquarom export nominal --units m --out results/nominal.msh",
     "cache": "aquarom cache list\n  aquarom cache clear --kind prom",
     "sweep": "aquarom sweep so1 --grid z_tail=-0.3:0.3:5 --grid y_thin=0:0.1:3 --level 1 --out results/so1-sweep\n"
              "  aquarom sweep so1 --samples 200 --seed 1 --scheduler tcp://head-node:8786 --out results/so1-lhs\n"
@@ -143,6 +146,13 @@ def build_parser() -> argparse.ArgumentParser:
     command("check", "Taylor tests of the scene's shape-field gradients against their values and of its PROM "
                      "against its FOM forms and finite differences (exit 1 on a FAIL)",
             prom="PROM file from `aquarom build` to check (default: build one)")
+    export = command("export", "write the design's body: a closed STL surface (binary, outward normals), one per region "
+                               "with --regions, or the tagged volume mesh (.msh, .vtu); checked before writing",
+                     out="output file (.stl, .msh or .vtu; a folder with --regions)", xi=shape_parameter)
+    export.add_argument("--units", choices=["mm", "m"], default="mm", help="length unit of the file (default mm)")
+    export.add_argument("--regions", action="store_true",
+                        help="one closed STL surface per region (head, each muscle, the passive body) in the "
+                             "folder --out; interfaces belong to both neighbours")
     cache_help = "list or clear the caches of meshes, PROMs and FOM checks (content-addressed, checksummed)"
     cache = commands.add_parser("cache", help=cache_help, description=cache_help,
                                 epilog=f"example:\n  {EXAMPLES['cache']}", formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -41,8 +41,9 @@ def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
     lines += body
     if scene.mesh_file:
         cells = body_cells          # the estimates below on the file's own cells
-    if command in ("mesh", "shapes"):
-        lines.append("work: tags" + (", design check, XDMF and PNG renders" if command == "shapes" else ""))
+    if command in ("mesh", "shapes", "export"):
+        lines.append("work: tags" + {"shapes": ", design check, XDMF and PNG renders",
+                                     "export": ", design check, surface checks, the file(s) of --out"}.get(command, ""))
         return lines + ["estimate: a few seconds"]
     lines.append("forms: SVK energy, muscle energy, mass, drag (compiled once by FFCx, then reused)")
     steps = scene.n_steps

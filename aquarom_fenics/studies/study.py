@@ -317,10 +317,12 @@ def _write_figures(out_dir, scene, fish, result, render):
     shapes = space.n_shapes
     optimal = dict(zip(space.names[:shapes], map(float, result.optimum[:shapes])))
     if render and scene.output.render and shapes:
+        from aquarom_fenics.geometry.export import write_design_stl
         from aquarom_fenics.viz.render import render_design
 
         render_design(fish, fish.design(optimal), optimal, out_dir / "optimal")
         if is_writer:
+            write_design_stl(scene, fish, optimal, out_dir / "optimal" / "design.stl")
             start = dict(zip(space.names[:shapes], map(float, space.start[:shapes])))
             render_start_and_optimal(fish, fish.design(start), fish.design(optimal),
                                        out_dir / "start_vs_optimal.png", f"{scene.name}: start and optimal design")

@@ -146,9 +146,28 @@ def test_optimize_command_writes_its_outputs(tmp_path, capsys):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["fom_check"]["ratio"] > 1.0 and summary["prom_builds"] >= 2
     for name in ("history.csv", "checkpoint.json", "cost.png", "parameters.png", "start_vs_optimal.png",
-                 "optimal/design.xdmf"):
+                 "optimal/design.xdmf", "optimal/design.stl"):
         assert (out / name).exists(), name
     assert "FOM check" in capsys.readouterr().out
+    assert_optimum_stl_encloses_its_design(scene, summary["optimum"], out / "optimal" / "design.stl")
+
+
+def assert_optimum_stl_encloses_its_design(scene_path, optimum, stl_path):
+    """The optimum's STL (millimetres) reads back closed, with the volume of the optimum's design mesh."""
+    from aquarom_fenics.geometry.export import design_body, read_stl
+    from aquarom_fenics.geometry.fish import load_fish
+    from aquarom_fenics.io.scene import Scene
+
+    scene = Scene.load(scene_path)
+    expected = design_body(scene, load_fish(scene), optimum).volume
+    header, _, corners = read_stl(stl_path.read_bytes())
+    points, triangles = np.unique(corners.reshape(-1, 3) / 1000.0, axis=0, return_inverse=True)
+    triangles = triangles.reshape(-1, 3)
+    edges = np.sort(triangles[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1)
+    assert (np.unique(edges, axis=0, return_counts=True)[1] == 2).all()          # closed
+    x = points[triangles] - points.mean(axis=0)
+    volume = np.einsum("ij,ij->i", x[:, 0], np.cross(x[:, 1], x[:, 2])).sum() / 6.0
+    assert header.startswith("aquarom export") and volume == pytest.approx(expected, rel=1e-6)
 
 
 @pytest.mark.mpi
