@@ -26,7 +26,8 @@ from aquarom_fenics.io.scene_sections import (SECTIONS, ActuationSection, Coopti
                                               LinearConstraint, MaterialSection, MeshSection, MuscleSpec,
                                               OptimizerSection, OutputSection, ReductionSection, RegionsSection,
                                               ShapeSpec, SolverSection, at_legacy, legacy_values)
-from aquarom_fenics.io.scene_muscles import check_actuation, default_muscles, muscles_from_list
+from aquarom_fenics.io.scene_muscles import (check_actuation, default_muscles, muscles_from_list, start_ramp_time,
+                                             warn_abrupt_start)
 
 SCENES_DIR = shipped_scenes()
 
@@ -134,6 +135,7 @@ class Scene:
 
     def _hashed_dict(self) -> dict[str, Any]:
         data = self.to_dict()
+        data["actuation"]["start_ramp"] = start_ramp_time(self)   # "auto" by the τ it gives: the pair's 0.0
         for section, cls in SECTIONS.items():
             for key, legacy in legacy_values(cls).items():
                 if at_legacy(data[section][key], legacy):
@@ -240,8 +242,10 @@ def scene_from_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str 
     constraints = _constraints_from_list(data.get("constraints", []), shapes, where)
     muscles = muscles_from_list(data["muscles"], sections["regions"], where) if "muscles" in data else ()
     cluster = cluster_from_table(data.get("cluster", {}), where, base_dir)
-    return Scene(name=name, description=description, source=source, base_dir=base_dir, muscles=muscles,
-                 shapes=shapes, constraints=constraints, cluster=cluster, **sections)
+    scene = Scene(name=name, description=description, source=source, base_dir=base_dir, muscles=muscles,
+                  shapes=shapes, constraints=constraints, cluster=cluster, **sections)
+    warn_abrupt_start(scene)
+    return scene
 
 
 def _plain_file_name(name: str) -> bool:

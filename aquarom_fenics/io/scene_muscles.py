@@ -2,11 +2,16 @@
 
     a_j(t) = A s_j r(t) sin(2π f_j t + φ_j)      (A, r(t) and the default f_j of [actuation])
 
+A muscle whose phase is not a multiple of 180° would start with a jump, a_j(0) = A s_j sin φ_j ≠ 0:
+``[actuation] start_ramp = "auto"`` (the default) then gives the whole gait the smooth start r(t)
+of :func:`start_ramp_time`; with every phase 0° or 180° it keeps SPEC §5's law, r = 1.
+
 A scene without ``[[muscles]]`` drives the pair ``[regions] muscles`` = [left, right] in antiphase:
 left s = 1, right s = -1 (both φ = 0), exactly the forces of the scenes written before the tables.
 """
 from __future__ import annotations
 
+import logging
 import math
 
 from aquarom_fenics.errors import InputError
@@ -227,3 +232,61 @@ def _strain_problem(scene, number, muscle, largest_scale: float) -> str:
     return (f"[actuation] amplitude = {actuation.amplitude:g}{scales(largest_scale)} with stiffness k = "
             f"{actuation.stiffness:g} Pa: {limit}; give amplitude in [0, {ceiling:.3g}) (default "
             f"{ActuationSection().amplitude:g})")
+
+
+START_RAMP_PERIODS = 0.25
+"""The automatic smooth start lasts this many periods of the slowest driven muscle: τ = 1/(4 f),
+0.25 s at 1 Hz. r(t) = sin²(π t / 2τ) then rises at most at π/(2τ) = 2π f per second, as fast as
+sin(2π f t) itself, so that the envelope loads the body no faster than the gait it starts. Measured
+on the shipped fish wave (level 1, 2 s): docs/devlog.md, "a gait that starts smoothly"."""
+
+JUMP_TOLERANCE = 1e-9
+"""A muscle starts with a jump when |sin φ_j| exceeds this (sin 180° is 1.2e-16 in floating point)."""
+
+
+def start_activation(muscle, amplitude: float) -> float:
+    """a_j(0) = A s_j sin φ_j of a muscle without smooth start (φ_j in degrees, reduced exactly first)."""
+    return amplitude * muscle.scale * math.sin(math.radians(math.fmod(muscle.phase, 360.0)))
+
+
+def abrupt_muscles(scene) -> list[tuple[int | None, MuscleSpec, float]]:
+    """(table number, muscle, a_j(0)) of each driven muscle whose activation would jump at t = 0:
+    a_j(0) = A s_j sin φ_j with |sin φ_j| > :data:`JUMP_TOLERANCE` (a phase other than 0° or 180°)."""
+    amplitude = scene.actuation.amplitude
+    return [(number, muscle, start_activation(muscle, amplitude)) for number, muscle in driven_muscles(scene)
+            if abs(math.sin(math.radians(math.fmod(muscle.phase, 360.0)))) > JUMP_TOLERANCE]
+
+
+def start_ramp_time(scene) -> float:
+    """τ [s] of the gait's smooth start r(t): ``[actuation] start_ramp`` when given; for "auto" 0 (SPEC
+    §5's law) when no driven muscle jumps at t = 0 (:func:`abrupt_muscles`), else
+    :data:`START_RAMP_PERIODS` periods of the slowest driven muscle, for every muscle of the gait (one
+    envelope keeps the wave's shape while it grows, and a(t) = A r(t) Σ_k c_k(t) P_k)."""
+    ramp = scene.actuation.start_ramp
+    if ramp != "auto":
+        return ramp
+    return _quarter_period(scene) if abrupt_muscles(scene) else 0.0
+
+
+def _quarter_period(scene) -> float:
+    """:data:`START_RAMP_PERIODS` periods 1/f_j of the slowest driven muscle [s]."""
+    slowest = min(scene.actuation.frequency if muscle.frequency is None else muscle.frequency
+                  for _, muscle in driven_muscles(scene))
+    return START_RAMP_PERIODS / slowest
+
+
+def warn_abrupt_start(scene) -> None:
+    """One warning line when the scene asks ``start_ramp = 0`` and a driven muscle jumps at t = 0 (the
+    first such muscle and its a_j(0)): the jump rings the body's stiff modes and the solver cuts its
+    steps (the shipped fish wave, level 1: 41 cut steps, 16.5 Newton iterations per step, against none
+    and 5.08 with the automatic start; docs/devlog.md)."""
+    abrupt = abrupt_muscles(scene) if scene.actuation.start_ramp == 0.0 else []
+    if not abrupt:
+        return
+    number, muscle, value = abrupt[0]
+    more = f" and {len(abrupt) - 1} more muscle(s)" if len(abrupt) > 1 else ""
+    logging.getLogger("aquarom").warning(
+        "warning: scene %s: [actuation] start_ramp = 0 and [[muscles]] %s (region '%s', phase %g°) starts with "
+        "a jump a_j(0) = %.3g%s; leave start_ramp out (\"auto\": %g s) for a smooth start",
+        scene.source, number, muscle.region, muscle.phase, value, more,
+        _quarter_period(scene))

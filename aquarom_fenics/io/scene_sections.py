@@ -69,6 +69,18 @@ def _station_count(value, where):
     raise InputError(f"{where} must be an integer number of station intervals in [2, 2000] or \"nodes\", got {value!r}")
 
 
+def _start_ramp(value, where):
+    """A time τ ≥ 0 [s] (a finite number) or the string "auto"."""
+    from aquarom_fenics.errors import InputError
+
+    if value == "auto":
+        return value
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value >= 0:
+        return float(value)
+    raise InputError(f"{where} must be a time >= 0 [s] or \"auto\" (a smooth start where a muscle would "
+                     f"start at a_j(0) != 0), got {value!r}")
+
+
 def _region_name(value, where):
     """A non-empty region name (a physical group or element set of the mesh)."""
     from aquarom_fenics.errors import InputError
@@ -149,7 +161,7 @@ class ActuationSection:
     stiffness: float = _spec(6e4, _non_negative, "muscle stiffness k [Pa]")
     amplitude: float = _spec(0.2, _non_negative, "A in a_left = A sin(2π f t), a_right = -a_left")
     frequency: float = _spec(1.0, _positive, "f [Hz]")
-    start_ramp: float = _spec(0.0, _non_negative, "τ [s] of a smooth start a(t) sin²(π t / 2τ) for t < τ; 0: SPEC's A sin(2π f t) from t = 0")
+    start_ramp: float | str = _spec("auto", None, "τ [s] of a smooth start a(t) sin²(π t / 2τ) for t < τ; 0: SPEC's A sin(2π f t) from t = 0; \"auto\": 0 when every driven muscle starts at a_j(0) = 0 (phases 0° or 180°, SPEC's law), else a quarter of the slowest muscle's period 1/(4 f) (0.25 s at 1 Hz), applied to the whole gait", coerce=_start_ramp)
     muscle_volume: str = _spec("shape", _one_of("shape", "nominal"), "muscle energy over the shape-varied (SPEC default) or nominal volume")
 
 

@@ -5,7 +5,9 @@
 over the scene's muscles j (``[[muscles]]``: region, fibre m_j, scale s_j, phase φ_j, frequency f_j;
 without them the antagonist pair (a_left, a_right) = A r(t) sin(2π f t) (1, -1)). r = 1 (SPEC) or,
 with ``[actuation] start_ramp`` τ > 0, the smooth start r(t) = sin²(π t / 2τ) for t < τ (then
-a ~ t³ at t = 0 instead of a jump of ȧ that rings the stiff modes).
+a ~ t³ at t = 0 instead of a jump of ȧ that rings the stiff modes, and a_j ~ t² instead of the jump
+a_j(0) = A s_j sin φ_j of a phase-shifted muscle). The default "auto" is τ = 0 for muscles that all
+start at zero (phases 0° or 180°: SPEC's law) and a quarter period otherwise (``start_ramp_time``).
 
 The activation law and its derivative in A are written here once, for the full and the reduced
 model. Π_act is linear in each a_j: the reduced force is -Σ_j a_j (b_j + B_j η) with b_j, B_j the
@@ -22,6 +24,7 @@ from mpi4py import MPI
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.forms.muscle import muscle_energy, muscle_energy_density
+from aquarom_fenics.io.scene_muscles import start_ramp_time
 from aquarom_fenics.physics.taylor import Taylor, stack_taylor, taylor_of
 
 LEFT, RIGHT = 1, 2
@@ -55,12 +58,13 @@ class ActivationLaw:
     @classmethod
     def of(cls, scene) -> "ActivationLaw":
         """The law of the scene's muscles (``Scene.actuated_muscles``; phases given in degrees, reduced
-        to (-360°, 360°) first, exactly: a phase of 1e300° keeps its angle, no digit is lost to 2π)."""
+        to (-360°, 360°) first, exactly: a phase of 1e300° keeps its angle, no digit is lost to 2π), with
+        the scene's smooth start τ (``start_ramp_time``: "auto" ramps a gait whose muscles would jump at t = 0)."""
         muscles, actuation = scene.actuated_muscles, scene.actuation
         return cls(tuple(muscle.scale for muscle in muscles),
                    tuple(math.radians(math.fmod(muscle.phase, 360.0)) for muscle in muscles),
                    tuple(actuation.frequency if muscle.frequency is None else muscle.frequency for muscle in muscles),
-                   actuation.start_ramp)
+                   start_ramp_time(scene))
 
     @property
     def size(self) -> int:

@@ -181,9 +181,10 @@ def test_the_pair_as_muscle_tables_swims_the_nominal_distance():
 
 
 def test_the_travelling_wave_scene_runs_with_its_full_and_reduced_model(tmp_path):
-    """scenes/wave.toml (3 pairs, 120° per pair), 0.3 s: the FOM moves it forward; the ROM, whose basis has
-    the actuation responses of the wave's two activation patterns, within 3 % of it."""
-    wave = Scene.load("wave").replace("solver", duration=0.3)
+    """scenes/wave.toml (3 pairs, 120° per pair), 0.3 s with SPEC's abrupt start (start_ramp = 0, as
+    measured): the FOM moves it forward; the ROM, whose basis has the actuation responses of the wave's
+    two activation patterns, within 3 % of it."""
+    wave = Scene.load("wave").replace("solver", duration=0.3).replace("actuation", start_ramp=0.0)
     fish = load_fish(wave)
     assert len(fish.tags.muscle_cells) == 6
     full = simulate(wave, fish=fish)
@@ -204,15 +205,15 @@ def test_the_fish_wave_scene_drives_its_three_pairs_from_the_head_to_the_tail():
 
 
 def test_the_fish_wave_scene_runs_with_its_full_and_reduced_model():
-    """scenes/fish_wave.toml over its first 0.1 s: both models complete and the fish starts to swim.
-    Its ROM is not within 3 % of the FOM (2 s: -6.0 % distance, -20 % tail amplitude; the scene's
-    comment and docs/your_own_swimmer.md), so no accuracy is asserted here."""
-    wave = Scene.load("fish_wave").replace("solver", duration=0.1)
+    """scenes/fish_wave.toml over its first 0.4 s (its automatic smooth start lasts 0.25 s): both models
+    complete and the fish starts to swim. Its ROM is not within 3 % of the FOM over 2 s (-13 % in
+    distance; the scene's comment and docs/your_own_swimmer.md), so no accuracy is asserted here."""
+    wave = Scene.load("fish_wave").replace("solver", duration=0.4)
     fish = load_fish(wave)
     full, reduced = simulate(wave, fish=fish), simulate(wave, model="rom", fish=fish)
     assert len(fish.tags.muscle_cells) == 6
     assert full.completed and reduced.completed
-    assert full.distance > 1e-4 and full.tail_amplitude > 5e-3       # measured: 0.34 mm forward, 1.04 cm
+    assert full.distance > 5e-4 and full.tail_amplitude > 1e-2       # measured: 1.01 mm forward, 1.42 cm
 
 
 def test_the_wave_basis_has_the_responses_of_each_activation_pattern():
