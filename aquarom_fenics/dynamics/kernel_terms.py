@@ -1,0 +1,220 @@
+"""The compiled kernel's linear algebra and the reduced terms but the thrust at one design: the residual
+r_r = M η̈ + C η̇ + f_int(η) + Σ_j a_j (b_j + B_j η) - f_thrust - f_drag, its tangents and ξ-derivative, as
+``batched_system.BatchedSystem`` computes them for a batch (the tests hold the two to 1e-12)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from aquarom_fenics.dynamics.compiled import jit as _jit
+from aquarom_fenics.dynamics.kernel_thrust import add_projected_force, half_forces, half_state, project_blocks
+
+
+@_jit
+def lu_factor(matrix, pivots):
+    """In-place LU with partial pivoting; False when a pivot is zero or not finite."""
+    size = matrix.shape[0]
+    for column in range(size):
+        best, row = abs(matrix[column, column]), column
+        for candidate in range(column + 1, size):
+            if abs(matrix[candidate, column]) > best:
+                best, row = abs(matrix[candidate, column]), candidate
+        if not (best > 0.0) or not math.isfinite(best):
+            return False
+        pivots[column] = row
+        if row != column:
+            for k in range(size):
+                matrix[column, k], matrix[row, k] = matrix[row, k], matrix[column, k]
+        inverse = 1.0 / matrix[column, column]
+        for below in range(column + 1, size):
+            factor = matrix[below, column] * inverse
+            matrix[below, column] = factor
+            for k in range(column + 1, size):
+                matrix[below, k] -= factor * matrix[column, k]
+    return True
+
+@_jit
+def lu_solve(factors, pivots, rhs):
+    """Solve in place for the columns of rhs (m, c) with the factors of ``lu_factor``."""
+    size, columns = rhs.shape
+    for row in range(size):
+        if pivots[row] != row:
+            for c in range(columns):
+                rhs[row, c], rhs[pivots[row], c] = rhs[pivots[row], c], rhs[row, c]
+    for c in range(columns):
+        for row in range(size):
+            total = rhs[row, c]
+            for k in range(row):
+                total -= factors[row, k] * rhs[k, c]
+            rhs[row, c] = total
+        for row in range(size - 1, -1, -1):
+            total = rhs[row, c]
+            for k in range(row + 1, size):
+                total -= factors[row, k] * rhs[k, c]
+            rhs[row, c] = total / factors[row, row]
+
+@_jit
+def between(old, new, alpha, out):
+    """x_{n+1-α} = (1 - α) x_{n+1} + α x_n (x_{n+1} itself when α = 0)."""
+    if alpha == 0.0:
+        out[:] = new
+    else:
+        for i in range(new.size):
+            out[i] = (1.0 - alpha) * new[i] + alpha * old[i]
+
+@_jit
+def monomials(eta, pairs, pair_of_triple, triples, out, tangent_out):
+    """(η; η_k η_l; η_k η_l η_n) and (1; η; η_k η_l) of ``batched_system.BatchedElastic``."""
+    m, n2 = eta.size, pairs.shape[0]
+    tangent_out[0] = 1.0
+    for k in range(m):
+        out[k] = eta[k]
+        tangent_out[1 + k] = eta[k]
+    for q in range(n2):
+        product = eta[pairs[q, 0]] * eta[pairs[q, 1]]
+        out[m + q] = product
+        tangent_out[1 + m + q] = product
+    for q in range(triples.shape[0]):
+        out[m + n2 + q] = out[m + pair_of_triple[q]] * eta[triples[q, 2]]
+
+@_jit
+def design_elastic(weights, weight_derivatives, force_coefficients, tangent_coefficients, m):
+    """F (n_mono, m), T (n_t, m m), G (p, n_mono, m) of one design: Σ_j c_j of the Taylor terms' coefficients
+    and Σ_j ∂c_j/∂ξ_k of their forces."""
+    n_terms, p = weights.size, weight_derivatives.shape[0]
+    n_mono, n_t = force_coefficients.shape[0], tangent_coefficients.shape[0]
+    force = np.zeros((n_mono, m))
+    tangent = np.zeros((n_t, m * m))
+    gradient = np.zeros((p, n_mono, m))
+    for j in range(n_terms):
+        c = weights[j]
+        for q in range(n_mono):
+            for i in range(m):
+                value = force_coefficients[q, j * m + i]
+                force[q, i] += c * value
+                for k in range(p):
+                    gradient[k, q, i] += weight_derivatives[k, j] * value
+        if c != 0.0:
+            for q in range(n_t):
+                for i in range(m * m):
+                    tangent[q, i] += c * tangent_coefficients[q, j * m * m + i]
+    return force, tangent, gradient
+
+
+@_jit
+def residual_at(eu, ev, ea, out, activations, mono, tangent_mono, pairs, pair_of_triple, triples, elastic_force,
+                mass, damping, muscle_constant, muscle_linear, has_thrust, lagrangian, rows, own_node, other_node, length,
+                rest_tangent, thrust_weights, tail_weight, state, per_mass, has_drag, drag_direction, drag_row):
+    """out = r_r = M η̈ + C η̇ + f_int(η) - f_ext at the evaluation point; (‖r‖, the force scale of Newton's
+    test max(‖f_int‖, ‖f_ext‖, ‖M η̈‖)). f_ext = -Σ_j a_j (b_j + B_j η) + f_thrust + f_drag."""
+    m = eu.size
+    monomials(eu, pairs, pair_of_triple, triples, mono, tangent_mono)
+    external = np.zeros(m)
+    if has_thrust:
+        half_state(eu, ev, ea, rows, own_node, other_node, length, rest_tangent, state)
+        tail_x, tail_y = half_forces(state, length, lagrangian, per_mass)
+        add_projected_force(per_mass, tail_x, tail_y, thrust_weights, tail_weight, rows, own_node, other_node, 1.0,
+                            external)
+    speed = 0.0
+    if has_drag:
+        for k in range(m):
+            speed += drag_row[k] * ev[k]
+    internal_force = np.dot(mono, elastic_force)        # BLAS: n_mono = m + m(m+1)/2 + m(m+1)(m+2)/6 rows
+    internal_norm, external_norm, inertia_norm, norm = 0.0, 0.0, 0.0, 0.0
+    for i in range(m):
+        internal = internal_force[i]
+        muscle = 0.0
+        for n in range(activations.size):
+            total = muscle_constant[n, i]
+            for k in range(m):
+                total += muscle_linear[n, i, k] * eu[k]
+            muscle += activations[n] * total
+        force = external[i] - muscle
+        if has_drag:
+            force += drag_direction[i] * speed * speed
+        inertia, viscous = 0.0, 0.0
+        for k in range(m):
+            inertia += mass[i, k] * ea[k]
+            viscous += damping[i, k] * ev[k]
+        out[i] = inertia + viscous + internal - force
+        internal_norm += internal * internal
+        external_norm += force * force
+        inertia_norm += inertia * inertia
+        norm += out[i] * out[i]
+    return math.sqrt(norm), math.sqrt(max(max(internal_norm, external_norm), inertia_norm))
+
+@_jit
+def tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass, damping, muscle_linear,
+                has_drag, drag_direction, drag_row, stiffness, damping_out, mass_out):
+    """(K_t, C_t, M_t) of every term but the thrust (whose blocks ``half_blocks`` gives)."""
+    m = eu.size
+    elastic = np.dot(tangent_mono, elastic_tangent)    # BLAS: (1 + m + m(m+1)/2) × m² coefficients
+    for i in range(m):
+        for k in range(m):
+            muscle = 0.0
+            for n in range(activations.size):
+                muscle += activations[n] * muscle_linear[n, i, k]
+            stiffness[i, k] = elastic[i * m + k] + muscle
+            damping_out[i, k] = damping[i, k]
+            mass_out[i, k] = mass[i, k]
+    if has_drag:
+        speed = 0.0
+        for k in range(m):
+            speed += drag_row[k] * ev[k]
+        for i in range(m):
+            for k in range(m):
+                damping_out[i, k] -= 2.0 * speed * drag_direction[i] * drag_row[k]
+
+@_jit
+def derivative_at(parameter_terms, eu, ev, ea, activations, units, mono, elastic_gradient, mass_gradient,
+                  damping_gradient, muscle_constant, muscle_linear, muscle_constant_gradient,
+                  muscle_linear_gradient, has_thrust, moving_rest, rows, own_node, other_node, rest_rows, state,
+                  per_mass, length, thrust_weights, tail_weight, thrust_weight_gradient, tail_weight_gradient,
+                  lagrangian, k_blocks, c_blocks, m_blocks, has_drag, drag_gradient, drag_row, sensitivities,
+                  amplitude_sensitivity, out):
+    """out (m, columns) = ∂r/∂ξ_k (and ∂r/∂A) at fixed (η, η̇, η̈), as ``BatchedSystem.parameter_derivative``."""
+    m = eu.size
+    p = elastic_gradient.shape[0]
+    out[:] = 0.0
+    if sensitivities and parameter_terms:
+        speed = 0.0
+        if has_drag:
+            for k in range(m):
+                speed += drag_row[k] * ev[k]
+        column = np.zeros(m)
+        tail_x, tail_y = 0.0, 0.0
+        if has_thrust:
+            tail_x, tail_y = half_forces(state, length, lagrangian, per_mass)
+        for c in range(p):
+            elastic = np.dot(mono, elastic_gradient[c])        # BLAS, as the force
+            for i in range(m):
+                total = elastic[i]
+                for n in range(activations.size):
+                    muscle = muscle_constant_gradient[c, n, i]
+                    for k in range(m):
+                        muscle += muscle_linear_gradient[c, n, i, k] * eu[k]
+                    total += activations[n] * muscle
+                for k in range(m):
+                    total += mass_gradient[c, i, k] * ea[k] + damping_gradient[c, i, k] * ev[k]
+                if has_drag:
+                    total -= drag_gradient[c, i] * speed * speed
+                out[i, c] = total
+            if has_thrust:
+                column[:] = 0.0
+                add_projected_force(per_mass, tail_x, tail_y, thrust_weight_gradient[c], tail_weight_gradient[c],
+                                    rows, own_node, other_node, -1.0, column)
+                for i in range(m):
+                    out[i, c] += column[i]
+        if has_thrust and moving_rest:
+            project_blocks(k_blocks, 4 if lagrangian else 2, rows, own_node, other_node, rest_rows, -1.0, out[:, :p])
+    if amplitude_sensitivity:
+        c = out.shape[1] - 1
+        for i in range(m):
+            total = 0.0
+            for n in range(units.size):
+                muscle = muscle_constant[n, i]
+                for k in range(m):
+                    muscle += muscle_linear[n, i, k] * eu[k]
+                total += units[n] * muscle
+            out[i, c] = total
