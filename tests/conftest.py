@@ -6,6 +6,7 @@ session, hence its own result cache; the tests marked ``mpi`` take turns (:func:
 """
 import fcntl
 import os
+import signal
 import time
 
 # One BLAS thread per process, set before numpy loads OpenBLAS: the xdist workers (and the CLI
@@ -20,6 +21,13 @@ from aquarom_fenics.io.scene import scene_from_dict  # noqa: E402
 os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
 os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
 os.environ.setdefault("OMPI_MCA_mpi_yield_when_idle", "1")   # a waiting rank yields its core to the other worker
+
+
+def pytest_configure(config):
+    """Ctrl-C as a terminal's foreground process gets it: the interrupt tests send SIGINT to the processes they
+    start, and a shell starts background jobs with SIGINT ignored, which every process started after keeps
+    (an ignored signal stays ignored across exec). The suite must answer the same however it is launched."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture(autouse=True, scope="session")
