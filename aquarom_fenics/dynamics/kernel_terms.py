@@ -103,6 +103,18 @@ def design_elastic(weights, weight_derivatives, force_coefficients, tangent_coef
 
 
 @_jit
+def muscle_force(activations, muscle_constant, muscle_linear, eta, i):
+    """Σ_j a_j (b_j + B_j η)_i: entry i of the muscles' reduced force for activations a (or of ∂/∂A for a = ∂a/∂A)."""
+    total = 0.0
+    for n in range(activations.size):
+        column = muscle_constant[n, i]
+        for k in range(eta.size):
+            column += muscle_linear[n, i, k] * eta[k]
+        total += activations[n] * column
+    return total
+
+
+@_jit
 def residual_at(eu, ev, ea, out, activations, mono, tangent_mono, pairs, pair_of_triple, triples, elastic_force,
                 mass, damping, muscle_constant, muscle_linear, has_thrust, lagrangian, rows, own_node, other_node, length,
                 rest_tangent, thrust_weights, tail_weight, state, per_mass, has_drag, drag_direction, drag_row):
@@ -124,12 +136,7 @@ def residual_at(eu, ev, ea, out, activations, mono, tangent_mono, pairs, pair_of
     internal_norm, external_norm, inertia_norm, norm = 0.0, 0.0, 0.0, 0.0
     for i in range(m):
         internal = internal_force[i]
-        muscle = 0.0
-        for n in range(activations.size):
-            total = muscle_constant[n, i]
-            for k in range(m):
-                total += muscle_linear[n, i, k] * eu[k]
-            muscle += activations[n] * total
+        muscle = muscle_force(activations, muscle_constant, muscle_linear, eu, i)
         force = external[i] - muscle
         if has_drag:
             force += drag_direction[i] * speed * speed
@@ -211,10 +218,4 @@ def derivative_at(parameter_terms, eu, ev, ea, activations, units, mono, elastic
     if amplitude_sensitivity:
         c = out.shape[1] - 1
         for i in range(m):
-            total = 0.0
-            for n in range(units.size):
-                muscle = muscle_constant[n, i]
-                for k in range(m):
-                    muscle += muscle_linear[n, i, k] * eu[k]
-                total += units[n] * muscle
-            out[i, c] = total
+            out[i, c] = muscle_force(units, muscle_constant, muscle_linear, eu, i)

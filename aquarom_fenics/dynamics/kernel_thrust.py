@@ -83,6 +83,15 @@ def add_projected_force(per_mass, tail_x, tail_y, weights, tail_weight, rows, ow
         out[k] += sign * total
 
 @_jit
+def add_block(block, sign, b00, b01, b10, b11):
+    """block (2, 2) += sign [[b00, b01], [b10, b11]]."""
+    block[0, 0] += sign * b00
+    block[0, 1] += sign * b01
+    block[1, 0] += sign * b10
+    block[1, 1] += sign * b11
+
+
+@_jit
 def half_blocks(state, length, weights, tail_weight, lagrangian, stiffness, damping, mass):
     """The Jacobian blocks of ``thrust_jacobians`` per half-segment on (o, x): stiffness and damping
     (H, 4, 2, 2) in the order (oo, ox, xo, xx), the added mass on oo only."""
@@ -127,52 +136,25 @@ def half_blocks(state, length, weights, tail_weight, lagrangian, stiffness, damp
             tail01 = scale * (v_n * tx * -vx)
             tail10 = scale * (v_n * ty * vy)
             tail11 = scale * (v_n * ty * -vx + half)
-            stiffness[h, 1, 0, 0] += tail00
-            stiffness[h, 1, 0, 1] += tail01
-            stiffness[h, 1, 1, 0] += tail10
-            stiffness[h, 1, 1, 1] += tail11
-            stiffness[h, 0, 0, 0] -= tail00
-            stiffness[h, 0, 0, 1] -= tail01
-            stiffness[h, 0, 1, 0] -= tail10
-            stiffness[h, 0, 1, 1] -= tail11
-            damping[h, 0, 0, 0] += tail_weight * v_n * tx * nx
-            damping[h, 0, 0, 1] += tail_weight * v_n * tx * ny
-            damping[h, 0, 1, 0] += tail_weight * v_n * ty * nx
-            damping[h, 0, 1, 1] += tail_weight * v_n * ty * ny
+            add_block(stiffness[h, 1], 1.0, tail00, tail01, tail10, tail11)
+            add_block(stiffness[h, 0], -1.0, tail00, tail01, tail10, tail11)
+            normal_mass = tail_weight * v_n
+            add_block(damping[h, 0], 1.0, normal_mass * tx * nx, normal_mass * tx * ny, normal_mass * ty * nx,
+                      normal_mass * ty * ny)
         if lagrangian:
             # g = w (v·n) Rᵀ v: ∂g/∂u_x = -∂g/∂u_o = (w/ℓ) (Rᵀ v)(Rᵀ v)ᵀ (front +g, own -g)
             rx, ry = vy, -vx
             scale = w / ell
             p00, p01, p11 = scale * rx * rx, scale * rx * ry, scale * ry * ry
-            stiffness[h, 0, 0, 0] += p00
-            stiffness[h, 0, 0, 1] += p01
-            stiffness[h, 0, 1, 0] += p01
-            stiffness[h, 0, 1, 1] += p11
-            stiffness[h, 1, 0, 0] -= p00
-            stiffness[h, 1, 0, 1] -= p01
-            stiffness[h, 1, 1, 0] -= p01
-            stiffness[h, 1, 1, 1] -= p11
-            stiffness[h, 2, 0, 0] -= p00
-            stiffness[h, 2, 0, 1] -= p01
-            stiffness[h, 2, 1, 0] -= p01
-            stiffness[h, 2, 1, 1] -= p11
-            stiffness[h, 3, 0, 0] += p00
-            stiffness[h, 3, 0, 1] += p01
-            stiffness[h, 3, 1, 0] += p01
-            stiffness[h, 3, 1, 1] += p11
+            for pair, sign in ((0, 1.0), (1, -1.0), (2, -1.0), (3, 1.0)):     # oo, ox, xo, xx
+                add_block(stiffness[h, pair], sign, p00, p01, p01, p11)
             # ∂g/∂v = w [Rᵀ v nᵀ + (v·n) Rᵀ], Rᵀ = [[0, 1], [-1, 0]]: own -, other +
             g00 = w * (rx * nx)
             g01 = w * (rx * ny + v_n)
             g10 = w * (ry * nx - v_n)
             g11 = w * (ry * ny)
-            damping[h, 0, 0, 0] -= g00
-            damping[h, 0, 0, 1] -= g01
-            damping[h, 0, 1, 0] -= g10
-            damping[h, 0, 1, 1] -= g11
-            damping[h, 2, 0, 0] += g00
-            damping[h, 2, 0, 1] += g01
-            damping[h, 2, 1, 0] += g10
-            damping[h, 2, 1, 1] += g11
+            add_block(damping[h, 0], -1.0, g00, g01, g10, g11)
+            add_block(damping[h, 2], 1.0, g00, g01, g10, g11)
 
 @_jit
 def project_blocks(blocks, n_pairs, rows, own_node, other_node, right, factor, out):

@@ -33,6 +33,25 @@ OK, FAILED = 0, 1
 
 
 @_jit
+def newton_matrix_into(k_u, k_v, k_a, stiffness, damping, mass, has_thrust, k_blocks, c_blocks, m_blocks, s_blocks,
+                       n_pairs, rows, own_node, other_node, out):
+    """out = S = k_u K_t + k_v C_t + k_a M_t (``reduced_dynamics.newton_matrix``): the dense tangents of every term
+    but the thrust, and the thrust's blocks combined before their one projection -Wᵀ J W."""
+    m = out.shape[0]
+    for i in range(m):
+        for k in range(m):
+            out[i, k] = k_u * stiffness[i, k] + k_v * damping[i, k] + k_a * mass[i, k]
+    if has_thrust:
+        for h in range(k_blocks.shape[0]):
+            for pair in range(4):
+                for i in range(2):
+                    for j in range(2):
+                        s_blocks[h, pair, i, j] = (k_u * k_blocks[h, pair, i, j] + k_v * c_blocks[h, pair, i, j]
+                                                   + k_a * m_blocks[h, pair, i, j])
+        project_blocks(s_blocks, n_pairs, rows, own_node, other_node, rows, -1.0, out)
+
+
+@_jit
 def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
         n_steps, h, alpha_m, alpha_f, beta, gamma, tolerance, max_iterations, contraction, per_factorization,
         floor, units, distance_mask, amplitude_mask,
@@ -121,20 +140,11 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
             if not have_factors or slow or worn:
                 tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass, damping, muscle_linear,
                             has_drag, drag_direction, drag_row, stiffness, damping_t, mass_t)
-                for i in range(m):
-                    for k in range(m):
-                        matrix[i, k] = k_u * stiffness[i, k] + k_v * damping_t[i, k] + k_a * mass_t[i, k]
                 if has_thrust:
                     half_blocks(state, length, thrust_weights, tail_weight, lagrangian, k_blocks, c_blocks,
                                 m_blocks)
-                    for hh in range(halves):
-                        for pair in range(4):
-                            for i in range(2):
-                                for j in range(2):
-                                    s_blocks[hh, pair, i, j] = (k_u * k_blocks[hh, pair, i, j]
-                                                                + k_v * c_blocks[hh, pair, i, j]
-                                                                + k_a * m_blocks[hh, pair, i, j])
-                    project_blocks(s_blocks, n_pairs, rows, own_node, other_node, rows, -1.0, matrix)
+                newton_matrix_into(k_u, k_v, k_a, stiffness, damping_t, mass_t, has_thrust, k_blocks, c_blocks,
+                                   m_blocks, s_blocks, n_pairs, rows, own_node, other_node, matrix)
                 if not lu_factor(matrix, pivots):
                     result[2] = FAILED
                     return
@@ -181,11 +191,8 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
                                   - alpha_f * stiffness[i, k] * sens[0, k, c]
                                   - alpha_m * mass_t[i, k] * sens[2, k, c])
                     thrust_rhs[i, c] = total
-            for i in range(m):
-                for k in range(m):
-                    exact[i, k] = k_u * stiffness[i, k] + k_v * damping_t[i, k] + k_a * mass_t[i, k]
             if has_thrust:
-                # the thrust's tangents -Wᵀ J W applied to the same columns, and in S
+                # the thrust's tangents -Wᵀ J W applied to the same columns
                 if alpha_f != 0.0:
                     rows_times(rows, sens[0], right)
                     project_blocks(k_blocks, n_pairs, rows, own_node, other_node, right, alpha_f, thrust_rhs)
@@ -196,14 +203,8 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
                         combination[i, c] = k_a * sens_new[0, i, c] - alpha_m * sens[2, i, c]
                 rows_times(rows, combination, right)
                 project_blocks(m_blocks, 1, rows, own_node, other_node, right, -1.0, thrust_rhs)
-                for hh in range(halves):
-                    for pair in range(4):
-                        for i in range(2):
-                            for j in range(2):
-                                s_blocks[hh, pair, i, j] = (k_u * k_blocks[hh, pair, i, j]
-                                                            + k_v * c_blocks[hh, pair, i, j]
-                                                            + k_a * m_blocks[hh, pair, i, j])
-                project_blocks(s_blocks, n_pairs, rows, own_node, other_node, rows, -1.0, exact)
+            newton_matrix_into(k_u, k_v, k_a, stiffness, damping_t, mass_t, has_thrust, k_blocks, c_blocks, m_blocks,
+                               s_blocks, n_pairs, rows, own_node, other_node, exact)
             if not lu_factor(exact, exact_pivots):
                 result[2] = FAILED
                 return
