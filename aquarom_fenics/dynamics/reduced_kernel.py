@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from aquarom_fenics.dynamics.compiled import available, jit as _jit
+from aquarom_fenics.dynamics.compiled import available, jit as _jit, refresh_stale_cache
 from aquarom_fenics.dynamics.kernel_pack import Packed, pack, synthetic
 from aquarom_fenics.dynamics.kernel_terms import (between, derivative_at, design_elastic, lu_factor, lu_solve,
                                                   residual_at, tangents_at)
@@ -280,7 +280,9 @@ def integrate_packed(packed: Packed):
 
 
 def warm_up() -> None:
-    """Compile (or load from numba's cache) the kernel's one signature on a small synthetic batch."""
+    """Compile (or load from numba's cache) the kernel's one signature on a small synthetic batch; a cache
+    compiled from other kernel sources is removed first (``compiled.refresh_stale_cache``)."""
+    refresh_stale_cache()
     distance, _, failed, _ = integrate_packed(synthetic())
     if failed.any() or not np.isfinite(distance).all():
         raise RuntimeError("the compiled reduced kernel failed on its synthetic batch")

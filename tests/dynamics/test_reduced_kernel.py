@@ -58,3 +58,31 @@ def test_an_unknown_engine_is_refused():
     scene = coarse_scene(solver={"duration": 0.1})
     with pytest.raises(ValueError, match="engine must be one of"):
         simulate_batch(None, scene, np.zeros((1, 0)), engine="fortran")
+
+
+def test_a_change_to_any_kernel_module_discards_the_cached_kernel(tmp_path):
+    """numba checks only a function's own file: the set-up's warm-up removes the kernel's cache when any of its
+    modules changed (the entry's machine code includes its callees'), and keeps it otherwise."""
+    from pathlib import Path
+
+    from aquarom_fenics.dynamics import compiled
+
+    source = Path(compiled.__file__).parent
+    for name in compiled.KERNEL_MODULES:
+        (tmp_path / f"{name}.py").write_bytes((source / f"{name}.py").read_bytes())
+    cache = tmp_path / "__pycache__"
+    cache.mkdir()
+    cached = [cache / "reduced_kernel.integrate_all-10.py311.nbi", cache / "kernel_thrust.half_blocks-5.py311.1.nbc"]
+    unrelated = cache / "batched.cpython-311.pyc"
+    for path in cached + [unrelated]:
+        path.write_bytes(b"x")
+    assert compiled.refresh_stale_cache(tmp_path)                         # no record yet: discarded
+    assert not any(path.exists() for path in cached) and unrelated.exists()
+    for path in cached:
+        path.write_bytes(b"x")
+    assert not compiled.refresh_stale_cache(tmp_path)                     # same sources: kept
+    assert all(path.exists() for path in cached)
+    thrust = tmp_path / "kernel_thrust.py"
+    thrust.write_text(thrust.read_text() + "\n# changed\n")
+    assert compiled.refresh_stale_cache(tmp_path)                         # a callee's module changed
+    assert not any(path.exists() for path in cached) and unrelated.exists()
