@@ -65,3 +65,23 @@ def assert_first_xi_derivative_matches_the_fom(scene, fish, prom):
         # z_head only moves the clamped head, where no basis vector deforms: both sides are zero.
         reference = max(np.linalg.norm(central), 1e-9 * force_scale)
         assert np.linalg.norm(derivative[k] - central) < 1e-5 * reference, name
+
+
+def max_relative_error(actual, expected) -> float:
+    """max |actual - expected| / max |expected|."""
+    return float(np.max(np.abs(np.asarray(actual) - expected)) / np.max(np.abs(expected)))
+
+
+def assert_batch_matches_single_runs(prom, scene, xis, amplitudes, batch):
+    """Each design of ``batch`` (``simulate_batch`` with sensitivities and the amplitude's) as ``simulate_reduced``
+    gives it alone, to 1e-12 relative in distance, tail amplitude and gradient."""
+    from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
+
+    assert batch.completed.all() and not batch.alone.any()
+    for b, xi in enumerate(xis):
+        single = simulate_reduced(prom, scene, xi, sensitivities=True, amplitude=amplitudes[b],
+                                  amplitude_sensitivity=True)
+        assert max_relative_error(batch.distance[b], single.distance) < 1e-12
+        assert max_relative_error(batch.tail_amplitude[b], single.tail_amplitude) < 1e-12
+        assert max_relative_error(batch.distance_gradient[b], single.distance_gradient) < 1e-12
+        assert batch.summary(b)["stop_reason"] == "completed"

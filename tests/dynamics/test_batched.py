@@ -8,7 +8,7 @@ from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
 from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.reduction.reductor import build_prom
 from conftest import coarse_scene
-from prom_checks import SO1_SHAPES
+from prom_checks import SO1_SHAPES, assert_batch_matches_single_runs, max_relative_error
 
 SHORT = {"duration": 0.4}
 
@@ -31,10 +31,6 @@ def designs(prom, count: int, seed: int = 3) -> np.ndarray:
     return prom.xi_center + prom.validity_radius * offsets
 
 
-def relative(actual, expected) -> float:
-    return float(np.max(np.abs(np.asarray(actual) - expected)) / np.max(np.abs(expected)))
-
-
 @pytest.fixture(params=ENGINES)
 def engine(request):
     if request.param == "compiled" and not reduced_kernel.available():
@@ -47,22 +43,15 @@ def test_a_batch_agrees_with_single_runs_in_distance_amplitude_and_gradient(scen
     amplitudes = scene.actuation.amplitude * np.array([1.0, 0.8, 1.1, 0.9, 1.2])
     batch = simulate_batch(prom, scene, xis, sensitivities=True, amplitudes=amplitudes, amplitude_sensitivity=True,
                            engine=engine)
-    assert batch.completed.all() and not batch.alone.any()
-    for b, xi in enumerate(xis):
-        single = simulate_reduced(prom, scene, xi, sensitivities=True, amplitude=amplitudes[b],
-                                  amplitude_sensitivity=True)
-        assert relative(batch.distance[b], single.distance) < 1e-12
-        assert relative(batch.tail_amplitude[b], single.tail_amplitude) < 1e-12
-        assert relative(batch.distance_gradient[b], single.distance_gradient) < 1e-12
-        assert batch.summary(b)["stop_reason"] == "completed"
+    assert_batch_matches_single_runs(prom, scene, xis, amplitudes, batch)
 
 
 def test_a_batch_of_one_is_the_single_run(scene, prom, engine):
     xi = designs(prom, 2)[1]
     batch = simulate_batch(prom, scene, xi[None], sensitivities=True, engine=engine)
     single = simulate_reduced(prom, scene, xi, sensitivities=True)
-    assert relative(batch.distance[0], single.distance) < 1e-12
-    assert relative(batch.distance_gradient[0], single.distance_gradient) < 1e-12
+    assert max_relative_error(batch.distance[0], single.distance) < 1e-12
+    assert max_relative_error(batch.distance_gradient[0], single.distance_gradient) < 1e-12
 
 
 def test_a_design_whose_step_fails_in_the_batch_is_integrated_alone_with_step_cutting(prom, engine):

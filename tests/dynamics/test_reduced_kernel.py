@@ -6,7 +6,7 @@ import pytest
 
 from aquarom_fenics.dynamics import reduced_kernel
 from aquarom_fenics.dynamics.batched import simulate_batch
-from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
+from prom_checks import assert_batch_matches_single_runs
 from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.reduction.reductor import build_prom
 from conftest import coarse_scene
@@ -16,10 +16,6 @@ pytestmark = pytest.mark.skipif(not reduced_kernel.available(), reason="numba is
 SHORT = {"duration": 0.3}
 MOVING_TAIL = {"xz_concave_tail": {"bounds": [-0.01, 0.2]}, "y_thin": {"bounds": [-0.15, 0.15]}}
 """Two shape parameters, the first of which moves the tail's rest stations (x and z), the second only widths."""
-
-
-def relative(actual, expected) -> float:
-    return float(np.max(np.abs(np.asarray(actual) - expected)) / np.max(np.abs(expected)))
 
 
 @pytest.mark.parametrize("fluid", [
@@ -35,13 +31,7 @@ def test_the_kernel_agrees_with_single_runs_on_each_thrust_variant(fluid):
     amplitudes = scene.actuation.amplitude * np.array([1.0, 1.1, 0.9])
     batch = simulate_batch(prom, scene, xis, sensitivities=True, amplitudes=amplitudes, amplitude_sensitivity=True,
                            engine="compiled")
-    assert batch.completed.all() and not batch.alone.any()
-    for b, xi in enumerate(xis):
-        single = simulate_reduced(prom, scene, xi, sensitivities=True, amplitude=amplitudes[b],
-                                  amplitude_sensitivity=True)
-        assert relative(batch.distance[b], single.distance) < 1e-12
-        assert relative(batch.tail_amplitude[b], single.tail_amplitude) < 1e-12
-        assert relative(batch.distance_gradient[b], single.distance_gradient) < 1e-12
+    assert_batch_matches_single_runs(prom, scene, xis, amplitudes, batch)
 
 
 def test_the_kernel_has_one_compiled_signature_for_a_real_batch_and_the_warm_up():
