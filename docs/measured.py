@@ -43,6 +43,13 @@ SOURCES = {
     "studies/so8/summary.json": "scripts/study.py --cases so8",
     "studies/so9/summary.json": "scripts/study.py --cases so9",
     "studies/co/w1_*/summary.json": "scripts/study.py --cases co",
+    "studies/so1-trust-region/summary.json": "scripts/study.py --cases so1 --methods trust-region",
+    "studies/so2-trust-region/summary.json": "scripts/study.py --cases so2 --methods trust-region",
+    "studies/so3-trust-region/summary.json": "scripts/study.py --cases so3 --methods trust-region",
+    "studies/so7-trust-region/summary.json": "scripts/study.py --cases so7 --methods trust-region",
+    "studies/so8-trust-region/summary.json": "scripts/study.py --cases so8 --methods trust-region",
+    "studies/so9-trust-region/summary.json": "scripts/study.py --cases so9 --methods trust-region",
+    "studies/co-trust-region/w1_*/summary.json": "scripts/study.py --cases co --methods trust-region",
     "so1-fom/summary.json": "the README's walkthrough: aquarom simulate so1 --level 1 --out results/so1-fom",
     "so1-compare/compare.json": "the README's walkthrough: aquarom compare so1 --level 1 … --out results/so1-compare",
     "so1-compare/prom/summary.json": "the README's walkthrough: aquarom compare so1 --level 1 … --out results/so1-compare",
@@ -98,11 +105,12 @@ def refresh(results: Path, folder: Path = SNAPSHOT, host: str | None = None) -> 
             target.parent.mkdir(parents=True, exist_ok=True)
             target.write_text(json.dumps(data, indent=1, sort_keys=False) + "\n")
             copied.append(relative)
-    if any(name.startswith("studies/co/") for name in copied):
-        kept = {name for name in copied if name.startswith("studies/co/")}
-        for stale in folder.glob("studies/co/w1_*/summary.json"):
-            if stale.relative_to(folder).as_posix() not in kept:
-                shutil.rmtree(stale.parent)
+    for sweep in ("studies/co/", "studies/co-trust-region/"):
+        if any(name.startswith(sweep) for name in copied):
+            kept = {name for name in copied if name.startswith(sweep)}
+            for stale in folder.glob(f"{sweep}w1_*/summary.json"):
+                if stale.relative_to(folder).as_posix() not in kept:
+                    shutil.rmtree(stale.parent)
     return copied
 
 
@@ -347,49 +355,66 @@ def _fom_check_time(summary: dict) -> str:
 STUDY_CASES = ("so1", "so2", "so3", "so7", "so8", "so9")
 """The shape studies on the default mesh that the studies page shows."""
 
+STUDY_METHODS = {"paper": "", "trust-region": "-trust-region"}
+"""Each optimiser's suffix of a case's folder under studies/ (``scripts/study.py --methods``)."""
+
+
+def study_summaries(case: str, folder: Path = SNAPSHOT) -> list[tuple[str, str, dict]]:
+    """(method, snapshot path, summary) of a case: the paper method's is required, the trust
+    region's shown when measured."""
+    found = []
+    for method, suffix in STUDY_METHODS.items():
+        relative = f"studies/{case}{suffix}/summary.json"
+        if method == "paper" or (folder / relative).is_file():
+            found.append((method, relative, load(relative, folder)))
+    return found
+
 
 def study_table(folder: Path = SNAPSHOT) -> str:
-    """SO1–SO3 and SO7–SO9 of ``scripts/study.py``: one row per case from its summary.json."""
+    """SO1–SO3 and SO7–SO9 of ``scripts/study.py``: one row per case and optimiser from its summary.json."""
     rows, notes = [], []
     for case in STUDY_CASES:
-        summary = load(f"studies/{case}/summary.json", folder)
-        check = summary["fom_check"]
-        optimum = ", ".join(f"{name} {value:+.3f}" for name, value in sorted(summary["optimum"].items()))
-        prom = summary["prom_distance_optimal"]
-        error = None if check["optimal_distance"] is None else prom / check["optimal_distance"] - 1.0
-        multistart = summary.get("multistart")
-        starts = "1" if multistart is None else (f"{multistart['starts']} (best {multistart['best_start']}; "
-                                                 f"{len(multistart['distinct_optima'])} distinct optima)")
-        rows.append([case.upper(), optimum, _active(summary["bounds_active"]), _stop(summary), starts,
-                     _builds(summary), f"{summary['timings']['total']:.1f}", _fom_check_time(summary),
-                     f"{cm(check['start_distance'])} → {cm(check['optimal_distance'])}",
-                     f"{cm(prom)} ({percent(error)})", "n/a" if check["ratio"] is None else f"{check['ratio']:.2f}"])
-        notes.append((f"studies/{case}/summary.json", summary))
-    header = ["case", "optimum", "active bounds", "stop (iterations)", "starts", "PROM builds (from the cache)",
+        for method, relative, summary in study_summaries(case, folder):
+            check = summary["fom_check"]
+            optimum = ", ".join(f"{name} {value:+.3f}" for name, value in sorted(summary["optimum"].items()))
+            prom = summary["prom_distance_optimal"]
+            error = None if check["optimal_distance"] is None else prom / check["optimal_distance"] - 1.0
+            multistart = summary.get("multistart")
+            starts = "1" if multistart is None else (f"{multistart['starts']} (best {multistart['best_start']}; "
+                                                     f"{len(multistart['distinct_optima'])} distinct optima)")
+            rows.append([case.upper(), method, optimum, _active(summary["bounds_active"]), _stop(summary), starts,
+                         _builds(summary), f"{summary['timings']['total']:.1f}", _fom_check_time(summary),
+                         f"{cm(check['start_distance'])} → {cm(check['optimal_distance'])}",
+                         f"{cm(prom)} ({percent(error)})", "n/a" if check["ratio"] is None else f"{check['ratio']:.2f}"])
+            notes.append((relative, summary))
+    header = ["case", "method", "optimum", "active bounds", "stop (iterations)", "starts", "PROM builds (from the cache)",
               "optimisation [s]", "FOM check [s]", "FOM start → optimal [cm]", "PROM optimal [cm] (error)", "ratio"]
     return table(header, rows) + "\n" + sources_note(notes)
 
 
 def co_table(folder: Path = SNAPSHOT) -> str:
-    """The CO Pareto sweep of ``scripts/study.py --cases co``: one row per weight w1."""
-    paths = sorted(folder.glob("studies/co/w1_*/summary.json"), key=lambda p: float(p.parent.name[3:]))
-    if not paths:
-        raise SnapshotError("docs/data/studies/co/w1_*/summary.json are missing: run `scripts/study.py --cases co` "
-                            "and `python docs/generate.py --snapshot`")
+    """The CO Pareto sweep of ``scripts/study.py --cases co``: one row per optimiser and weight w1 (the
+    trust region's when measured)."""
     rows, notes = [], []
-    for path in paths:
-        summary = json.loads(path.read_text())
-        check = summary["fom_check"]
-        optimum = dict(summary["optimum"])
-        amplitude = optimum.pop("amplitude", None)
-        shape = ", ".join(f"{name} {value:+.3f}" for name, value in sorted(optimum.items())) or "not recorded"
-        timings = summary["timings"]
-        rows.append([path.parent.name[3:], "n/a" if amplitude is None else f"{amplitude:.3f}", shape, _stop(summary),
-                     _builds(summary), f"{timings['total']:.0f} ({timings.get('tail_screens', 0):.0f})",
-                     _fom_check_time(summary), f"{cm(check['optimal_distance'])} ({cm(summary['prom_distance_optimal'])})",
-                     "n/a" if check["ratio"] is None else f"{check['ratio']:.2f}"])
-        notes.append(("studies/co/w1_*/summary.json", summary))
-    header = ["w1", "A", "shape at the optimum", "stop (iterations)", "PROM builds (from the cache)",
+    for method, suffix in STUDY_METHODS.items():
+        paths = sorted(folder.glob(f"studies/co{suffix}/w1_*/summary.json"), key=lambda p: float(p.parent.name[3:]))
+        if not paths and method == "paper":
+            raise SnapshotError("docs/data/studies/co/w1_*/summary.json are missing: run `scripts/study.py --cases co` "
+                                "and `python docs/generate.py --snapshot`")
+        for path in paths:
+            summary = json.loads(path.read_text())
+            check = summary["fom_check"]
+            optimum = dict(summary["optimum"])
+            amplitude = optimum.pop("amplitude", None)
+            shape = ", ".join(f"{name} {value:+.3f}" for name, value in sorted(optimum.items())) or "not recorded"
+            timings = summary["timings"]
+            rows.append([method, path.parent.name[3:], "n/a" if amplitude is None else f"{amplitude:.3f}", shape,
+                         _stop(summary), _builds(summary),
+                         f"{timings['total']:.0f} ({timings.get('tail_screens', 0):.0f})", _fom_check_time(summary),
+                         f"{cm(check['optimal_distance'])} ({cm(summary['prom_distance_optimal'])})",
+                         "n/a" if check["ratio"] is None else f"{check['ratio']:.2f}"])
+            notes.append((f"studies/co{suffix}/w1_*/summary.json", summary))
+    header = ["method", "w1", "A", "shape at the optimum", "stop (iterations)", "PROM builds (from the cache)",
               "optimisation [s] (of it the tail screens)", "FOM check [s]", "FOM optimal (PROM) [cm]", "ratio"]
     return table(header, rows) + "\n" + sources_note(notes)
 

@@ -7,6 +7,9 @@ reports two local optima); its row is the best FOM-verified one. Each case keeps
 <case>/study_rows.md, and summary.md gathers the rows of every case in the output folder, so
 cases run one invocation at a time (`--cases so7 so8`) land in the same table.
 
+Each case runs with both optimisers by default (`--methods paper trust-region`): the paper
+method's runs in <case>/, the trust region's in <case>-trust-region/, one table row each.
+
 The cases run one after the other; within a case the Pareto weights and the starts of a
 multi-start run on --workers local processes or on a Dask cluster (--scheduler ADDRESS,
 --scheduler-file FILE; results/studies must then be on a file system the workers share).
@@ -33,6 +36,7 @@ from aquarom_fenics.studies.study import (checkpoint_pattern, completed_summary,
 REPOSITORY = Path(__file__).resolve().parents[1]
 
 STARTS = {"so2": 3}      # [optimizer] starts per case (1 when not listed)
+METHODS = ("paper", "trust-region")
 ROWS = "study_rows.md"   # a case's table rows, inside its output folder
 HEADER = ["| case | mesh | parameters | cells | PROM dofs | builds (reused from the cache) | optimisation [s] | "
           "FOM check [s] | case wall time [s] | time per build [s] | optimum | active | stop (iterations) | starts | "
@@ -44,6 +48,9 @@ def main():
     parser.add_argument("--level", type=int, help="mesh level for every case (default: each scene's own)")
     parser.add_argument("--degree", type=int, choices=(1, 2), help="element degree for every case (default: each scene's own)")
     parser.add_argument("--cases", nargs="+", default=["so1", "so2", "so3", "co"])
+    parser.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS),
+                        help="optimisers to run each case with (default both; the paper method's runs in <case>/, "
+                             "the trust region's in <case>-trust-region/)")
     parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "studies")
     parser.add_argument("--workers", type=int, default=1,
                         help="local worker processes for a case's weights or starts (default 1: one after the other)")
@@ -70,33 +77,46 @@ def main():
     return 0
 
 
+def case_folder(case: str, method: str) -> str:
+    """A case's output folder for one optimiser: <case> (the paper method), <case>-trust-region."""
+    return case if method == "paper" else f"{case}-{method}"
+
+
 def run_cases(args, pool) -> None:
     for case in args.cases:
-        scene = Scene.load(case)
-        mesh = {name: value for name, value in (("level", args.level), ("degree", args.degree)) if value is not None}
-        scene = scene.replace("mesh", **mesh).replace("optimizer", starts=STARTS.get(case, 1))
-        started = time.perf_counter()
-        fish = load_fish(scene)
-        if scene.cooptimization.enabled:
-            points = pareto_sweep(scene, args.out / case, fish=fish, pool=pool, resume=args.resume)
-            summaries = [(f"{case} w1={point['w1']:g}", args.out / case / weight_folder(point['w1']) / "summary.json")
-                         for point in points]
-        else:
-            if not (args.resume and completed_summary(args.out / case, scene)):
-                run_optimization(scene, args.out / case, fish=fish, pool=pool,
-                                 resume=args.resume and holds_file(args.out / case, checkpoint_pattern(scene)))
-            summaries = [(case, args.out / case / "summary.json")]
-        case_time = time.perf_counter() - started
-        rows = [_row(name, scene, fish, json.loads(path.read_text()), case_time if k == 0 else None)
-                for k, (name, path) in enumerate(summaries)]
-        write_text_atomic(args.out / case / ROWS, "\n".join(rows) + "\n")
-        write_text_atomic(args.out / "summary.md", "\n".join(summary_lines(args.out)) + "\n")
+        for method in args.methods:
+            run_case(args, pool, case, method)
     print((args.out / "summary.md").read_text(), end="")
+
+
+def run_case(args, pool, case: str, method: str) -> None:
+    """One case with one optimiser: its runs, its rows (<folder>/study_rows.md) and summary.md."""
+    scene = Scene.load(case)
+    mesh = {name: value for name, value in (("level", args.level), ("degree", args.degree)) if value is not None}
+    scene = scene.replace("mesh", **mesh).replace("optimizer", starts=STARTS.get(case, 1), method=method)
+    folder = args.out / case_folder(case, method)
+    label = case if method == "paper" else f"{case} ({method})"
+    started = time.perf_counter()
+    fish = load_fish(scene)
+    if scene.cooptimization.enabled:
+        points = pareto_sweep(scene, folder, fish=fish, pool=pool, resume=args.resume)
+        summaries = [(f"{label} w1={point['w1']:g}", folder / weight_folder(point['w1']) / "summary.json")
+                     for point in points]
+    else:
+        if not (args.resume and completed_summary(folder, scene)):
+            run_optimization(scene, folder, fish=fish, pool=pool,
+                             resume=args.resume and holds_file(folder, checkpoint_pattern(scene)))
+        summaries = [(label, folder / "summary.json")]
+    case_time = time.perf_counter() - started
+    rows = [_row(name, scene, fish, json.loads(path.read_text()), case_time if k == 0 else None)
+            for k, (name, path) in enumerate(summaries)]
+    write_text_atomic(folder / ROWS, "\n".join(rows) + "\n")
+    write_text_atomic(args.out / "summary.md", "\n".join(summary_lines(args.out)) + "\n")
 
 
 def summary_lines(out: Path) -> list[str]:
     """summary.md: the header and the rows of every case folder in ``out`` (SO cases, then CO)."""
-    folders = sorted((path.parent for path in out.glob(f"*/{ROWS}")), key=lambda path: (path.name == "co", path.name))
+    folders = sorted((path.parent for path in out.glob(f"*/{ROWS}")), key=lambda path: (path.name.startswith("co"), path.name))
     lines = ["# Optimisation studies", "", *HEADER]
     lines += [row for folder in folders for row in (folder / ROWS).read_text().splitlines()]
     lines += ["", "Optimisation and FOM check (start and optimal design) are those of the reported run (of the "

@@ -79,3 +79,18 @@ def test_a_remeasurement_copied_into_the_snapshot_changes_the_table(tmp_path):
 def test_a_missing_snapshot_file_names_the_command_that_writes_it(tmp_path):
     with pytest.raises(measured.SnapshotError, match="scripts/validate.py --only stations"):
         measured.stations_table(tmp_path)
+
+
+def test_the_trust_region_rows_join_the_studies_table_once_measured(tmp_path):
+    """The studies table shows each case's trust-region run next to its paper run when its snapshot
+    exists (scripts/study.py --methods trust-region writes <case>-trust-region/)."""
+    shutil.copytree(measured.SNAPSHOT / "studies", tmp_path / "studies")
+    before = measured.study_table(tmp_path)
+    paper = json.loads((tmp_path / "studies" / "so2" / "summary.json").read_text())
+    paper.update(method="trust-region", iterations=16, prom_builds=19)
+    (tmp_path / "studies" / "so2-trust-region").mkdir()
+    (tmp_path / "studies" / "so2-trust-region" / "summary.json").write_text(json.dumps(paper))
+    after = measured.study_table(tmp_path)
+    rows = [line for line in after.splitlines() if line.startswith("| SO2 |")]
+    assert len(rows) == 2 and "| paper |" in rows[0] and "| trust-region |" in rows[1] and "19 (" in rows[1]
+    assert len(after.splitlines()) == len(before.splitlines()) + 1

@@ -37,3 +37,21 @@ def test_the_summary_gathers_every_case_folder_with_co_last_and_names_stopped_fo
     rows = [line for line in lines if line.startswith("| ") and not line.startswith("| case")]
     assert [row.split("|")[1].strip() for row in rows] == ["so1", "so3", "co w1=0.2", "co w1=0.5"]
     assert any("did not converge" in line for line in lines)
+
+
+def test_each_method_has_its_own_case_folder_and_rows(tmp_path, monkeypatch):
+    """`--methods paper trust-region` runs every case once per optimiser, into <case>/ and
+    <case>-trust-region/, the trust region's rows after the paper method's and CO's sweeps last."""
+    assert study.case_folder("so1", "paper") == "so1"
+    assert study.case_folder("so1", "trust-region") == "so1-trust-region"
+    ran = []
+    monkeypatch.setattr(study, "run_case", lambda args, pool, case, method: ran.append((case, method)))
+    (tmp_path / "summary.md").write_text("")
+    study.run_cases(SimpleNamespace(cases=["so1", "co"], methods=["paper", "trust-region"], out=tmp_path), None)
+    assert ran == [("so1", "paper"), ("so1", "trust-region"), ("co", "paper"), ("co", "trust-region")]
+    for folder in ("co-trust-region", "so1-trust-region", "co", "so1"):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / study.ROWS).write_text(f"| {folder} | x |\n")
+    rows = [line.split("|")[1].strip() for line in study.summary_lines(tmp_path)
+            if line.startswith("| ") and not line.startswith("| case")]
+    assert rows == ["so1", "so1-trust-region", "co", "co-trust-region"]
