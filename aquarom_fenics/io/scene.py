@@ -135,6 +135,8 @@ class Scene:
 
     def _hashed_dict(self) -> dict[str, Any]:
         data = self.to_dict()
+        if self.mesh_file is not None:   # the file by its name: its content is hashed (:meth:`_digest`), and
+            data["mesh"]["file"] = self.mesh_file.name   # one scene in two checkouts keeps one hash and cache
         data["actuation"]["start_ramp"] = start_ramp_time(self)   # "auto" by the τ it gives: the pair's 0.0
         for section, cls in SECTIONS.items():
             for key, legacy in legacy_values(cls).items():

@@ -358,6 +358,20 @@ def test_hash_follows_the_content_of_the_mesh_file(tmp_path):
     assert Scene.load(path).hash != before
 
 
+def test_one_scene_in_two_folders_has_one_hash(tmp_path):
+    """The mesh file enters the hash by its name and content, not by where the checkout lies: one
+    scene copied into another folder keeps its hash (and its caches)."""
+    hashes = []
+    for folder in (tmp_path / "checkout", tmp_path / "elsewhere" / "copy"):
+        folder.mkdir(parents=True)
+        write_box_inp(folder / "box.inp")
+        hashes.append(Scene.load(write_scene(folder, '[mesh]\nfile = "box.inp"\n')).hash)
+    assert hashes[0] == hashes[1]
+    Path(tmp_path / "elsewhere" / "copy" / "box.inp").rename(tmp_path / "elsewhere" / "copy" / "other.inp")
+    renamed = write_scene(tmp_path / "elsewhere" / "copy", '[mesh]\nfile = "other.inp"\n')
+    assert Scene.load(renamed).hash != hashes[0]
+
+
 def test_replace_changes_one_value_and_keeps_the_rest():
     scene = Scene.load("so1")
     finer = scene.replace("mesh", level=2)
