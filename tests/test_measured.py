@@ -85,6 +85,7 @@ def test_the_trust_region_rows_join_the_studies_table_once_measured(tmp_path):
     """The studies table shows each case's trust-region run next to its paper run when its snapshot
     exists (scripts/study.py --methods trust-region writes <case>-trust-region/)."""
     shutil.copytree(measured.SNAPSHOT / "studies", tmp_path / "studies")
+    shutil.rmtree(tmp_path / "studies" / "so2-trust-region", ignore_errors=True)
     before = measured.study_table(tmp_path)
     paper = json.loads((tmp_path / "studies" / "so2" / "summary.json").read_text())
     paper.update(method="trust-region", iterations=16, prom_builds=19)
