@@ -60,3 +60,15 @@ def test_a_new_basis_offset_is_no_loss_of_the_step_and_the_run_reaches_the_first
     assert result.converged, (result.stop_reason, result.optimality.measure, result.optimum)
     assert result.optimum == pytest.approx(space.upper, abs=1e-9)
     assert sum(row["prom"] == "rejected" for row in result.history) == 0
+
+
+def test_the_trust_box_is_capped_by_the_centre_prom_radius():
+    """A PROM whose radius ``[reduction] validity_change`` capped below the scene's bounds the trust box
+    (the CO sweep's first trust-region weight stopped on a candidate outside it); the amplitude's width stays."""
+    from types import SimpleNamespace
+
+    from aquarom_fenics.optimization.trust_region import trust_box
+
+    prom = SimpleNamespace(validity_radius=np.array([0.0186, 0.125]))
+    box = trust_box(np.array([0.125, 0.125, 0.35]), prom, 2)
+    assert np.allclose(box, [0.0186, 0.125, 0.35])
