@@ -26,8 +26,8 @@ from aquarom_fenics.io.scene_sections import (SECTIONS, ActuationSection, Coopti
                                               LinearConstraint, MaterialSection, MeshSection, MuscleSpec,
                                               OptimizerSection, OutputSection, ReductionSection, RegionsSection,
                                               ShapeSpec, SolverSection, at_legacy, legacy_values)
-from aquarom_fenics.io.scene_muscles import (check_actuation, default_muscles, muscles_from_list, start_ramp_time,
-                                             warn_abrupt_start)
+from aquarom_fenics.io.scene_muscles import (check_actuation, default_muscles, muscles_from_list, scene_vibration_modes,
+                                             start_ramp_time, warn_abrupt_start)
 
 SCENES_DIR = shipped_scenes()
 
@@ -136,6 +136,8 @@ class Scene:
     def _hashed_dict(self) -> dict[str, Any]:
         data = self.to_dict()
         data["actuation"]["start_ramp"] = start_ramp_time(self)   # "auto" by the τ it gives: the pair's 0.0
+        modes = scene_vibration_modes(self)      # "auto" by the count it gives where the scene decides it: the pair's 1
+        data["reduction"]["vibration_modes"] = data["reduction"]["vibration_modes"] if modes is None else modes
         for section, cls in SECTIONS.items():
             for key, legacy in legacy_values(cls).items():
                 if at_legacy(data[section][key], legacy):

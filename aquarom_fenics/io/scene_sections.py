@@ -81,6 +81,15 @@ def _start_ramp(value, where):
                      f"start at a_j(0) != 0), got {value!r}")
 
 
+def _mode_count(value, where):
+    """An integer n_vm in [1, MAX_VIBRATION_MODES] or the string "auto"."""
+    from aquarom_fenics.errors import InputError
+
+    if value == "auto" or (isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= MAX_VIBRATION_MODES):
+        return value
+    raise InputError(f"{where} must be in [1, {MAX_VIBRATION_MODES}] or \"auto\" (the basis follows the gait), got {value!r}")
+
+
 def _region_name(value, where):
     """A non-empty region name (a physical group or element set of the mesh)."""
     from aquarom_fenics.errors import InputError
@@ -212,7 +221,7 @@ class SolverSection:
 @dataclass(frozen=True)
 class ReductionSection:
     basis: str = _spec("default", _one_of("default", "paper"), "'paper' drops the actuation modes ψ, θ_ψ")
-    vibration_modes: int = _spec(1, lambda v: None if 1 <= v <= MAX_VIBRATION_MODES else f"must be in [1, {MAX_VIBRATION_MODES}]", "number of vibration modes n_vm")
+    vibration_modes: int | str = _spec("auto", None, f"number of vibration modes n_vm, in [1, {MAX_VIBRATION_MODES}]; \"auto\": 1 (SPEC §7) when the driven muscles move in one rhythm (the antagonist pair), else the lowest modes of the clamped body that hold as many modes in the swimming plane as the gait has muscle groups (a travelling wave over three pairs: 3, on the shipped block and fish n_vm = 4; docs/theory/basis.md)", coerce=_mode_count)
     modal_derivatives: bool = _spec(True, None, "static modal derivatives θ_ij")
     response_vectors: bool = _spec(True, None, "with basis = 'default': the static responses ψ_m to the muscles' stiffness on ψ and, with stations = \"nodes\", τ to the thrust's tail-node force")
     stroke_amplitude: float = _spec(0.0, lambda v: None if 0 <= v <= 10 else "must be in [0, 10] (0: off)", "with basis = 'default': > 0 adds the stroke vectors (docs/theory/basis.md, \"Large strokes\"): the FOM's static responses at the activations ±A_s (this A_s, e.g. the largest amplitude the model will run), the tail station's force responses and their inertia and modal-derivative terms; 0: off", legacy=0.0)

@@ -43,6 +43,8 @@ from aquarom_fenics.errors import SolverError
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.fem.linear_solver import mumps_solver, upper_triangle_copy
+from aquarom_fenics.io.scene_muscles import muscle_groups, scene_vibration_modes
+from aquarom_fenics.reduction.mode_count import candidate_count, choose_modes, lateral_shares
 from aquarom_fenics.reduction.stroke_responses import stroke_response, stroke_sensitivity
 
 log = logging.getLogger("aquarom")
@@ -141,6 +143,18 @@ def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int,
     for petsc_object in (solver, vector, mass):
         petsc_object.destroy()      # frees the factorisation and copies (not freed with the Python objects)
     return np.column_stack(modes), np.array(frequencies)
+
+
+def basis_modes(fom: FullOrderModel, stiffness: PETSc.Mat, solver: PETSc.KSP) -> tuple[np.ndarray, np.ndarray]:
+    """The basis's vibration modes and frequencies [Hz]: ``[reduction] vibration_modes`` of them, or for
+    "auto" the lowest that hold the gait's muscle groups in the swimming plane (reduction/mode_count.py)."""
+    count = scene_vibration_modes(fom.scene)
+    if count is not None:
+        return vibration_modes(fom, stiffness, count, factors=solver)
+    modes, frequencies = vibration_modes(fom, stiffness, candidate_count(muscle_groups(fom.scene)), factors=solver)
+    products = np.column_stack([fom.matvec(fom.mass_matrix, modes[:, i]) for i in range(modes.shape[1])])
+    count = choose_modes(fom.scene, modes, frequencies, lateral_shares(modes, products, fom.comm))
+    return modes[:, :count], frequencies[:count]
 
 
 def pattern_suffixes(actuation_modes: int) -> list[str]:
@@ -272,7 +286,7 @@ def _build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
     rigid = np.zeros(fom.n_owned_dofs)
     rigid[0::3] = 1.0
     candidates = [rigid]
-    modes, frequencies = vibration_modes(fom, stiffness, settings.vibration_modes, factors=solver)
+    modes, frequencies = basis_modes(fom, stiffness, solver)
     timings["vibration_modes"] = time.perf_counter() - started
     modes = [modes[:, i] / fom.norm(modes[:, i]) for i in range(modes.shape[1])]
     candidates += modes
