@@ -43,7 +43,7 @@ from aquarom_fenics.errors import SolverError
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.fem.linear_solver import mumps_solver, upper_triangle_copy
-from aquarom_fenics.io.scene_muscles import muscle_groups, scene_vibration_modes
+from aquarom_fenics.io.scene_muscles import muscle_groups, scene_vibration_modes, stroke_amplitude
 from aquarom_fenics.reduction.mode_count import candidate_count, choose_modes, lateral_shares
 from aquarom_fenics.reduction.stroke_responses import stroke_response, stroke_sensitivity
 
@@ -316,7 +316,7 @@ def _build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
     tail = static_solve(unit_tail_force(fom)) if "tail_force" in responses else None
     if tail is not None:
         candidates.append(tail)
-    strokes = stroke_labels(settings.basis == "default" and settings.stroke_amplitude > 0, actuation_modes,
+    strokes = stroke_labels(settings.basis == "default" and stroke_amplitude(fom.scene) > 0, actuation_modes,
                             fom.thrust is not None, responses, n_parameters if settings.stroke_sensitivities else 0)
     if strokes:
         candidates += stroke_vectors(fom, strokes, static_solve, variations, psi, tail)
@@ -337,7 +337,7 @@ def _build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
 def stroke_vectors(fom: FullOrderModel, labels: tuple[str, ...], static_solve, variations: _SecondVariations,
                    psi: np.ndarray, tail: np.ndarray | None) -> list[np.ndarray]:
     """The stroke vectors of item 7 named by ``labels`` (:func:`stroke_labels`), in their order."""
-    amplitude = fom.scene.reduction.stroke_amplitude
+    amplitude = stroke_amplitude(fom.scene)
     try:
         plus, minus = stroke_response(fom, amplitude), stroke_response(fom, -amplitude)
     except SolverError as error:

@@ -16,7 +16,7 @@ import numpy as np
 from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS
 from aquarom_fenics.io.paths import bench_results
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.io.scene_muscles import planned_vibration_modes
+from aquarom_fenics.io.scene_muscles import planned_vibration_modes, stroke_amplitude
 from aquarom_fenics.optimization.prom_builder import screens_tail
 from aquarom_fenics.physics.muscle import ActivationLaw
 from aquarom_fenics.reduction.basis import candidate_labels, response_labels, stroke_labels
@@ -150,7 +150,7 @@ def expected_basis(scene: Scene, parametric: bool, modes: int | None = None) -> 
     count = actuation_modes(scene) if modes is None else modes
     responses = response_labels(reduction.basis == "default" and reduction.response_vectors, count,
                                 scene.fluid.thrust)
-    responses += stroke_labels(reduction.basis == "default" and reduction.stroke_amplitude > 0, count,
+    responses += stroke_labels(reduction.basis == "default" and stroke_amplitude(scene) > 0, count,
                                scene.fluid.thrust, responses,
                                len(scene.shapes) if parametric and reduction.stroke_sensitivities else 0)
     return candidate_labels(planned_vibration_modes(scene), reduction.modal_derivatives,

@@ -1,6 +1,7 @@
-"""The basis's vibration-mode count, ``[reduction] vibration_modes = "auto"``: one mode for the
-antagonist pair (its hash and basis unchanged), for a wave of G muscle groups the lowest modes that
-hold G lateral ones (reduction/mode_count.py)."""
+"""The basis's defaults that follow the gait and the body: ``[reduction] vibration_modes = "auto"``, one
+mode for the antagonist pair (its hash and basis unchanged), for a wave of G muscle groups the lowest
+modes that hold G lateral ones (reduction/mode_count.py); ``stroke_amplitude = "auto"``, off on the
+built-in block, the largest amplitude the scene runs on a body from a mesh file."""
 import dataclasses
 
 import numpy as np
@@ -9,7 +10,7 @@ import pytest
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.io.scene import Scene, scene_from_dict
-from aquarom_fenics.io.scene_muscles import muscle_groups, planned_vibration_modes, scene_vibration_modes
+from aquarom_fenics.io.scene_muscles import muscle_groups, planned_vibration_modes, scene_vibration_modes, stroke_amplitude
 from aquarom_fenics.reduction.basis import build_basis, clamped_stiffness, vibration_modes
 from aquarom_fenics.reduction.mode_count import lateral_shares, modes_for_groups
 from conftest import coarse_scene
@@ -95,3 +96,29 @@ def test_vibration_modes_takes_a_count_or_auto(value):
     with pytest.raises(InputError, match=r'\[reduction\] vibration_modes must be in \[1, 50\] or "auto"'):
         coarse_scene(reduction={"vibration_modes": value})
     assert coarse_scene(reduction={"vibration_modes": 50}).reduction.vibration_modes == 50
+
+
+def test_auto_stroke_vectors_are_off_on_the_block_and_on_for_a_body_of_a_mesh_file():
+    from aquarom_fenics.studies.estimate import expected_basis
+
+    for name in ("nominal", "so1", "wave"):
+        scene = Scene.load(name)
+        assert scene.reduction.stroke_amplitude == "auto" and stroke_amplitude(scene) == 0.0
+        assert scene.hash == scene.replace("reduction", stroke_amplitude=0.0).hash
+        assert "stroke_plus" not in expected_basis(scene, parametric=False)
+    assert stroke_amplitude(Scene.load("co")) == 0.4 and stroke_amplitude(Scene.load("fish")) == 0.2   # their own
+    wave = Scene.load("fish_wave")
+    assert wave.mesh_file is not None and stroke_amplitude(wave) == wave.actuation.amplitude == 0.2
+    assert stroke_amplitude(wave.replace("actuation", amplitude=0.15)) == 0.15
+    assert stroke_amplitude(wave.replace("cooptimization", enabled=True, amplitude_bounds=(0.05, 0.3))) == 0.3
+    assert wave.hash == wave.replace("reduction", stroke_amplitude=0.2).hash != wave.replace("reduction", stroke_amplitude=0.0).hash
+    assert "stroke_plus" in expected_basis(wave, parametric=False)
+    assert stroke_amplitude(wave.replace("reduction", stroke_amplitude=0.0)) == 0.0
+
+
+@pytest.mark.parametrize("value", ["large", -0.1, 11, False])
+def test_stroke_amplitude_takes_an_amplitude_or_auto(value):
+    from aquarom_fenics.errors import InputError
+
+    with pytest.raises(InputError, match=r'\[reduction\] stroke_amplitude must be in \[0, 10\] \(0: off\) or "auto"'):
+        coarse_scene(reduction={"stroke_amplitude": value})
