@@ -341,8 +341,10 @@ def stroke_vectors(fom: FullOrderModel, labels: tuple[str, ...], static_solve, v
     try:
         plus, minus = stroke_response(fom, amplitude), stroke_response(fom, -amplitude)
     except SolverError as error:
-        raise SolverError(f"[reduction] stroke_amplitude = {amplitude:g}: {error}; a smaller stroke_amplitude "
-                          "(the largest amplitude the model runs) may converge") from None
+        given = (" (\"auto\": the scene's amplitude, a body from a mesh file)"
+                 if fom.scene.reduction.stroke_amplitude == "auto" else "")
+        raise SolverError(f"[reduction] stroke_amplitude = {amplitude:g}{given}: {error}; a smaller stroke_amplitude "
+                          "(the largest amplitude the model runs) may converge, 0 leaves the stroke vectors out") from None
     finally:
         fom.set_displacement(np.zeros(fom.n_owned_dofs))
         fom.muscle.set_activations(np.zeros(fom.muscle.law.size))
