@@ -22,6 +22,7 @@ from pathlib import Path
 from aquarom_fenics.api import Scene, build_prom, simulate
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.io.persistence import write_json_atomic
+from aquarom_fenics.io.scene_muscles import stroke_amplitude as resolved_stroke_amplitude
 from aquarom_fenics.io.versions import software_versions
 from aquarom_fenics.verification.compare import model_errors
 
@@ -142,7 +143,7 @@ def main():
         parser.error(str(error))
     stroke_amplitude = args.stroke_amplitude
     if stroke_amplitude is None:
-        stroke_amplitude = scene.reduction.stroke_amplitude or max(args.amplitudes)
+        stroke_amplitude = resolved_stroke_amplitude(scene) or max(args.amplitudes)
     scenes = {"without": scene.replace("reduction", stroke_amplitude=0.0)}
     if stroke_amplitude > 0:
         scenes["stroke"] = scene.replace("reduction", stroke_amplitude=stroke_amplitude)

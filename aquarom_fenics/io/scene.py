@@ -26,8 +26,8 @@ from aquarom_fenics.io.scene_sections import (SECTIONS, ActuationSection, Coopti
                                               LinearConstraint, MaterialSection, MeshSection, MuscleSpec,
                                               OptimizerSection, OutputSection, ReductionSection, RegionsSection,
                                               ShapeSpec, SolverSection, at_legacy, legacy_values)
-from aquarom_fenics.io.scene_muscles import (check_actuation, default_muscles, muscles_from_list, start_ramp_time,
-                                             warn_abrupt_start)
+from aquarom_fenics.io.scene_muscles import (check_actuation, default_muscles, muscles_from_list, scene_vibration_modes,
+                                             start_ramp_time, stroke_amplitude, warn_abrupt_start)
 
 SCENES_DIR = shipped_scenes()
 
@@ -138,6 +138,9 @@ class Scene:
         if self.mesh_file is not None:   # the file by its name: its content is hashed (:meth:`_digest`), and
             data["mesh"]["file"] = self.mesh_file.name   # one scene in two checkouts keeps one hash and cache
         data["actuation"]["start_ramp"] = start_ramp_time(self)   # "auto" by the τ it gives: the pair's 0.0
+        modes = scene_vibration_modes(self)      # "auto" by the count it gives where the scene decides it: the pair's 1
+        data["reduction"]["vibration_modes"] = data["reduction"]["vibration_modes"] if modes is None else modes
+        data["reduction"]["stroke_amplitude"] = stroke_amplitude(self)      # "auto" by its A_s: the block's 0 (legacy)
         for section, cls in SECTIONS.items():
             for key, legacy in legacy_values(cls).items():
                 if at_legacy(data[section][key], legacy):

@@ -195,7 +195,7 @@ def _check_activation_strain(scene, where: str) -> None:
         raise InputError(f"{where}: {_strain_problem(scene, *over[0], largest_scale)}")
     for key, value, on in (("[cooptimization] amplitude_bounds upper bound", scene.cooptimization.amplitude_bounds[1],
                             scene.cooptimization.enabled),
-                           ("[reduction] stroke_amplitude", scene.reduction.stroke_amplitude, True)):
+                           ("[reduction] stroke_amplitude", stroke_amplitude(scene), True)):
         if on and activation_ratio(actuation.stiffness, value, largest_scale, modulus) >= 1.0:
             raise InputError(f"{where}: {key} = {value:g}{scales(largest_scale)} with [actuation] stiffness k = "
                              f"{actuation.stiffness:g} Pa: {_limit(scene)} at that amplitude; give a value below "
@@ -290,3 +290,52 @@ def warn_abrupt_start(scene) -> None:
         "a jump a_j(0) = %.3g%s; leave start_ramp out (\"auto\": %g s) for a smooth start",
         scene.source, number, muscle.region, muscle.phase, value, more,
         _quarter_period(scene))
+
+
+MAX_AUTO_MODES = 8
+"""The most vibration modes "auto" takes (n_vm² / 2 modal derivatives follow them; a gait of more muscle
+groups gets this many, with a warning, or a number of its own in [reduction] vibration_modes)."""
+PHASE_DIGITS = 6
+"""Phases (degrees, modulo 180°) equal to this many decimals make one muscle group."""
+
+
+def muscle_groups(scene) -> int:
+    """G: the number of distinct activation rhythms of the driven muscles, a muscle's rhythm being its
+    frequency and its phase modulo 180° (a muscle in antiphase, or of scale -1, moves with its
+    partner); 0 without actuation."""
+    keys = set()
+    for _, muscle in driven_muscles(scene):
+        frequency = scene.actuation.frequency if muscle.frequency is None else muscle.frequency
+        keys.add((frequency, round(math.fmod(math.fmod(muscle.phase, 180.0) + 180.0, 180.0), PHASE_DIGITS) % 180.0))
+    return len(keys)
+
+
+def scene_vibration_modes(scene) -> int | None:
+    """n_vm as the scene alone decides it: the number given, 1 for "auto" with at most one muscle
+    group; None when "auto" is decided by the modes of the body (reduction/mode_count.py)."""
+    value = scene.reduction.vibration_modes
+    if value != "auto":
+        return int(value)
+    return 1 if muscle_groups(scene) <= 1 else None
+
+
+def planned_vibration_modes(scene) -> int:
+    """n_vm for cost estimates before any mode is computed: the scene's own, else G + 1 (the G
+    lateral modes and one out-of-plane mode among them, as on the shipped block and fish), at most
+    :data:`MAX_AUTO_MODES`."""
+    known = scene_vibration_modes(scene)
+    return known if known is not None else min(muscle_groups(scene) + 1, MAX_AUTO_MODES)
+
+
+def stroke_amplitude(scene) -> float:
+    """A_s of the stroke vectors: ``[reduction] stroke_amplitude`` when given; for "auto" 0 (off) on the
+    built-in block, whose SPEC §7 basis follows its strokes (the nominal ROM -0.06 % without them at
+    A = 0.2), and on a body from a mesh file the largest amplitude the scene runs, [actuation]
+    amplitude or with co-optimisation the upper bound of A (the fish's ROM +1.84 % without them and
+    +0.13 % with, the example swimmer of docs/your_own_swimmer.md -5.05 % and -0.24 %)."""
+    value = scene.reduction.stroke_amplitude
+    if value != "auto":
+        return value
+    if scene.mesh_file is None:
+        return 0.0
+    return scene.cooptimization.amplitude_bounds[1] if scene.cooptimization.enabled else scene.actuation.amplitude

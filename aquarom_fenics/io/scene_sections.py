@@ -81,6 +81,26 @@ def _start_ramp(value, where):
                      f"start at a_j(0) != 0), got {value!r}")
 
 
+def _mode_count(value, where):
+    """An integer n_vm in [1, MAX_VIBRATION_MODES] or the string "auto"."""
+    from aquarom_fenics.errors import InputError
+
+    if value == "auto" or (isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= MAX_VIBRATION_MODES):
+        return value
+    raise InputError(f"{where} must be in [1, {MAX_VIBRATION_MODES}] or \"auto\" (the basis follows the gait), got {value!r}")
+
+
+def _stroke(value, where):
+    """An amplitude A_s in [0, 10] (0: off) or the string "auto"."""
+    from aquarom_fenics.errors import InputError
+
+    if value == "auto":
+        return value
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and 0 <= value <= 10:
+        return float(value)
+    raise InputError(f"{where} must be in [0, 10] (0: off) or \"auto\" (on for a body from a mesh file), got {value!r}")
+
+
 def _region_name(value, where):
     """A non-empty region name (a physical group or element set of the mesh)."""
     from aquarom_fenics.errors import InputError
@@ -212,10 +232,10 @@ class SolverSection:
 @dataclass(frozen=True)
 class ReductionSection:
     basis: str = _spec("default", _one_of("default", "paper"), "'paper' drops the actuation modes ψ, θ_ψ")
-    vibration_modes: int = _spec(1, lambda v: None if 1 <= v <= MAX_VIBRATION_MODES else f"must be in [1, {MAX_VIBRATION_MODES}]", "number of vibration modes n_vm")
+    vibration_modes: int | str = _spec("auto", None, f"number of vibration modes n_vm, in [1, {MAX_VIBRATION_MODES}]; \"auto\": 1 (SPEC §7) when the driven muscles move in one rhythm (the antagonist pair), else the lowest modes of the clamped body that hold as many modes in the swimming plane as the gait has muscle groups (a travelling wave over three pairs: 3, on the shipped block and fish n_vm = 4; docs/theory/basis.md)", coerce=_mode_count)
     modal_derivatives: bool = _spec(True, None, "static modal derivatives θ_ij")
     response_vectors: bool = _spec(True, None, "with basis = 'default': the static responses ψ_m to the muscles' stiffness on ψ and, with stations = \"nodes\", τ to the thrust's tail-node force")
-    stroke_amplitude: float = _spec(0.0, lambda v: None if 0 <= v <= 10 else "must be in [0, 10] (0: off)", "with basis = 'default': > 0 adds the stroke vectors (docs/theory/basis.md, \"Large strokes\"): the FOM's static responses at the activations ±A_s (this A_s, e.g. the largest amplitude the model will run), the tail station's force responses and their inertia and modal-derivative terms; 0: off", legacy=0.0)
+    stroke_amplitude: float | str = _spec("auto", None, "with basis = 'default': > 0 adds the stroke vectors (docs/theory/basis.md, \"Large strokes\"): the FOM's static responses at the activations ±A_s (this A_s, e.g. the largest amplitude the model will run), the tail station's force responses and their inertia and modal-derivative terms; 0: off; \"auto\": off on the built-in block (SPEC §7's basis, which follows its strokes), on a body from a mesh file A_s = the largest amplitude the scene runs ([actuation] amplitude, or the upper amplitude bound of [cooptimization])", coerce=_stroke, legacy=0.0)
     stroke_sensitivities: bool = _spec(False, None, "with stroke_amplitude > 0 and a PROM: also the stroke responses' sensitivities ∂u_s(±A_s)/∂ξ_k (a forward difference of the FOM's static responses, step 1 % of the parameter's range towards the box's middle), so that the PROM's ξ-gradient follows how the large stroke changes with the shape (docs/theory/basis.md, \"The PROM's ξ-gradient with the stroke vectors\")", legacy=False)
     taylor_order: int = _spec(1, _one_of(1, 2), "order of the PROM's Taylor expansion in ξ")
     drop_tolerance: float = _spec(1e-8, _positive, "basis vectors whose remaining mass-norm is below this are dropped")

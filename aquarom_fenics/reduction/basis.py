@@ -43,6 +43,8 @@ from aquarom_fenics.errors import SolverError
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.fem.linear_solver import mumps_solver, upper_triangle_copy
+from aquarom_fenics.io.scene_muscles import muscle_groups, scene_vibration_modes, stroke_amplitude
+from aquarom_fenics.reduction.mode_count import candidate_count, choose_modes, lateral_shares
 from aquarom_fenics.reduction.stroke_responses import stroke_response, stroke_sensitivity
 
 log = logging.getLogger("aquarom")
@@ -141,6 +143,18 @@ def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int,
     for petsc_object in (solver, vector, mass):
         petsc_object.destroy()      # frees the factorisation and copies (not freed with the Python objects)
     return np.column_stack(modes), np.array(frequencies)
+
+
+def basis_modes(fom: FullOrderModel, stiffness: PETSc.Mat, solver: PETSc.KSP) -> tuple[np.ndarray, np.ndarray]:
+    """The basis's vibration modes and frequencies [Hz]: ``[reduction] vibration_modes`` of them, or for
+    "auto" the lowest that hold the gait's muscle groups in the swimming plane (reduction/mode_count.py)."""
+    count = scene_vibration_modes(fom.scene)
+    if count is not None:
+        return vibration_modes(fom, stiffness, count, factors=solver)
+    modes, frequencies = vibration_modes(fom, stiffness, candidate_count(muscle_groups(fom.scene)), factors=solver)
+    products = np.column_stack([fom.matvec(fom.mass_matrix, modes[:, i]) for i in range(modes.shape[1])])
+    count = choose_modes(fom.scene, modes, frequencies, lateral_shares(modes, products, fom.comm))
+    return modes[:, :count], frequencies[:count]
 
 
 def pattern_suffixes(actuation_modes: int) -> list[str]:
@@ -272,7 +286,7 @@ def _build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
     rigid = np.zeros(fom.n_owned_dofs)
     rigid[0::3] = 1.0
     candidates = [rigid]
-    modes, frequencies = vibration_modes(fom, stiffness, settings.vibration_modes, factors=solver)
+    modes, frequencies = basis_modes(fom, stiffness, solver)
     timings["vibration_modes"] = time.perf_counter() - started
     modes = [modes[:, i] / fom.norm(modes[:, i]) for i in range(modes.shape[1])]
     candidates += modes
@@ -302,7 +316,7 @@ def _build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
     tail = static_solve(unit_tail_force(fom)) if "tail_force" in responses else None
     if tail is not None:
         candidates.append(tail)
-    strokes = stroke_labels(settings.basis == "default" and settings.stroke_amplitude > 0, actuation_modes,
+    strokes = stroke_labels(settings.basis == "default" and stroke_amplitude(fom.scene) > 0, actuation_modes,
                             fom.thrust is not None, responses, n_parameters if settings.stroke_sensitivities else 0)
     if strokes:
         candidates += stroke_vectors(fom, strokes, static_solve, variations, psi, tail)
@@ -323,12 +337,14 @@ def _build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
 def stroke_vectors(fom: FullOrderModel, labels: tuple[str, ...], static_solve, variations: _SecondVariations,
                    psi: np.ndarray, tail: np.ndarray | None) -> list[np.ndarray]:
     """The stroke vectors of item 7 named by ``labels`` (:func:`stroke_labels`), in their order."""
-    amplitude = fom.scene.reduction.stroke_amplitude
+    amplitude = stroke_amplitude(fom.scene)
     try:
         plus, minus = stroke_response(fom, amplitude), stroke_response(fom, -amplitude)
     except SolverError as error:
-        raise SolverError(f"[reduction] stroke_amplitude = {amplitude:g}: {error}; a smaller stroke_amplitude "
-                          "(the largest amplitude the model runs) may converge") from None
+        given = (" (\"auto\": the scene's amplitude, a body from a mesh file)"
+                 if fom.scene.reduction.stroke_amplitude == "auto" else "")
+        raise SolverError(f"[reduction] stroke_amplitude = {amplitude:g}{given}: {error}; a smaller stroke_amplitude "
+                          "(the largest amplitude the model runs) may converge, 0 leaves the stroke vectors out") from None
     finally:
         fom.set_displacement(np.zeros(fom.n_owned_dofs))
         fom.muscle.set_activations(np.zeros(fom.muscle.law.size))

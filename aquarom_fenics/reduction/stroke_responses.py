@@ -9,6 +9,7 @@ import numpy as np
 
 from aquarom_fenics.errors import SolverError
 from aquarom_fenics.fem.fom import FullOrderModel
+from aquarom_fenics.io.scene_muscles import stroke_amplitude
 
 log = logging.getLogger("aquarom")
 
@@ -25,7 +26,7 @@ def stroke_sensitivity(fom: FullOrderModel, k: int, plus: np.ndarray, minus: np.
     moved_xi = fom.xi.copy()
     moved_xi[k] += step
     moved = FullOrderModel(fom.scene, fom.fish, moved_xi, comm=fom.comm)
-    activations = fom.scene.reduction.stroke_amplitude * fom.muscle.law.patterns()[0]
+    activations = stroke_amplitude(fom.scene) * fom.muscle.law.patterns()[0]
     try:
         responses = [fom.owned_values(moved.nodal_displacement(moved.static_response(*(sign * activations), start=start)))
                      for sign, start in ((1.0, plus), (-1.0, minus))]

@@ -16,6 +16,7 @@ import numpy as np
 from aquarom_fenics.geometry.block import LEVEL_TARGET_CELLS
 from aquarom_fenics.io.paths import bench_results
 from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.io.scene_muscles import planned_vibration_modes, stroke_amplitude
 from aquarom_fenics.optimization.prom_builder import screens_tail
 from aquarom_fenics.physics.muscle import ActivationLaw
 from aquarom_fenics.reduction.basis import candidate_labels, response_labels, stroke_labels
@@ -114,7 +115,7 @@ def basis_seconds(scene: Scene, cells: float, parametric: bool) -> float:
     """Estimated time [s] of the steps of a PROM build that grow with the basis: the eigensolve of the
     n_vm vibration modes (∝ n_vm × cells), the static solves of the modal derivatives (∝ their
     count × cells) and the cubic internal-force tensors (∝ m⁴ × cells), all from level-1 figures."""
-    modes = scene.reduction.vibration_modes
+    modes = planned_vibration_modes(scene)
     size = len(expected_basis(scene, parametric))
     derivatives = modes * (modes + 1) // 2 if scene.reduction.modal_derivatives else 0
     scale = QUADRATIC_COST_FACTOR[scene.mesh.degree] * cells / LEVEL_1_CELLS
@@ -149,10 +150,10 @@ def expected_basis(scene: Scene, parametric: bool, modes: int | None = None) -> 
     count = actuation_modes(scene) if modes is None else modes
     responses = response_labels(reduction.basis == "default" and reduction.response_vectors, count,
                                 scene.fluid.thrust)
-    responses += stroke_labels(reduction.basis == "default" and reduction.stroke_amplitude > 0, count,
+    responses += stroke_labels(reduction.basis == "default" and stroke_amplitude(scene) > 0, count,
                                scene.fluid.thrust, responses,
                                len(scene.shapes) if parametric and reduction.stroke_sensitivities else 0)
-    return candidate_labels(reduction.vibration_modes, reduction.modal_derivatives,
+    return candidate_labels(planned_vibration_modes(scene), reduction.modal_derivatives,
                             len(scene.shapes) if parametric else 0, count, responses)
 
 

@@ -14,6 +14,7 @@ from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.block import block_cache_path
 from aquarom_fenics.geometry.fish import planned_body
 from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.io.scene_muscles import planned_vibration_modes
 from aquarom_fenics.optimization.prom_builder import stability_plan
 from aquarom_fenics.studies.estimate import (REFERENCE_CELLS, actuation_modes, basis_seconds, expected_basis,
                                              fom_seconds, level_cells, prom_build_seconds, reduced_tensor_bytes, scene_cells, tail_screen_seconds)
@@ -67,7 +68,7 @@ def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
         lines.append("skipped: " + (", ".join(skipped) or "nothing"))
         build_time = prom_build_seconds(cells, p, degree) + basis_seconds(scene, cells, parametric)
         lines.append(f"PROM: from the PROM cache when an identical one was built before, else ~{build_time:.1f} s "
-                     f"({scene.reduction.vibration_modes} vibration mode(s) by SLEPc, "
+                     f"({planned_vibration_modes(scene)} vibration mode(s) by SLEPc, "
                      f"~{reduced_tensor_bytes(scene, parametric) / 1e6:.1f} MB of reduced tensors)")
     if command == "simulate" and model == "fom" or command == "compare":
         lines.append(f"FOM: {steps} steps of {scene.solver.time_step:g} s, ~{fom_time:.0f} s")
