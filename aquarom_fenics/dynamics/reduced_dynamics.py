@@ -233,13 +233,16 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
 
 def attach_strains(result: ReducedResult, prom: ReducedModel, scene: Scene, xi, fish=None) -> ReducedResult:
     """The run's largest principal strain (``fem/strains.py``): u = V η at the sampled steps on the
-    FOM's mesh at the design ξ, logged (a warning line above the limit); ``result.strain``."""
+    FOM's mesh at the run's design (the PROM's parameters at ξ, every other shape at the building
+    point; a ROM's design is its building point), logged (a warning line above the limit); ``result.strain``."""
     from aquarom_fenics.fem.strains import reduced_run_strains, report_strains
     from aquarom_fenics.geometry.fish import load_fish
 
     fish = fish or load_fish(scene)
     xi = prom.xi_center if xi is None else np.asarray(xi, dtype=float)
-    result.strain = reduced_run_strains(scene, fish, xi, prom.basis, result.states, result.trajectory.arrays()["time"])
+    design = prom.design_point | dict(zip(prom.shape_names, map(float, xi)))
+    result.strain = reduced_run_strains(scene, fish, design, prom.basis, result.states,
+                                        result.trajectory.arrays()["time"])
     report_strains(result.strain, warn=result.completed)
     return result
 
