@@ -27,8 +27,11 @@ from aquarom_fenics.forms.kinematics import green_lagrange_strain
 
 log = logging.getLogger("aquarom")
 
-STRAIN_LIMIT = 0.05
-"""Largest principal Green–Lagrange strain [1] up to which the SVK law is trusted (the method's 5 %)."""
+STRAIN_LIMIT = 0.10
+"""Largest principal Green–Lagrange strain [1] above which a run warns. The method justifies SVK by
+ε_max < 5 % in its nominal case; measured here (docs/theory/material-law.md) the nominal design
+reaches 9.1 % (level 1), and SVK's peak strain stays within 10 % of the Neo-Hookean FOM's up to
+about there while it falls 20-33 % short of it at 16-28 % (the SO2 optimum, the CO corner)."""
 
 STRAIN_SAMPLES = 100
 """About this many steps of a run are evaluated (every k-th step, k = ceil(n_steps / STRAIN_SAMPLES))."""
@@ -111,8 +114,8 @@ class StrainReport:
         if not self.above_limit:
             return None
         return (f"the largest principal Green-Lagrange strain, {100 * self.maximum:.1f} % at t = {self.time:.3g} s in "
-                f"the {self.region}, is above the {100 * self.limit:g} % up to which the material law is justified "
-                "(docs/theory/material-law.md)")
+                f"the {self.region}, is above {100 * self.limit:g} %, where SVK's strains part from a "
+                "Neo-Hookean law's (docs/theory/material-law.md)")
 
 
 class StrainProbe:
