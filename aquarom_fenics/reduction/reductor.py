@@ -105,7 +105,7 @@ def material_law_warning(scene: Scene) -> str | None:
         return None
     return (f"[material] law = \"{scene.material.law}\": the reduced model's internal force is the law's small-strain "
             "(SVK) expansion, exact for SVK only; on Neo-Hookean it was measured more than 3 % off the FOM's "
-            "distance at the SO1 and SO2 optima (docs/theory/material-law.md): check its results with the FOM "
+            "distance at the SO1-SO3 optima (docs/theory/material-law.md): check its results with the FOM "
             "(aquarom compare)")
 
 
