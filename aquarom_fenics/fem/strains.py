@@ -49,8 +49,21 @@ def is_sampled(step: int, n_steps: int, stride: int) -> bool:
 
 
 def largest_principal(strains: np.ndarray) -> np.ndarray:
-    """λ_max of symmetric 3×3 tensors (..., 3, 3) → (...)."""
-    return np.linalg.eigvalsh(strains)[..., -1]
+    """λ_max of symmetric 3×3 tensors (..., 3, 3) → (...), in closed form (a batched eigensolver costs
+    ten times more): with q = tr A / 3, p = √(|A - qI|² / 6) and r = det((A - qI)/p) / 2,
+
+        λ_max = q + 2 p cos(arccos(r) / 3)   (λ_max = q where p = 0)."""
+    a = np.asarray(strains, dtype=float)
+    q = np.trace(a, axis1=-2, axis2=-1) / 3.0
+    deviator = a - q[..., None, None] * np.eye(3)
+    p = np.sqrt(np.einsum("...ij,...ij->...", deviator, deviator) / 6.0)
+    safe = np.where(p > 0.0, p, 1.0)
+    b = deviator / safe[..., None, None]
+    determinant = (b[..., 0, 0] * (b[..., 1, 1] * b[..., 2, 2] - b[..., 1, 2] * b[..., 2, 1])
+                   - b[..., 0, 1] * (b[..., 1, 0] * b[..., 2, 2] - b[..., 1, 2] * b[..., 2, 0])
+                   + b[..., 0, 2] * (b[..., 1, 0] * b[..., 2, 1] - b[..., 1, 1] * b[..., 2, 0]))
+    r = np.clip(determinant / 2.0, -1.0, 1.0)
+    return q + np.where(p > 0.0, 2.0 * p * np.cos(np.arccos(r) / 3.0), 0.0)
 
 
 def region_names(scene, tags, n_cells: int) -> tuple[tuple[str, ...], np.ndarray]:
@@ -130,6 +143,7 @@ class StrainProbe:
         self.expression = fx.compile_quadrature_expression(
             green_lagrange_strain(self.displacement, shape_gradient), degree)
         self.region = np.asarray(region_of_input_cell)[fx.input_cell_indices(mesh)[self.cells]]
+        self.region_cells = [np.flatnonzero(self.region == index) for index in range(len(names))]
         self.points = fx.quadrature_points(mesh, degree)[: self.cells.size]
         self.report = StrainReport(sampling_stride(n_steps), degree, names)
         self.n_steps = n_steps
@@ -157,10 +171,9 @@ class StrainProbe:
     def sample(self, time: float) -> None:
         """Add the current displacement's ε_max (with its region and point) to the report."""
         principal = largest_principal(self.strains()) if self.cells.size else np.zeros((0, 1))
-        by_region = {}
-        for index, name in enumerate(self.names):
-            inside = principal[self.region == index]
-            by_region[name] = float(inside.max()) if inside.size else -math.inf
+        by_cell = principal.max(axis=1)
+        by_region = {name: float(by_cell[cells].max()) if cells.size else -math.inf
+                     for name, cells in zip(self.names, self.region_cells)}
         best = (-math.inf, 0, [0.0, 0.0, 0.0])
         if principal.size:
             cell, point = np.unravel_index(int(np.argmax(principal)), principal.shape)

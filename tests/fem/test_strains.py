@@ -39,6 +39,10 @@ def test_largest_principal_and_the_sampled_steps():
     strain = np.diag([0.01, -0.04, 0.03])
     rotation = np.linalg.qr(np.arange(9.0).reshape(3, 3) + np.eye(3))[0]
     assert largest_principal(rotation @ strain @ rotation.T) == pytest.approx(0.03)
+    tensors = np.random.default_rng(5).standard_normal((200, 3, 3))
+    tensors = 0.5 * (tensors + tensors.transpose(0, 2, 1))
+    tensors[0], tensors[1] = 0.02 * np.eye(3), np.diag([0.01, 0.01, -0.02])      # p = 0 and a double root
+    assert largest_principal(tensors) == pytest.approx(np.linalg.eigvalsh(tensors)[:, -1], rel=1e-9, abs=1e-12)
     assert sampling_stride(100) == 1 and sampling_stride(250) == 3
     assert [step for step in range(11) if is_sampled(step, 10, 3)] == [0, 3, 6, 9, 10]
 
