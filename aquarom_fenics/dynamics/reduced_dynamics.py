@@ -235,6 +235,8 @@ def attach_strains(result: ReducedResult, prom: ReducedModel, scene: Scene, xi, 
     """The run's largest principal strain (``fem/strains.py``): u = V η at the sampled steps on the
     FOM's mesh at the run's design (the PROM's parameters at ξ, every other shape at the building
     point; a ROM's design is its building point), logged (a warning line above the limit); ``result.strain``."""
+    from mpi4py import MPI
+
     from aquarom_fenics.fem.strains import reduced_run_strains, report_strains
     from aquarom_fenics.geometry.fish import load_fish
 
@@ -243,7 +245,8 @@ def attach_strains(result: ReducedResult, prom: ReducedModel, scene: Scene, xi, 
     design = prom.design_point | dict(zip(prom.shape_names, map(float, xi)))
     result.strain = reduced_run_strains(scene, fish, design, prom.basis, result.states,
                                         result.trajectory.arrays()["time"])
-    report_strains(result.strain, warn=result.completed)
+    if MPI.COMM_WORLD.rank == 0:
+        report_strains(result.strain, warn=result.completed)
     return result
 
 
