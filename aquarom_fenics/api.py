@@ -25,7 +25,7 @@ from mpi4py import MPI
 from aquarom_fenics.optimization.cost import CostWeights
 from aquarom_fenics.geometry.fish import Fish, load_fish
 from aquarom_fenics.reduction.prom import ReducedModel
-from aquarom_fenics.dynamics.reduced_dynamics import ReducedResult, simulate_reduced
+from aquarom_fenics.dynamics.reduced_dynamics import ReducedResult, attach_strains, simulate_reduced
 from aquarom_fenics.reduction.reductor import build_prom as _build_prom
 from aquarom_fenics.io.scene import Scene, scene_from_dict
 from aquarom_fenics.dynamics.simulate import SimulationResult, simulate_fom
@@ -68,12 +68,13 @@ def simulate(scene: Scene, xi: dict[str, float] | None = None, model: str = "fom
     if model == "fom":
         return simulate_fom(scene, xi, fish=fish, progress=False)
     if model == "rom":
-        return simulate_reduced(_build_prom(scene, xi_center=xi, fish=fish, parametric=False), scene)
+        rom = _build_prom(scene, xi_center=xi, fish=fish, parametric=False)
+        return attach_strains(simulate_reduced(rom, scene), rom, scene, None, fish)
     if model != "prom":
         raise ValueError(f"model must be 'fom', 'rom' or 'prom', got {model!r}")
     prom = prom or build_prom(scene, fish=fish)
     vector = np.array([xi.get(name, prom.design_point.get(name, 0.0)) for name in prom.shape_names])
-    return simulate_reduced(prom, scene, vector, sensitivities=sensitivities)
+    return attach_strains(simulate_reduced(prom, scene, vector, sensitivities=sensitivities), prom, scene, vector, fish)
 
 
 def optimize(scene: Scene, out_dir: str | Path, weights: CostWeights | None = None, fish: Fish | None = None,

@@ -33,6 +33,7 @@ SOURCES = {
     "validation/rom_accuracy.json": "scripts/rom_accuracy.py --meshes 2/1 2/2 2/3",
     "validation/prom_gradient.json": "scripts/validate_gradient.py --radius",
     "validation/stroke_accuracy.json": "scripts/stroke_accuracy.py",
+    "validation/material_law.json": "scripts/validate_material_law.py",
     "bench/fom.json": "scripts/bench_fom.py",
     "bench/prom.json": "scripts/bench_prom.py",
     "optimize/so1/summary.json": "aquarom optimize so1 --out results/optimize/so1 (empty cache)",
@@ -57,7 +58,8 @@ SOURCES = {
 }
 """Snapshot files (paths under ``results/`` and ``docs/data/`` alike) and the command that writes each."""
 
-PAGES = ("README.md", "docs/validation.md", "docs/studies.md", "docs/theory/stations.md", "docs/theory/basis.md")
+PAGES = ("README.md", "docs/validation.md", "docs/studies.md", "docs/theory/stations.md", "docs/theory/basis.md",
+         "docs/theory/material-law.md")
 """Files whose measured tables ``make docs`` rewrites."""
 
 MARKER = re.compile(r"(<!-- measured: (?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /measured -->)", re.S)
@@ -456,6 +458,51 @@ def stroke_table(folder: Path = SNAPSHOT) -> str:
     return table(header, rows) + "\n" + note
 
 
+def _strain(run: dict) -> str:
+    """'ε_max % (region, t s)' of a run of ``validation/material_law.json``."""
+    if run.get("max_principal_strain") is None:
+        return "n/a"
+    return f"{100 * run['max_principal_strain']:.1f} % ({run['strain_region']}, {run['strain_time']:.2f} s)"
+
+
+def _law_run(run: dict) -> str:
+    if not run.get("completed"):
+        return "stopped"
+    return f"{cm(run['distance'])} ({cm(run['tail_amplitude'])})"
+
+
+def _reduced_law_error(run: dict | None) -> str:
+    """'error (tail amplitude error)' of a reduced model against the FOM of its law."""
+    if not run:
+        return "n/a"
+    if "size" not in run:
+        return "build failed"
+    if run.get("distance_error") is None:
+        return "stopped"
+    return f"{percent(run['distance_error'])} ({percent(run['tail_amplitude_error'])})"
+
+
+def material_table(folder: Path = SNAPSHOT) -> str:
+    """SVK against Neo-Hookean on the FOM with the largest principal strains, and the reduced model's error
+    on each law (``scripts/validate_material_law.py``)."""
+    data = load("validation/material_law.json", folder)
+    rows = []
+    for case in data["cases"]:
+        svk, neo = case["svk"], case["neo-hookean"]
+        model = case.get("neo-hookean_reduced", {}).get("model", "")
+        rows.append([case["case"], _law_run(svk), _strain(svk), _law_run(neo), _strain(neo),
+                     f"{percent(case['distance_difference'])} ({percent(case['tail_amplitude_difference'])})",
+                     model.upper(), _reduced_law_error(case.get("svk_reduced")),
+                     _reduced_law_error(case.get("neo-hookean_reduced"))])
+    header = ["design", "SVK distance (tail amplitude) [cm]", "SVK ε_max (where, when)",
+              "Neo-Hookean distance (tail amplitude) [cm]", "Neo-Hookean ε_max (where, when)",
+              "Neo-Hookean − SVK", "reduced model", "its error on SVK", "its error on Neo-Hookean"]
+    note = (f"ε_max: the largest principal Green–Lagrange strain (limit {100 * data['strain_limit']:g} %); the "
+            "reduced models' errors are against the FOM of the same law. "
+            f"`{command_of('validation/material_law.json')}`. " + sources_note([("validation/material_law.json", data)]))
+    return table(header, rows) + "\n" + note
+
+
 def shape_order(scene: str, values: dict) -> list[str]:
     """The names of ``values`` in the order of the shipped scene's [shapes] (as the commands print them)."""
     from aquarom_fenics.io.scene import Scene
@@ -495,7 +542,7 @@ def walkthrough_table(folder: Path = SNAPSHOT) -> str:
 
 TABLES = {"walkthrough": walkthrough_table, "accuracy": accuracy_table, "costs": cost_table, "mesh-convergence": mesh_table,
           "station-convergence": stations_table, "studies": study_table, "studies-co": co_table,
-          "stroke-accuracy": stroke_table}
+          "stroke-accuracy": stroke_table, "material-law": material_table}
 
 
 # ---------------------------------------------------------------- the pages

@@ -48,6 +48,8 @@ def run_simulate(args, scene, xi) -> int:
         raise SolverError(f"{result.error}; partial trajectory in {out / 'trajectory.csv'}")
     say(f"{scene.name} ({args.model}): distance {100 * result.distance:.3f} cm, tail amplitude "
         f"{100 * result.tail_amplitude:.3f} cm, {result.wall_time:.2f} s on {MPI.COMM_WORLD.size} rank(s)")
+    if result.strain is not None:
+        say(f"{scene.name} ({args.model}): {result.strain.line()}")
     written = sorted(path.name for path in out.iterdir() if path.is_file()) if MPI.COMM_WORLD.rank == 0 else []
     say(f"outputs in {shown(args, out)}/ ({', '.join(written)})")
     return 0
@@ -97,7 +99,7 @@ def build_command_on_refusal(scene, design: dict):
 
 def run_reduced_model(scene, xi: dict, model: str, prom_file: Path | None, out: Path):
     """Simulate the ROM or PROM at the design and write its run outputs to ``out``."""
-    from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
+    from aquarom_fenics.dynamics.reduced_dynamics import attach_strains, simulate_reduced
     from aquarom_fenics.geometry.fish import load_fish
     from aquarom_fenics.io.run_outputs import write_run_outputs
     from aquarom_fenics.io.xdmf import cell_regions
@@ -106,6 +108,7 @@ def run_reduced_model(scene, xi: dict, model: str, prom_file: Path | None, out: 
     xi_vector = np.array([xi.get(name, reduced.design_point.get(name, 0.0)) for name in reduced.shape_names])
     result = simulate_reduced(reduced, scene, xi_vector)
     fish = load_fish(scene)
+    attach_strains(result, reduced, scene, xi_vector, fish)
     if MPI.COMM_WORLD.rank == 0:
         design = reduced.design_point | xi
         vertices = fish.nodes.n_vertices
@@ -174,4 +177,7 @@ def run_compare(args, scene, xi) -> int:
     say(f"{scene.name} at {at}: distance FOM {100 * full.distance:.3f} cm, "
         f"{args.model.upper()} {100 * reduced.distance:.3f} cm ({100 * errors['distance_relative']:+.2f} %); "
         f"tail amplitude {100 * errors['tail_amplitude_relative']:+.2f} %; outputs in {shown(args, out)}/")
+    for name, result in (("fom", full), (args.model, reduced)):
+        if result.strain is not None:
+            say(f"{scene.name} ({name}): {result.strain.line()}")
     return 0

@@ -147,10 +147,11 @@ class ReducedResult:
     sensitivities: np.ndarray | None = None       # (n_samples, m, p) dη/dξ
     distance_gradient: np.ndarray | None = None   # (p,) dd/dξ
     timings: dict = field(default_factory=dict)
+    strain: object = None                         # StrainReport of fem/strains.py, for a single run
 
     def summary(self) -> dict:
         iterations = np.asarray(self.trajectory.newton_iterations[1:])
-        return {"distance": self.distance, "tail_amplitude": self.tail_amplitude, "completed": self.completed,
+        return {"strain": self.strain.as_dict() if self.strain is not None else None, "distance": self.distance, "tail_amplitude": self.tail_amplitude, "completed": self.completed,
                 "error": self.error, "stop_reason": self.error or "completed", "wall_time": self.wall_time,
                 "steps": len(self.trajectory) - 1, "cut_steps": self.cut_steps,
                 "mean_newton_iterations": float(iterations.mean()) if iterations.size else None,
@@ -227,6 +228,25 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
             weights_gradient = np.vstack([weights_gradient, np.zeros(m)])
         result.distance_gradient = distance_gradient(system, arrays["time"], result.states, result.sensitivities,
                                                      weights_gradient)
+    return result
+
+
+def attach_strains(result: ReducedResult, prom: ReducedModel, scene: Scene, xi, fish=None) -> ReducedResult:
+    """The run's largest principal strain (``fem/strains.py``): u = V η at the sampled steps on the
+    FOM's mesh at the run's design (the PROM's parameters at ξ, every other shape at the building
+    point; a ROM's design is its building point), logged (a warning line above the limit); ``result.strain``."""
+    from mpi4py import MPI
+
+    from aquarom_fenics.fem.strains import reduced_run_strains, report_strains
+    from aquarom_fenics.geometry.fish import load_fish
+
+    fish = fish or load_fish(scene)
+    xi = prom.xi_center if xi is None else np.asarray(xi, dtype=float)
+    design = prom.design_point | dict(zip(prom.shape_names, map(float, xi)))
+    result.strain = reduced_run_strains(scene, fish, design, prom.basis, result.states,
+                                        result.trajectory.arrays()["time"])
+    if MPI.COMM_WORLD.rank == 0:
+        report_strains(result.strain, warn=result.completed)
     return result
 
 

@@ -16,6 +16,7 @@ from aquarom_fenics.dynamics.diagnostics import newton_failure_hints, scene_warn
 from aquarom_fenics.errors import InputError, Terminated
 from aquarom_fenics.geometry.fish import Fish, load_fish
 from aquarom_fenics.fem.fom import FullOrderModel
+from aquarom_fenics.fem.strains import StrainProbe, StrainReport, report_strains
 from aquarom_fenics.dynamics.integrator import IntegrationStopped, NewtonSettings, StepReport, integrate
 from aquarom_fenics.io.tables import TrajectoryCSV
 from aquarom_fenics.io.stop_signals import stop_between_steps, stop_for
@@ -45,10 +46,11 @@ class SimulationResult:
     timings: dict = field(default_factory=dict)
     states: list = field(default_factory=list)    # owned (u, u̇, ü) per stored sample, when asked for
     model: FullOrderModel | None = None
+    strain: StrainReport | None = None            # the largest principal strain over the run (fem/strains.py)
 
     def summary(self) -> dict:
         iterations = np.asarray(self.trajectory.newton_iterations[1:])
-        return {"distance": self.distance, "tail_amplitude": self.tail_amplitude, "completed": self.completed,
+        return {"strain": self.strain.as_dict() if self.strain is not None else None, "distance": self.distance, "tail_amplitude": self.tail_amplitude, "completed": self.completed,
                 "error": self.error, "stop_reason": self.error or "completed", "wall_time": self.wall_time,
                 "cells": self.n_cells, "dofs": self.n_dofs, "steps": len(self.trajectory) - 1,
                 "cut_steps": self.cut_steps,
@@ -87,6 +89,7 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
     for warning in scene_warnings(scene, fish):
         log.warning("scene %s: %s", scene.source, warning)
     model = FullOrderModel(scene, fish, xi, moved_mesh=moved_mesh, comm=comm)
+    probe = StrainProbe.of_model(model, n_steps)
     setup_time = clock.perf_counter() - started
     log.info("FOM: %d cells, %d dofs, %d steps of %g s (set-up %.2f s)", model.n_cells, model.n_global_dofs,
              n_steps, scene.solver.time_step, setup_time)
@@ -103,6 +106,7 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
         factorizations += report.factorizations
         values = model.observables(u)
         trajectory.append(report.time, values["head_x"], values["tail_y"], values["com_x"], report.iterations)
+        probe.observe(report.step, report.time, u)
         if csv:
             csv.write(report.time, values["head_x"], values["tail_y"], values["com_x"], report.iterations)
         if keep_states:
@@ -149,7 +153,9 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
         n_dofs=model.n_global_dofs, error=error, cut_steps=cut_steps, factorizations=factorizations,
         timings={"setup": setup_time, "time_integration": clock.perf_counter() - started - setup_time,
                  "newton": model.profile.as_dict()},
-        states=states, model=model)
+        states=states, model=model, strain=probe.report if probe.report.times else None)
+    if result.strain is not None and comm.rank == 0:
+        report_strains(result.strain, warn=completed)
     if is_writer:
         vertices = fish.nodes.n_vertices
         write_run_outputs(Path(out_dir), scene, result, "fom", dict(zip(fish.shape_names, fish.parameter_vector(xi))),

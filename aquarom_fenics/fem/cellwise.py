@@ -6,7 +6,9 @@ w_cq = |det J_c| ω_q det F_1(x_cq) (ω_q the reference weights). At every quadr
 
     E_s(η) = Σ_j e_sj η_j + ½ Σ_jk q_sjk η_j η_k,
 
-and the energy density ψ(E) = ½ E:ℂ_s:E is a quadratic form of E. The coefficients e, q are
+and the energy density ψ(E) = ½ E:ℂ_s:E is a quadratic form of E (the SVK law; of a Neo-Hookean
+scene its second-order expansion at E = 0, ``small_strain_energy_density``, so that its reduced
+model is SVK's: exact for SVK only). The coefficients e, q are
 obtained by evaluating the UFL strain of ``forms/`` at the quadrature points for u = ±V_j and
 u = V_j + V_k, and ℂ_s by evaluating the UFL energy density at unit strains: the physics stays in
 the forms, this module only samples and contracts. Sampling at the FOM's own quadrature points
@@ -27,7 +29,7 @@ import ufl
 from mpi4py import MPI
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
-from aquarom_fenics.forms.elasticity import svk_energy_density
+from aquarom_fenics.forms.elasticity import small_strain_energy_density
 from aquarom_fenics.forms.kinematics import green_lagrange_strain, volume_ratio
 
 # Orthonormal basis of symmetric 3×3 tensors: E = Σ_a s_a B_a with s_a = E:B_a.
@@ -79,8 +81,8 @@ class CellSampler:
             _flat(strain) + [value for direction in self.parameter_directions
                              for value in _flat(fom.shape_derivative(strain, direction))]))
         self.unit_strain = fx.tensor_constant(fom.mesh, (3, 3))
-        self.energy_density = self._compile(svk_energy_density(
-            self.unit_strain, fom.elastic.young_modulus, fom.elastic.poisson_ratio))
+        self.energy_density = self._compile(small_strain_energy_density(
+            fom.elastic.law, self.unit_strain, fom.elastic.young_modulus, fom.elastic.poisson_ratio))
 
     def _compile(self, expression):
         return fx.compile_quadrature_expression(expression, self.degree)

@@ -21,7 +21,8 @@ from aquarom_fenics.io.persistence import write_json_atomic, write_npz_atomic
 
 
 RUN_SUMMARY_UNITS = {"distance": "m", "tail_amplitude": "m", "wall_time": "s", "timings": "s",
-                     "build_timings": "s", "peak_memory_mb": "MB", "xi": "1 (shape parameters are dimensionless)"}
+                     "build_timings": "s", "peak_memory_mb": "MB", "xi": "1 (shape parameters are dimensionless)",
+                     "strain": "1 (Green-Lagrange strain); its time in s, its point in m (mesh coordinates)"}
 """The ``units`` block of a run's summary.json: every dimensional key and its SI unit."""
 
 DISPLACEMENT_FILE = "displacement.npz"

@@ -151,6 +151,7 @@ class MaterialSection:
     rayleigh_alpha: float = _spec(3.1, _non_negative, "α_R [1/s] in C = α_R M + β_R K_0")
     rayleigh_beta: float = _spec(6.3e-6, _non_negative, "β_R [s]")
     mass: str = _spec("consistent", _one_of("consistent", "lumped"), "mass matrix")
+    law: str = _spec("svk", _one_of("svk", "neo-hookean"), "the elastic energy ψ: \"svk\" (Saint Venant-Kirchhoff, ψ = ½ λ (tr E)² + μ E:E, SPEC §5) or \"neo-hookean\" (compressible, ψ = μ/2 (I₁ - 3) - μ ln J + λ/2 (ln J)², the same λ, μ); the FOM uses the law, a ROM or PROM its small-strain (SVK) expansion, which is exact for \"svk\" only (docs/theory/material-law.md)", legacy="svk")
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,5 @@
-"""Elastic force (SPEC §5): f_int = ∂Π/∂u of the Saint Venant-Kirchhoff energy of ``forms/elasticity.py``.
+"""Elastic force (SPEC §5): f_int = ∂Π/∂u of the energy of ``forms/elasticity.py`` (the scene's
+``[material] law``: Saint Venant-Kirchhoff, or Neo-Hookean on the FOM).
 
 On the FOM the energy is assembled as a UFL form; its reduction samples the same forms at the
 quadrature points (``fem/cellwise.py``, SPEC §8) into the force tensors of
@@ -21,7 +22,7 @@ from aquarom_fenics.physics.taylor import Taylor
 
 
 class ElasticTerm:
-    """The SVK energy of one FOM (stiffer head cells), its force and tangent forms."""
+    """The elastic energy of one FOM (stiffer head cells), its force and tangent forms."""
 
     def __init__(self, fom):
         self.fom = fom
@@ -31,8 +32,9 @@ class ElasticTerm:
         self.young_modulus = fom.cell_field(stiffness_by_cell, "young_modulus")
         self.poisson_ratio = fx.constant(fom.mesh, material.poisson_ratio)
         u = fom.displacement
+        self.law = material.law
         self.energy_form = fom.stiffness_rule(strain_energy(u, fom.shape_gradients["stiffness"],
-                                                            self.young_modulus, self.poisson_ratio))
+                                                            self.young_modulus, self.poisson_ratio, self.law))
         self.force_form = ufl.derivative(self.energy_form, u, fom.test_function)
         self.tangent_form = ufl.derivative(self.force_form, u, fom.trial_function)
         self._energy = fx.compile_form(self.energy_form)

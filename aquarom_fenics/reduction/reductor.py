@@ -37,6 +37,9 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
     timings = {}
     fish = fish or load_fish(scene, comm)
     xi_center = fish.parameter_vector(xi_center)
+    warning = material_law_warning(scene)
+    if warning:
+        log.warning("%s", warning)
     fom = FullOrderModel(scene, fish, xi_center, comm=comm)
     timings["fom_setup"] = time.perf_counter() - started
     p = len(fish.shape_names) if parametric else 0
@@ -91,6 +94,19 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
         observation=observation, cells=fom.n_cells, dofs=fom.n_global_dofs, timings=timings)
     fom.destroy()
     return prom
+
+
+def material_law_warning(scene: Scene) -> str | None:
+    """One line for a reduced model of a law its polynomial tensors do not represent exactly: the
+    internal force is sampled from the law's small-strain expansion (``fem/cellwise.py``), which is the
+    law itself for SVK only; on Neo-Hookean scenes the reduced models were measured more than 3 % from
+    the FOM's distance (docs/theory/material-law.md). None for SVK."""
+    if scene.material.law == "svk":
+        return None
+    return (f"[material] law = \"{scene.material.law}\": the reduced model's internal force is the law's small-strain "
+            "(SVK) expansion, exact for SVK only; on Neo-Hookean it was measured more than 3 % off the FOM's "
+            "distance at the SO1-SO3 optima (docs/theory/material-law.md): check its results with the FOM "
+            "(aquarom compare)")
 
 
 def validity_radii(scene: Scene, elastic, inertia, p: int) -> np.ndarray:

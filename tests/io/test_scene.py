@@ -301,7 +301,7 @@ def test_a_key_added_later_keeps_the_hash_of_the_scenes_before_it_at_its_legacy_
     data["actuation"]["start_ramp"] = 0.0          # "auto" is hashed as the τ it gives: the pair's 0
     data["reduction"]["vibration_modes"] = 1       # "auto" is hashed as the mode count it gives: the pair's 1
     for section, key in (("mesh", "axis"), ("mesh", "head_end"), ("regions", "head"), ("regions", "muscles"),
-                         ("regions", "muscle_pairs")):   # later keys at their legacy values
+                         ("regions", "muscle_pairs"), ("material", "law")):   # later keys at their legacy values
         del data[section][key]
     for key, legacy in legacy_values(ReductionSection).items():    # the CO scene sets some of them
         if data["reduction"][key] == legacy:
@@ -324,7 +324,7 @@ def test_the_region_axis_and_head_end_keys_keep_the_hashes_of_the_scenes_before_
     scene = Scene.load("nominal")
     data = scene.to_dict()
     for section, key in (("mesh", "axis"), ("mesh", "head_end"), ("regions", "head"), ("regions", "muscles"),
-                         ("regions", "muscle_pairs"), ("reduction", "stroke_amplitude"),
+                         ("regions", "muscle_pairs"), ("material", "law"), ("reduction", "stroke_amplitude"),
                          ("reduction", "validity_change"), ("reduction", "stroke_sensitivities")):   # later keys at their legacy values
         del data[section][key]
     data["actuation"]["start_ramp"] = 0.0          # "auto" is hashed as the τ it gives: the pair's 0
@@ -337,6 +337,20 @@ def test_the_region_axis_and_head_end_keys_keep_the_hashes_of_the_scenes_before_
                             ("mesh", {"head_end": "-x"}), ("mesh", {"axis": "y", "head_end": "+y"})):
         changed = scene.replace(section, **values)
         assert changed.hash != scene.hash and changed.fom_hash != scene.fom_hash
+
+
+def test_the_material_law_is_checked_and_svk_keeps_the_hash_of_the_scenes_before_it():
+    """[material] law came after scenes were hashed: "svk", written out or not, leaves the hash as it was."""
+    from aquarom_fenics.io.scene_sections import MaterialSection, legacy_values
+
+    assert legacy_values(MaterialSection) == {"law": "svk"}
+    scene = Scene.load("nominal")
+    assert scene.material.law == "svk" and scene.replace("material", law="svk").hash == scene.hash
+    neo_hookean = scene.replace("material", law="neo-hookean")
+    assert neo_hookean.hash != scene.hash and neo_hookean.fom_hash != scene.fom_hash
+    assert 'law = "neo-hookean"' in neo_hookean.to_toml()
+    with pytest.raises(InputError, match=r"\[material\] law = 'mooney' must be one of 'svk', 'neo-hookean'"):
+        scene.replace("material", law="mooney")
 
 
 @pytest.mark.parametrize("table, message", [
