@@ -73,19 +73,15 @@ def calibrate_inputs(args):
 
 @checked(calibrate_inputs)
 def run_calibrate(args, scene, xi) -> int:
-    from aquarom_fenics.calibration.fit import FitSettings, calibrate, refine_on_fom, statistics
-    from aquarom_fenics.calibration.parameters import OBSERVED
+    from aquarom_fenics.calibration.fit import FitSettings
+    from aquarom_fenics.calibration.models import CalibrationModels, fit_swim
     from aquarom_fenics.calibration.report import write_outputs
 
     data, (keys, start, bounds) = vars(args).pop("swim"), vars(args).pop("fit_plan")
     out = claim_output(args, args.out or Path("results") / "calibrate" / scene.name)
     settings = FitSettings(max_iterations=args.max_iterations)
     models = CalibrationModels(scene, run_design(scene, xi), data, keys, settings, not args.no_progress)
-    columns = [OBSERVED.index(name) for name in data.observables]
-    result = calibrate(data, columns, keys, start, bounds, models.build, settings, models.reporter(data, "PROM"))
-    result = refine_on_fom(data, result, bounds, models.fom, models.prom_jacobian, report=models.reporter(data, "FOM"))
-    stats = statistics(result)
-    fom = models.fom_check(result.values)
+    result, stats, fom = fit_swim(models, start, bounds, reporter(keys, data, "PROM"), reporter(keys, data, "FOM"))
     write_outputs(out, scene, args.data, data, result, stats, fom, settings)
     for key, value, (low, high) in zip(keys, result.values, stats.ci95):
         say(f"{key} = {value:.6g}, 95 % interval [{low:.6g}, {high:.6g}]")
@@ -100,65 +96,10 @@ def run_calibrate(args, scene, xi) -> int:
     return 0
 
 
-class CalibrationModels:
-    """The PROM (rebuilt when a parameter moved beyond the settings' fraction) and the FOM of a calibration."""
-
-    def __init__(self, scene, design: dict, data, keys: list[str], settings, progress: bool):
-        from aquarom_fenics.geometry.fish import load_fish
-
-        self.scene, self.design, self.data, self.keys = scene, design, data, keys
-        self.settings, self.progress = settings, progress
-        self.fish = load_fish(scene)
-        self.prom = self.built = self.built_at = None
-        self.last_fom = None
-
-    def build(self, values: dict):
-        """(PROM, scene it was built on) at ``values``."""
-        from aquarom_fenics.calibration.parameters import with_values
-        from aquarom_fenics.reduction.reductor import build_prom
-
-        self.built = with_values(self.scene, values)
-        self.prom = build_prom(self.built, xi_center=self.design, fish=self.fish, parametric=False)
-        self.built_at = np.array(list(values.values()), dtype=float)
-        return self.prom, self.built
-
-    def prom_run(self, theta: np.ndarray):
-        """The PROM's observed points (n, k) and Jacobian (n k, q) at the data's times, at θ."""
-        from aquarom_fenics.calibration.fit import sample_at
-        from aquarom_fenics.calibration.parameters import OBSERVED, simulate_parameters
-
-        if np.any(np.abs(theta - self.built_at) > self.settings.rebuild_fraction * np.abs(self.built_at)):
-            self.build(dict(zip(self.keys, theta)))
-        swim = simulate_parameters(self.prom, self.built, dict(zip(self.keys, theta)))
-        model, derivative = sample_at(swim, self.data.time, [OBSERVED.index(name) for name in self.data.observables])
-        return model, derivative.reshape(-1, len(self.keys))
-
-    def prom_jacobian(self, theta: np.ndarray) -> np.ndarray:
-        return self.prom_run(theta)[1]
-
-    def fom(self, theta: np.ndarray) -> np.ndarray:
-        """The FOM's observed points at the data's times at θ (kept for the check of the last point)."""
-        from aquarom_fenics.calibration.parameters import with_values
-        from aquarom_fenics.calibration.report import fom_model
-
-        run, model = fom_model(with_values(self.scene, dict(zip(self.keys, theta))), self.design, self.fish,
-                               self.data, self.progress)
-        self.last_fom = (theta.copy(), run, model)
-        return model
-
-    def fom_check(self, theta: np.ndarray) -> dict:
-        """The FOM record at θ (its last run there, or a new one) with the PROM's distance from it."""
-        from aquarom_fenics.calibration.report import fom_record
-
-        if self.last_fom is None or not np.array_equal(self.last_fom[0], theta):
-            self.fom(theta)
-        _, run, model = self.last_fom
-        return fom_record(run, model, self.prom_run(theta)[0], self.data)
-
-    def reporter(self, data, model: str):
-        """One line per iteration: the model, the residual RMS and θ."""
-        def report(iteration: int, cost: float, values: np.ndarray):
-            shown_values = ", ".join(f"{key.split('.')[1]} {value:.6g}" for key, value in zip(self.keys, values))
-            say(f"{model} iteration {iteration}: residual RMS {1e3 * np.sqrt(2 * cost / data.values.size):.4f} mm; "
-                f"{shown_values}")
-        return report
+def reporter(keys: list[str], data, model: str):
+    """One line per iteration: the model, the residual RMS and θ."""
+    def report(iteration: int, cost: float, values: np.ndarray):
+        shown_values = ", ".join(f"{key.split('.')[1]} {value:.6g}" for key, value in zip(keys, values))
+        say(f"{model} iteration {iteration}: residual RMS {1e3 * np.sqrt(2 * cost / data.values.size):.4f} mm; "
+            f"{shown_values}")
+    return report
