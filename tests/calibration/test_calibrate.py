@@ -89,3 +89,10 @@ def test_a_fit_that_does_not_converge_exits_3_with_its_best_point(tmp_path, swim
     start = tomllib.loads((tmp_path / "scene.toml").read_text())
     assert start["solver"]["duration"] == DURATION
     assert record["parameters"]["material.young_modulus"]["value"] != 260e3      # it moved towards the data
+
+
+def test_a_dry_run_checks_the_data_and_writes_nothing(tmp_path, swim, capsys):
+    assert calibrate(tmp_path, swim, ["tail_y"], ["fluid.drag_factor"], "--dry-run") == 0
+    printed = capsys.readouterr().out
+    assert "Levenberg–Marquardt" in printed and "FOM" in printed and "estimate" in printed
+    assert not (tmp_path / "out").exists()
