@@ -23,6 +23,7 @@ import numpy as np
 import scipy.stats
 
 from aquarom_fenics.calibration.parameters import ModelSwim, simulate_parameters
+from aquarom_fenics.dynamics.integrator import IntegrationStopped
 
 CORRELATION_LIMIT = 0.95
 """|corr| above this: the data cannot tell the two parameters apart."""
@@ -96,11 +97,7 @@ def calibrate(data, columns: list[int], keys: list[str], start: np.ndarray, boun
                 break
             try:
                 trial_model, trial_jacobian, trial_residual = evaluate(trial)
-            except Exception as failure:            # the PROM stops far from the data: a shorter step
-                from aquarom_fenics.dynamics.integrator import IntegrationStopped
-
-                if not isinstance(failure, IntegrationStopped):
-                    raise
+            except IntegrationStopped:              # the PROM stops far from the data: a shorter step
                 damping *= 4.0
                 continue
             trial_cost = 0.5 * float(np.sum(trial_residual ** 2))

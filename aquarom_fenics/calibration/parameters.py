@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aquarom_fenics.dynamics.integrator import IntegrationStopped, NewtonSettings, TimeScheme, integrate
+from aquarom_fenics.dynamics.integrator import NewtonSettings, TimeScheme, integrate
 from aquarom_fenics.dynamics.reduced_dynamics import ReducedSystem, one_blas_thread, propagate_sensitivity
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.io.scene import Scene
@@ -155,7 +155,7 @@ class ModelSwim:
 def simulate_parameters(prom: ReducedModel, built: Scene, values: dict[str, float],
                         sensitivities: bool = True) -> ModelSwim:
     """Integrate the PROM at θ = ``values`` over ``built``'s horizon (and time step), from rest; with
-    ``sensitivities`` also dη/dθ. Raises :class:`IntegrationStopped` if the run stops."""
+    ``sensitivities`` also dη/dθ. Raises ``IntegrationStopped`` if the run stops."""
     from aquarom_fenics.dynamics.simulate import check_time_grid
 
     n_steps = check_time_grid(built)
@@ -184,5 +184,5 @@ def simulate_parameters(prom: ReducedModel, built: Scene, values: dict[str, floa
     return ModelSwim(np.array(times), observed, derivative, list(values))
 
 
-__all__ = ["CALIBRATION_KEYS", "OBSERVED", "CalibratedSystem", "IntegrationStopped", "ModelSwim", "check_keys",
-           "scene_value", "simulate_parameters", "with_values"]
+__all__ = ["CALIBRATION_KEYS", "OBSERVED", "CalibratedSystem", "ModelSwim", "check_keys", "scene_value",
+           "simulate_parameters", "with_values"]
