@@ -16,6 +16,10 @@ The columns of ∂r/∂θ at fixed (η, η̇, η̈):
     ∂r/∂E = (f_int(η) + β K_0 η̇) / E_0        ∂r/∂α = M η̇          ∂r/∂β = s_E K_0 η̇
     ∂r/∂k = ∂r/∂A_eff · A / k_0               ∂r/∂A = ∂r/∂A_eff · k / k_0
     ∂r/∂c_T = -f_thrust / c_T,0               ∂r/∂c_D = -f_drag / c_D,0
+    ∂r/∂f = A_eff Σ_j (∂u_j/∂f) (b_j + B_j η),   ∂u_j/∂f = 2π t s_j r(t) cos(2π f t + φ_j)
+
+(the muscle force -Σ_j a_j (b_j + B_j η) with a_j = A_eff u_j(t); the last over the muscles driven at
+``[actuation] frequency``, for a gait whose smooth start τ does not depend on f: ``check_fit``).
 
 enter ``propagate_sensitivity`` (direct differentiation of each converged step).
 """
@@ -29,10 +33,16 @@ from aquarom_fenics.dynamics.integrator import NewtonSettings, TimeScheme, integ
 from aquarom_fenics.dynamics.reduced_dynamics import ReducedSystem, one_blas_thread, propagate_sensitivity
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.physics.inertia import rayleigh_damping
+from aquarom_fenics.physics.muscle import start_ramp
 from aquarom_fenics.reduction.prom import ReducedModel
 
-CALIBRATION_KEYS = ("material.young_modulus", "material.rayleigh_alpha", "material.rayleigh_beta",
-                    "actuation.stiffness", "actuation.amplitude", "fluid.thrust_factor", "fluid.drag_factor")
+ALPHA, BETA = "material.rayleigh_alpha", "material.rayleigh_beta"
+"""The Rayleigh coefficients' keys (C = α M + β K_0, ``physics.inertia.rayleigh_damping``)."""
+
+CALIBRATION_KEYS = ("material.young_modulus", ALPHA, BETA,
+                    "actuation.stiffness", "actuation.amplitude", "actuation.frequency", "fluid.thrust_factor",
+                    "fluid.drag_factor")
 """The scene keys a fit can take, as section.key."""
 
 OBSERVED = ("head_x", "tail_y", "com_x")
@@ -65,6 +75,21 @@ def check_keys(keys) -> None:
                          "product k·A, so the data cannot tell them apart; fit one of them")
 
 
+def check_fit(keys, scene: Scene) -> None:
+    """InputError, one line, for a fit ``scene`` cannot take: the frequency of a gait without a muscle
+    driven at it, or whose automatic smooth start lasts a quarter period (τ depends on f)."""
+    from aquarom_fenics.io.scene_muscles import start_ramp_time
+
+    if "actuation.frequency" not in keys:
+        return
+    if all(muscle.frequency is not None for muscle in scene.actuated_muscles):
+        raise InputError("--fit actuation.frequency: every muscle of the scene has its own frequency; none is "
+                         "driven at [actuation] frequency")
+    if scene.actuation.start_ramp == "auto" and start_ramp_time(scene) > 0:
+        raise InputError("--fit actuation.frequency: the gait's automatic smooth start lasts a quarter period, "
+                         "which moves with f; give [actuation] start_ramp in seconds to fit the frequency")
+
+
 class CalibratedSystem(ReducedSystem):
     """The PROM (built on ``built``, the scene with θ_0) at the parameter values ``values`` {key: θ}; its
     ``parameter_derivative`` is ∂r/∂θ for ``values``' keys, in their order, shape (m, q)."""
@@ -79,14 +104,17 @@ class CalibratedSystem(ReducedSystem):
         if k0 <= 0 or self.reference["actuation.amplitude"] <= 0:
             raise InputError("calibration needs driven muscles: [actuation] stiffness and amplitude > 0")
         self.muscle_product = theta["actuation.stiffness"] * theta["actuation.amplitude"] / k0     # A_eff
-        super().__init__(prom, built, prom.xi_center, scheme, amplitude=self.muscle_product)
+        check_fit(self.keys, built)
+        at_theta = with_values(built, {"actuation.frequency": theta["actuation.frequency"]})
+        super().__init__(prom, at_theta, prom.xi_center, scheme, amplitude=self.muscle_product)
+        self.driven_at_f = np.array([muscle.frequency is None for muscle in built.actuated_muscles], dtype=float)
         self.elastic_scale = theta["material.young_modulus"] / self.reference["material.young_modulus"]
         self.thrust_scale = theta["fluid.thrust_factor"] / self.reference["fluid.thrust_factor"]
         self.drag_scale = theta["fluid.drag_factor"] / self.reference["fluid.drag_factor"]
         self.rest_stiffness = self.elastic.k1                          # K_0 at E_0
         self.mass = self.inertia.mass
-        self.damping = (theta["material.rayleigh_alpha"] * self.mass
-                        + theta["material.rayleigh_beta"] * self.elastic_scale * self.rest_stiffness)
+        self.alpha, self.beta = theta[ALPHA], theta[BETA]
+        self.damping = rayleigh_damping(self.alpha, self.mass, self.beta, self.elastic_scale * self.rest_stiffness)
 
     def residual(self, time, eta, eta_dot, eta_ddot):
         inertia = self.mass @ eta_ddot
@@ -120,15 +148,21 @@ class CalibratedSystem(ReducedSystem):
         reference, theta = self.reference, self.theta
         zero = np.zeros(eta.size)
         if key == "material.young_modulus":
-            return (self.elastic.force(eta) + theta["material.rayleigh_beta"] * (self.rest_stiffness @ eta_dot)) \
+            return (self.elastic.force(eta) + self.beta * (self.rest_stiffness @ eta_dot)) \
                 / reference["material.young_modulus"]
-        if key == "material.rayleigh_alpha":
+        if key == ALPHA:
             return self.mass @ eta_dot
-        if key == "material.rayleigh_beta":
+        if key == BETA:
             return self.elastic_scale * (self.rest_stiffness @ eta_dot)
         if key in ("actuation.stiffness", "actuation.amplitude"):
             other = "actuation.amplitude" if key == "actuation.stiffness" else "actuation.stiffness"
             return self.muscle.amplitude_derivative(time, eta) * theta[other] / reference["actuation.stiffness"]
+        if key == "actuation.frequency":
+            law = self.muscle.law
+            ramp = start_ramp(time, law.ramp_time)
+            rate = np.array([2.0 * np.pi * time * ramp * scale * np.cos(2.0 * np.pi * frequency * time + phase)
+                             for scale, phase, frequency in zip(law.scales, law.phases, law.frequencies)])
+            return self.muscle_product * self.muscle.amplitude_derivative_of(rate * self.driven_at_f, eta)
         if key == "fluid.thrust_factor":
             return zero if self.thrust is None else -self.thrust.force(eta, eta_dot, eta_ddot) / reference[key]
         if key == "fluid.drag_factor":

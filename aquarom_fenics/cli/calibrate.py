@@ -16,7 +16,7 @@ DEFAULT_RANGE = 10.0
 
 def parse_fit(items: list[str] | None, scene) -> tuple[list[str], np.ndarray, np.ndarray]:
     """--fit KEY[=LO:HI] … → (keys, start values, bounds (q, 2)), each refusal one line."""
-    from aquarom_fenics.calibration.parameters import check_keys, scene_value
+    from aquarom_fenics.calibration.parameters import check_fit, check_keys, scene_value
     from aquarom_fenics.io.scene import parse_number
 
     if not items:
@@ -47,6 +47,7 @@ def parse_fit(items: list[str] | None, scene) -> tuple[list[str], np.ndarray, np
             low, high = start / DEFAULT_RANGE, start * DEFAULT_RANGE
         bounds.append((low, high))
     check_keys(keys)
+    check_fit(keys, scene)
     return keys, np.array([scene_value(scene, key) for key in keys]), np.array(bounds, dtype=float)
 
 

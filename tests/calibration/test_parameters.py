@@ -53,7 +53,7 @@ def test_taylor_remainder_of_each_parameter_is_second_order(scene, prom, point, 
         moved = simulate_parameters(prom, scene, point | {key: point[key] + step}, sensitivities=False)
         linear = step * base.derivative[:, :, column]
         remainders.append(np.linalg.norm(moved.observed - base.observed - linear))
-        assert remainders[-1] < 0.15 * np.linalg.norm(linear)
+        assert remainders[-1] < 0.2 * np.linalg.norm(linear)
     assert 3.5 < remainders[0] / remainders[1] < 4.5, remainders
 
 
@@ -118,3 +118,14 @@ def test_the_system_tangents_are_the_derivatives_of_its_residual(scene, prom, po
 
         expected = (residual(1) - residual(-1)) / (2 * h)
         np.testing.assert_allclose(tangents[slot] @ direction, expected, rtol=1e-5, atol=1e-7 * np.abs(expected).max())
+
+
+def test_the_frequency_of_a_gait_whose_start_moves_with_it_is_refused():
+    from aquarom_fenics.calibration.parameters import check_fit
+    from aquarom_fenics.io.scene import Scene
+
+    wave = Scene.load("fish_wave")            # phase-shifted muscles: an automatic start of a quarter period
+    with pytest.raises(InputError, match="start_ramp"):
+        check_fit(["actuation.frequency"], wave)
+    check_fit(["actuation.frequency"], wave.replace("actuation", start_ramp=0.25))
+    check_fit(["actuation.frequency"], coarse_scene())
