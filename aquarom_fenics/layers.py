@@ -28,6 +28,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("screening", ("verification.local_stability",)),
     ("optimization", ("optimization",)),
     ("verification", ("verification",)),
+    ("calibration", ("calibration",)),
     ("viz", ("viz",)),
     ("studies", ("studies", "verification.validation")),
     ("interface", ("cli", "api")),

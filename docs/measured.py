@@ -34,6 +34,7 @@ SOURCES = {
     "validation/prom_gradient.json": "scripts/validate_gradient.py --radius",
     "validation/stroke_accuracy.json": "scripts/stroke_accuracy.py",
     "validation/material_law.json": "scripts/validate_material_law.py",
+    "validation/calibration.json": "scripts/validate.py --only calibration",
     "bench/fom.json": "scripts/bench_fom.py",
     "bench/prom.json": "scripts/bench_prom.py",
     "optimize/so1/summary.json": "aquarom optimize so1 --out results/optimize/so1 (empty cache)",
@@ -503,6 +504,33 @@ def material_table(folder: Path = SNAPSHOT) -> str:
     return table(header, rows) + "\n" + note
 
 
+def calibration_table(folder: Path = SNAPSHOT) -> str:
+    """`aquarom calibrate`'s fit of synthetic FOM swims (``scripts/validate.py --only calibration``): per case and
+    parameter the error against the truth and the 95 % interval's half-width; the interval's coverage."""
+    data = load("validation/calibration.json", folder)
+    targets = data["targets"]
+    rows = []
+    for name, case in data["cases"].items():
+        for key, entry in case["parameters"].items():
+            ok = abs(entry["error"]) <= targets["error"] and entry["half_width"] <= targets["half_width"]
+            rows.append([name, key, f"{entry['truth']:.4g}", f"{entry['value']:.4g}", percent(entry["error"]),
+                         f"±{100 * entry['half_width']:.2f} %", "pass" if ok else "**fail**"])
+    notes = []
+    for name, case in data["cases"].items():
+        coverage = case.get("coverage")
+        if coverage:
+            notes.append(f"The truth inside the 95 % interval over {coverage['draws']} noise draws of case ({name}): "
+                         + ", ".join(f"{key} {count} times" for key, count in coverage["covered"].items())
+                         + f" (target: at least {targets['coverage']}).")
+    note = (f"The {data['scene']} scene (degree {data['mesh']['degree']}, level {data['mesh']['level']}), "
+            f"{data['duration']:g} s swims of the FOM at the truth, head x, tail y and centre-of-mass x sampled at "
+            f"{data['frame_rate_hz']:g} Hz with noise σ = {1e3 * data['noise_m']:g} mm, fitted from the scene's values. "
+            f"Targets: within {100 * targets['error']:g} % of the truth, the 95 % interval within "
+            f"±{100 * targets['half_width']:g} %. " + " ".join(notes) + " "
+            + f"`{command_of('validation/calibration.json')}`. " + sources_note([("validation/calibration.json", data)]))
+    return table(["case", "parameter", "truth", "fitted", "error", "95 % half-width", "targets"], rows) + "\n" + note
+
+
 def shape_order(scene: str, values: dict) -> list[str]:
     """The names of ``values`` in the order of the shipped scene's [shapes] (as the commands print them)."""
     from aquarom_fenics.io.scene import Scene
@@ -542,7 +570,7 @@ def walkthrough_table(folder: Path = SNAPSHOT) -> str:
 
 TABLES = {"walkthrough": walkthrough_table, "accuracy": accuracy_table, "costs": cost_table, "mesh-convergence": mesh_table,
           "station-convergence": stations_table, "studies": study_table, "studies-co": co_table,
-          "stroke-accuracy": stroke_table, "material-law": material_table}
+          "stroke-accuracy": stroke_table, "material-law": material_table, "calibration": calibration_table}
 
 
 # ---------------------------------------------------------------- the pages

@@ -27,6 +27,11 @@ Studies (SPEC §11 "Validation studies", the validation issue):
           estimated error and the finest level's error against it, each within 1 % (the reference:
           Richardson's, or without an observed order the finest level with the three finest levels'
           spread as its error).
+  calibration
+          `aquarom calibrate` on synthetic FOM swims of the nominal fish (1 s, 50 Hz, noise 0.4 mm) at
+          parameters away from the scene's: cases (E, k), (E, α), (k, drag factor), (E, k, thrust factor);
+          each fitted value's error and 95 % interval, and the interval's coverage over 20 noise draws
+          for (E, k) (not cached: every run fits again).
 
 The studies, the case cache and the report live in `aquarom_fenics.verification.validation`;
 this script parses the command line.

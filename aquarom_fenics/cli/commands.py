@@ -9,6 +9,7 @@ from mpi4py import MPI
 from aquarom_fenics.cli.inputs import (check_design_space, check_plan, check_time_runs, checked, design_values,
                                        load_scene, say)
 from aquarom_fenics.cli.export import run_export
+from aquarom_fenics.cli.calibrate import run_calibrate
 from aquarom_fenics.cli.outputs import claim_output, claim_output_file, shown
 from aquarom_fenics.cli.runs import run_build, run_compare, run_simulate
 from aquarom_fenics.cli.sweep import run_sweep
@@ -345,4 +346,4 @@ def run_cache(args) -> int:
 COMMANDS = {"mesh": run_mesh, "shapes": run_shapes, "simulate": run_simulate, "build": run_build,
             "compare": run_compare, "optimize": run_optimize, "pareto": run_pareto, "cache": run_cache, "animate": run_animate,
             "basis": run_basis, "check": run_check, "sweep": run_sweep,
-            "export": run_export}
+            "export": run_export, "calibrate": run_calibrate}

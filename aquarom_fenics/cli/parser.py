@@ -25,6 +25,8 @@ EXAMPLES = {
     "export": "aquarom export so1 --xi y_thin=0.1 --out results/so1-thin.stl\n"
               "  aquarom export nominal --regions --out results/nominal-parts\n"
               "  aquarom export nominal --units m --out results/nominal.msh",
+    "calibrate": "aquarom calibrate nominal --level 1 --data swim.csv --fit material.young_modulus "
+                 "--fit fluid.thrust_factor=0.5:2 --out results/nominal-calibrated",
     "cache": "aquarom cache list\n  aquarom cache clear --kind prom",
     "sweep": "aquarom sweep so1 --grid z_tail=-0.3:0.3:5 --grid y_thin=0:0.1:3 --level 1 --out results/so1-sweep\n"
              "  aquarom sweep so1 --samples 200 --seed 1 --scheduler tcp://head-node:8786 --out results/so1-lhs\n"
@@ -153,6 +155,19 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--regions", action="store_true",
                         help="one closed STL surface per region (head, each muscle, the passive body) in the "
                              "folder --out; interfaces belong to both neighbours")
+    calibrate = command("calibrate", "fit scene parameters (E, damping, k·A, frequency, fluid factors) to a measured swim by "
+                                     "least squares on the PROM, checked with the FOM (calibration.json, fit.png, "
+                                     "calibrated.toml)",
+                        out="output directory (default results/calibrate/SCENE)", progress=True)
+    calibrate.add_argument("--data", type=Path, metavar="SWIM.csv",
+                           help="the measured swim: time_s and any of head_x_m, tail_y_m, com_x_m (displacements "
+                                "from rest [m])")
+    calibrate.add_argument("--fit", action="append", metavar="KEY[=LO:HI]",
+                           help="a scene key to fit, e.g. material.young_modulus or fluid.drag_factor=0.5:2 "
+                                "(repeatable; default bounds: a tenth to ten times the scene's value)")
+    calibrate.add_argument("--max-iterations", type=int, default=30, metavar="N",
+                           help="Levenberg–Marquardt iterations on the PROM before the fit counts as not converged "
+                                "(exit 3, its best point written; default 30)")
     cache_help = "list or clear the caches of meshes, PROMs and FOM checks (content-addressed, checksummed)"
     cache = commands.add_parser("cache", help=cache_help, description=cache_help,
                                 epilog=f"example:\n  {EXAMPLES['cache']}", formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -19,6 +19,11 @@ from aquarom_fenics.forms.drag import drag_direction_form
 from aquarom_fenics.physics.taylor import Taylor
 
 
+def drag_fluid_density(fluid) -> float:
+    """c_D ρ_w [kg/m³]: ``[fluid] drag_factor`` × ``density``, the density g is linear in (C_d = 2 c_D (n·e_x)²)."""
+    return fluid.density * fluid.drag_factor
+
+
 def drag_force(direction: np.ndarray, head_velocity_x: float) -> np.ndarray:
     """f = g v_x² [N]; with ∂g/∂ξ_k (shape (p, n)) in place of g, ∂f/∂ξ_k."""
     return direction * head_velocity_x ** 2
@@ -34,7 +39,7 @@ class DragTerm:
 
     def __init__(self, fom):
         self.fom = fom
-        fluid_density = fx.constant(fom.mesh, fom.scene.fluid.density)
+        fluid_density = fx.constant(fom.mesh, drag_fluid_density(fom.scene.fluid))
         # The skin of the rest shape: u_ξ interpolated at the displacement nodes (SPEC §5).
         self.direction_form = fom.mass_rule(drag_direction_form(
             fom.test_function, ufl.grad(fom.shape_displacement), fluid_density, fom.mesh))

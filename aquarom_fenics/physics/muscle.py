@@ -295,6 +295,11 @@ class ReducedMuscle:
         """∂r/∂A = Σ_j (∂a_j/∂A) (b_j + B_j η)."""
         return self._per_activation(self.law.unit(time), eta)
 
+    def amplitude_derivative_of(self, rates: np.ndarray, eta: np.ndarray) -> np.ndarray:
+        """Σ_j (∂u_j/∂θ) (b_j + B_j η) of the unit activations' derivatives ``rates`` in a parameter θ of the
+        law (∂r/∂θ = A × this, a_j = A u_j)."""
+        return self._per_activation(rates, eta)
+
     def tangents(self, time, eta, eta_dot, eta_ddot):
         """K_t part Σ_j a_j B_j."""
         return self._stiffness(self.activations(time)), None, None

@@ -119,6 +119,12 @@ class SpineGeometry:
         return np.linalg.norm(segment_difference(self.rest_xy), axis=1)
 
 
+def added_mass_density(fluid) -> float:
+    """c_T ρ_w [kg/m³]: the fluid density of the virtual mass, ``[fluid] thrust_factor`` × ``density``
+    (m̃ = c_T (π/4) ρ_w d² is linear in it, and so is the thrust)."""
+    return fluid.density * fluid.thrust_factor
+
+
 def virtual_mass(dorsal_z, fluid_density: float) -> np.ndarray:
     """Virtual mass per length m̃ = (π/4) ρ_w d², d = 2 z_dorsal [kg/m].
 

@@ -17,7 +17,7 @@ from petsc4py import PETSc
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.shapes import shape_displacement
 from aquarom_fenics.physics.stations import skin_line_heights
-from aquarom_fenics.physics.thrust import SpineGeometry, thrust_force, virtual_mass
+from aquarom_fenics.physics.thrust import SpineGeometry, added_mass_density, thrust_force, virtual_mass
 from aquarom_fenics.physics.thrust_jacobians import thrust_jacobians
 from aquarom_fenics.physics.thrust_reduced import ThrustTensors
 
@@ -47,7 +47,7 @@ class NodalThrustTerm:
         self.fom = fom
         tags, fluid = fom.fish.tags, fom.scene.fluid
         self.dorsal_z = rest_points[tags.dorsal_nodes, 2] - tags.box.z_axis
-        self.spine = SpineGeometry(rest_points[tags.spine_nodes, :2], virtual_mass(self.dorsal_z, fluid.density),
+        self.spine = SpineGeometry(rest_points[tags.spine_nodes, :2], virtual_mass(self.dorsal_z, added_mass_density(fluid)),
                                    fluid.spine_force)
 
     def _spine_states(self, u, v, a):
@@ -96,7 +96,7 @@ class NodalThrustTerm:
         return ThrustTensors(rows=spine_rows, rest_xy=self.spine.rest_xy,
                           rest_xy_gradient=np.zeros(self.spine.rest_xy.shape + (p,)), dorsal_z=self.dorsal_z,
                           dorsal_z_gradient=shape_rows(fom.fish)[tags.dorsal_nodes, 2, :p],
-                          fluid_density=fom.scene.fluid.density)
+                          fluid_density=added_mass_density(fom.scene.fluid))
 
 
 class StationThrustTerm:
@@ -121,8 +121,8 @@ class StationThrustTerm:
         self.dorsal_z = self.half_depth(fom.xi, self.rear_sections)
         self.front_dorsal_z = (None if self.front_sections is None
                                else self.half_depth(fom.xi, self.front_sections))
-        self.spine = SpineGeometry(rest_xy, virtual_mass(self.dorsal_z, fluid.density), fluid.spine_force,
-                                   None if self.front_sections is None else virtual_mass(self.front_dorsal_z, fluid.density))
+        self.spine = SpineGeometry(rest_xy, virtual_mass(self.dorsal_z, added_mass_density(fluid)), fluid.spine_force,
+                                   None if self.front_sections is None else virtual_mass(self.front_dorsal_z, added_mass_density(fluid)))
         n_owned = self.owned_weights.shape[1]
         self._block_rows = np.arange(n_owned + 1, dtype=np.int32)
         self._block_columns = fom.layout.global_block[:n_owned].astype(np.int32)
@@ -227,7 +227,7 @@ class StationThrustTerm:
             "front_dorsal_z_gradient": self.half_depth_gradient(p, self.front_sections)}
         return ThrustTensors(rows=rows, rest_xy=self.spine.rest_xy, rest_xy_gradient=np.asarray(rest_gradient).reshape(self.spine.n_nodes, 2, p),
                           dorsal_z=self.dorsal_z, dorsal_z_gradient=self.half_depth_gradient(p, self.rear_sections),
-                          fluid_density=fom.scene.fluid.density, **front)
+                          fluid_density=added_mass_density(fom.scene.fluid), **front)
 
 
 @dataclass(frozen=True)

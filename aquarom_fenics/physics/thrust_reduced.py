@@ -28,7 +28,7 @@ class ThrustTensors:
     rest_xy_gradient: np.ndarray         # (n_points, 2, p) ∂(rest x-y)/∂ξ: B U (exact; zero for the nodal model)
     dorsal_z: np.ndarray                 # (n_segments,) half depth d/2 at ξ_c (z_dorsal - z_axis on the nodal spine)
     dorsal_z_gradient: np.ndarray        # (n_segments, p) ∂(d/2)/∂ξ (exact)
-    fluid_density: float                 # ρ_w [kg/m³]
+    fluid_density: float                 # c_T ρ_w [kg/m³]: the fluid density of the virtual mass (thrust_factor × ρ_w)
     front_dorsal_z: np.ndarray | None = None            # the same at the segments' front stations
     front_dorsal_z_gradient: np.ndarray | None = None   # (trapezoid rule; None: rear rule)
 

@@ -83,6 +83,13 @@ def plan(command: str, scene: Scene, model: str | None = None) -> list[str]:
         screen = tail_screen_seconds(scene)
         lines.append(f"stability: {stability_plan(scene)}" + (f", ~{screen:.0f} s per screen" if screen else ""))
         lines.append(f"FOM checks: start and optimal design per run (~{fom_time:.0f} s each; the start is cached)")
+    if command == "calibrate":
+        build_time = prom_build_seconds(cells, 0, degree) + basis_seconds(scene, cells, False)
+        lines.append(f"fit: a ROM at the scene's design (~{build_time:.1f} s, rebuilt when a parameter moves by more "
+                     "than a fifth of its value), Levenberg–Marquardt on it with sensitivities dη/dθ (~0.1 s per "
+                     f"iteration), then Gauss–Newton iterations on the FOM ({steps} steps of {scene.solver.time_step:g} "
+                     f"s, ~{fom_time:.1f} s each, at most 6)")
+        lines.append(f"estimate: ~{2 * build_time + 3 * fom_time:.1f} s (three FOM iterations)")
     if command in ("optimize", "pareto"):
         lines.append(f"estimate: ~{plan_seconds(command, scene, model):.0f} s")
     elif command == "build":

@@ -22,7 +22,8 @@ MOVING_TAIL = {"xz_concave_tail": {"bounds": [-0.01, 0.2]}, "y_thin": {"bounds":
     {"spine_force": "lagrangian", "spine_rule": "rear"},
     {"spine_force": "lagrangian", "spine_rule": "trapezoid", "drag": False},
     {"spine_force": "source", "spine_rule": "rear", "drag": False},
-], ids=["lagrangian-rear", "lagrangian-trapezoid-no-drag", "source-rear-no-drag"])
+    {"thrust_factor": 1.3, "drag_factor": 0.7},
+], ids=["lagrangian-rear", "lagrangian-trapezoid-no-drag", "source-rear-no-drag", "fluid-factors"])
 def test_the_kernel_agrees_with_single_runs_on_each_thrust_variant(fluid):
     scene = coarse_scene(shapes=MOVING_TAIL, solver=SHORT, fluid=fluid)
     prom = build_prom(scene, fish=load_fish(scene))

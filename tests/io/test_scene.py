@@ -292,12 +292,13 @@ def test_a_key_added_later_keeps_the_hash_of_the_scenes_before_it_at_its_legacy_
     default ("trapezoid") and any other value change it."""
     from aquarom_fenics.io.scene_sections import FluidSection, ReductionSection, legacy_values
 
-    assert legacy_values(FluidSection) == {"spine_rule": "rear"}
+    assert legacy_values(FluidSection) == {"spine_rule": "rear", "thrust_factor": 1.0, "drag_factor": 1.0}
     scene = Scene.load("co")
     assert scene.fluid.spine_rule == "trapezoid"
     rear = scene.replace("fluid", spine_rule="rear")
     data = rear.to_dict()
-    del data["fluid"]["spine_rule"]
+    for key in ("spine_rule", "thrust_factor", "drag_factor"):
+        del data["fluid"][key]
     data["actuation"]["start_ramp"] = 0.0          # "auto" is hashed as the τ it gives: the pair's 0
     data["reduction"]["vibration_modes"] = 1       # "auto" is hashed as the mode count it gives: the pair's 1
     for section, key in (("mesh", "axis"), ("mesh", "head_end"), ("regions", "head"), ("regions", "muscles"),
@@ -325,7 +326,8 @@ def test_the_region_axis_and_head_end_keys_keep_the_hashes_of_the_scenes_before_
     data = scene.to_dict()
     for section, key in (("mesh", "axis"), ("mesh", "head_end"), ("regions", "head"), ("regions", "muscles"),
                          ("regions", "muscle_pairs"), ("material", "law"), ("reduction", "stroke_amplitude"),
-                         ("reduction", "validity_change"), ("reduction", "stroke_sensitivities")):   # later keys at their legacy values
+                         ("reduction", "validity_change"), ("reduction", "stroke_sensitivities"),
+                         ("fluid", "thrust_factor"), ("fluid", "drag_factor")):   # later keys at their legacy values
         del data[section][key]
     data["actuation"]["start_ramp"] = 0.0          # "auto" is hashed as the τ it gives: the pair's 0
     data["reduction"]["vibration_modes"] = 1       # "auto" is hashed as the mode count it gives: the pair's 1

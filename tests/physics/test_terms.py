@@ -24,8 +24,8 @@ LAWS = {
     "drag Jacobian": (r"2(\.0)?\s*\*\s*\(?\s*(self\.)?(head|velocity_x)", "physics/drag.py"),
     # (a_left, a_right) = A sin(2π f t) (1, -1)
     "activation law": (r"sin\(\s*2(\.0)?\s*\*\s*np\.pi", "physics/muscle.py"),
-    # C = α_R M + β_R K_0 needs the scene's α_R, β_R
-    "Rayleigh damping": (r"\.rayleigh_(alpha|beta)\b", "physics/inertia.py"),
+    # C = α_R M + β_R K_0 needs the scene's α_R, β_R (read as attributes; a key's name in quotes is no law)
+    "Rayleigh damping": (r"\.rayleigh_(alpha|beta)\b(?![\"'])", "physics/inertia.py"),
 }
 
 

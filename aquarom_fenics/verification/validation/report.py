@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 from aquarom_fenics.io.persistence import write_text_atomic
+from aquarom_fenics.verification.validation.calibration import section_calibration
 from aquarom_fenics.verification.validation.figures_accuracy import sorted_fits
 from aquarom_fenics.verification.validation.report_format import (BUILD_EXPONENT_MAX, FIGURES, RATIO_RANGE,
                                                                    RUN_LIMITS, SOLVE_EXPONENT_MAX, TOLERANCE_LIST,
@@ -124,6 +125,7 @@ def write_report(out: Path, report: Path, studies_summary: Path | None = None) -
     section_mesh(lines, studies.get("mesh_convergence"), out, report)
     section_stations(lines, studies.get("stations"))
     section_fish_mesh(lines, studies.get("fish_mesh_convergence"))
+    section_calibration(lines, studies.get("calibration"))
     _section_validity(lines, out / "prom_validity.md", report)
     _section_optimisation(lines, studies_summary or report.parent / "studies" / "summary.md", report)
     lines += ["## Reproduce", "", "    make validate                                   # every study, cached per case",

@@ -36,7 +36,8 @@ def model_order(models: dict) -> list[str]:
 
 def load_studies(out: Path) -> dict:
     studies = {}
-    for name in ("a", "b", "c", "d", "e", "stress", "mesh_convergence", "stations", "fish_mesh_convergence", "run"):
+    for name in ("a", "b", "c", "d", "e", "stress", "mesh_convergence", "stations", "fish_mesh_convergence", "calibration",
+                 "run"):
         path = Path(out) / f"{name}.json"
         if path.exists():
             studies[name] = json.loads(path.read_text())

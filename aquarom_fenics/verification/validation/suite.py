@@ -19,6 +19,7 @@ from aquarom_fenics.io.versions import software_versions
 
 from aquarom_fenics.io.persistence import write_json_atomic
 from aquarom_fenics.verification.validation.accuracy import study_a, study_b, study_c
+from aquarom_fenics.verification.validation.calibration import study_calibration
 from aquarom_fenics.verification.validation.convergence_studies import (study_d, study_fish_mesh_convergence,
                                                                         study_mesh_convergence, study_stations,
                                                                         time_convergence_summary)
@@ -28,11 +29,11 @@ from aquarom_fenics.verification.validation.runner import CasesCollected, Runner
 from aquarom_fenics.verification.validation.settings import Settings
 from aquarom_fenics.verification.validation.stability import study_e, study_stress
 
-STUDIES = ("a", "b", "c", "d", "e", "stress", "mesh_convergence", "stations", "fish_mesh_convergence")
+STUDIES = ("a", "b", "c", "d", "e", "stress", "mesh_convergence", "stations", "fish_mesh_convergence", "calibration")
 
 STUDY_FUNCTIONS = {"a": study_a, "b": study_b, "c": study_c, "d": study_d, "e": study_e, "stress": study_stress,
                    "mesh_convergence": study_mesh_convergence, "stations": study_stations,
-                   "fish_mesh_convergence": study_fish_mesh_convergence}
+                   "fish_mesh_convergence": study_fish_mesh_convergence, "calibration": study_calibration}
 
 
 def run(settings: Settings, out: Path, report_path: Path, studies=STUDIES, recompute_failed=False,

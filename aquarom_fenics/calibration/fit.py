@@ -1,0 +1,199 @@
+"""Least-squares calibration of scene parameters θ to a measured swim on the reduced model (issue 52).
+
+Residual r(θ) = y_model(t_i; θ) - y_data(t_i) over every data time t_i and tracked column, the model
+sampled at the data's times by linear interpolation of the reduced trajectory on its time grid, its
+Jacobian J = dy/dθ from the forward sensitivities (``parameters.simulate_parameters``). Levenberg–
+Marquardt on the relative parameters θ/θ_start, with bounds by projection:
+
+    (Jᵀ J + λ diag(Jᵀ J)) δ = -Jᵀ r,   λ ÷ 3 after a step that lowers ½‖r‖², × 4 after one that does not
+
+The PROM is rebuilt at the current θ when a parameter has moved more than ``rebuild_fraction`` of its
+value since the last build. Converged: a relative step below ``step_tolerance`` on every parameter.
+The last iterations run on the FOM (``refine_on_fom``), so that the reported point is the FOM's.
+At the optimum, with N data, q parameters and the noise estimate σ² = ‖r‖² / (N - q):
+
+    Cov = σ² (Jᵀ J)⁻¹,   std_j = √Cov_jj,   ci95_j = θ_j ± t_{0.975, N-q} std_j,   corr = Cov_jk / (std_j std_k)
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+import scipy.stats
+
+from aquarom_fenics.calibration.parameters import ModelSwim, simulate_parameters
+from aquarom_fenics.dynamics.integrator import IntegrationStopped
+
+CORRELATION_LIMIT = 0.95
+"""|corr| above this: the data cannot tell the two parameters apart."""
+CONDITION_LIMIT = 1e10
+"""Condition number of the relative information matrix above this: nearly singular."""
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    max_iterations: int = 30
+    step_tolerance: float = 1e-6          # relative step |δθ_j| / |θ_j| on every parameter
+    rebuild_fraction: float = 0.2         # rebuild the PROM when a parameter moved more than this fraction
+    initial_damping: float = 1e-3         # λ
+
+
+@dataclass
+class FitResult:
+    keys: list[str]
+    start: np.ndarray                     # θ where the fit started
+    values: np.ndarray                    # θ at the end
+    converged: bool
+    iterations: int
+    residual: np.ndarray                  # (n, k) model - data at the data's times [m]
+    model: np.ndarray                     # (n, k) the model at the data's times [m]
+    jacobian: np.ndarray                  # (n k, q) d(model)/dθ
+    rebuilds: int
+    history: list = field(default_factory=list)   # per iteration: cost, θ, λ
+
+
+def sample_at(swim: ModelSwim, times: np.ndarray, columns: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """The model's observed columns (n, k) and their θ-derivatives (n, k, q) linearly interpolated at ``times``."""
+    values = np.column_stack([np.interp(times, swim.time, swim.observed[:, c]) for c in columns])
+    q = swim.derivative.shape[2]
+    derivative = np.empty((times.size, len(columns), q))
+    for j, c in enumerate(columns):
+        for k in range(q):
+            derivative[:, j, k] = np.interp(times, swim.time, swim.derivative[:, c, k])
+    return values, derivative
+
+
+def calibrate(data, columns: list[int], keys: list[str], start: np.ndarray, bounds: np.ndarray,
+              build: Callable[[dict], tuple], settings: FitSettings = FitSettings(),
+              report: Callable[[int, float, np.ndarray], None] | None = None) -> FitResult:
+    """Fit θ (``keys``, from ``start``, within ``bounds`` (q, 2)) to ``data`` (a SwimData; ``columns`` the
+    model's observable index of each data column). ``build(values)`` returns (prom, scene it was built on)."""
+    scale = np.abs(start)
+    theta = np.clip(np.asarray(start, dtype=float), bounds[:, 0], bounds[:, 1])
+    prom, built = build(dict(zip(keys, theta)))
+    built_at, rebuilds = theta.copy(), 0
+
+    def evaluate(values: np.ndarray):
+        swim = simulate_parameters(prom, built, dict(zip(keys, values)))
+        model, derivative = sample_at(swim, data.time, columns)
+        return model, derivative.reshape(-1, len(keys)), model - data.values
+
+    model, jacobian, residual = evaluate(theta)
+    cost = 0.5 * float(np.sum(residual ** 2))
+    damping, converged, history = settings.initial_damping, False, []
+    iteration = 0
+    for iteration in range(1, settings.max_iterations + 1):
+        scaled = jacobian * scale                              # d(model)/d(θ/θ_start)
+        normal = scaled.T @ scaled
+        gradient = scaled.T @ residual.ravel()
+        accepted = stalled = False
+        for _ in range(12):
+            system = normal + damping * np.diag(np.diag(normal) + 1e-300)
+            step = -np.linalg.lstsq(system, gradient, rcond=None)[0] * scale
+            trial = np.clip(theta + step, bounds[:, 0], bounds[:, 1])
+            if np.all(np.abs(trial - theta) <= settings.step_tolerance * np.abs(theta)):
+                stalled = True                  # no step left to take: at the minimum (to the tolerance)
+                break
+            try:
+                trial_model, trial_jacobian, trial_residual = evaluate(trial)
+            except IntegrationStopped:              # the PROM stops far from the data: a shorter step
+                damping *= 4.0
+                continue
+            trial_cost = 0.5 * float(np.sum(trial_residual ** 2))
+            if trial_cost <= cost:
+                accepted = True
+                break
+            damping *= 4.0
+        history.append({"iteration": iteration, "cost": cost, "values": theta.tolist(), "damping": damping})
+        if report is not None:
+            report(iteration, cost, theta)
+        if stalled:
+            converged = True
+            break
+        if not accepted:
+            break
+        moved = trial - theta
+        theta, model, jacobian, residual, cost = trial, trial_model, trial_jacobian, trial_residual, trial_cost
+        damping = max(damping / 3.0, 1e-12)
+        if np.all(np.abs(moved) <= settings.step_tolerance * np.maximum(np.abs(theta), 1e-300)):
+            converged = True
+            break
+        if np.any(np.abs(theta - built_at) > settings.rebuild_fraction * np.abs(built_at)):
+            prom, built = build(dict(zip(keys, theta)))
+            built_at, rebuilds = theta.copy(), rebuilds + 1
+            model, jacobian, residual = evaluate(theta)
+            cost = 0.5 * float(np.sum(residual ** 2))
+    return FitResult(keys, np.asarray(start, dtype=float), theta, converged, iteration, residual, model, jacobian, rebuilds, history)
+
+
+@dataclass
+class Statistics:
+    std: np.ndarray
+    ci95: np.ndarray                      # (q, 2)
+    correlation: np.ndarray               # (q, q)
+    noise: float                          # σ [m]
+    condition: float                      # of the relative information matrix
+    unidentifiable: list[str]             # one phrase per problem found
+
+
+def statistics(result: FitResult) -> Statistics:
+    """The Gauss–Newton covariance at the optimum with the residual's noise estimate (module docstring)."""
+    n_data, q = result.residual.size, len(result.keys)
+    dof = max(n_data - q, 1)
+    noise = float(np.sqrt(np.sum(result.residual ** 2) / dof))
+    scale = np.where(result.values != 0, np.abs(result.values), 1.0)
+    relative = result.jacobian * scale
+    information = relative.T @ relative
+    singular = np.linalg.svd(information, compute_uv=False)
+    condition = float(singular[0] / singular[-1]) if singular[-1] > 0 else float("inf")
+    covariance = noise ** 2 * np.linalg.pinv(information) * np.outer(scale, scale)
+    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        correlation = covariance / np.outer(std, std)
+    correlation = np.nan_to_num(correlation)
+    t = float(scipy.stats.t.ppf(0.975, dof))
+    ci95 = np.column_stack([result.values - t * std, result.values + t * std])
+    problems = []
+    if condition > CONDITION_LIMIT:
+        problems.append(f"the information matrix is nearly singular (condition number {condition:.2g})")
+    for j in range(q):
+        for k in range(j + 1, q):
+            if abs(correlation[j, k]) > CORRELATION_LIMIT:
+                problems.append(f"{result.keys[j]} and {result.keys[k]} (correlation {correlation[j, k]:+.3f})")
+    return Statistics(std, ci95, correlation, noise, condition, problems)
+
+
+FOM_STEP_TOLERANCE = 1e-4
+"""The FOM iterations stop when every relative step is below this (a tenth of a per mille: far inside the
+confidence intervals of a swim tracked to tenths of a millimetre)."""
+
+
+def refine_on_fom(data, result: FitResult, bounds: np.ndarray, fom_model: Callable[[np.ndarray], np.ndarray],
+                  prom_jacobian: Callable[[np.ndarray], np.ndarray], max_iterations: int = 6,
+                  report: Callable[[int, float, np.ndarray], None] | None = None) -> FitResult:
+    """The last iterations on the FOM: Gauss–Newton steps δ = -J⁺ r_FOM(θ) with the FOM's residual and the
+    PROM's Jacobian at θ (``prom_jacobian(θ)``, (n k, q); ``fom_model(θ)`` the FOM at the data's times,
+    (n, k)), from the PROM's optimum. Its fixed point is a zero of J_PROMᵀ r_FOM: the FOM's least-squares
+    point up to the PROM's error in J times the residual. Returns the result at the FOM with ``converged``
+    the PROM's and the FOM's both."""
+    theta = result.values.copy()
+    history = list(result.history)
+    converged = False
+    for iteration in range(1, max_iterations + 1):
+        model = fom_model(theta)
+        residual = model - data.values
+        jacobian = prom_jacobian(theta)
+        cost = 0.5 * float(np.sum(residual ** 2))
+        history.append({"iteration": f"fom {iteration}", "cost": cost, "values": theta.tolist()})
+        if report is not None:
+            report(iteration, cost, theta)
+        step = -np.linalg.lstsq(jacobian, residual.ravel(), rcond=None)[0]
+        if np.all(np.abs(step) <= FOM_STEP_TOLERANCE * np.abs(theta)):
+            converged = True
+            break
+        if iteration == max_iterations:
+            break                               # the point reported is the last one the FOM ran
+        theta = np.clip(theta + step, bounds[:, 0], bounds[:, 1])
+    return FitResult(result.keys, result.start, theta, result.converged and converged,
+                     result.iterations + iteration, residual, model, jacobian, result.rebuilds, history)

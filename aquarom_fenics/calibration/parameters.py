@@ -1,0 +1,222 @@
+"""The calibration parameters θ of the reduced model and its sensitivities dη/dθ (issue 52, SPEC §8).
+
+A PROM built at the scene's values θ_0 is evaluated at other values θ without a new basis, each
+parameter scaling its part of the reduced equations of motion exactly:
+
+    r(θ) = M η̈ + (α M + β s_E K_0) η̇ + s_E f_int(η) - f_act(η, t; A_eff) - s_T f_thrust - s_D f_drag
+
+with s_E = E / E_0 (the SVK internal force and K_0 are linear in E at fixed ν: both Lamé constants
+are), α, β the Rayleigh coefficients, A_eff = k A / k_0 (the muscle force is linear in k a(t): k and A
+enter only as their product k·A), s_T = c_T / c_T,0 and s_D = c_D / c_D,0 the fluid factors. The
+basis (vibration modes and modal derivatives of K and M) does not depend on E, α, β, k·A or the fluid
+factors, so the PROM at θ is the PROM a rebuild at θ would give on the same basis.
+
+The columns of ∂r/∂θ at fixed (η, η̇, η̈):
+
+    ∂r/∂E = (f_int(η) + β K_0 η̇) / E_0        ∂r/∂α = M η̇          ∂r/∂β = s_E K_0 η̇
+    ∂r/∂k = ∂r/∂A_eff · A / k_0               ∂r/∂A = ∂r/∂A_eff · k / k_0
+    ∂r/∂c_T = -f_thrust / c_T,0               ∂r/∂c_D = -f_drag / c_D,0
+    ∂r/∂f = A_eff Σ_j (∂u_j/∂f) (b_j + B_j η),   ∂u_j/∂f = 2π t s_j r(t) cos(2π f t + φ_j)
+
+(the muscle force -Σ_j a_j (b_j + B_j η) with a_j = A_eff u_j(t); the last over the muscles driven at
+``[actuation] frequency``, for a gait whose smooth start τ does not depend on f: ``check_fit``).
+
+enter ``propagate_sensitivity`` (direct differentiation of each converged step).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from aquarom_fenics.dynamics.integrator import NewtonSettings, TimeScheme, integrate
+from aquarom_fenics.dynamics.reduced_dynamics import ReducedSystem, one_blas_thread, propagate_sensitivity
+from aquarom_fenics.errors import InputError
+from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.physics.inertia import rayleigh_damping
+from aquarom_fenics.physics.muscle import start_ramp
+from aquarom_fenics.reduction.prom import ReducedModel
+
+ALPHA, BETA = "material.rayleigh_alpha", "material.rayleigh_beta"
+"""The Rayleigh coefficients' keys (C = α M + β K_0, ``physics.inertia.rayleigh_damping``)."""
+
+CALIBRATION_KEYS = ("material.young_modulus", ALPHA, BETA,
+                    "actuation.stiffness", "actuation.amplitude", "actuation.frequency", "fluid.thrust_factor",
+                    "fluid.drag_factor")
+"""The scene keys a fit can take, as section.key."""
+
+OBSERVED = ("head_x", "tail_y", "com_x")
+"""The observed points and axes of the reduced model (trajectory.csv's columns, without the unit)."""
+
+
+def scene_value(scene: Scene, key: str) -> float:
+    """The value of ``section.key`` in ``scene``."""
+    section, name = key.split(".")
+    return float(getattr(getattr(scene, section), name))
+
+
+def with_values(scene: Scene, values: dict[str, float]) -> Scene:
+    """``scene`` with the keys ``section.key`` set to ``values``."""
+    for key, value in values.items():
+        section, name = key.split(".")
+        scene = scene.replace(section, **{name: float(value)})
+    return scene
+
+
+def check_keys(keys) -> None:
+    """InputError, one line, for a key no fit takes, a key named twice, or both k and A."""
+    for key in keys:
+        if key not in CALIBRATION_KEYS:
+            raise InputError(f"--fit {key}: not a calibration parameter; choose from {', '.join(CALIBRATION_KEYS)}")
+    if len(set(keys)) != len(keys):
+        raise InputError(f"--fit names a parameter twice: {', '.join(keys)}")
+    if "actuation.stiffness" in keys and "actuation.amplitude" in keys:
+        raise InputError("--fit actuation.stiffness and actuation.amplitude: the muscle force depends only on their "
+                         "product k·A, so the data cannot tell them apart; fit one of them")
+
+
+def check_fit(keys, scene: Scene) -> None:
+    """InputError, one line, for a fit ``scene`` cannot take: the frequency of a gait without a muscle
+    driven at it, or whose automatic smooth start lasts a quarter period (τ depends on f)."""
+    from aquarom_fenics.io.scene_muscles import start_ramp_time
+
+    if "actuation.frequency" not in keys:
+        return
+    if all(muscle.frequency is not None for muscle in scene.actuated_muscles):
+        raise InputError("--fit actuation.frequency: every muscle of the scene has its own frequency; none is "
+                         "driven at [actuation] frequency")
+    if scene.actuation.start_ramp == "auto" and start_ramp_time(scene) > 0:
+        raise InputError("--fit actuation.frequency: the gait's automatic smooth start lasts a quarter period, "
+                         "which moves with f; give [actuation] start_ramp in seconds to fit the frequency")
+
+
+class CalibratedSystem(ReducedSystem):
+    """The PROM (built on ``built``, the scene with θ_0) at the parameter values ``values`` {key: θ}; its
+    ``parameter_derivative`` is ∂r/∂θ for ``values``' keys, in their order, shape (m, q)."""
+
+    def __init__(self, prom: ReducedModel, built: Scene, values: dict[str, float], scheme: TimeScheme):
+        check_keys(list(values))
+        self.keys = list(values)
+        theta = {key: scene_value(built, key) for key in CALIBRATION_KEYS} | {k: float(v) for k, v in values.items()}
+        self.reference = {key: scene_value(built, key) for key in CALIBRATION_KEYS}
+        self.theta = theta
+        k0 = self.reference["actuation.stiffness"]
+        if k0 <= 0 or self.reference["actuation.amplitude"] <= 0:
+            raise InputError("calibration needs driven muscles: [actuation] stiffness and amplitude > 0")
+        self.muscle_product = theta["actuation.stiffness"] * theta["actuation.amplitude"] / k0     # A_eff
+        check_fit(self.keys, built)
+        at_theta = with_values(built, {"actuation.frequency": theta["actuation.frequency"]})
+        super().__init__(prom, at_theta, prom.xi_center, scheme, amplitude=self.muscle_product)
+        self.driven_at_f = np.array([muscle.frequency is None for muscle in built.actuated_muscles], dtype=float)
+        self.elastic_scale = theta["material.young_modulus"] / self.reference["material.young_modulus"]
+        self.thrust_scale = theta["fluid.thrust_factor"] / self.reference["fluid.thrust_factor"]
+        self.drag_scale = theta["fluid.drag_factor"] / self.reference["fluid.drag_factor"]
+        self.rest_stiffness = self.elastic.k1                          # K_0 at E_0
+        self.mass = self.inertia.mass
+        self.alpha, self.beta = theta[ALPHA], theta[BETA]
+        self.damping = rayleigh_damping(self.alpha, self.mass, self.beta, self.elastic_scale * self.rest_stiffness)
+
+    def residual(self, time, eta, eta_dot, eta_ddot):
+        inertia = self.mass @ eta_ddot
+        internal = self.elastic_scale * self.elastic.force(eta)
+        external = self.muscle.force(time, eta)
+        if self.thrust is not None:
+            external = external + self.thrust_scale * self.thrust.force(eta, eta_dot, eta_ddot)
+        if self.drag is not None:
+            external = external + self.drag_scale * self.drag.force(eta_dot)
+        residual = inertia + self.damping @ eta_dot + internal - external
+        return residual, max(self.norm(internal), self.norm(external), self.norm(inertia))
+
+    def tangents(self, time, eta, eta_dot, eta_ddot):
+        """(K_t, C_t, M_t) with each term's part scaled by its factor."""
+        stiffness = self.elastic_scale * self.elastic.tangent(eta) + self.muscle.tangents(time, eta, eta_dot, eta_ddot)[0]
+        damping, mass = self.damping.copy(), self.mass.copy()
+        for term, scale in ((self.thrust, self.thrust_scale), (self.drag, self.drag_scale)):
+            if term is None:
+                continue
+            parts = term.tangents(time, eta, eta_dot, eta_ddot)
+            for total, part in zip((stiffness, damping, mass), parts):
+                if part is not None:
+                    total += scale * part
+        return stiffness, damping, mass
+
+    def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
+        """∂r/∂θ at fixed (η, η̇, η̈), shape (m, q) (the module's equations)."""
+        return np.column_stack([self._derivative(key, time, eta, eta_dot, eta_ddot) for key in self.keys])
+
+    def _derivative(self, key, time, eta, eta_dot, eta_ddot) -> np.ndarray:
+        reference, theta = self.reference, self.theta
+        zero = np.zeros(eta.size)
+        if key == "material.young_modulus":
+            return (self.elastic.force(eta) + self.beta * (self.rest_stiffness @ eta_dot)) \
+                / reference["material.young_modulus"]
+        if key == ALPHA:
+            return self.mass @ eta_dot
+        if key == BETA:
+            return self.elastic_scale * (self.rest_stiffness @ eta_dot)
+        if key in ("actuation.stiffness", "actuation.amplitude"):
+            other = "actuation.amplitude" if key == "actuation.stiffness" else "actuation.stiffness"
+            return self.muscle.amplitude_derivative(time, eta) * theta[other] / reference["actuation.stiffness"]
+        if key == "actuation.frequency":
+            law = self.muscle.law
+            ramp = start_ramp(time, law.ramp_time)
+            rate = np.array([2.0 * np.pi * time * ramp * scale * np.cos(2.0 * np.pi * frequency * time + phase)
+                             for scale, phase, frequency in zip(law.scales, law.phases, law.frequencies)])
+            return self.muscle_product * self.muscle.amplitude_derivative_of(rate * self.driven_at_f, eta)
+        if key == "fluid.thrust_factor":
+            return zero if self.thrust is None else -self.thrust.force(eta, eta_dot, eta_ddot) / reference[key]
+        if key == "fluid.drag_factor":
+            return zero if self.drag is None else -self.drag.force(eta_dot) / reference[key]
+        raise ValueError(key)
+
+    def observation_rows(self) -> np.ndarray:
+        """(3, m): head x, tail y and centre-of-mass x from η (:data:`OBSERVED`)."""
+        observation = self.prom.observation
+        return np.vstack([observation.head_x_row, observation.tail_y_row, self.com_weights])
+
+
+@dataclass
+class ModelSwim:
+    """The PROM's observed motion at θ on the time-step grid and, with sensitivities, its θ-derivative."""
+
+    time: np.ndarray                     # (n,) [s]
+    observed: np.ndarray                 # (n, 3) head x, tail y, com x [m] (displacements)
+    derivative: np.ndarray | None        # (n, 3, q) d(observed)/dθ [m per unit of θ]
+    keys: list[str]
+
+
+@one_blas_thread
+def simulate_parameters(prom: ReducedModel, built: Scene, values: dict[str, float],
+                        sensitivities: bool = True) -> ModelSwim:
+    """Integrate the PROM at θ = ``values`` over ``built``'s horizon (and time step), from rest; with
+    ``sensitivities`` also dη/dθ. Raises ``IntegrationStopped`` if the run stops."""
+    from aquarom_fenics.dynamics.simulate import check_time_grid
+
+    n_steps = check_time_grid(built)
+    scheme = TimeScheme.from_solver(built.solver)
+    system = CalibratedSystem(prom, built, values, scheme)
+    rows = system.observation_rows()
+    m, q = prom.size, len(values)
+    zero = np.zeros(m)
+    sensitivity = [np.zeros((m, q))] * 3
+    times, states, history = [0.0], [zero], [np.zeros((m, q))]
+
+    def advance(step_scheme: TimeScheme, time: float, old, new):
+        nonlocal sensitivity
+        point = step_scheme.evaluation_point(time, old, new)
+        sensitivity = propagate_sensitivity(system, step_scheme, point, sensitivity, system.parameter_derivative(*point))
+
+    def record(report, eta, eta_dot, eta_ddot):
+        times.append(report.time)
+        states.append(eta.copy())
+        history.append(sensitivity[0].copy())
+
+    integrate(system, scheme, n_steps, (zero, zero, zero), NewtonSettings.from_solver(built.solver), record,
+              on_step=advance if sensitivities and q else None)
+    observed = np.array(states) @ rows.T
+    derivative = np.einsum("om,nmq->noq", rows, np.array(history)) if sensitivities else None
+    return ModelSwim(np.array(times), observed, derivative, list(values))
+
+
+__all__ = ["CALIBRATION_KEYS", "OBSERVED", "CalibratedSystem", "ModelSwim", "check_keys", "scene_value",
+           "simulate_parameters", "with_values"]
