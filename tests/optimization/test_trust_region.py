@@ -3,8 +3,6 @@
 Each 'PROM' is exact in its slopes but carries the projection error of its basis: an offset of L
 that depends on where the basis was built. The builder reuses the last basis within half the
 validity radius of its centre and builds a new one beyond (as ``PromBuilder`` does)."""
-from typing import NamedTuple
-
 import numpy as np
 import pytest
 
@@ -20,14 +18,6 @@ SLOPES = np.array([0.02, 0.01])      # d = 0.01 + SLOPES · z [m]: the optimum i
 OFFSET_SLOPE = 0.06                  # a basis built at ξ_b lowers d by this × z_tail(ξ_b) [m]
 
 
-class ToyProm(NamedTuple):
-    """A 'PROM': its centre, the centre of its basis and its validity radius (the scene's)."""
-
-    center: np.ndarray
-    basis_center: np.ndarray
-    validity_radius: np.ndarray
-
-
 class BasisOffsetBuilder(PromBuilder):
     """'PROM' = (centre, basis centre); L_c(z) = -(0.01 + SLOPES · z) + OFFSET_SLOPE · z_tail(basis centre)."""
 
@@ -36,7 +26,7 @@ class BasisOffsetBuilder(PromBuilder):
         z = np.array(z, dtype=float)
         if self.basis_center is None or np.any(np.abs(z - self.basis_center) > BASIS_REUSE_FRACTION * self.radius):
             self.basis_center = z.copy()
-        return ToyProm(z, self.basis_center.copy(), self.radius)
+        return z, self.basis_center.copy()
 
     def evaluate(self, prom, z, weights):
         z = np.array(z, dtype=float)
