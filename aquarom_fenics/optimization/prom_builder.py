@@ -123,6 +123,11 @@ class PromBuilder:
                                              lambda: build_prom(self.scene, xi_center=source_center, fish=self.fish))
         return self._basis_source
 
+    @staticmethod
+    def validity_radius(prom: ReducedModel) -> np.ndarray:
+        """r_k of ``prom``: the scene's validity radius, capped where ``[reduction] validity_change`` caps it."""
+        return np.asarray(prom.validity_radius, dtype=float)
+
     def trusts(self, prom: ReducedModel | None, z: np.ndarray) -> bool:
         """Whether z is inside the validity radius of ``prom`` (every |ξ - ξ_c|_k ≤ r_k)."""
         return prom is not None and bool(np.all(np.abs(z[: self.space.n_shapes] - prom.xi_center)

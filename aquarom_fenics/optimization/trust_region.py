@@ -48,7 +48,8 @@ def trust_region(scene, space, builder, weights, history, checkpoint, state, saf
             break
         radius = state["radius"]
         candidate, predicted_cost = _surrogate_step(builder, prom, space, weights, center,
-                                                    radius * trust_box(half_widths, prom, space.n_shapes), cuts)
+                                                    radius * trust_box(half_widths, builder.validity_radius(prom),
+                                                                       space.n_shapes), cuts)
         candidate = safeguard.finite(candidate, state["iteration"] + 1)
         step = candidate - center
         iteration = state["iteration"] + 1
@@ -93,14 +94,12 @@ def trust_region(scene, space, builder, weights, history, checkpoint, state, saf
     return center, current, reason
 
 
-def trust_box(half_widths: np.ndarray, prom: ReducedModel, n_shapes: int) -> np.ndarray:
+def trust_box(half_widths: np.ndarray, prom_radius: np.ndarray, n_shapes: int) -> np.ndarray:
     """The box the trust radius scales: the scene's validity radii, each shape's capped by the centre
-    PROM's own radius (``[reduction] validity_change`` caps it where the tensors change fast), so that
-    every candidate is a design the centre's PROM answers."""
+    PROM's own radius ``prom_radius`` (``[reduction] validity_change`` caps it where the tensors change
+    fast), so that every candidate is a design the centre's PROM answers."""
     box = np.array(half_widths, dtype=float)
-    radius = getattr(prom, "validity_radius", None)      # a surrogate without one (a test's) keeps the box
-    if radius is not None:
-        box[:n_shapes] = np.minimum(box[:n_shapes], np.asarray(radius)[:n_shapes])
+    box[:n_shapes] = np.minimum(box[:n_shapes], np.asarray(prom_radius, dtype=float)[:n_shapes])
     return box
 
 

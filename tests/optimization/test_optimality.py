@@ -51,6 +51,10 @@ class AnalyticBuilder(PromBuilder):
     def meshes(self, z):
         return True
 
+    def validity_radius(self, prom):
+        """The scene's radius, as a PROM whose tensors change slowly carries it."""
+        return self.radius
+
     def trusts(self, prom, z):
         """The 'PROM' is the design it was built at: trusted within the scene's validity radius of it."""
         return prom is not None and bool(np.all(np.abs(np.asarray(z) - prom) <= self.radius))
