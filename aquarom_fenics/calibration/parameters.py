@@ -45,29 +45,41 @@ CALIBRATION_KEYS = ("material.young_modulus", ALPHA, BETA,
                     "fluid.drag_factor")
 """The scene keys a fit can take, as section.key."""
 
-OBSERVED = ("head_x", "tail_y", "com_x")
+TIME_OFFSET = "time_offset"
+"""Not a scene key: a constant shift τ [s] between the data's clock and the model's, y_data(t) = y_model(t + τ)
+(the model at rest before t = 0). Its derivative is the model's velocity, dy/dτ = ẏ(t + τ)."""
+
+OBSERVED = ("head_x", "tail_y", "com_x", "tail_x", "com_y")
 """The observed points and axes of the reduced model (trajectory.csv's columns, without the unit)."""
 
 
 def scene_value(scene: Scene, key: str) -> float:
-    """The value of ``section.key`` in ``scene``."""
+    """The value of ``section.key`` in ``scene`` (0 for the time offset: the scene's clock is the data's)."""
+    if key == TIME_OFFSET:
+        return 0.0
     section, name = key.split(".")
     return float(getattr(getattr(scene, section), name))
 
 
 def with_values(scene: Scene, values: dict[str, float]) -> Scene:
-    """``scene`` with the keys ``section.key`` set to ``values``."""
-    for key, value in values.items():
+    """``scene`` with the keys ``section.key`` set to ``values`` (the time offset is not the scene's)."""
+    for key, value in scene_values(values).items():
         section, name = key.split(".")
         scene = scene.replace(section, **{name: float(value)})
     return scene
 
 
+def scene_values(values: dict[str, float]) -> dict[str, float]:
+    """``values`` without the time offset: the scene keys the model runs with."""
+    return {key: value for key, value in values.items() if key != TIME_OFFSET}
+
+
 def check_keys(keys) -> None:
     """InputError, one line, for a key no fit takes, a key named twice, or both k and A."""
     for key in keys:
-        if key not in CALIBRATION_KEYS:
-            raise InputError(f"--fit {key}: not a calibration parameter; choose from {', '.join(CALIBRATION_KEYS)}")
+        if key not in CALIBRATION_KEYS and key != TIME_OFFSET:
+            raise InputError(f"--fit {key}: not a calibration parameter; choose from {', '.join(CALIBRATION_KEYS)} "
+                             f"or {TIME_OFFSET}")
     if len(set(keys)) != len(keys):
         raise InputError(f"--fit names a parameter twice: {', '.join(keys)}")
     if "actuation.stiffness" in keys and "actuation.amplitude" in keys:
@@ -170,9 +182,10 @@ class CalibratedSystem(ReducedSystem):
         raise ValueError(key)
 
     def observation_rows(self) -> np.ndarray:
-        """(3, m): head x, tail y and centre-of-mass x from η (:data:`OBSERVED`)."""
+        """(5, m): head x, tail y, centre-of-mass x, tail x and centre-of-mass y from η (:data:`OBSERVED`)."""
         observation = self.prom.observation
-        return np.vstack([observation.head_x_row, observation.tail_y_row, self.com_weights])
+        return np.vstack([observation.head_x_row, observation.tail_y_row, self.com_weights, observation.tail_x_row,
+                          self.com_y_weights])
 
 
 @dataclass
@@ -180,8 +193,10 @@ class ModelSwim:
     """The PROM's observed motion at θ on the time-step grid and, with sensitivities, its θ-derivative."""
 
     time: np.ndarray                     # (n,) [s]
-    observed: np.ndarray                 # (n, 3) head x, tail y, com x [m] (displacements)
-    derivative: np.ndarray | None        # (n, 3, q) d(observed)/dθ [m per unit of θ]
+    observed: np.ndarray                 # (n, 5) the points of OBSERVED [m] (displacements)
+    velocity: np.ndarray                 # (n, 5) their velocities [m/s]
+    derivative: np.ndarray | None        # (n, 5, q) d(observed)/dθ [m per unit of θ]
+    velocity_derivative: np.ndarray | None   # (n, 5, q) d(velocity)/dθ
     keys: list[str]
 
 
@@ -199,7 +214,7 @@ def simulate_parameters(prom: ReducedModel, built: Scene, values: dict[str, floa
     m, q = prom.size, len(values)
     zero = np.zeros(m)
     sensitivity = [np.zeros((m, q))] * 3
-    times, states, history = [0.0], [zero], [np.zeros((m, q))]
+    times, states, velocities, history, rate_history = [0.0], [zero], [zero], [np.zeros((m, q))], [np.zeros((m, q))]
 
     def advance(step_scheme: TimeScheme, time: float, old, new):
         nonlocal sensitivity
@@ -209,14 +224,17 @@ def simulate_parameters(prom: ReducedModel, built: Scene, values: dict[str, floa
     def record(report, eta, eta_dot, eta_ddot):
         times.append(report.time)
         states.append(eta.copy())
+        velocities.append(eta_dot.copy())
         history.append(sensitivity[0].copy())
+        rate_history.append(sensitivity[1].copy())
 
     integrate(system, scheme, n_steps, (zero, zero, zero), NewtonSettings.from_solver(built.solver), record,
               on_step=advance if sensitivities and q else None)
     observed = np.array(states) @ rows.T
     derivative = np.einsum("om,nmq->noq", rows, np.array(history)) if sensitivities else None
-    return ModelSwim(np.array(times), observed, derivative, list(values))
+    rate = np.einsum("om,nmq->noq", rows, np.array(rate_history)) if sensitivities else None
+    return ModelSwim(np.array(times), observed, np.array(velocities) @ rows.T, derivative, rate, list(values))
 
 
-__all__ = ["CALIBRATION_KEYS", "OBSERVED", "CalibratedSystem", "ModelSwim", "check_keys", "scene_value",
-           "simulate_parameters", "with_values"]
+__all__ = ["CALIBRATION_KEYS", "OBSERVED", "TIME_OFFSET", "CalibratedSystem", "ModelSwim", "check_keys", "scene_value",
+           "scene_values", "simulate_parameters", "with_values"]

@@ -160,8 +160,8 @@ def build_parser() -> argparse.ArgumentParser:
                                      "calibrated.toml)",
                         out="output directory (default results/calibrate/SCENE)", progress=True)
     calibrate.add_argument("--data", type=Path, metavar="SWIM.csv",
-                           help="the measured swim: time_s and any of head_x_m, tail_y_m, com_x_m (displacements "
-                                "from rest [m])")
+                           help="the measured swim: time_s and any of head_x_m, tail_y_m, com_x_m, tail_x_m, "
+                                "com_y_m (displacements from rest [m])")
     calibrate.add_argument("--fit", action="append", metavar="KEY[=LO:HI]",
                            help="a scene key to fit, e.g. material.young_modulus or fluid.drag_factor=0.5:2 "
                                 "(repeatable; default bounds: a tenth to ten times the scene's value)")

@@ -61,6 +61,7 @@ class ReducedSystem:
         self.terms = [term for term in (self.elastic, self.muscle, self.inertia, self.thrust, self.drag)
                       if term is not None]
         self.com_weights = self.inertia.com_weights
+        self.com_y_weights = self.inertia.com_y_weights
         self._factors = None
 
     # ------------------------------------------------------------------ forces
@@ -122,10 +123,11 @@ class ReducedSystem:
         """∂f_int,r/∂ξ_k, shape (p, m)."""
         return self.elastic.force_gradient(eta)
 
-    def observables(self, eta) -> tuple[float, float, float]:
-        """(head x, tail y, centre-of-mass x) [m]."""
+    def observables(self, eta) -> tuple[float, float, float, float, float]:
+        """(head x, tail y, centre-of-mass x, tail x, centre-of-mass y) [m]."""
         observation = self.prom.observation
-        return float(observation.head_x_row @ eta), float(observation.tail_y_row @ eta), float(self.com_weights @ eta)
+        return (float(observation.head_x_row @ eta), float(observation.tail_y_row @ eta), float(self.com_weights @ eta),
+                float(observation.tail_x_row @ eta), float(self.com_y_weights @ eta))
 
     def com_weights_gradient(self) -> np.ndarray:
         """∂c/∂ξ_k of com_x = c(ξ)·η, shape (p, m)."""

@@ -105,10 +105,11 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
         cut_steps = report.cut_steps
         factorizations += report.factorizations
         values = model.observables(u)
-        trajectory.append(report.time, values["head_x"], values["tail_y"], values["com_x"], report.iterations)
+        observed = [values[name] for name in ("head_x", "tail_y", "com_x", "tail_x", "com_y")]
+        trajectory.append(report.time, *observed, report.iterations)
         probe.observe(report.step, report.time, u)
         if csv:
-            csv.write(report.time, values["head_x"], values["tail_y"], values["com_x"], report.iterations)
+            csv.write(report.time, *observed, report.iterations)
         if keep_states:
             states.append((u.copy(), v.copy(), a.copy()))
         if displacements is not None:

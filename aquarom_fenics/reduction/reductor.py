@@ -73,8 +73,8 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
         skipped.append("ξ-terms (no shape parameters)" if parametric else "ξ-terms (plain ROM)")
     timings["other_tensors"] = time.perf_counter() - mark
 
-    head_x_row, tail_y_row = fom.observation_rows(vectors)
-    observation = Observation(head_x_row=head_x_row, tail_y_row=tail_y_row)
+    head_x_row, tail_y_row, tail_x_row = fom.observation_rows(vectors)
+    observation = Observation(head_x_row=head_x_row, tail_y_row=tail_y_row, tail_x_row=tail_x_row)
     timings["total"] = time.perf_counter() - started
     m = vectors.shape[1]
     if comm.rank == 0:
