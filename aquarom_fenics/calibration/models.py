@@ -23,7 +23,8 @@ class CalibrationModels:
         from aquarom_fenics.reduction.reductor import build_prom
 
         self.built = with_values(self.scene, values)
-        self.prom = build_prom(self.built, xi_center=self.design, fish=self.fish, parametric=False)
+        self.prom = build_prom(self.built, xi_center=self.design, fish=self.fish, parametric=False,
+                               head_share="material.head_stiffness_factor" in self.keys)
         self.built_at = np.array(list(values.values()), dtype=float)
         return self.prom, self.built
 

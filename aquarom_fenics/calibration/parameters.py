@@ -3,10 +3,12 @@
 A PROM built at the scene's values θ_0 is evaluated at other values θ without a new basis, each
 parameter scaling its part of the reduced equations of motion exactly:
 
-    r(θ) = M η̈ + (α M + β s_E K_0) η̇ + s_E f_int(η) - f_act(η, t; A_eff) - s_T f_thrust - s_D f_drag
+    r(θ) = M η̈ + (α M + β s_E K_0) η̇ + s_E f_int(η) - f_act(η, t; A_eff) - s_T f_thrust - s_D f_drag,
+    f_int = f_all + (s_H - 1) f_head,   K_0 = K_0,all + (s_H - 1) K_0,head
 
 with s_E = E / E_0 (the SVK internal force and K_0 are linear in E at fixed ν: both Lamé constants
-are), α, β the Rayleigh coefficients, A_eff = k A / k_0 (the muscle force is linear in k a(t): k and A
+are), s_H = h / h_0 the head's stiffness factor, which scales the head cells' share f_head of the
+elastic tensors only (``ReducedModel.head_elastic``, projected with ``build_prom(head_share=True)``), α, β the Rayleigh coefficients, A_eff = k A / k_0 (the muscle force is linear in k a(t): k and A
 enter only as their product k·A), s_T = c_T / c_T,0 and s_D = c_D / c_D,0 the fluid factors. The
 basis (vibration modes and modal derivatives of K and M) does not depend on E, α, β, k·A or the fluid
 factors, so the PROM at θ is the PROM a rebuild at θ would give on the same basis.
@@ -14,6 +16,7 @@ factors, so the PROM at θ is the PROM a rebuild at θ would give on the same ba
 The columns of ∂r/∂θ at fixed (η, η̇, η̈):
 
     ∂r/∂E = (f_int(η) + β K_0 η̇) / E_0        ∂r/∂α = M η̇          ∂r/∂β = s_E K_0 η̇
+    ∂r/∂h = s_E (f_head(η) + β K_0,head η̇) / h_0
     ∂r/∂k = ∂r/∂A_eff · A / k_0               ∂r/∂A = ∂r/∂A_eff · k / k_0
     ∂r/∂c_T = -f_thrust / c_T,0               ∂r/∂c_D = -f_drag / c_D,0
     ∂r/∂f = A_eff Σ_j (∂u_j/∂f) (b_j + B_j η),   ∂u_j/∂f = 2π t s_j r(t) cos(2π f t + φ_j)
@@ -40,7 +43,10 @@ from aquarom_fenics.reduction.prom import ReducedModel
 ALPHA, BETA = "material.rayleigh_alpha", "material.rayleigh_beta"
 """The Rayleigh coefficients' keys (C = α M + β K_0, ``physics.inertia.rayleigh_damping``)."""
 
-CALIBRATION_KEYS = ("material.young_modulus", ALPHA, BETA,
+HEAD = "material.head_stiffness_factor"
+"""The head's stiffness factor: it scales the head cells' share of the elastic tensors only."""
+
+CALIBRATION_KEYS = ("material.young_modulus", HEAD, ALPHA, BETA,
                     "actuation.stiffness", "actuation.amplitude", "actuation.frequency", "fluid.thrust_factor",
                     "fluid.drag_factor")
 """The scene keys a fit can take, as section.key."""
@@ -121,16 +127,28 @@ class CalibratedSystem(ReducedSystem):
         super().__init__(prom, at_theta, prom.xi_center, scheme, amplitude=self.muscle_product)
         self.driven_at_f = np.array([muscle.frequency is None for muscle in built.actuated_muscles], dtype=float)
         self.elastic_scale = theta["material.young_modulus"] / self.reference["material.young_modulus"]
+        self.head_extra = theta[HEAD] / self.reference[HEAD] - 1.0                     # s_H - 1
+        self.head = prom.head_elastic.at(self.delta) if prom.head_elastic is not None else None
+        if self.head is None and (HEAD in self.keys or self.head_extra != 0.0):
+            raise InputError(f"{HEAD}: this reduced model has no head share of its elastic tensors; build it "
+                             "with build_prom(..., head_share=True)")
         self.thrust_scale = theta["fluid.thrust_factor"] / self.reference["fluid.thrust_factor"]
         self.drag_scale = theta["fluid.drag_factor"] / self.reference["fluid.drag_factor"]
-        self.rest_stiffness = self.elastic.k1                          # K_0 at E_0
+        self.rest_stiffness = self.elastic.k1                          # K_0 at E_0 and h
+        if self.head_extra:
+            self.rest_stiffness = self.rest_stiffness + self.head_extra * self.head.k1
         self.mass = self.inertia.mass
         self.alpha, self.beta = theta[ALPHA], theta[BETA]
         self.damping = rayleigh_damping(self.alpha, self.mass, self.beta, self.elastic_scale * self.rest_stiffness)
 
+    def unscaled_force(self, eta) -> np.ndarray:
+        """f_int at E_0 and the head factor h: f_all + (s_H - 1) f_head."""
+        force = self.elastic.force(eta)
+        return force + self.head_extra * self.head.force(eta) if self.head_extra else force
+
     def residual(self, time, eta, eta_dot, eta_ddot):
         inertia = self.mass @ eta_ddot
-        internal = self.elastic_scale * self.elastic.force(eta)
+        internal = self.elastic_scale * self.unscaled_force(eta)
         external = self.muscle.force(time, eta)
         if self.thrust is not None:
             external = external + self.thrust_scale * self.thrust.force(eta, eta_dot, eta_ddot)
@@ -141,7 +159,10 @@ class CalibratedSystem(ReducedSystem):
 
     def tangents(self, time, eta, eta_dot, eta_ddot):
         """(K_t, C_t, M_t) with each term's part scaled by its factor."""
-        stiffness = self.elastic_scale * self.elastic.tangent(eta) + self.muscle.tangents(time, eta, eta_dot, eta_ddot)[0]
+        elastic = self.elastic.tangent(eta)
+        if self.head_extra:
+            elastic = elastic + self.head_extra * self.head.tangent(eta)
+        stiffness = self.elastic_scale * elastic + self.muscle.tangents(time, eta, eta_dot, eta_ddot)[0]
         damping, mass = self.damping.copy(), self.mass.copy()
         for term, scale in ((self.thrust, self.thrust_scale), (self.drag, self.drag_scale)):
             if term is None:
@@ -160,8 +181,10 @@ class CalibratedSystem(ReducedSystem):
         reference, theta = self.reference, self.theta
         zero = np.zeros(eta.size)
         if key == "material.young_modulus":
-            return (self.elastic.force(eta) + self.beta * (self.rest_stiffness @ eta_dot)) \
+            return (self.unscaled_force(eta) + self.beta * (self.rest_stiffness @ eta_dot)) \
                 / reference["material.young_modulus"]
+        if key == HEAD:
+            return self.elastic_scale * (self.head.force(eta) + self.beta * (self.head.k1 @ eta_dot)) / reference[HEAD]
         if key == ALPHA:
             return self.mass @ eta_dot
         if key == BETA:

@@ -155,7 +155,8 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--regions", action="store_true",
                         help="one closed STL surface per region (head, each muscle, the passive body) in the "
                              "folder --out; interfaces belong to both neighbours")
-    calibrate = command("calibrate", "fit scene parameters (E, damping, k·A, frequency, fluid factors) to a measured swim by "
+    calibrate = command("calibrate", "fit scene parameters (E, head factor, damping, k·A, frequency, fluid factors, a time "
+                                     "offset) to a measured swim by "
                                      "least squares on the PROM, checked with the FOM (calibration.json, fit.png, "
                                      "calibrated.toml)",
                         out="output directory (default results/calibrate/SCENE)", progress=True)

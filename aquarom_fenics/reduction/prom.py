@@ -64,6 +64,7 @@ class ReducedModel:
     cells: int
     dofs: int
     timings: dict = field(default_factory=dict)
+    head_elastic: ElasticTensors | None = None   # the head cells' share of ``elastic`` (calibration of its factor)
 
     @property
     def size(self) -> int:
