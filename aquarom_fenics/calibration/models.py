@@ -62,7 +62,8 @@ class CalibrationModels:
         return fom_record(run, model, self.prom_run(theta)[0], self.data)
 
 
-def fit_swim(models: CalibrationModels, start: np.ndarray, bounds: np.ndarray, report_prom=None, report_fom=None):
+def fit_swim(models: CalibrationModels, start: np.ndarray, bounds: np.ndarray, report_prom=None, report_fom=None,
+             fom_iterations: int = 6):
     """The whole fit of ``models.data``: Levenberg–Marquardt on the PROM, the last iterations on the FOM,
     the statistics at the FOM's point and the FOM's check there; (FitResult, Statistics, FOM record)."""
     from aquarom_fenics.calibration.fit import calibrate, refine_on_fom, statistics
@@ -71,5 +72,5 @@ def fit_swim(models: CalibrationModels, start: np.ndarray, bounds: np.ndarray, r
     data, keys = models.data, models.keys
     columns = [OBSERVED.index(name) for name in data.observables]
     result = calibrate(data, columns, keys, start, bounds, models.build, models.settings, report_prom)
-    result = refine_on_fom(data, result, bounds, models.fom, models.prom_jacobian, report=report_fom)
+    result = refine_on_fom(data, result, bounds, models.fom, models.prom_jacobian, fom_iterations, report=report_fom)
     return result, statistics(result), models.fom_check(result.values)

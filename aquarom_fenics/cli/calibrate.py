@@ -10,6 +10,9 @@ from aquarom_fenics.cli.inputs import check_time_runs, checked, load_scene, run_
 from aquarom_fenics.cli.outputs import claim_output, shown
 from aquarom_fenics.errors import InputError, SolverError
 
+FOM_ITERATIONS = 6
+"""The fit's iterations on the FOM at most (``calibration.fit.refine_on_fom``)."""
+
 DEFAULT_RANGE = 10.0
 """Without LO:HI a parameter is fitted within [θ_start / 10, 10 θ_start]."""
 OFFSET_PERIODS = 0.25
@@ -116,7 +119,13 @@ def run_calibrate(args, scene, xi) -> int:
     out = claim_output(args, args.out or Path("results") / "calibrate" / scene.name)
     settings = FitSettings(max_iterations=args.max_iterations)
     models = CalibrationModels(scene, run_design(scene, xi), data, keys, settings, not args.no_progress)
-    result, stats, fom = fit_swim(models, start, bounds, reporter(keys, data, "PROM"), reporter(keys, data, "FOM"))
+    prom_report = IterationReport(keys, data, "PROM", settings.max_iterations, not args.no_progress)
+    fom_report = IterationReport(keys, data, "FOM", FOM_ITERATIONS, not args.no_progress)
+    try:
+        result, stats, fom = fit_swim(models, start, bounds, prom_report, fom_report, FOM_ITERATIONS)
+    finally:
+        prom_report.close()
+        fom_report.close()
     write_outputs(out, scene, args.data, data, result, stats, fom, settings)
     for key, value, (low, high) in zip(keys, result.values, stats.ci95):
         say(f"{key} = {value:.6g}, 95 % interval [{low:.6g}, {high:.6g}]")
@@ -131,10 +140,24 @@ def run_calibrate(args, scene, xi) -> int:
     return 0
 
 
-def reporter(keys: list[str], data, model: str):
-    """One line per iteration: the model, the residual RMS and θ."""
-    def report(iteration: int, cost: float, values: np.ndarray):
-        shown_values = ", ".join(f"{key.rpartition('.')[2]} {value:.6g}" for key, value in zip(keys, values))
-        say(f"{model} iteration {iteration}: residual RMS {1e3 * np.sqrt(2 * cost / data.values.size):.4f} mm; "
-            f"{shown_values}")
-    return report
+class IterationReport:
+    """One line per iteration (the model, the residual RMS and θ) and a progress bar of the iterations (at most
+    ``total``) on a terminal, unless ``shown`` is False (--no-progress)."""
+
+    def __init__(self, keys: list[str], data, model: str, total: int, shown: bool):
+        from aquarom_fenics.dynamics.simulate import progress_bar
+
+        self.keys, self.data, self.model = keys, data, model
+        self.bar = progress_bar(total, f"fit ({model})", shown, unit="iteration")
+
+    def __call__(self, iteration: int, cost: float, values: np.ndarray) -> None:
+        rms = 1e3 * np.sqrt(2 * cost / self.data.values.size)
+        shown_values = ", ".join(f"{key.rpartition('.')[2]} {value:.6g}" for key, value in zip(self.keys, values))
+        say(f"{self.model} iteration {iteration}: residual RMS {rms:.4f} mm; {shown_values}")
+        if self.bar is not None:
+            self.bar.set_postfix_str(f"RMS {rms:.4f} mm", refresh=False)
+            self.bar.update(1)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()

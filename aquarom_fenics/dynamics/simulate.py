@@ -201,12 +201,16 @@ lock (a named semaphore), which in a spawned worker coordinates with no other pr
 the worker is ended with SIGTERM (Ctrl-C of the command), is reported as leaked at exit."""
 
 
-def _progress_bar(total: int, label: str, enabled: bool):
+def _progress_bar(total: int, label: str, enabled: bool, unit: str = "step"):
+    """A progress bar of ``total`` ``unit``s on a terminal (None when not ``enabled`` or bars are off)."""
     if not (enabled and PROGRESS_BARS["shown"]):
         return None
     from tqdm import tqdm
 
     if in_worker():
         tqdm.set_lock(WORKER_BAR_LOCK)
-    return tqdm(total=total, desc=label, unit="step", leave=False, disable=None)
+    return tqdm(total=total, desc=label, unit=unit, leave=False, disable=None)
+
+
+progress_bar = _progress_bar
 

@@ -96,3 +96,15 @@ def test_offset_bounds_are_checked_in_one_line(fit, expected, tmp_path, capsys):
     line = one_line(capsys)
     for part in expected:
         assert part in line, line
+
+
+def test_the_fit_s_iterations_have_a_progress_bar_unless_asked_not_to(capsys):
+    from aquarom_fenics.cli.calibrate import IterationReport
+
+    data = SwimData(np.array([0.1, 0.2]), np.zeros((2, 1)), ("tail_y",), "<test>")
+    report = IterationReport(["material.young_modulus", TIME_OFFSET], data, "PROM", 30, shown=True)
+    assert report.bar is not None and report.bar.total == 30      # drawn on a terminal only (tqdm disable=None)
+    report(1, 1e-8, np.array([2.6e5, 0.01]))            # ½‖r‖² over 2 values: RMS 0.1 mm
+    report.close()
+    assert "PROM iteration 1: residual RMS 0.1000 mm; young_modulus 260000, time_offset 0.01" in capsys.readouterr().out
+    assert IterationReport(["fluid.drag_factor"], data, "FOM", 6, shown=False).bar is None
