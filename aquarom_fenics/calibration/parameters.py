@@ -28,6 +28,7 @@ enter ``propagate_sensitivity`` (direct differentiation of each converged step).
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,7 +37,9 @@ from aquarom_fenics.dynamics.integrator import NewtonSettings, TimeScheme, integ
 from aquarom_fenics.dynamics.reduced_dynamics import ReducedSystem, one_blas_thread, propagate_sensitivity
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.physics.elastic import ElasticTensors
 from aquarom_fenics.physics.inertia import rayleigh_damping
+from aquarom_fenics.physics.taylor import Taylor
 from aquarom_fenics.physics.muscle import start_ramp
 from aquarom_fenics.reduction.prom import ReducedModel
 
@@ -108,6 +111,15 @@ def check_fit(keys, scene: Scene) -> None:
                          "which moves with f; give [actuation] start_ramp in seconds to fit the frequency")
 
 
+def combined(tensors: ElasticTensors, head: ElasticTensors, extra: float) -> ElasticTensors:
+    """tensors + extra × head, term by term (each Taylor's constant and ξ-derivatives)."""
+    def add(left: Taylor, right: Taylor) -> Taylor:
+        return Taylor(*(None if a is None else a + extra * b
+                        for a, b in zip((left.constant, left.first, left.second),
+                                        (right.constant, right.first, right.second))))
+    return ElasticTensors(*(add(getattr(tensors, name), getattr(head, name)) for name in ("linear", "quadratic", "cubic")))
+
+
 class CalibratedSystem(ReducedSystem):
     """The PROM (built on ``built``, the scene with θ_0) at the parameter values ``values`` {key: θ}; its
     ``parameter_derivative`` is ∂r/∂θ for ``values``' keys, in their order, shape (m, q)."""
@@ -124,54 +136,25 @@ class CalibratedSystem(ReducedSystem):
         self.muscle_product = theta["actuation.stiffness"] * theta["actuation.amplitude"] / k0     # A_eff
         check_fit(self.keys, built)
         at_theta = with_values(built, {"actuation.frequency": theta["actuation.frequency"]})
-        super().__init__(prom, at_theta, prom.xi_center, scheme, amplitude=self.muscle_product)
-        self.driven_at_f = np.array([muscle.frequency is None for muscle in built.actuated_muscles], dtype=float)
-        self.elastic_scale = theta["material.young_modulus"] / self.reference["material.young_modulus"]
         self.head_extra = theta[HEAD] / self.reference[HEAD] - 1.0                     # s_H - 1
-        self.head = prom.head_elastic.at(self.delta) if prom.head_elastic is not None else None
-        if self.head is None and (HEAD in self.keys or self.head_extra != 0.0):
+        if prom.head_elastic is None and (HEAD in self.keys or self.head_extra != 0.0):
             raise InputError(f"{HEAD}: this reduced model has no head share of its elastic tensors; build it "
                              "with build_prom(..., head_share=True)")
+        if self.head_extra:               # the elastic tensors at h: all + (s_H - 1) head, on the same basis
+            prom = dataclasses.replace(prom, elastic=combined(prom.elastic, prom.head_elastic, self.head_extra))
+        super().__init__(prom, at_theta, prom.xi_center, scheme, amplitude=self.muscle_product)
+        self.head = prom.head_elastic.at(self.delta) if prom.head_elastic is not None else None
+        self.driven_at_f = np.array([muscle.frequency is None for muscle in built.actuated_muscles], dtype=float)
+        self.elastic_scale = theta["material.young_modulus"] / self.reference["material.young_modulus"]
         self.thrust_scale = theta["fluid.thrust_factor"] / self.reference["fluid.thrust_factor"]
         self.drag_scale = theta["fluid.drag_factor"] / self.reference["fluid.drag_factor"]
         self.rest_stiffness = self.elastic.k1                          # K_0 at E_0 and h
-        if self.head_extra:
-            self.rest_stiffness = self.rest_stiffness + self.head_extra * self.head.k1
         self.mass = self.inertia.mass
         self.alpha, self.beta = theta[ALPHA], theta[BETA]
-        self.damping = rayleigh_damping(self.alpha, self.mass, self.beta, self.elastic_scale * self.rest_stiffness)
-
-    def unscaled_force(self, eta) -> np.ndarray:
-        """f_int at E_0 and the head factor h: f_all + (s_H - 1) f_head."""
-        force = self.elastic.force(eta)
-        return force + self.head_extra * self.head.force(eta) if self.head_extra else force
-
-    def residual(self, time, eta, eta_dot, eta_ddot):
-        inertia = self.mass @ eta_ddot
-        internal = self.elastic_scale * self.unscaled_force(eta)
-        external = self.muscle.force(time, eta)
-        if self.thrust is not None:
-            external = external + self.thrust_scale * self.thrust.force(eta, eta_dot, eta_ddot)
-        if self.drag is not None:
-            external = external + self.drag_scale * self.drag.force(eta_dot)
-        residual = inertia + self.damping @ eta_dot + internal - external
-        return residual, max(self.norm(internal), self.norm(external), self.norm(inertia))
-
-    def tangents(self, time, eta, eta_dot, eta_ddot):
-        """(K_t, C_t, M_t) with each term's part scaled by its factor."""
-        elastic = self.elastic.tangent(eta)
-        if self.head_extra:
-            elastic = elastic + self.head_extra * self.head.tangent(eta)
-        stiffness = self.elastic_scale * elastic + self.muscle.tangents(time, eta, eta_dot, eta_ddot)[0]
-        damping, mass = self.damping.copy(), self.mass.copy()
-        for term, scale in ((self.thrust, self.thrust_scale), (self.drag, self.drag_scale)):
-            if term is None:
-                continue
-            parts = term.tangents(time, eta, eta_dot, eta_ddot)
-            for total, part in zip((stiffness, damping, mass), parts):
-                if part is not None:
-                    total += scale * part
-        return stiffness, damping, mass
+        if (self.alpha, self.beta, self.elastic_scale) != (prom.inertia.rayleigh_alpha, prom.inertia.rayleigh_beta, 1.0):
+            self.inertia.damping = rayleigh_damping(self.alpha, self.mass, self.beta,
+                                                    self.elastic_scale * self.rest_stiffness)
+        self.damping = self.inertia.damping
 
     def parameter_derivative(self, time, eta, eta_dot, eta_ddot) -> np.ndarray:
         """∂r/∂θ at fixed (η, η̇, η̈), shape (m, q) (the module's equations)."""
@@ -181,7 +164,7 @@ class CalibratedSystem(ReducedSystem):
         reference, theta = self.reference, self.theta
         zero = np.zeros(eta.size)
         if key == "material.young_modulus":
-            return (self.unscaled_force(eta) + self.beta * (self.rest_stiffness @ eta_dot)) \
+            return (self.elastic.force(eta) + self.beta * (self.rest_stiffness @ eta_dot)) \
                 / reference["material.young_modulus"]
         if key == HEAD:
             return self.elastic_scale * (self.head.force(eta) + self.beta * (self.head.k1 @ eta_dot)) / reference[HEAD]
