@@ -4,7 +4,8 @@ Residual r(θ) = y_model(t_i + τ; θ) - y_data(t_i) over every data time t_i an
 sampled at the data's times (shifted by the time offset τ when it is fitted, 0 otherwise) by cubic Hermite
 interpolation of the reduced trajectory and its velocity on the time grid (:func:`hermite`), its Jacobian
 J = dy/dθ the same interpolation of the forward sensitivities of y and ẏ (``parameters.simulate_parameters``)
-and dy/dτ the interpolant's time derivative (ẏ at the grid's times): the exact derivatives of what is sampled. Levenberg–Marquardt on the relative parameters θ/θ_start (τ, which starts at 0, relative to its
+and dy/dτ the interpolant's time derivative (ẏ at the grid's times): the exact derivatives of what is sampled.
+Levenberg–Marquardt on the relative parameters θ/θ_start (τ, which starts at 0, relative to its
 bounds' half-width), with bounds by projection:
 
     (Jᵀ J + λ diag(Jᵀ J)) δ = -Jᵀ r,   λ ÷ 3 after a step that lowers ½‖r‖², × 4 after one that does not

@@ -8,10 +8,12 @@ parameter scaling its part of the reduced equations of motion exactly:
 
 with s_E = E / E_0 (the SVK internal force and K_0 are linear in E at fixed ν: both Lamé constants
 are), s_H = h / h_0 the head's stiffness factor, which scales the head cells' share f_head of the
-elastic tensors only (``ReducedModel.head_elastic``, projected with ``build_prom(head_share=True)``), α, β the Rayleigh coefficients, A_eff = k A / k_0 (the muscle force is linear in k a(t): k and A
+elastic tensors only (``ReducedModel.head_elastic``, projected with ``build_prom(head_share=True)``),
+α, β the Rayleigh coefficients, A_eff = k A / k_0 (the muscle force is linear in k a(t): k and A
 enter only as their product k·A), s_T = c_T / c_T,0 and s_D = c_D / c_D,0 the fluid factors. The
 basis (vibration modes and modal derivatives of K and M) does not depend on E, α, β, k·A or the fluid
-factors, so the PROM at θ is the PROM a rebuild at θ would give on the same basis.
+factors, so the PROM at θ is the PROM a rebuild at θ would give on the same basis (the head's factor moves the
+head's vectors of a ``head_share`` basis a little: the fit rebuilds the PROM when a parameter moved far).
 
 The columns of ∂r/∂θ at fixed (η, η̇, η̈):
 

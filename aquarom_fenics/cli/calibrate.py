@@ -94,7 +94,8 @@ def calibrate_inputs(args):
     scene = load_scene(args)
     keys, start, bounds = parse_fit(args.fit, scene)
     if args.data is None:
-        raise InputError("--data is required: the measured swim, a CSV of time_s and any of head_x_m, tail_y_m, com_x_m, tail_x_m, com_y_m")
+        raise InputError("--data is required: the measured swim, a CSV of time_s and any of head_x_m, tail_y_m, "
+                         "com_x_m, tail_x_m, com_y_m")
     if args.max_iterations < 1:
         raise InputError(f"--max-iterations {args.max_iterations}: must be at least 1")
     check_time_runs(args, scene)

@@ -154,3 +154,13 @@ def test_the_frequency_of_a_gait_whose_start_moves_with_it_is_refused():
         check_fit(["actuation.frequency"], wave)
     check_fit(["actuation.frequency"], wave.replace("actuation", start_ramp=0.25))
     check_fit(["actuation.frequency"], coarse_scene())
+
+
+def test_a_prom_with_the_head_share_saves_and_loads_it(prom, tmp_path):
+    from aquarom_fenics.reduction.prom import ReducedModel
+
+    prom.save(tmp_path / "head.npz")
+    loaded = ReducedModel.load(tmp_path / "head.npz")
+    assert loaded.labels == prom.labels and any(label.startswith("head_") for label in loaded.labels)
+    for name in ("linear", "quadratic", "cubic"):
+        np.testing.assert_array_equal(getattr(loaded.head_elastic, name).constant, getattr(prom.head_elastic, name).constant)
