@@ -19,6 +19,11 @@ def mass_moment_x(test, shape_gradient_field, density):
     return mass_density(shape_gradient_field, density) * test[0] * ufl.dx
 
 
+def mass_moment_y(test, shape_gradient_field, density):
+    """m_i = ∫ ρ φ_i·e_y dV_ξ; the centre-of-mass y-displacement is m·u / ∫ ρ dV_ξ."""
+    return mass_density(shape_gradient_field, density) * test[1] * ufl.dx
+
+
 def total_mass(shape_gradient_field, density, mesh):
     """∫ ρ dV_ξ  [kg]."""
     return mass_density(shape_gradient_field, density) * ufl.dx(domain=mesh)

@@ -42,7 +42,7 @@ def test_simulate_fom_without_xi_runs_the_start_design(tmp_path):
     assert summary["xi"] == {"z_tail": 0.1}
     assert summary["units"]["distance"] == "m" and summary["units"]["wall_time"] == "s"
     header = (tmp_path / "fom" / "trajectory.csv").read_text().splitlines()[0]
-    assert header == "time_s,head_x_m,tail_y_m,com_x_m,newton_iterations"
+    assert header == "time_s,head_x_m,tail_y_m,com_x_m,tail_x_m,com_y_m,newton_iterations"
 
 
 def test_the_fom_check_names_the_start_design_not_the_nominal_one():

@@ -1,14 +1,18 @@
 """Least-squares calibration of scene parameters θ to a measured swim on the reduced model (issue 52).
 
-Residual r(θ) = y_model(t_i; θ) - y_data(t_i) over every data time t_i and tracked column, the model
-sampled at the data's times by linear interpolation of the reduced trajectory on its time grid, its
-Jacobian J = dy/dθ from the forward sensitivities (``parameters.simulate_parameters``). Levenberg–
-Marquardt on the relative parameters θ/θ_start, with bounds by projection:
+Residual r(θ) = y_model(t_i + τ; θ) - y_data(t_i) over every data time t_i and tracked column, the model
+sampled at the data's times (shifted by the time offset τ when it is fitted, 0 otherwise) by cubic Hermite
+interpolation of the reduced trajectory and its velocity on the time grid (:func:`hermite`), its Jacobian
+J = dy/dθ the same interpolation of the forward sensitivities of y and ẏ (``parameters.simulate_parameters``)
+and dy/dτ the interpolant's time derivative (ẏ at the grid's times): the exact derivatives of what is sampled.
+Levenberg–Marquardt on the relative parameters θ/θ_start (τ, which starts at 0, relative to its
+bounds' half-width), with bounds by projection:
 
     (Jᵀ J + λ diag(Jᵀ J)) δ = -Jᵀ r,   λ ÷ 3 after a step that lowers ½‖r‖², × 4 after one that does not
 
 The PROM is rebuilt at the current θ when a parameter has moved more than ``rebuild_fraction`` of its
-value since the last build. Converged: a relative step below ``step_tolerance`` on every parameter.
+value since the last build (τ aside: the PROM does not depend on it). Converged: a relative step below
+``step_tolerance`` on every parameter (τ's relative to its bounds' half-width).
 The last iterations run on the FOM (``refine_on_fom``), so that the reported point is the FOM's.
 At the optimum, with N data, q parameters and the noise estimate σ² = ‖r‖² / (N - q):
 
@@ -22,7 +26,7 @@ from typing import Callable
 import numpy as np
 import scipy.stats
 
-from aquarom_fenics.calibration.parameters import ModelSwim, simulate_parameters
+from aquarom_fenics.calibration.parameters import TIME_OFFSET, ModelSwim, scene_values, simulate_parameters
 from aquarom_fenics.dynamics.integrator import IntegrationStopped
 
 CORRELATION_LIMIT = 0.95
@@ -53,15 +57,65 @@ class FitResult:
     history: list = field(default_factory=list)   # per iteration: cost, θ, λ
 
 
-def sample_at(swim: ModelSwim, times: np.ndarray, columns: list[int]) -> tuple[np.ndarray, np.ndarray]:
-    """The model's observed columns (n, k) and their θ-derivatives (n, k, q) linearly interpolated at ``times``."""
-    values = np.column_stack([np.interp(times, swim.time, swim.observed[:, c]) for c in columns])
-    q = swim.derivative.shape[2]
-    derivative = np.empty((times.size, len(columns), q))
-    for j, c in enumerate(columns):
-        for k in range(q):
-            derivative[:, j, k] = np.interp(times, swim.time, swim.derivative[:, c, k])
+def hermite(at: np.ndarray, grid: np.ndarray, values: np.ndarray, rates: np.ndarray):
+    """The cubic Hermite interpolant of ``values`` (n, …) with time derivatives ``rates`` on ``grid`` (n,) at
+    ``at`` and its time derivative; zero before grid[0] (at rest before the start). On [t_k, t_k+1], Δ its
+    length and s = (t - t_k)/Δ:
+
+        y = h00 y_k + Δ h10 ẏ_k + h01 y_k+1 + Δ h11 ẏ_k+1,   h00 = 2s³ - 3s² + 1, h10 = s³ - 2s² + s,
+        h01 = 3s² - 2s³, h11 = s³ - s²;  dy/dt = (h00' y_k + Δ h10' ẏ_k + h01' y_k+1 + Δ h11' ẏ_k+1) / Δ
+    """
+    clipped = np.clip(at, grid[0], grid[-1])
+    k = np.clip(np.searchsorted(grid, clipped, side="right") - 1, 0, grid.size - 2)
+    step = grid[k + 1] - grid[k]
+    s = (clipped - grid[k]) / step
+    shape = (-1,) + (1,) * (values.ndim - 1)
+    s, step, before = s.reshape(shape), step.reshape(shape), (at < grid[0]).reshape(shape)
+    h = (2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, 3 * s**2 - 2 * s**3, s**3 - s**2)
+    dh = (6 * s**2 - 6 * s, 3 * s**2 - 4 * s + 1, 6 * s - 6 * s**2, 3 * s**2 - 2 * s)
+    ends = (values[k], step * rates[k], values[k + 1], step * rates[k + 1])
+    value = sum(weight * end for weight, end in zip(h, ends))
+    rate = sum(weight * end for weight, end in zip(dh, ends)) / step
+    return np.where(before, 0.0, value), np.where(before, 0.0, rate)
+
+
+def sample_at(swim: ModelSwim, times: np.ndarray, columns: list[int], keys: list[str] | None = None,
+              offset: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The model's observed columns (n, k) at ``times`` + ``offset`` and their derivatives (n, k, q) with respect
+    to ``keys`` (the swim's by default; the time offset's is the time derivative), by :func:`hermite`."""
+    keys = swim.keys if keys is None else keys
+    at = np.asarray(times, dtype=float) + offset
+    values, rates = hermite(at, swim.time, swim.observed[:, columns], swim.velocity[:, columns])
+    derivative = np.empty((at.size, len(columns), len(keys)))
+    for k, key in enumerate(keys):
+        if key == TIME_OFFSET:
+            derivative[:, :, k] = rates
+        else:
+            index = swim.keys.index(key)
+            derivative[:, :, k] = hermite(at, swim.time, swim.derivative[:, columns, index],
+                                          swim.velocity_derivative[:, columns, index])[0]
     return values, derivative
+
+
+def model_at(prom, built, data, columns: list[int], keys: list[str], values: np.ndarray):
+    """The PROM (built on the scene ``built``) at θ = ``values``: its observed columns at the data's times
+    (n, k) and their Jacobian (n k, q) in ``keys``' order."""
+    point = dict(zip(keys, values))
+    swim = simulate_parameters(prom, built, scene_values(point))
+    model, derivative = sample_at(swim, data.time, columns, keys, point.get(TIME_OFFSET, 0.0))
+    return model, derivative.reshape(-1, len(keys))
+
+
+def typical_sizes(keys: list[str], values: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """|θ_j| per parameter, and for the time offset (which starts at 0) its bounds' half-width [s]."""
+    is_offset = np.array([key == TIME_OFFSET for key in keys])
+    return np.where(is_offset, 0.5 * (bounds[:, 1] - bounds[:, 0]), np.abs(values))
+
+
+def moved_beyond(keys: list[str], theta: np.ndarray, built_at: np.ndarray, fraction: float) -> bool:
+    """Whether a parameter the PROM depends on (not the time offset) moved beyond ``fraction`` of its value."""
+    depends = np.array([key != TIME_OFFSET for key in keys])
+    return bool(np.any(depends & (np.abs(theta - built_at) > fraction * np.abs(built_at))))
 
 
 def calibrate(data, columns: list[int], keys: list[str], start: np.ndarray, bounds: np.ndarray,
@@ -69,15 +123,17 @@ def calibrate(data, columns: list[int], keys: list[str], start: np.ndarray, boun
               report: Callable[[int, float, np.ndarray], None] | None = None) -> FitResult:
     """Fit θ (``keys``, from ``start``, within ``bounds`` (q, 2)) to ``data`` (a SwimData; ``columns`` the
     model's observable index of each data column). ``build(values)`` returns (prom, scene it was built on)."""
-    scale = np.abs(start)
+    scale = typical_sizes(keys, np.asarray(start, dtype=float), bounds)
     theta = np.clip(np.asarray(start, dtype=float), bounds[:, 0], bounds[:, 1])
     prom, built = build(dict(zip(keys, theta)))
     built_at, rebuilds = theta.copy(), 0
 
     def evaluate(values: np.ndarray):
-        swim = simulate_parameters(prom, built, dict(zip(keys, values)))
-        model, derivative = sample_at(swim, data.time, columns)
-        return model, derivative.reshape(-1, len(keys)), model - data.values
+        model, jacobian = model_at(prom, built, data, columns, keys, values)
+        return model, jacobian, model - data.values
+
+    def size(values: np.ndarray) -> np.ndarray:
+        return typical_sizes(keys, values, bounds)
 
     model, jacobian, residual = evaluate(theta)
     cost = 0.5 * float(np.sum(residual ** 2))
@@ -92,7 +148,7 @@ def calibrate(data, columns: list[int], keys: list[str], start: np.ndarray, boun
             system = normal + damping * np.diag(np.diag(normal) + 1e-300)
             step = -np.linalg.lstsq(system, gradient, rcond=None)[0] * scale
             trial = np.clip(theta + step, bounds[:, 0], bounds[:, 1])
-            if np.all(np.abs(trial - theta) <= settings.step_tolerance * np.abs(theta)):
+            if np.all(np.abs(trial - theta) <= settings.step_tolerance * size(theta)):
                 stalled = True                  # no step left to take: at the minimum (to the tolerance)
                 break
             try:
@@ -116,10 +172,10 @@ def calibrate(data, columns: list[int], keys: list[str], start: np.ndarray, boun
         moved = trial - theta
         theta, model, jacobian, residual, cost = trial, trial_model, trial_jacobian, trial_residual, trial_cost
         damping = max(damping / 3.0, 1e-12)
-        if np.all(np.abs(moved) <= settings.step_tolerance * np.maximum(np.abs(theta), 1e-300)):
+        if np.all(np.abs(moved) <= settings.step_tolerance * np.maximum(size(theta), 1e-300)):
             converged = True
             break
-        if np.any(np.abs(theta - built_at) > settings.rebuild_fraction * np.abs(built_at)):
+        if moved_beyond(keys, theta, built_at, settings.rebuild_fraction):
             prom, built = build(dict(zip(keys, theta)))
             built_at, rebuilds = theta.copy(), rebuilds + 1
             model, jacobian, residual = evaluate(theta)
@@ -189,7 +245,7 @@ def refine_on_fom(data, result: FitResult, bounds: np.ndarray, fom_model: Callab
         if report is not None:
             report(iteration, cost, theta)
         step = -np.linalg.lstsq(jacobian, residual.ravel(), rcond=None)[0]
-        if np.all(np.abs(step) <= FOM_STEP_TOLERANCE * np.abs(theta)):
+        if np.all(np.abs(step) <= FOM_STEP_TOLERANCE * typical_sizes(result.keys, theta, bounds)):
             converged = True
             break
         if iteration == max_iterations:

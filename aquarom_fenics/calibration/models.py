@@ -23,31 +23,32 @@ class CalibrationModels:
         from aquarom_fenics.reduction.reductor import build_prom
 
         self.built = with_values(self.scene, values)
-        self.prom = build_prom(self.built, xi_center=self.design, fish=self.fish, parametric=False)
+        self.prom = build_prom(self.built, xi_center=self.design, fish=self.fish, parametric=False,
+                               head_share="material.head_stiffness_factor" in self.keys)
         self.built_at = np.array(list(values.values()), dtype=float)
         return self.prom, self.built
 
     def prom_run(self, theta: np.ndarray):
         """The PROM's observed points (n, k) and Jacobian (n k, q) at the data's times, at θ."""
-        from aquarom_fenics.calibration.fit import sample_at
-        from aquarom_fenics.calibration.parameters import OBSERVED, simulate_parameters
+        from aquarom_fenics.calibration.fit import model_at, moved_beyond
+        from aquarom_fenics.calibration.parameters import OBSERVED
 
-        if np.any(np.abs(theta - self.built_at) > self.settings.rebuild_fraction * np.abs(self.built_at)):
+        if moved_beyond(self.keys, theta, self.built_at, self.settings.rebuild_fraction):
             self.build(dict(zip(self.keys, theta)))
-        swim = simulate_parameters(self.prom, self.built, dict(zip(self.keys, theta)))
-        model, derivative = sample_at(swim, self.data.time, [OBSERVED.index(name) for name in self.data.observables])
-        return model, derivative.reshape(-1, len(self.keys))
+        columns = [OBSERVED.index(name) for name in self.data.observables]
+        return model_at(self.prom, self.built, self.data, columns, self.keys, theta)
 
     def prom_jacobian(self, theta: np.ndarray) -> np.ndarray:
         return self.prom_run(theta)[1]
 
     def fom(self, theta: np.ndarray) -> np.ndarray:
         """The FOM's observed points at the data's times at θ (kept for the check of the last point)."""
-        from aquarom_fenics.calibration.parameters import with_values
+        from aquarom_fenics.calibration.parameters import TIME_OFFSET, with_values
         from aquarom_fenics.calibration.report import fom_model
 
-        run, model = fom_model(with_values(self.scene, dict(zip(self.keys, theta))), self.design, self.fish,
-                               self.data, self.progress)
+        point = dict(zip(self.keys, theta))
+        run, model = fom_model(with_values(self.scene, point), self.design, self.fish, self.data, self.progress,
+                               offset=point.get(TIME_OFFSET, 0.0))
         self.last_fom = (theta.copy(), run, model)
         return model
 
@@ -61,7 +62,8 @@ class CalibrationModels:
         return fom_record(run, model, self.prom_run(theta)[0], self.data)
 
 
-def fit_swim(models: CalibrationModels, start: np.ndarray, bounds: np.ndarray, report_prom=None, report_fom=None):
+def fit_swim(models: CalibrationModels, start: np.ndarray, bounds: np.ndarray, report_prom=None, report_fom=None,
+             fom_iterations: int = 6):
     """The whole fit of ``models.data``: Levenberg–Marquardt on the PROM, the last iterations on the FOM,
     the statistics at the FOM's point and the FOM's check there; (FitResult, Statistics, FOM record)."""
     from aquarom_fenics.calibration.fit import calibrate, refine_on_fom, statistics
@@ -70,5 +72,5 @@ def fit_swim(models: CalibrationModels, start: np.ndarray, bounds: np.ndarray, r
     data, keys = models.data, models.keys
     columns = [OBSERVED.index(name) for name in data.observables]
     result = calibrate(data, columns, keys, start, bounds, models.build, models.settings, report_prom)
-    result = refine_on_fom(data, result, bounds, models.fom, models.prom_jacobian, report=report_fom)
+    result = refine_on_fom(data, result, bounds, models.fom, models.prom_jacobian, fom_iterations, report=report_fom)
     return result, statistics(result), models.fom_check(result.values)

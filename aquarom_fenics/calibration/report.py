@@ -16,9 +16,9 @@ def residual_rms(residual: np.ndarray, observables) -> dict[str, float]:
     return per_point | {"overall": float(np.sqrt(np.mean(residual ** 2)))}
 
 
-def fom_model(scene, design: dict, fish, data, progress: bool = True):
-    """The FOM run at ``scene``'s values and its observed points at the data's times, (n, k) [m]; raises
-    SolverError when it stops."""
+def fom_model(scene, design: dict, fish, data, progress: bool = True, offset: float = 0.0):
+    """The FOM run at ``scene``'s values and its observed points at the data's times shifted by the time
+    offset [s] (at rest before t = 0), (n, k) [m]; raises SolverError when it stops."""
     from aquarom_fenics.dynamics.simulate import simulate_fom
     from aquarom_fenics.errors import SolverError
 
@@ -26,7 +26,8 @@ def fom_model(scene, design: dict, fish, data, progress: bool = True):
     if not run.completed:
         raise SolverError(f"the FOM at the fitted values stopped: {run.error}")
     arrays = run.trajectory.arrays()
-    return run, np.column_stack([np.interp(data.time, arrays["time"], arrays[name]) for name in data.observables])
+    at = data.time + offset
+    return run, np.column_stack([np.interp(at, arrays["time"], arrays[name]) for name in data.observables])
 
 
 def fom_record(run, fom: np.ndarray, prom: np.ndarray, data) -> dict:
@@ -79,7 +80,7 @@ def plot_fit(path: Path, data, result, fom: dict) -> None:
         axis.grid(alpha=0.3)
     axes[0, 0].legend(loc="best", fontsize=8)
     axes[-1, 0].set_xlabel("time [s]")
-    axes[0, 0].set_title(", ".join(f"{key.split('.')[1]} = {value:.4g}" for key, value in zip(result.keys, result.values)))
+    axes[0, 0].set_title(", ".join(f"{key.rpartition('.')[2]} = {value:.4g}" for key, value in zip(result.keys, result.values)))
     figure.tight_layout()
     figure.savefig(path, dpi=120)
     plt.close(figure)

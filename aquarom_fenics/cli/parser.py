@@ -155,13 +155,14 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--regions", action="store_true",
                         help="one closed STL surface per region (head, each muscle, the passive body) in the "
                              "folder --out; interfaces belong to both neighbours")
-    calibrate = command("calibrate", "fit scene parameters (E, damping, k·A, frequency, fluid factors) to a measured swim by "
+    calibrate = command("calibrate", "fit scene parameters (E, head factor, damping, k·A, frequency, fluid factors, a time "
+                                     "offset) to a measured swim by "
                                      "least squares on the PROM, checked with the FOM (calibration.json, fit.png, "
                                      "calibrated.toml)",
                         out="output directory (default results/calibrate/SCENE)", progress=True)
     calibrate.add_argument("--data", type=Path, metavar="SWIM.csv",
-                           help="the measured swim: time_s and any of head_x_m, tail_y_m, com_x_m (displacements "
-                                "from rest [m])")
+                           help="the measured swim: time_s and any of head_x_m, tail_y_m, com_x_m, tail_x_m, "
+                                "com_y_m (displacements from rest [m])")
     calibrate.add_argument("--fit", action="append", metavar="KEY[=LO:HI]",
                            help="a scene key to fit, e.g. material.young_modulus or fluid.drag_factor=0.5:2 "
                                 "(repeatable; default bounds: a tenth to ten times the scene's value)")

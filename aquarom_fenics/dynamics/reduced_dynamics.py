@@ -45,8 +45,10 @@ def one_blas_thread(function):
 class ReducedSystem:
     """The PROM's terms evaluated at one design ξ (implements ``NewtonSystem``).
 
-    r_r = M_r η̈ + C_r η̇ + f_int,r(η) - f_act,r(η, t) - f_thrust,r(η, η̇, η̈) - f_drag,r(η̇); its tangents and
-    ξ-derivative are the sums of the terms' parts.
+    r_r = M_r η̈ + C_r η̇ + s_E f_int,r(η) - f_act,r(η, t) - s_T f_thrust,r(η, η̇, η̈) - s_D f_drag,r(η̇); its
+    tangents and ξ-derivative are the sums of the terms' parts. The factors s_E, s_T, s_D (``elastic_scale``,
+    ``thrust_scale``, ``drag_scale``) are 1 but for a calibration's system (``calibration.parameters``); a term
+    whose factor is 1 is not multiplied (the results are those of the plain sum, bit for bit).
     """
 
     def __init__(self, prom: ReducedModel, scene: Scene, xi, scheme: TimeScheme, amplitude: float | None = None):
@@ -61,6 +63,8 @@ class ReducedSystem:
         self.terms = [term for term in (self.elastic, self.muscle, self.inertia, self.thrust, self.drag)
                       if term is not None]
         self.com_weights = self.inertia.com_weights
+        self.com_y_weights = self.inertia.com_y_weights
+        self.elastic_scale = self.thrust_scale = self.drag_scale = 1.0
         self._factors = None
 
     # ------------------------------------------------------------------ forces
@@ -73,19 +77,25 @@ class ReducedSystem:
 
     def residual(self, time, eta, eta_dot, eta_ddot):
         inertia = self.inertia.mass @ eta_ddot
-        internal = self.elastic.force(eta)
+        internal = scaled(self.elastic_scale, self.elastic.force(eta))
         external = self.muscle.force(time, eta)
         if self.thrust is not None:
-            external = external + self.thrust.force(eta, eta_dot, eta_ddot)
+            external = external + scaled(self.thrust_scale, self.thrust.force(eta, eta_dot, eta_ddot))
         if self.drag is not None:
-            external = external + self.drag.force(eta_dot)
+            external = external + scaled(self.drag_scale, self.drag.force(eta_dot))
         residual = inertia + self.inertia.damping @ eta_dot + internal - external
         return residual, max(self.norm(internal), self.norm(external), self.norm(inertia))
 
+    def term_scale(self, term) -> float:
+        """The factor of ``term``'s force: s_E, s_T, s_D, or 1."""
+        return {id(self.elastic): self.elastic_scale, id(self.thrust): self.thrust_scale,
+                id(self.drag): self.drag_scale}.get(id(term), 1.0)
+
     def tangents(self, time, eta, eta_dot, eta_ddot):
-        """(K_t, C_t, M_t) = ∂r/∂(η, η̇, η̈), the sums of the terms' parts (new arrays)."""
-        parts = [term.tangents(time, eta, eta_dot, eta_ddot) for term in self.terms]
-        return tuple(sum_of_matrices([part[slot] for part in parts if part[slot] is not None], eta.size)
+        """(K_t, C_t, M_t) = ∂r/∂(η, η̇, η̈), the sums of the terms' parts, each by its factor (new arrays)."""
+        parts = [(self.term_scale(term), term.tangents(time, eta, eta_dot, eta_ddot)) for term in self.terms]
+        return tuple(sum_of_matrices([scaled(scale, part[slot]) for scale, part in parts if part[slot] is not None],
+                                     eta.size)
                      for slot in range(3))
 
     def set_time_step(self, scheme: TimeScheme) -> None:
@@ -122,10 +132,11 @@ class ReducedSystem:
         """∂f_int,r/∂ξ_k, shape (p, m)."""
         return self.elastic.force_gradient(eta)
 
-    def observables(self, eta) -> tuple[float, float, float]:
-        """(head x, tail y, centre-of-mass x) [m]."""
+    def observables(self, eta) -> tuple[float, float, float, float, float]:
+        """(head x, tail y, centre-of-mass x, tail x, centre-of-mass y) [m]."""
         observation = self.prom.observation
-        return float(observation.head_x_row @ eta), float(observation.tail_y_row @ eta), float(self.com_weights @ eta)
+        return (float(observation.head_x_row @ eta), float(observation.tail_y_row @ eta), float(self.com_weights @ eta),
+                float(observation.tail_x_row @ eta), float(self.com_y_weights @ eta))
 
     def com_weights_gradient(self) -> np.ndarray:
         """∂c/∂ξ_k of com_x = c(ξ)·η, shape (p, m)."""
@@ -248,6 +259,11 @@ def attach_strains(result: ReducedResult, prom: ReducedModel, scene: Scene, xi, 
     if MPI.COMM_WORLD.rank == 0:
         report_strains(result.strain, warn=result.completed)
     return result
+
+
+def scaled(factor: float, array: np.ndarray) -> np.ndarray:
+    """factor × array, the array itself when the factor is 1."""
+    return array if factor == 1.0 else factor * array
 
 
 def sum_of_matrices(matrices: list[np.ndarray], size: int) -> np.ndarray:

@@ -105,10 +105,11 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
         cut_steps = report.cut_steps
         factorizations += report.factorizations
         values = model.observables(u)
-        trajectory.append(report.time, values["head_x"], values["tail_y"], values["com_x"], report.iterations)
+        observed = [values[name] for name in ("head_x", "tail_y", "com_x", "tail_x", "com_y")]
+        trajectory.append(report.time, *observed, report.iterations)
         probe.observe(report.step, report.time, u)
         if csv:
-            csv.write(report.time, values["head_x"], values["tail_y"], values["com_x"], report.iterations)
+            csv.write(report.time, *observed, report.iterations)
         if keep_states:
             states.append((u.copy(), v.copy(), a.copy()))
         if displacements is not None:
@@ -200,12 +201,16 @@ lock (a named semaphore), which in a spawned worker coordinates with no other pr
 the worker is ended with SIGTERM (Ctrl-C of the command), is reported as leaked at exit."""
 
 
-def _progress_bar(total: int, label: str, enabled: bool):
+def _progress_bar(total: int, label: str, enabled: bool, unit: str = "step"):
+    """A progress bar of ``total`` ``unit``s on a terminal (None when not ``enabled`` or bars are off)."""
     if not (enabled and PROGRESS_BARS["shown"]):
         return None
     from tqdm import tqdm
 
     if in_worker():
         tqdm.set_lock(WORKER_BAR_LOCK)
-    return tqdm(total=total, desc=label, unit="step", leave=False, disable=None)
+    return tqdm(total=total, desc=label, unit=unit, leave=False, disable=None)
+
+
+progress_bar = _progress_bar
 

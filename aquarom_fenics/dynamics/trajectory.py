@@ -19,10 +19,13 @@ class Trajectory:
     head_x: list = field(default_factory=list)
     tail_y: list = field(default_factory=list)
     com_x: list = field(default_factory=list)
+    tail_x: list = field(default_factory=list)
+    com_y: list = field(default_factory=list)
     newton_iterations: list = field(default_factory=list)
 
-    def append(self, time: float, head_x: float, tail_y: float, com_x: float, iterations: int) -> None:
-        for name, value in zip(COLUMNS, (time, head_x, tail_y, com_x, iterations)):
+    def append(self, time: float, head_x: float, tail_y: float, com_x: float, tail_x: float, com_y: float,
+               iterations: int) -> None:
+        for name, value in zip(COLUMNS, (time, head_x, tail_y, com_x, tail_x, com_y, iterations)):
             getattr(self, name).append(value)
 
     def arrays(self) -> dict[str, np.ndarray]:

@@ -198,16 +198,20 @@ def force_tensors(p2, p3, p4):
 
 
 def internal_force_taylor(sampler: CellSampler, vectors: np.ndarray, n_parameters: int,
-                          order: int, comm: MPI.Comm):
+                          order: int, comm: MPI.Comm, samples: np.ndarray | None = None):
     """Taylor coefficients in Δξ of (K1, K2, K3): lists [constant, first (p, ...), second (p, p, ...)].
 
     Π = ½ Σ_c w_c E_c:ℂ_c:E_c; its ξ-derivatives follow Leibniz' rule over the three factors
     (w, E, E). The weight enters as w_I / w_0 on the left factor of strains whitened with w_0.
+    ``samples`` (bool, one per sample) restricts the sums to those samples (the measure dx of a region):
+    the other samples' whitened strains are zero.
     """
     m = vectors.shape[1]
     moduli = sampler.elasticity()
     base_weight = sampler.weights(sampler.weight[0])
     transform = whitening(base_weight, moduli)
+    if samples is not None:
+        transform = transform * samples[:, None, None]
     p = n_parameters if order >= 1 else 0
     whitened, weight_ratio = {}, {}
 

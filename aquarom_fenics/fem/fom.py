@@ -189,7 +189,7 @@ class FullOrderModel:
 
     def _build_observation(self):
         """Weights w on the owned dofs of the observed displacements (SPEC §3: outputs, never where a force
-        acts), head x = w_head·u and tail y = w_tail·u: the head's volume average of u_x (the drag's
+        acts), head x = w_head·u and tail y = w_tail·u (tail x its u_x): the head's volume average of u_x (the drag's
         reference, the head being stiff) and the tail station's average of u_y (the end face x = -L with
         ``tail_station = "face"``); the head and tail spine nodes with ``stations = "nodes"``."""
         self._head_x_weights = np.zeros(self.n_owned_dofs)
@@ -200,6 +200,7 @@ class FullOrderModel:
             self._tail_y_weights[3 * tail + 1] = 1.0
         else:
             self._tail_y_weights[1::3] = self.station_averages.weights[0][:, self.layout.owned_nodes].toarray().ravel()
+        self._tail_x_weights = np.roll(self._tail_y_weights, -1)       # the same point's u_x (dofs x, y, z per node)
 
     def tail_point(self) -> np.ndarray:
         """(3,) rest position [m] of the tail's observation point in this design: the tail station's
@@ -375,17 +376,20 @@ class FullOrderModel:
         return owned
 
     def observables(self, u: np.ndarray) -> dict[str, float]:
-        """Head x, tail y and centre-of-mass x displacements [m] (``_build_observation``)."""
-        local = np.array([self._head_x_weights @ u, self._tail_y_weights @ u, self.inertia.mass_moment_x @ u])
-        head_x, tail_y, moment = self.comm.allreduce(local, op=MPI.SUM)
-        return {"head_x": float(head_x), "tail_y": float(tail_y), "com_x": float(moment) / self.inertia.total_mass}
+        """Head x, tail y, centre-of-mass x, tail x and centre-of-mass y displacements [m] (``_build_observation``)."""
+        inertia = self.inertia
+        local = np.array([self._head_x_weights @ u, self._tail_y_weights @ u, inertia.mass_moment_x @ u,
+                          self._tail_x_weights @ u, inertia.mass_moment_y @ u])
+        head_x, tail_y, moment, tail_x, moment_y = self.comm.allreduce(local, op=MPI.SUM)
+        return {"head_x": float(head_x), "tail_y": float(tail_y), "com_x": float(moment) / inertia.total_mass,
+                "tail_x": float(tail_x), "com_y": float(moment_y) / inertia.total_mass}
 
-    def observation_rows(self, vectors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(head x row, tail y row), each (m,): the observed displacements from reduced coordinates η of
-        the owned dof columns ``vectors`` (u = V η), on every rank."""
-        local = np.stack([self._head_x_weights @ vectors, self._tail_y_weights @ vectors])
-        head_x, tail_y = self.comm.allreduce(local, op=MPI.SUM)
-        return head_x, tail_y
+    def observation_rows(self, vectors: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(head x row, tail y row, tail x row), each (m,): the observed displacements from reduced
+        coordinates η of the owned dof columns ``vectors`` (u = V η), on every rank."""
+        local = np.stack([self._head_x_weights @ vectors, self._tail_y_weights @ vectors, self._tail_x_weights @ vectors])
+        head_x, tail_y, tail_x = self.comm.allreduce(local, op=MPI.SUM)
+        return head_x, tail_y, tail_x
 
     def kinetic_energy(self, v: np.ndarray) -> float:
         """½ u̇ᵀ M u̇ [J]."""

@@ -22,7 +22,7 @@ import numpy as np
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.files import read_text_file, require_regular_file  # noqa: F401  (require_: for their users)
-from aquarom_fenics.io.tables import TRAJECTORY_COLUMNS, TRAJECTORY_FILE_COLUMNS
+from aquarom_fenics.io.tables import OPTIONAL_TRAJECTORY_COLUMNS, TRAJECTORY_COLUMNS, TRAJECTORY_FILE_COLUMNS
 
 MAX_READBACK_BYTES = 256 * 1024 * 1024
 """Largest JSON or CSV file read back [bytes] (a checkpoint of a long optimisation is a few MB)."""
@@ -233,9 +233,9 @@ def load_run_record(path: Path) -> dict:
 
 
 def load_csv_table(path: Path, columns: tuple[str, ...] | list[str], kind: str, remedy: str = "",
-                   text_columns: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
+                   text_columns: tuple[str, ...] = (), optional_columns: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
     """A CSV file with a header holding ``columns`` (others allowed) and at least one row; numbers
-    in every column but ``text_columns`` (an empty cell is NaN)."""
+    in every column but ``text_columns`` (an empty cell is NaN); ``optional_columns`` read too when present."""
     path = Path(path)
     text = read_text_file(path, kind, MAX_READBACK_BYTES, remedy)
     remedy = f"; {remedy}" if remedy else ""
@@ -253,7 +253,7 @@ def load_csv_table(path: Path, columns: tuple[str, ...] | list[str], kind: str, 
     if not body:
         raise InputError(f"{kind} {path}: no rows after the header{remedy}")
     table = {}
-    for name in columns:
+    for name in [*columns, *(name for name in optional_columns if name in header)]:
         index = header.index(name)
         values = []
         for number, row in enumerate(body, start=2):
@@ -273,17 +273,20 @@ def load_csv_table(path: Path, columns: tuple[str, ...] | list[str], kind: str, 
 
 
 def load_trajectory(path: Path) -> dict[str, np.ndarray]:
-    """trajectory.csv of a run: time [s], head x, tail y, centre-of-mass x [m], Newton iterations;
-    finite values, times increasing."""
+    """trajectory.csv of a run: time [s], head x, tail y, centre-of-mass x [m], tail x and centre-of-mass y [m]
+    when the file has them (a run written before they existed does not), Newton iterations; finite values,
+    times increasing."""
     remedy = "rerun `aquarom simulate` into this folder with --force"
-    file_columns = [TRAJECTORY_FILE_COLUMNS[name] for name in TRAJECTORY_COLUMNS]
-    table = load_csv_table(path, file_columns, "trajectory", remedy)
+    optional = [TRAJECTORY_FILE_COLUMNS[name] for name in OPTIONAL_TRAJECTORY_COLUMNS]
+    file_columns = [TRAJECTORY_FILE_COLUMNS[name] for name in TRAJECTORY_COLUMNS if name not in OPTIONAL_TRAJECTORY_COLUMNS]
+    table = load_csv_table(path, file_columns, "trajectory", remedy, optional_columns=tuple(optional))
     for name, values in table.items():
         if not np.all(np.isfinite(values)):
             raise InputError(f"trajectory {path}: column {name} holds empty or non-finite values; {remedy}")
     if np.any(np.diff(table[TRAJECTORY_FILE_COLUMNS["time"]]) <= 0):
         raise InputError(f"trajectory {path}: the times do not increase; {remedy}")
-    return {name: table[TRAJECTORY_FILE_COLUMNS[name]] for name in TRAJECTORY_COLUMNS}
+    return {name: table[TRAJECTORY_FILE_COLUMNS[name]] for name in TRAJECTORY_COLUMNS
+            if TRAJECTORY_FILE_COLUMNS[name] in table}
 
 
 def read_trajectory_csv(path: Path) -> dict[str, np.ndarray]:

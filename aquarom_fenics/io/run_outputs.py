@@ -1,7 +1,7 @@
 """What a simulation run leaves in its folder, written by one writer for the FOM and the reduced models.
 
-``trajectory.csv`` (time_s, head_x_m, tail_y_m, com_x_m, newton_iterations per sample), ``displacement.npz`` (the
-nodal displacement series the animation reads), ``summary.json`` (distance, tail amplitude,
+``trajectory.csv`` (time_s, head_x_m, tail_y_m, com_x_m, tail_x_m, com_y_m, newton_iterations per sample),
+``displacement.npz`` (the nodal displacement series the animation reads), ``summary.json`` (distance, tail amplitude,
 stop reason, scene, design, versions) and ``trajectory.png``.
 """
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """A measured swim to calibrate against (issue 52): a CSV of tracked points in the model's frame.
 
 The first column is ``time_s`` [s]; the others are ``<point>_<axis>_m`` [m], the displacements of
-trajectory.csv's points from their rest positions (``head_x_m`` the head's volume average, ``tail_y_m``
-the tail station, ``com_x_m`` the centre of mass), any subset, at any frame rate. A tracking tool's
+trajectory.csv's points from their rest positions (``head_x_m`` the head's volume average, ``tail_y_m`` and
+``tail_x_m`` the tail station, ``com_x_m`` and ``com_y_m`` the centre of mass), any subset, at any frame rate. A tracking tool's
 export in pixels is brought to this format by a scale [m/px] and the rest position as origin (the
 manual's page "From the robot to the model and back"). Every refusal is one line (InputError, exit 2).
 """
@@ -21,14 +21,11 @@ from aquarom_fenics.files import read_text_file
 MAX_SWIM_FILE_BYTES = 64 * 2**20
 """Largest swim CSV read [bytes]."""
 
-SWIM_COLUMNS = {"head_x_m": "head_x", "tail_y_m": "tail_y", "com_x_m": "com_x"}
+SWIM_COLUMNS = {"head_x_m": "head_x", "tail_y_m": "tail_y", "com_x_m": "com_x", "tail_x_m": "tail_x", "com_y_m": "com_y"}
 """The columns a swim may have (besides time_s) and the model's observable each is compared with."""
 
 HELD_COLUMNS = ("head_y_m", "head_z_m")
 """Columns refused: the head is held in y and z (SPEC §5), the model's head does not move there."""
-
-NOT_OBSERVED = ("tail_x_m", "com_y_m")
-"""Points the model does not report yet (trajectory.csv has no such column)."""
 
 MAX_RANGE_BODY_LENGTHS = 10.0
 """A column whose range exceeds this many body lengths is refused (millimetres or pixels, not metres)."""
@@ -85,9 +82,6 @@ def _check_header(header: list[str], what: str) -> tuple[str, ...]:
         if name in HELD_COLUMNS:
             raise InputError(f"{what}: column {name} refused: the head is held in y and z (SPEC §5), the model's "
                              "head moves only along x")
-        if name in NOT_OBSERVED:
-            raise InputError(f"{what}: column {name}: the model does not report this point; use "
-                             f"{', '.join(SWIM_COLUMNS)}")
         if name not in SWIM_COLUMNS:
             raise InputError(f"{what}: unknown column {name!r}; the columns are time_s and any of "
                              f"{', '.join(SWIM_COLUMNS)} (<point>_<axis>_m, metres)")

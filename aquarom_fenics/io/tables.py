@@ -6,8 +6,12 @@ from pathlib import Path
 
 import numpy as np
 
-TRAJECTORY_COLUMNS = ("time", "head_x", "tail_y", "com_x", "newton_iterations")
-"""The arrays of a trajectory, by name: time [s], head x, tail y, centre-of-mass x [m], Newton iterations."""
+TRAJECTORY_COLUMNS = ("time", "head_x", "tail_y", "com_x", "tail_x", "com_y", "newton_iterations")
+"""The arrays of a trajectory, by name: time [s], head x, tail y, centre-of-mass x, tail x, centre-of-mass y
+[m], Newton iterations."""
+
+OPTIONAL_TRAJECTORY_COLUMNS = ("tail_x", "com_y")
+"""Columns a trajectory.csv written before they existed lacks (read as absent, not refused)."""
 
 
 class IncrementalCSV:
@@ -32,24 +36,26 @@ class IncrementalCSV:
 
 
 TRAJECTORY_FILE_COLUMNS = {"time": "time_s", "head_x": "head_x_m", "tail_y": "tail_y_m", "com_x": "com_x_m",
-                           "newton_iterations": "newton_iterations"}
+                           "tail_x": "tail_x_m", "com_y": "com_y_m", "newton_iterations": "newton_iterations"}
 """trajectory.csv's header: every column named with its SI unit (time [s], positions [m])."""
 
 
 class TrajectoryCSV(IncrementalCSV):
     """trajectory.csv, one row per converged step (kept if a later step fails): time_s, head_x_m,
-    tail_y_m, com_x_m (head and centre-of-mass x, tail y, all [m]) and newton_iterations."""
+    tail_y_m, com_x_m, tail_x_m, com_y_m (head and centre-of-mass x, tail y, tail x, centre-of-mass y,
+    all displacements [m]) and newton_iterations."""
 
     def __init__(self, path: Path):
         super().__init__(path, [TRAJECTORY_FILE_COLUMNS[name] for name in TRAJECTORY_COLUMNS])
 
-    def write(self, time, head_x, tail_y, com_x, iterations) -> None:
-        self.write_row([f"{time:.10g}", f"{head_x:.17g}", f"{tail_y:.17g}", f"{com_x:.17g}", iterations])
+    def write(self, time, head_x, tail_y, com_x, tail_x, com_y, iterations) -> None:
+        self.write_row([f"{time:.10g}", *(f"{value:.17g}" for value in (head_x, tail_y, com_x, tail_x, com_y)),
+                        iterations])
 
 
 def write_trajectory_csv(path: Path, arrays: dict[str, np.ndarray]) -> None:
     """A whole trajectory at once (reduced runs are fast enough not to stream)."""
     table = TrajectoryCSV(path)
     for row in zip(*(arrays[name] for name in TRAJECTORY_COLUMNS)):
-        table.write(*row[:4], int(row[4]))
+        table.write(*row[:-1], int(row[-1]))
     table.close()

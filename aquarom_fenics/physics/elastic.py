@@ -59,11 +59,18 @@ class ElasticTerm:
         tangent = fx.compile_form(self.tangent_form)
         return fx.assemble_matrix_into(fx.create_matrix(tangent), tangent)
 
-    def reduce(self, projector) -> "ElasticTensors":
-        """(K1, K2, K3) on the projector's basis with their Taylor terms in ξ, sampled at the quadrature points."""
+    def reduce(self, projector, head_only: bool = False) -> "ElasticTensors":
+        """(K1, K2, K3) on the projector's basis with their Taylor terms in ξ, sampled at the quadrature points;
+        with ``head_only`` the head cells' share alone (the sums restricted to their samples, dx(head)): the
+        tensors are linear in each cell's modulus, so at a head factor h the total is
+        rest + (h / h_0) head = total + (h / h_0 - 1) head, h_0 the scene's."""
         sampler = CellSampler(self.fom, projector.order, projector.n_parameters)
+        samples = None
+        if head_only:
+            head = np.isin(sampler.cells, fx.owned_cells_among(self.fom.mesh, self.fom.fish.tags.head_cells))
+            samples = np.repeat(head, sampler.reference_weights.size)
         taylor = internal_force_taylor(sampler, projector.vectors, projector.n_parameters, projector.order,
-                                       self.fom.comm)
+                                       self.fom.comm, samples)
         terms = list(taylor) + [None] * (3 - len(taylor))     # (constant, first, second), each (K1, K2, K3)
         return ElasticTensors(*(Taylor(*(term[i] if term is not None else None for term in terms))
                                 for i in range(3)))

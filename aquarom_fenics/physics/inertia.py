@@ -16,7 +16,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
-from aquarom_fenics.forms.inertia import mass_density, mass_form, mass_moment_x, total_mass
+from aquarom_fenics.forms.inertia import mass_density, mass_form, mass_moment_x, mass_moment_y, total_mass
 from aquarom_fenics.physics.taylor import Taylor
 
 
@@ -65,6 +65,7 @@ class InertiaTerm:
         test, trial = fom.test_function, fom.trial_function
         self.mass_form = fom.mass_rule(mass_form(trial, test, shape_gradient, density))
         self.mass_moment_form = fom.mass_rule(mass_moment_x(test, shape_gradient, density))
+        self.mass_moment_y_form = fom.mass_rule(mass_moment_y(test, shape_gradient, density))
         self.total_mass_form = fom.mass_rule(total_mass(shape_gradient, density, fom.mesh))
         mass = fx.compile_form(self.mass_form)
         self.mass_matrix = fx.assemble_matrix_into(fx.create_matrix(mass), mass)
@@ -74,6 +75,8 @@ class InertiaTerm:
                                                petsc_linear_combination)
         moment = fx.compile_form(self.mass_moment_form)
         self.mass_moment_x = fx.assemble_vector_into(fx.create_vector(moment), moment).copy()
+        moment_y = fx.compile_form(self.mass_moment_y_form)
+        self.mass_moment_y = fx.assemble_vector_into(fx.create_vector(moment_y), moment_y).copy()
         self.total_mass = fx.assemble_scalar(fx.compile_form(self.total_mass_form), fom.comm)
 
     def destroy(self) -> None:
@@ -88,15 +91,17 @@ class InertiaTerm:
     def reduce(self, projector) -> "InertiaTensors":
         if self.lumped:     # row sums of M: projected from the assembled matrix
             return InertiaTensors(projector.taylor(self.mass_form, transform=lump), self.alpha, self.beta,
-                                  projector.taylor(self.mass_moment_form), projector.taylor(self.total_mass_form))
-        mass, moment, total = sampled_inertia(self.fom, projector, self.density)
-        return InertiaTensors(mass, self.alpha, self.beta, moment, total)
+                                  projector.taylor(self.mass_moment_form), projector.taylor(self.total_mass_form),
+                                  projector.taylor(self.mass_moment_y_form))
+        mass, moment, total, moment_y = sampled_inertia(self.fom, projector, self.density)
+        return InertiaTensors(mass, self.alpha, self.beta, moment, total, moment_y)
 
 
-def sampled_inertia(fom, projector, density) -> tuple[Taylor, Taylor, Taylor]:
-    """Vᵀ M V, Vᵀ m and ∫ρ dV_ξ with their Taylor terms in ξ, as the quadrature sums of the mass forms:
+def sampled_inertia(fom, projector, density) -> tuple[Taylor, Taylor, Taylor, Taylor]:
+    """Vᵀ M V, Vᵀ m_x, ∫ρ dV_ξ and Vᵀ m_y with their Taylor terms in ξ, as the quadrature sums of the mass forms:
 
-        Vᵀ M V = Σ_s w_s ρ_s V(x_s)ᵀ V(x_s),   Vᵀ m = Σ_s w_s ρ_s V_x(x_s),   ∫ρ dV_ξ = Σ_s w_s ρ_s,
+        Vᵀ M V = Σ_s w_s ρ_s V(x_s)ᵀ V(x_s),   Vᵀ m_x = Σ_s w_s ρ_s V_x(x_s),   ∫ρ dV_ξ = Σ_s w_s ρ_s,
+        Vᵀ m_y = Σ_s w_s ρ_s V_y(x_s),
 
     ρ_s = ρ det F_1 (``mass_density`` of ``forms/inertia.py``) and w_s = ω_q |det J_c| at the points
     of the FOM's mass rule. Only ρ_s depends on ξ: its UFL derivatives along the shape directions
@@ -125,11 +130,11 @@ def sampled_inertia(fom, projector, density) -> tuple[Taylor, Taylor, Taylor]:
         compiled.append(fx.compile_quadrature_expression(
             fom.shape_derivative(first, projector.directions[1]), degree))
 
-    def sums(derivative: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def sums(derivative: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         weights = (fx.evaluate_expression(compiled[derivative], cells).reshape(cells.size, -1)
                    * reference_weights).ravel()
         local = (np.tensordot(values * weights[:, None, None], values, axes=([0, 1], [0, 1])),
-                 weights @ values[:, 0, :], np.array(weights.sum()))
+                 weights @ values[:, 0, :], np.array(weights.sum()), weights @ values[:, 1, :])
         return tuple(comm.allreduce(part, op=MPI.SUM) for part in local)
 
     return tuple(projector.taylor_terms(sums))
@@ -144,6 +149,7 @@ class InertiaTensors:
     rayleigh_beta: float                 # β_R [s]
     mass_moment_x: Taylor                # Vᵀ ∫ρ φ·e_x dV_ξ (m,)
     total_mass: Taylor                   # ∫ρ dV_ξ ()
+    mass_moment_y: Taylor                # Vᵀ ∫ρ φ·e_y dV_ξ (m,)
 
     def at(self, delta: np.ndarray, rest_stiffness: Taylor, rest_stiffness_value: np.ndarray) -> "ReducedInertia":
         """At Δξ, with the Taylor of K_0,r and its value at Δξ."""
@@ -164,6 +170,7 @@ class ReducedInertia:
         self.damping = rayleigh_damping(tensors.rayleigh_alpha, self.mass, tensors.rayleigh_beta, rest_stiffness_value)
         self.total_mass = float(tensors.total_mass.at(delta))
         self.com_weights = tensors.mass_moment_x.at(delta) / self.total_mass
+        self.com_y_weights = tensors.mass_moment_y.at(delta) / self.total_mass
         self.mass_gradient = tensors.mass.gradient(delta)                       # ∂M_r/∂ξ_k, (p, m, m)
         self.damping_gradient = rayleigh_damping(tensors.rayleigh_alpha, self.mass_gradient, tensors.rayleigh_beta,
                                                  rest_stiffness.gradient(delta))     # ∂C_r/∂ξ_k

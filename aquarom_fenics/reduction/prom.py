@@ -23,9 +23,10 @@ from aquarom_fenics.physics.inertia import InertiaTensors
 from aquarom_fenics.physics.muscle import MuscleTensors
 from aquarom_fenics.physics.thrust_reduced import ThrustTensors
 
-FORMAT_VERSION = 3
+FORMAT_VERSION = 4
 """2: the tensors grouped per force term (elastic, muscle, inertia, drag, thrust, observation);
-3: the thrust's kinematic rows (stations) and the drag's reference-velocity row."""
+3: the thrust's kinematic rows (stations) and the drag's reference-velocity row;
+4: the tail's x row and the mass moment in y (tail x and centre-of-mass y observed)."""
 MAX_PROM_FILE_BYTES = 16 * 1024 ** 3
 """Largest PROM file read [bytes]."""
 ZIP_MAGIC = b"PK\x03\x04"       # first bytes of a .npz (zip) archive
@@ -37,6 +38,7 @@ class Observation:
 
     head_x_row: np.ndarray               # (m,) the head's average x (the head spine node's with stations = "nodes")
     tail_y_row: np.ndarray               # (m,) the tail station's average y (the tail node's with stations = "nodes")
+    tail_x_row: np.ndarray               # (m,) the same point's x
 
 
 @dataclass
@@ -62,6 +64,7 @@ class ReducedModel:
     cells: int
     dofs: int
     timings: dict = field(default_factory=dict)
+    head_elastic: ElasticTensors | None = None   # the head cells' share of ``elastic`` (calibration of its factor)
 
     @property
     def size(self) -> int:

@@ -26,12 +26,14 @@ log = logging.getLogger("aquarom")
 
 
 def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI.Comm = MPI.COMM_WORLD,
-               parametric: bool = True, basis_from: ReducedModel | None = None) -> ReducedModel:
+               parametric: bool = True, basis_from: ReducedModel | None = None, head_share: bool = False) -> ReducedModel:
     """The PROM of ``scene`` centred on ξ_c (a ROM, without ξ-terms, when ``parametric`` is False).
 
     Each force term of the FOM projects itself on the basis (``reduce``). With ``basis_from`` the
     basis is that PROM's (same scene and mesh), not built again: only a subspace is reused, every
     tensor and its ξ-derivatives are projected at ξ_c, so the PROM is exact for ξ_c on that subspace.
+    With ``head_share`` the basis gets the head's static responses as it swims (``head_vectors``) and the
+    head cells' share of the elastic tensors is projected too (``head_elastic``).
     """
     started = time.perf_counter()
     timings = {}
@@ -48,11 +50,16 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
         check_spine_is_not_moved(fish)
 
     basis = build_basis(fom, p) if basis_from is None else reused_basis(fom, basis_from)
+    if head_share and basis_from is None:
+        from aquarom_fenics.reduction.head_vectors import with_head_responses
+
+        basis = with_head_responses(fom, basis)         # the head strains: its factor enters the tensors
     vectors = basis.vectors
     timings.update(basis.timings)
     projector = Projector(fom, vectors, p, order)
     mark = time.perf_counter()
     elastic = fom.elastic.reduce(projector)
+    head_elastic = fom.elastic.reduce(projector, head_only=True) if head_share else None
     timings["internal_force_tensors"] = time.perf_counter() - mark
 
     mark = time.perf_counter()
@@ -73,8 +80,8 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
         skipped.append("ξ-terms (no shape parameters)" if parametric else "ξ-terms (plain ROM)")
     timings["other_tensors"] = time.perf_counter() - mark
 
-    head_x_row, tail_y_row = fom.observation_rows(vectors)
-    observation = Observation(head_x_row=head_x_row, tail_y_row=tail_y_row)
+    head_x_row, tail_y_row, tail_x_row = fom.observation_rows(vectors)
+    observation = Observation(head_x_row=head_x_row, tail_y_row=tail_y_row, tail_x_row=tail_x_row)
     timings["total"] = time.perf_counter() - started
     m = vectors.shape[1]
     if comm.rank == 0:
@@ -91,7 +98,8 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
         xi_center=xi_center[:p], validity_radius=validity_radii(scene, elastic, inertia, p), labels=basis.labels,
         basis=np.stack([fom.nodal_displacement(vectors[:, j]) for j in range(m)], axis=-1), dropped=basis.dropped,
         frequencies=basis.frequencies, elastic=elastic, muscle=muscle, inertia=inertia, drag=drag, thrust=thrust,
-        observation=observation, cells=fom.n_cells, dofs=fom.n_global_dofs, timings=timings)
+        observation=observation, cells=fom.n_cells, dofs=fom.n_global_dofs, timings=timings,
+        head_elastic=head_elastic)
     fom.destroy()
     return prom
 

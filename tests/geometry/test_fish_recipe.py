@@ -226,7 +226,7 @@ def test_short_simulate_of_the_fish_scene_swims_forward(tmp_path, capsys):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["completed"] and summary["cells"] == FISH_RECIPE["levels"]["1"]["cells"]
     columns = np.loadtxt(out / "trajectory.csv", delimiter=",", skiprows=1)
-    assert columns.shape == (11, 5)                       # t = 0, 0.02, ..., 0.2 s
+    assert columns.shape == (11, 7)                       # t = 0, 0.02, ..., 0.2 s
     tail_y = columns[:, 2]
     assert np.all(np.isfinite(columns)) and np.isfinite(summary["distance"])
     assert tail_y.max() > 2e-3                            # the left muscles contract first: the tail swings to +y

@@ -20,6 +20,14 @@ def test_a_good_file_reads_as_times_and_displacements(tmp_path):
     np.testing.assert_array_equal(swim.values[:, 1], [0.002, 0.004, 0.005])
 
 
+def test_tail_x_and_com_y_columns_are_read_as_their_points(tmp_path):
+    path = tmp_path / "swim.csv"
+    path.write_text("time_s,com_y_m,tail_x_m\n0.01,0.0001,-0.0002\n0.02,0.0003,-0.0004\n")
+    swim = read_swim(path, duration=0.2, n_parameters=2, body_length=0.2)
+    assert swim.observables == ("com_y", "tail_x") and swim.columns == ("com_y_m", "tail_x_m")
+    np.testing.assert_array_equal(swim.values[:, 1], [-0.0002, -0.0004])
+
+
 CASES = {
     "no time_s": ("t,head_x_m\n0.01,0.001\n", ["time_s"]),
     "time_s not first": ("head_x_m,time_s\n0.001,0.01\n", ["first column must be time_s"]),
@@ -36,7 +44,6 @@ CASES = {
     "range of millimetres": ("time_s,head_x_m\n0.01,0\n0.02,1500\n0.03,3000\n", ["millimetres"]),
     "head y": ("time_s,head_x_m,head_y_m\n0.01,0.001,0.0\n", ["head_y_m", "held in y and z"]),
     "head z": ("time_s,head_z_m\n0.01,0.001\n", ["head_z_m", "held in y and z"]),
-    "a point the model does not report": ("time_s,tail_x_m\n0.01,0.001\n", ["tail_x_m", "does not report"]),
     "no tracked column": ("time_s\n0.01\n", ["no tracked column"]),
     "header only": ("time_s,head_x_m\n", ["no rows"]),
     "empty": ("", ["empty"]),
@@ -65,7 +72,6 @@ def test_bad_data_is_one_line_and_exit_code_2(case, tmp_path, capsys):
     (["fluid.drag_factor=2:3"], ["outside [2, 3]"]),
     (["fluid.drag_factor=0.5"], ["LO:HI"]),
     (["material.young_modulus", "material.young_modulus"], ["twice"]),
-    (["time_offset"], ["not supported yet"]),
     ([], ["--fit is required"]),
 ])
 def test_bad_fits_are_one_line_and_exit_code_2(fits, expected, tmp_path, capsys):

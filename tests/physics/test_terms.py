@@ -178,7 +178,7 @@ def test_the_activation_law_of_each_muscle_and_its_independent_patterns():
 def test_reduced_inertia_xi_derivative_includes_the_rayleigh_damping(rng):
     stiffness = random_taylor(rng, (M, M), 2)
     tensors = InertiaTensors(random_taylor(rng, (M, M), 2), 3.1, 0.05, random_taylor(rng, (M,)),
-                             Taylor(np.array(2.0), np.array([0.1, -0.2]), np.diag([0.05, 0.02])))
+                             Taylor(np.array(2.0), np.array([0.1, -0.2]), np.diag([0.05, 0.02])), random_taylor(rng, (M,)))
     _, eta_dot, eta_ddot = state(rng)
 
     def term_at(delta):
