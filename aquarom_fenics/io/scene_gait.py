@@ -237,3 +237,19 @@ def check_gait_bounds(scene) -> None:
                 reason = str(error).split(": ", 1)[-1]
                 raise InputError(f"scene {scene.source}: [gait] {variable.name} at its {side} bound {value:g}: "
                                  f"{reason}") from None
+
+
+def pair_patterns(scene) -> tuple[tuple[float, ...], ...]:
+    """Each pair's activation pattern (its muscles at sign(s_j), the others 0), from the tail, when the
+    scene's phase lag or a pair's amplitude is a design variable (they move a(t) out of the span of the
+    scene's own patterns; ``ActivationLaw.patterns``); () otherwise."""
+    if not any(variable.name != "frequency" for variable in scene.gait):
+        return ()
+    muscles = scene.actuated_muscles
+    patterns = []
+    for pair in gait_pairs(muscles, scene.regions):
+        pattern = [0.0] * len(muscles)
+        for index in pair.muscles:
+            pattern[index] = math.copysign(1.0, muscles[index].scale)
+        patterns.append(tuple(pattern))
+    return tuple(patterns)
