@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from aquarom_fenics.io.scene_gait import gait_pairs, pair_number
-from aquarom_fenics.physics.muscle import start_ramp
+from aquarom_fenics.physics.muscle import ActivationLaw, start_ramp
 
 
 def ramp_time_derivative(time: float, ramp_time: float) -> float:
@@ -63,3 +63,24 @@ class GaitRates:
                 column = np.where(self.pair_of == pair_number(name), np.sign(scales) * ramp * np.sin(angles), 0.0)
             columns.append(column)
         return np.column_stack(columns) if columns else np.zeros((law.size, 0))
+
+
+def mean_positive_power(prom, scene, result, xi=None, amplitude: float | None = None) -> float:
+    """The muscles' mean positive power over the last activation period [W]:
+
+        P̄ = mean over t_n ∈ [T - 1/f, T] of max(0, f_act,r(η_n, t_n) · η̇_n),   f_act,r = -Σ_j a_j (b_j + B_j η)
+
+    the power f_act · u̇ of the muscles' force on the body in reduced coordinates (u = V η), of a completed
+    reduced run ``result`` (``simulate_reduced`` of ``scene`` at ξ and A). Work per cycle would reward a
+    lower frequency over a fixed horizon; the power does not."""
+    from aquarom_fenics.dynamics.trajectory import last_stroke_start
+
+    law = ActivationLaw.of(scene)
+    muscle = prom.muscle.at(prom.delta(prom.xi_center if xi is None else np.asarray(xi, dtype=float)),
+                            scene.actuation.amplitude if amplitude is None else amplitude, law)
+    time = np.asarray(result.trajectory.arrays()["time"])
+    start = last_stroke_start(scene.solver.duration, min(law.frequencies))
+    window = time >= start - 1e-9
+    powers = [max(0.0, float(muscle.force(t, eta) @ eta_dot))
+              for t, eta, eta_dot in zip(time[window], result.states[window], result.velocities[window])]
+    return float(np.mean(powers))

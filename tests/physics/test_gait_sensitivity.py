@@ -121,3 +121,23 @@ def test_the_distance_gradient_matches_central_differences_of_the_fom(second_sce
     difference = (plus.distance - minus.distance) / (2 * step)
     gradient = reduced.distance_gradient[scene.gait_names.index(name)]
     assert abs(gradient - difference) < tolerance * abs(difference), (gradient, difference)
+
+
+def test_the_mean_positive_power_is_the_fom_muscles_power_at_the_reduced_states(scene, prom):
+    """P̄ of the reduced run against f_act(V η) · V η̇ of the FOM's muscle term at the same states and times."""
+    from aquarom_fenics.fem.fom import FullOrderModel
+    from aquarom_fenics.physics.gait import mean_positive_power
+
+    driven = apply_gait(scene, POINT)
+    run = simulate_reduced(prom, driven)
+    power = mean_positive_power(prom, driven, run)
+    model = FullOrderModel(driven, load_fish(driven), prom.xi_center)
+    vectors = np.column_stack([model.owned_values(prom.basis[:, :, j]) for j in range(prom.size)])
+    time = np.asarray(run.trajectory.arrays()["time"])
+    window = time >= driven.solver.duration - 1.0 / POINT["frequency"] - 1e-9
+    expected = []
+    for t, eta, eta_dot in zip(time[window], run.states[window], run.velocities[window]):
+        model.set_displacement(vectors @ eta)
+        model.muscle.set_time(t)
+        expected.append(max(0.0, float(model.muscle.force() @ (vectors @ eta_dot))))
+    assert power > 0 and power == pytest.approx(np.mean(expected), rel=1e-8)
