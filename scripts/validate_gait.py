@@ -7,7 +7,8 @@ gradient against the FOM, and the muscles' effort of a gait against the antagoni
 2. Gradient: dd/dg of that ROM at the scene's gait against central differences of the FOM (lag ± 5°,
    f ± 0.02 Hz).
 3. Effort: the muscles' mean positive power over the last cycle (``physics.gait.mean_positive_power``) of
-   the gait at --gait and of the fish's antagonist pair (scenes/fish.toml, [regions] muscles, the same
+   the ROM (built at --gait) at the scene's gait, the other gaits of 1. and --gait (all at the scene's A),
+   and of the fish's antagonist pair (scenes/fish.toml, [regions] muscles, the same
    frequency and shapes) at the amplitude of equal power (bisection on ROM runs), with both FOM distances.
 
 Writes results/validation/gait.json. Usage::
@@ -107,6 +108,13 @@ def effort_check(scene, design, fish, gait) -> dict:
               "pair_rom_distance": pair_power(amplitude)[1],
               "pair_fom_distance": fom_distance(pair_at, design, pair_fish),
               "pair_power_at_scene_amplitude_w": pair_power(scene.actuation.amplitude)[0]}
+    start = {variable.name: variable.start for variable in scene.gait}
+    result["power_by_gait"] = []
+    for other in [start] + OTHER_GAITS + [gait]:
+        at = apply_gait(scene, other)
+        other_run = simulate_reduced(rom, at)
+        result["power_by_gait"].append({"gait": other, "power_w": mean_positive_power(rom, at, other_run),
+                                        "rom_distance": other_run.distance})
     print("  effort: " + json.dumps(result), flush=True)
     return result
 

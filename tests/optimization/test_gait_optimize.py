@@ -73,3 +73,15 @@ def test_optimize_moves_the_gait_and_its_fom_check_improves(tmp_path, capsys):
     assert set(optimum) == {"z_tail", "frequency", "phase_lag"}
     assert optimum["frequency"] != pytest.approx(1.0, abs=1e-3) or optimum["phase_lag"] != pytest.approx(120.0, abs=0.1)
     assert summary["fom_check"]["ratio"] > 1.0
+
+
+def test_a_scene_of_gait_variables_alone_is_planned_and_budgets_are_refused(tmp_path, capfd):
+    path = tmp_path / "gait_only.toml"
+    path.write_text('[mesh]\nlevel = 1\n[optimizer]\nmethod = "trust-region"\n[gait]\nfrequency = { bounds = [0.5, 2.0] }\n')
+    assert main(["optimize", str(path), "--dry-run"]) == 0
+    capfd.readouterr()
+    path.write_text('[mesh]\nlevel = 1\n[optimizer]\nmethod = "trust-region"\n[cooptimization]\nenabled = true\n'
+                    '[shapes]\nz_tail = { bounds = [-0.2, 0.2] }\n[gait]\nfrequency = { bounds = [0.5, 2.0] }\n')
+    assert main(["pareto", str(path), "--budgets", "0.1,0.2", "--dry-run"]) == 2
+    err = capfd.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "--budgets" in err and "[gait]" in err
