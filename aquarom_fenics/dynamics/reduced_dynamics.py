@@ -145,6 +145,7 @@ class ReducedResult:
     velocities: np.ndarray | None = None          # (n_samples, m) η̇
     accelerations: np.ndarray | None = None       # (n_samples, m) η̈
     sensitivities: np.ndarray | None = None       # (n_samples, m, p) dη/dξ
+    velocity_sensitivities: np.ndarray | None = None   # (n_samples, m, p) dη̇/dξ
     distance_gradient: np.ndarray | None = None   # (p,) dd/dξ
     timings: dict = field(default_factory=dict)
     strain: object = None                         # StrainReport of fem/strains.py, for a single run
@@ -188,6 +189,7 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
     trajectory.append(0.0, *system.observables(zero), 0)
     sensitivity = [np.zeros((m, columns))] * 3
     sensitivity_history = [np.zeros((m, columns))]
+    velocity_history = [np.zeros((m, columns))]
     cut_steps = 0
 
     def advance_sensitivity(step_scheme: TimeScheme, time: float, old, new):
@@ -214,6 +216,7 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
         accelerations.append(eta_ddot.copy())
         if columns:
             sensitivity_history.append(sensitivity[0].copy())
+            velocity_history.append(sensitivity[1].copy())
 
     error = None
     try:
@@ -232,6 +235,7 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
         wall_time=clock.perf_counter() - started)
     if columns and completed:
         result.sensitivities = np.array(sensitivity_history)
+        result.velocity_sensitivities = np.array(velocity_history)
         weights_gradient = system.com_weights_gradient() if sensitivities else np.zeros((0, m))
         extra = int(amplitude_sensitivity) + (len(gait.names) if gait is not None else 0)
         weights_gradient = np.vstack([weights_gradient, np.zeros((extra, m))])

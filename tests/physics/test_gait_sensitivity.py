@@ -141,3 +141,32 @@ def test_the_mean_positive_power_is_the_fom_muscles_power_at_the_reduced_states(
         model.muscle.set_time(t)
         expected.append(max(0.0, float(model.muscle.force() @ (vectors @ eta_dot))))
     assert power > 0 and power == pytest.approx(np.mean(expected), rel=1e-8)
+
+
+def test_the_power_gradient_matches_central_differences_of_the_power():
+    """dP̄/dz of the reduced run over [ξ, A, gait] against central differences of P̄ (level 1, 0.3 s)."""
+    from aquarom_fenics.physics.gait import mean_positive_power, mean_positive_power_gradient
+
+    scene = wave_scene(shapes={"z_tail": {"bounds": [-0.2, 0.2]}}, solver={"duration": 0.3, "tolerance": 1e-11})
+    prom = build_prom(scene)
+    z = {"xi": np.array([0.03]), "amplitude": 0.22} | POINT
+
+    def run(values, sensitivities=False):
+        driven = apply_gait(scene, {name: values[name] for name in POINT})
+        result = simulate_reduced(prom, driven, values["xi"], sensitivities=sensitivities, amplitude=values["amplitude"],
+                                  amplitude_sensitivity=sensitivities, gait_sensitivity=sensitivities)
+        return driven, result
+
+    driven, result = run(z, sensitivities=True)
+    power, gradient = mean_positive_power_gradient(prom, driven, result, z["xi"], z["amplitude"], (True, True, True))
+    assert power == pytest.approx(mean_positive_power(prom, driven, result, z["xi"], z["amplitude"]), rel=1e-12)
+    steps = [("xi", 1e-5), ("amplitude", 1e-6)] + [(name, 1e-6 * max(1.0, POINT[name])) for name in POINT]
+    for column, (name, step) in enumerate(steps):
+        values = []
+        for sign in (1, -1):
+            moved = dict(z)
+            moved[name] = z[name] + sign * step
+            at, moved_run = run(moved)
+            values.append(mean_positive_power(prom, at, moved_run, moved["xi"], moved["amplitude"]))
+        central = (values[0] - values[1]) / (2 * step)
+        assert gradient[column] == pytest.approx(central, rel=1e-4, abs=1e-6 * power), (name, gradient[column], central)
