@@ -177,6 +177,9 @@ def pareto_inputs(args):
     check_time_runs(args, scene)
     if not scene.cooptimization.enabled:
         raise InputError(f"scene {scene.source}: [cooptimization] enabled = true is needed for a Pareto sweep")
+    if scene.cooptimization.effort == "power":
+        raise InputError(f"scene {scene.source}: [cooptimization] effort = \"power\": the Pareto front reports and "
+                         "bounds the effort A²; run optimize --weight W per point, or effort = \"amplitude\"")
     if args.budgets is not None:
         if scene.gait:
             raise InputError(f"--budgets: scene {scene.source} has [gait] variables; the budget front bounds A "

@@ -2,7 +2,8 @@
 
 The design vector z is ξ (the scene's shape parameters), followed by the actuation amplitude A
 when co-optimisation is on, then the ``[gait]`` variables g (io/scene_gait.py). Cost
-L(z) = w_1 (-d(z)) + w_2 α A², d the swimming distance [m].
+L(z) = w_1 (-d(z)) + w_2 α E, d the swimming distance [m] and E the effort: A² or, with
+``[cooptimization] effort = "power"``, the muscles' mean positive power P̄ [W] (physics/gait.py).
 """
 from __future__ import annotations
 
@@ -266,10 +267,13 @@ class CostWeights:
 
 @dataclass(frozen=True)
 class PromRun:
-    """What the cost reads of a PROM run: d [m] and dd/dz (None without sensitivities or design variables)."""
+    """What the cost reads of a PROM run: d [m] and dd/dz (None without sensitivities or design variables), and
+    with the effort "power" P̄ [W] and dP̄/dz."""
 
     distance: float
     distance_gradient: np.ndarray | None
+    power: float | None = None
+    power_gradient: np.ndarray | None = None
 
 
 def scene_at(scene: Scene, space: DesignSpace, z: np.ndarray) -> Scene:
@@ -291,7 +295,7 @@ def _prom_run(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarra
     (``simulate_batch``: the compiled kernel where numba is installed; a step that fails there is integrated by
     ``simulate_reduced`` with its step control, as a single run would be). With [gait] variables the single
     run ``simulate_reduced`` of the scene driven by z's gait, with its gait sensitivities."""
-    if space.n_gait:
+    if space.n_gait or counts_power(scene, space):
         return _gait_run(prom, scene, space, z, sensitivities)
     amplitudes = [float(z[-1])] if space.with_amplitude else None
     batch = simulate_batch(prom, scene, z[None, : space.n_shapes], sensitivities=sensitivities, amplitudes=amplitudes,
@@ -302,28 +306,41 @@ def _prom_run(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarra
     return PromRun(float(batch.distance[0]), gradient)
 
 
+def counts_power(scene: Scene, space: DesignSpace) -> bool:
+    """Whether the cost's effort is the muscles' mean positive power (a co-design with effort = "power")."""
+    return space.with_amplitude and scene.cooptimization.effort == "power"
+
+
 def _gait_run(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarray, sensitivities: bool) -> PromRun:
     from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
+    from aquarom_fenics.physics.gait import mean_positive_power_gradient
 
-    result = simulate_reduced(prom, scene_at(scene, space, z), z[: space.n_shapes], sensitivities=sensitivities,
-                              amplitude=amplitude_of(space, z),
+    driven, xi, amplitude = scene_at(scene, space, z), z[: space.n_shapes], amplitude_of(space, z)
+    result = simulate_reduced(prom, driven, xi, sensitivities=sensitivities, amplitude=amplitude,
                               amplitude_sensitivity=sensitivities and space.with_amplitude,
-                              gait_sensitivity=sensitivities)
+                              gait_sensitivity=sensitivities and space.n_gait > 0)
     if not result.completed:
         raise SolverError(f"PROM simulation at {space.as_dict(z)} stopped: {result.error}")
-    return PromRun(float(result.distance), result.distance_gradient)
+    if not counts_power(scene, space):
+        return PromRun(float(result.distance), result.distance_gradient)
+    columns = (True, space.with_amplitude, space.n_gait > 0) if sensitivities else None
+    power, power_gradient = mean_positive_power_gradient(prom, driven, result, xi, amplitude, columns)
+    return PromRun(float(result.distance), result.distance_gradient, power, power_gradient)
 
 
 def weighted_cost(space: DesignSpace, weights: CostWeights, z: np.ndarray, distance: float,
-                  distance_gradient: np.ndarray | None = None) -> tuple[float, np.ndarray | None]:
-    """L = -w_1 d + w_2 α A² at z and, given dd/dz, ∇L (None without)."""
+                  distance_gradient: np.ndarray | None = None, run: PromRun | None = None) -> tuple[float, np.ndarray | None]:
+    """L = -w_1 d + w_2 α E at z (E = A², or the run's P̄ when it carries one) and, given dd/dz, ∇L (None without)."""
+    power = run is not None and run.power is not None
     cost = -weights.distance * distance
     if space.with_amplitude:
-        cost += weights.energy * weights.energy_term(z[space.amplitude_index])
+        cost += weights.energy * (weights.alpha * run.power if power else weights.energy_term(z[space.amplitude_index]))
     if distance_gradient is None:
         return cost, None
     gradient = -weights.distance * np.asarray(distance_gradient, dtype=float)
-    if space.with_amplitude:
+    if space.with_amplitude and power:
+        gradient = gradient + weights.energy * weights.alpha * np.asarray(run.power_gradient, dtype=float)
+    elif space.with_amplitude:
         gradient[space.amplitude_index] += weights.energy * 2 * weights.alpha * z[space.amplitude_index]
     return cost, gradient
 
@@ -331,7 +348,8 @@ def weighted_cost(space: DesignSpace, weights: CostWeights, z: np.ndarray, dista
 def cost_value(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarray, weights: CostWeights) -> float:
     """L at z without its gradient: a PROM run without sensitivities (a third cheaper; the same
     trajectory, so the same L as :func:`evaluate`'s). Raises SolverError as :func:`evaluate`."""
-    cost, _ = weighted_cost(space, weights, z, _prom_run(prom, scene, space, z, sensitivities=False).distance)
+    run = _prom_run(prom, scene, space, z, sensitivities=False)
+    cost, _ = weighted_cost(space, weights, z, run.distance, run=run)
     if not np.isfinite(cost):
         raise SolverError(f"non-finite cost at {space.as_dict(z)}: {cost}")
     return float(cost)
@@ -343,7 +361,7 @@ def evaluate(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarray
     distance_gradient = result.distance_gradient
     if distance_gradient is None:
         distance_gradient = np.zeros(len(z))
-    cost, gradient = weighted_cost(space, weights, z, result.distance, distance_gradient)
+    cost, gradient = weighted_cost(space, weights, z, result.distance, distance_gradient, run=result)
     if not (np.isfinite(cost) and np.all(np.isfinite(gradient))):
         raise SolverError(f"non-finite cost or gradient at {space.as_dict(z)}: cost {cost}, gradient {gradient}")
     return Evaluation(z.copy(), float(cost), gradient, float(result.distance), distance_gradient)

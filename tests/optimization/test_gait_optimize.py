@@ -85,3 +85,25 @@ def test_a_scene_of_gait_variables_alone_is_planned_and_budgets_are_refused(tmp_
     assert main(["pareto", str(path), "--budgets", "0.1,0.2", "--dry-run"]) == 2
     err = capfd.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "--budgets" in err and "[gait]" in err
+
+
+def test_the_power_effort_gradient_matches_central_differences_of_the_prom_cost():
+    """[cooptimization] effort = "power": L = -w_1 d + w_2 α P̄ over [ξ, A, g], its gradient against the cost's
+    central differences; the effort "amplitude" keeps α A²."""
+    scene = gait_scene({"phase_lag": {"bounds": [60, 180]}}, cooptimization={"enabled": True, "effort": "power"},
+                       solver={"duration": 0.6, "tolerance": 1e-11})
+    space = design_space(scene)
+    prom = build_prom(scene)
+    weights = CostWeights(0.6, 0.4, 1.0)
+    z = np.array([0.03, 0.22, 100.0])
+    evaluation = evaluate(prom, scene, space, z, weights)
+    assert cost_value(prom, scene, space, z, weights) == evaluation.cost
+    assert evaluation.cost != pytest.approx(-0.6 * evaluation.distance + 0.4 * 0.22 ** 2, rel=1e-6)
+    for k, step in ((0, 1e-5), (1, 1e-6), (2, 1e-4)):
+        shift = step * np.eye(3)[k]
+        central = (cost_value(prom, scene, space, z + shift, weights)
+                   - cost_value(prom, scene, space, z - shift, weights)) / (2 * step)
+        assert abs(evaluation.gradient[k] - central) < 1e-4 * abs(central), (k, evaluation.gradient[k], central)
+    amplitude = scene_from_dict({"mesh": {"level": 1}, "cooptimization": {"enabled": True}}, source="<test>")
+    assert amplitude.hash == scene_from_dict({"mesh": {"level": 1}, "cooptimization": {"enabled": True,
+                                              "effort": "amplitude"}}, source="<test>").hash
