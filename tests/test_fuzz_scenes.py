@@ -116,6 +116,8 @@ def test_mutated_shipped_scenes_exit_0_2_or_3_without_traceback(tmp_path, capsys
     rng = random.Random(SEED)
     shipped = sorted(SCENES_DIR.glob("*.toml"))
     originals = {path.stem: tomllib.loads(path.read_text()) for path in shipped}
+    (tmp_path / "meshes").symlink_to(SCENES_DIR.parent / "meshes")    # the fish scenes' ../meshes/ files, as shipped
+    (tmp_path / "scenes").mkdir()
     started = time.perf_counter()
     codes = []
     for number in range(SCENES):
@@ -124,7 +126,7 @@ def test_mutated_shipped_scenes_exit_0_2_or_3_without_traceback(tmp_path, capsys
         text = to_toml(data)
         if rng.random() < 0.25:
             text = corrupt_text(text, rng)
-        scene = tmp_path / f"{number:03d}-{name}.toml"
+        scene = tmp_path / "scenes" / f"{number:03d}-{name}.toml"
         scene.write_text(text)
         command = arguments(data, rng)
         argv = [command[0], str(scene), *command[1:], "--dry-run", "--out", str(tmp_path / "out")]

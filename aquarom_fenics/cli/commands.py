@@ -125,8 +125,8 @@ def optimize_inputs(args):
     check_time_runs(args, scene)
     if args.method:
         scene = scene.replace("optimizer", method=args.method)
-    if not scene.shapes:
-        raise InputError(f"scene {scene.source} has no [shapes] to optimise")
+    if not scene.shapes and not scene.gait:
+        raise InputError(f"scene {scene.source} has no [shapes] or [gait] variables to optimise")
     if args.weight is not None and not scene.cooptimization.enabled:
         raise InputError(f"--weight {args.weight}: scene {scene.source} does not co-optimise the amplitude "
                          "([cooptimization] enabled = false), so its cost is -d alone; leave --weight out")
@@ -177,7 +177,13 @@ def pareto_inputs(args):
     check_time_runs(args, scene)
     if not scene.cooptimization.enabled:
         raise InputError(f"scene {scene.source}: [cooptimization] enabled = true is needed for a Pareto sweep")
+    if scene.cooptimization.effort == "power":
+        raise InputError(f"scene {scene.source}: [cooptimization] effort = \"power\": the Pareto front reports and "
+                         "bounds the effort A²; run optimize --weight W per point, or effort = \"amplitude\"")
     if args.budgets is not None:
+        if scene.gait:
+            raise InputError(f"--budgets: scene {scene.source} has [gait] variables; the budget front bounds A "
+                             "alone (its design vector is [shapes, A]); use the weights' front without --budgets")
         parse_budgets(args.budgets, scene.cooptimization.amplitude_bounds)
     require_distinct_weights(scene.cooptimization.weights, f"scene {scene.source}")
     check_design_space(scene)

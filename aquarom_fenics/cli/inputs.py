@@ -139,6 +139,13 @@ def check_design_space(scene) -> None:
     from aquarom_fenics.optimization.cost import design_space, require_interior
 
     space = design_space(scene)
+    if scene.optimizer.method == "paper" and scene.gait:
+        raise InputError(f"scene {scene.source}: [optimizer] method = \"paper\" with [gait] variables: its steps and "
+                         "rebuild threshold are in the shapes' units (a step of 0.05 in degrees or hertz); use "
+                         "method = \"trust-region\", whose box scales each variable by its range")
+    if scene.optimizer.method == "paper" and scene.cooptimization.enabled and scene.cooptimization.effort == "power":
+        raise InputError(f"scene {scene.source}: [optimizer] method = \"paper\" with [cooptimization] effort = "
+                         "\"power\": its linearised cost between builds counts A² alone; use method = \"trust-region\"")
     if scene.optimizer.method == "paper":
         require_interior(space, scene)
 

@@ -156,6 +156,7 @@ class ReducedResult:
     velocities: np.ndarray | None = None          # (n_samples, m) η̇
     accelerations: np.ndarray | None = None       # (n_samples, m) η̈
     sensitivities: np.ndarray | None = None       # (n_samples, m, p) dη/dξ
+    velocity_sensitivities: np.ndarray | None = None   # (n_samples, m, p) dη̇/dξ
     distance_gradient: np.ndarray | None = None   # (p,) dd/dξ
     timings: dict = field(default_factory=dict)
     strain: object = None                         # StrainReport of fem/strains.py, for a single run
@@ -172,11 +173,14 @@ class ReducedResult:
 
 @one_blas_thread
 def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: bool = False,
-                     amplitude: float | None = None, amplitude_sensitivity: bool = False) -> ReducedResult:
+                     amplitude: float | None = None, amplitude_sensitivity: bool = False,
+                     gait_sensitivity: bool = False) -> ReducedResult:
     """Integrate the PROM at design ξ over the scene's horizon.
 
     With ``sensitivities`` the result carries dη/dξ (and dd/dξ); with ``amplitude_sensitivity``
-    one more column, d/dA of the actuation amplitude (``amplitude`` overrides the scene's A).
+    one more column, d/dA of the actuation amplitude (``amplitude`` overrides the scene's A); with
+    ``gait_sensitivity`` one more per variable of the scene's ``[gait]`` (the scene driven at the gait's
+    values, ``apply_gait``; physics/gait.py), in this order: [ξ, A, gait].
     """
     from aquarom_fenics.dynamics.diagnostics import newton_failure_hints
     from aquarom_fenics.dynamics.simulate import check_time_grid
@@ -187,13 +191,16 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
     scheme = TimeScheme.from_solver(scene.solver)
     system = ReducedSystem(prom, scene, xi, scheme, amplitude)
     m = prom.size
-    columns = (prom.n_parameters if sensitivities else 0) + (1 if amplitude_sensitivity else 0)
+    gait = gait_rates(scene, system) if gait_sensitivity else None
+    columns = ((prom.n_parameters if sensitivities else 0) + (1 if amplitude_sensitivity else 0)
+               + (len(gait.names) if gait is not None else 0))
     trajectory = Trajectory()
     zero = np.zeros(m)
     states, velocities, accelerations = [zero], [zero], [zero]
     trajectory.append(0.0, *system.observables(zero), 0)
     sensitivity = [np.zeros((m, columns))] * 3
     sensitivity_history = [np.zeros((m, columns))]
+    velocity_history = [np.zeros((m, columns))]
     cut_steps = 0
 
     def advance_sensitivity(step_scheme: TimeScheme, time: float, old, new):
@@ -205,6 +212,10 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
             derivative = system.parameter_derivative(*point)
         if amplitude_sensitivity:
             derivative = np.column_stack([derivative, system.amplitude_derivative(point[0], point[1])])
+        if gait is not None:
+            rates = gait.at(point[0])
+            derivative = np.column_stack([derivative] + [system.muscle.amplitude_derivative_of(rates[:, q], point[1])
+                                                         for q in range(rates.shape[1])])
         sensitivity = propagate_sensitivity(system, step_scheme, point, sensitivity, derivative)
 
     def record(report: StepReport, eta, eta_dot, eta_ddot):
@@ -216,6 +227,7 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
         accelerations.append(eta_ddot.copy())
         if columns:
             sensitivity_history.append(sensitivity[0].copy())
+            velocity_history.append(sensitivity[1].copy())
 
     error = None
     try:
@@ -234,12 +246,20 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
         wall_time=clock.perf_counter() - started)
     if columns and completed:
         result.sensitivities = np.array(sensitivity_history)
+        result.velocity_sensitivities = np.array(velocity_history)
         weights_gradient = system.com_weights_gradient() if sensitivities else np.zeros((0, m))
-        if amplitude_sensitivity:
-            weights_gradient = np.vstack([weights_gradient, np.zeros(m)])
+        extra = int(amplitude_sensitivity) + (len(gait.names) if gait is not None else 0)
+        weights_gradient = np.vstack([weights_gradient, np.zeros((extra, m))])
         result.distance_gradient = distance_gradient(system, arrays["time"], result.states, result.sensitivities,
                                                      weights_gradient)
     return result
+
+
+def gait_rates(scene: Scene, system: ReducedSystem):
+    """The activations' gait derivatives of a run (physics/gait.py)."""
+    from aquarom_fenics.physics.gait import GaitRates
+
+    return GaitRates(scene, system.muscle.law, system.muscle.amplitude)
 
 
 def attach_strains(result: ReducedResult, prom: ReducedModel, scene: Scene, xi, fish=None) -> ReducedResult:

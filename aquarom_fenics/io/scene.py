@@ -26,6 +26,7 @@ from aquarom_fenics.io.scene_sections import (SECTIONS, ActuationSection, Coopti
                                               LinearConstraint, MaterialSection, MeshSection, MuscleSpec,
                                               OptimizerSection, OutputSection, ReductionSection, RegionsSection,
                                               ShapeSpec, SolverSection, at_legacy, legacy_values)
+from aquarom_fenics.io.scene_gait import GaitVariable, check_gait_bounds, gait_from_table, resolve_gait
 from aquarom_fenics.io.scene_muscles import (check_actuation, default_muscles, muscles_from_list, scene_vibration_modes,
                                              start_ramp_time, stroke_amplitude, warn_abrupt_start)
 
@@ -50,6 +51,8 @@ class Scene:
     """The ``[[muscles]]`` tables; empty: the antagonist pair of ``[regions] muscles`` (:attr:`actuated_muscles`)."""
     shapes: tuple[ShapeSpec, ...] = ()
     constraints: tuple[LinearConstraint, ...] = ()
+    gait: tuple[GaitVariable, ...] = ()
+    """The ``[gait]`` table's design variables (io/scene_gait.py), their starts resolved."""
     solver: SolverSection = SolverSection()
     reduction: ReductionSection = ReductionSection()
     optimizer: OptimizerSection = OptimizerSection()
@@ -84,6 +87,10 @@ class Scene:
     def shape_names(self) -> list[str]:
         return [shape.name for shape in self.shapes]
 
+    @property
+    def gait_names(self) -> list[str]:
+        return [variable.name for variable in self.gait]
+
     def validity_radii(self) -> list[float]:
         """PROM validity radius per shape parameter (SPEC §8)."""
         fraction = self.reduction.validity_fraction
@@ -112,6 +119,8 @@ class Scene:
         data.pop("cluster")
         if not self.muscles:
             data.pop("muscles")       # the scenes without [[muscles]] keep their hash
+        if not self.gait:
+            data.pop("gait")          # and those without [gait]
         if self.mesh_file is not None:
             data["mesh"]["file"] = str(self.mesh_file)
         return data
@@ -175,6 +184,11 @@ class Scene:
             radius = "" if shape.radius is None else f", radius = {_toml_value(shape.radius)}"
             lines.append(f"{shape.name} = {{ bounds = [{_toml_value(shape.lower)}, {_toml_value(shape.upper)}], "
                          f"start = {_toml_value(shape.start)}{radius} }}")
+        if self.gait:
+            lines.append("\n[gait]")
+        for variable in self.gait:
+            lines.append(f"{variable.name} = {{ bounds = [{_toml_value(variable.lower)}, {_toml_value(variable.upper)}], "
+                         f"start = {_toml_value(variable.start)} }}")
         for muscle in self.muscles:
             lines += ["\n[[muscles]]"] + [f"{key} = {_toml_value(value)}" for key, value in
                                            dataclasses.asdict(muscle).items() if value is not None]
@@ -230,7 +244,7 @@ def resolve_scene_path(path: str | Path) -> Path:
 
 def scene_from_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str = ".") -> Scene:
     where = f"scene {source}"
-    known = {"name", "description", "shapes", "constraints", "muscles", "cluster", *SECTIONS}
+    known = {"name", "description", "shapes", "constraints", "muscles", "gait", "cluster", *SECTIONS}
     for key in data:
         if key not in known:
             raise InputError(f"{where}: unknown key '{key}'; valid top-level keys: {', '.join(sorted(known))}")
@@ -247,8 +261,12 @@ def scene_from_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str 
     constraints = _constraints_from_list(data.get("constraints", []), shapes, where)
     muscles = muscles_from_list(data["muscles"], sections["regions"], where) if "muscles" in data else ()
     cluster = cluster_from_table(data.get("cluster", {}), where, base_dir)
+    gait = resolve_gait(gait_from_table(_table(data, "gait", where), where),
+                        muscles or default_muscles(sections["regions"]), sections["actuation"], sections["regions"],
+                        sections["cooptimization"], sections["solver"].time_step, where)
     scene = Scene(name=name, description=description, source=source, base_dir=base_dir, muscles=muscles,
-                  shapes=shapes, constraints=constraints, cluster=cluster, **sections)
+                  shapes=shapes, constraints=constraints, gait=gait, cluster=cluster, **sections)
+    check_gait_bounds(scene)
     warn_abrupt_start(scene)
     return scene
 

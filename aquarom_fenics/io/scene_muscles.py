@@ -261,11 +261,14 @@ def start_ramp_time(scene) -> float:
     """τ [s] of the gait's smooth start r(t): ``[actuation] start_ramp`` when given; for "auto" 0 (SPEC
     §5's law) when no driven muscle jumps at t = 0 (:func:`abrupt_muscles`), else
     :data:`START_RAMP_PERIODS` periods of the slowest driven muscle, for every muscle of the gait (one
-    envelope keeps the wave's shape while it grows, and a(t) = A r(t) Σ_k c_k(t) P_k)."""
+    envelope keeps the wave's shape while it grows, and a(t) = A r(t) Σ_k c_k(t) P_k). With a ``[gait]``
+    phase_lag variable "auto" ramps at every lag, 0° and 180° too, so that τ does not jump across the
+    design space."""
     ramp = scene.actuation.start_ramp
     if ramp != "auto":
         return ramp
-    return _quarter_period(scene) if abrupt_muscles(scene) else 0.0
+    lag_varies = any(variable.name == "phase_lag" for variable in getattr(scene, "gait", ()))
+    return _quarter_period(scene) if abrupt_muscles(scene) or (lag_varies and driven_muscles(scene)) else 0.0
 
 
 def _quarter_period(scene) -> float:

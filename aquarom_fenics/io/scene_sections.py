@@ -272,7 +272,8 @@ class CooptimizationSection:
     enabled: bool = _spec(False, None, "optimise the actuation amplitude A too")
     amplitude_bounds: tuple[float, float] = _spec((0.05, 0.4), _interval_within(0.0, math.inf), "bounds of A")
     weights: tuple[float, ...] = _spec((0.2, 0.3, 0.4, 0.5, 0.7, 0.9, 0.98), lambda v: None if v and all(0 <= w <= 1 for w in v) else "must be a non-empty list of numbers in [0, 1]", "w_1 sweep, w_2 = 1 - w_1", variable_length=True)
-    energy_weight: float = _spec(1.0, _non_negative, "α in L = w_1 (-d) + w_2 α A²")
+    energy_weight: float = _spec(1.0, _non_negative, "α in L = w_1 (-d) + w_2 α E, E the effort")
+    effort: str = _spec("amplitude", _one_of("amplitude", "power"), "the effort E of the cost: \"amplitude\": A² (SPEC §10); \"power\": the muscles' mean positive power over the last activation period [W], P̄ = mean max(0, f_act · u̇), which counts what a gait's frequency and lag cost (through the single reduced run, with its gradient)", legacy="amplitude")
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,9 @@
 """Cost of a design and its gradient from the PROM (SPEC §10), and the feasible set.
 
 The design vector z is ξ (the scene's shape parameters), followed by the actuation amplitude A
-when co-optimisation is on. Cost L(z) = w_1 (-d(z)) + w_2 α A², d the swimming distance [m].
+when co-optimisation is on, then the ``[gait]`` variables g (io/scene_gait.py). Cost
+L(z) = w_1 (-d(z)) + w_2 α E, d the swimming distance [m] and E the effort: A² or, with
+``[cooptimization] effort = "power"``, the muscles' mean positive power P̄ [W] (physics/gait.py).
 """
 from __future__ import annotations
 
@@ -27,10 +29,21 @@ class DesignSpace:
     constraint_matrix: np.ndarray     # (n_rows, n) rows of A z ≤ b
     constraint_bound: np.ndarray      # (n_rows,)
     with_amplitude: bool
+    n_gait: int = 0                   # the [gait] variables, last in z
 
     @property
     def n_shapes(self) -> int:
-        return len(self.names) - int(self.with_amplitude)
+        return len(self.names) - int(self.with_amplitude) - self.n_gait
+
+    @property
+    def amplitude_index(self) -> int:
+        """The index of A in z (with co-optimisation): right after the shapes."""
+        return self.n_shapes
+
+    def gait_values(self, z: np.ndarray) -> dict[str, float]:
+        """{gait variable: value} of z (empty without [gait])."""
+        first = len(self.names) - self.n_gait
+        return dict(zip(self.names[first:], map(float, z[first:])))
 
     def slacks(self, z: np.ndarray) -> np.ndarray:
         """Every inequality as s(z) ≥ 0: z - lower, upper - z, b - A z."""
@@ -58,8 +71,8 @@ class DesignSpace:
         amplitude's two (A is set to its conditional optimum at every PROM, not held off its bounds)."""
         rows = self.barrier_rows.copy()
         if self.with_amplitude:
-            n = len(self.names)
-            rows[n - 1] = rows[2 * n - 1] = False
+            n, index = len(self.names), self.amplitude_index
+            rows[index] = rows[n + index] = False
         return rows
 
     def most_interior_point(self) -> np.ndarray:
@@ -155,6 +168,11 @@ def design_space(scene: Scene) -> DesignSpace:
         lower.append(co.amplitude_bounds[0])
         upper.append(co.amplitude_bounds[1])
         start.append(float(np.clip(scene.actuation.amplitude, *co.amplitude_bounds)))
+    for variable in scene.gait:
+        names.append(variable.name)
+        lower.append(variable.lower)
+        upper.append(variable.upper)
+        start.append(variable.start)
     rows, bounds = [], []
     for constraint in scene.constraints:
         row = np.zeros(len(names))
@@ -167,7 +185,7 @@ def design_space(scene: Scene) -> DesignSpace:
             rows.append(-row)
             bounds.append(-constraint.lower)
     space = DesignSpace(tuple(names), np.array(lower), np.array(upper), np.array(start),
-                        np.array(rows).reshape(-1, len(names)), np.array(bounds), co.enabled)
+                        np.array(rows).reshape(-1, len(names)), np.array(bounds), co.enabled, len(scene.gait))
     if space.constraint_matrix.size:
         feasible = linprog(np.zeros(len(names)), A_ub=space.constraint_matrix, b_ub=space.constraint_bound,
                            bounds=list(zip(space.lower, space.upper)), method="highs")
@@ -210,7 +228,7 @@ def meshable_space(space: DesignSpace, fish) -> tuple[DesignSpace, list[str]]:
                          "refuses: det F_1 ≤ 0 at a quadrature point)")
             bounds[k] = good
     restricted = DesignSpace(space.names, lower, upper, space.start, space.constraint_matrix, space.constraint_bound,
-                             space.with_amplitude)
+                             space.with_amplitude, space.n_gait)
     return restricted, notes
 
 
@@ -249,16 +267,36 @@ class CostWeights:
 
 @dataclass(frozen=True)
 class PromRun:
-    """What the cost reads of a PROM run: d [m] and dd/dz (None without sensitivities or design variables)."""
+    """What the cost reads of a PROM run: d [m] and dd/dz (None without sensitivities or design variables), and
+    with the effort "power" P̄ [W] and dP̄/dz."""
 
     distance: float
     distance_gradient: np.ndarray | None
+    power: float | None = None
+    power_gradient: np.ndarray | None = None
+
+
+def scene_at(scene: Scene, space: DesignSpace, z: np.ndarray) -> Scene:
+    """The scene driven by the gait of z (``apply_gait``); the scene itself without [gait] variables."""
+    if not space.n_gait:
+        return scene
+    from aquarom_fenics.io.scene_gait import apply_gait
+
+    return apply_gait(scene, space.gait_values(z))
+
+
+def amplitude_of(space: DesignSpace, z: np.ndarray) -> float | None:
+    """A of z with co-optimisation, else None (the scene's)."""
+    return float(z[space.amplitude_index]) if space.with_amplitude else None
 
 
 def _prom_run(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarray, sensitivities: bool) -> PromRun:
     """The PROM's run at z (with dd/dz when ``sensitivities``); SolverError if it stops. A batch of one design
     (``simulate_batch``: the compiled kernel where numba is installed; a step that fails there is integrated by
-    ``simulate_reduced`` with its step control, as a single run would be)."""
+    ``simulate_reduced`` with its step control, as a single run would be). With [gait] variables the single
+    run ``simulate_reduced`` of the scene driven by z's gait, with its gait sensitivities."""
+    if space.n_gait or counts_power(scene, space):
+        return _gait_run(prom, scene, space, z, sensitivities)
     amplitudes = [float(z[-1])] if space.with_amplitude else None
     batch = simulate_batch(prom, scene, z[None, : space.n_shapes], sensitivities=sensitivities, amplitudes=amplitudes,
                            amplitude_sensitivity=sensitivities and space.with_amplitude)
@@ -268,24 +306,50 @@ def _prom_run(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarra
     return PromRun(float(batch.distance[0]), gradient)
 
 
+def counts_power(scene: Scene, space: DesignSpace) -> bool:
+    """Whether the cost's effort is the muscles' mean positive power (a co-design with effort = "power")."""
+    return space.with_amplitude and scene.cooptimization.effort == "power"
+
+
+def _gait_run(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarray, sensitivities: bool) -> PromRun:
+    from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
+    from aquarom_fenics.physics.gait import mean_positive_power_gradient
+
+    driven, xi, amplitude = scene_at(scene, space, z), z[: space.n_shapes], amplitude_of(space, z)
+    result = simulate_reduced(prom, driven, xi, sensitivities=sensitivities, amplitude=amplitude,
+                              amplitude_sensitivity=sensitivities and space.with_amplitude,
+                              gait_sensitivity=sensitivities and space.n_gait > 0)
+    if not result.completed:
+        raise SolverError(f"PROM simulation at {space.as_dict(z)} stopped: {result.error}")
+    if not counts_power(scene, space):
+        return PromRun(float(result.distance), result.distance_gradient)
+    columns = (True, space.with_amplitude, space.n_gait > 0) if sensitivities else None
+    power, power_gradient = mean_positive_power_gradient(prom, driven, result, xi, amplitude, columns)
+    return PromRun(float(result.distance), result.distance_gradient, power, power_gradient)
+
+
 def weighted_cost(space: DesignSpace, weights: CostWeights, z: np.ndarray, distance: float,
-                  distance_gradient: np.ndarray | None = None) -> tuple[float, np.ndarray | None]:
-    """L = -w_1 d + w_2 α A² at z and, given dd/dz, ∇L (None without)."""
+                  distance_gradient: np.ndarray | None = None, run: PromRun | None = None) -> tuple[float, np.ndarray | None]:
+    """L = -w_1 d + w_2 α E at z (E = A², or the run's P̄ when it carries one) and, given dd/dz, ∇L (None without)."""
+    power = run is not None and run.power is not None
     cost = -weights.distance * distance
     if space.with_amplitude:
-        cost += weights.energy * weights.energy_term(z[-1])
+        cost += weights.energy * (weights.alpha * run.power if power else weights.energy_term(z[space.amplitude_index]))
     if distance_gradient is None:
         return cost, None
     gradient = -weights.distance * np.asarray(distance_gradient, dtype=float)
-    if space.with_amplitude:
-        gradient[-1] += weights.energy * 2 * weights.alpha * z[-1]
+    if space.with_amplitude and power:
+        gradient = gradient + weights.energy * weights.alpha * np.asarray(run.power_gradient, dtype=float)
+    elif space.with_amplitude:
+        gradient[space.amplitude_index] += weights.energy * 2 * weights.alpha * z[space.amplitude_index]
     return cost, gradient
 
 
 def cost_value(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarray, weights: CostWeights) -> float:
     """L at z without its gradient: a PROM run without sensitivities (a third cheaper; the same
     trajectory, so the same L as :func:`evaluate`'s). Raises SolverError as :func:`evaluate`."""
-    cost, _ = weighted_cost(space, weights, z, _prom_run(prom, scene, space, z, sensitivities=False).distance)
+    run = _prom_run(prom, scene, space, z, sensitivities=False)
+    cost, _ = weighted_cost(space, weights, z, run.distance, run=run)
     if not np.isfinite(cost):
         raise SolverError(f"non-finite cost at {space.as_dict(z)}: {cost}")
     return float(cost)
@@ -297,7 +361,7 @@ def evaluate(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarray
     distance_gradient = result.distance_gradient
     if distance_gradient is None:
         distance_gradient = np.zeros(len(z))
-    cost, gradient = weighted_cost(space, weights, z, result.distance, distance_gradient)
+    cost, gradient = weighted_cost(space, weights, z, result.distance, distance_gradient, run=result)
     if not (np.isfinite(cost) and np.all(np.isfinite(gradient))):
         raise SolverError(f"non-finite cost or gradient at {space.as_dict(z)}: cost {cost}, gradient {gradient}")
     return Evaluation(z.copy(), float(cost), gradient, float(result.distance), distance_gradient)

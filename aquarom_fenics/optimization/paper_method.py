@@ -339,7 +339,8 @@ def _descent_space(space: DesignSpace, z: np.ndarray) -> DesignSpace:
     if not space.with_amplitude:
         return space
     lower, upper = space.lower.copy(), space.upper.copy()
-    lower[-1] = upper[-1] = z[-1]
+    index = space.amplitude_index
+    lower[index] = upper[index] = z[index]
     return dataclasses.replace(space, lower=lower, upper=upper)
 
 
@@ -352,13 +353,14 @@ def _best_amplitude(space: DesignSpace, builder: PromBuilder, prom, weights, z: 
     tolerance), then each bound is compared. A design the
     PROM cannot simulate counts as L = +∞; an A* whose PROM gait the stability test refuses
     leaves z's amplitude unchanged."""
-    if not space.with_amplitude or space.upper[-1] <= space.lower[-1]:
+    index = space.amplitude_index
+    if not space.with_amplitude or space.upper[index] <= space.lower[index]:
         return z
-    lower, upper = float(space.lower[-1]), float(space.upper[-1])
+    lower, upper = float(space.lower[index]), float(space.upper[index])
 
     def cost(amplitude: float) -> float:
         trial = np.array(z, dtype=float)
-        trial[-1] = amplitude
+        trial[index] = amplitude
         try:
             return builder.cost(prom, trial, weights)
         except SolverError:
@@ -371,7 +373,7 @@ def _best_amplitude(space: DesignSpace, builder: PromBuilder, prom, weights, z: 
     if not np.isfinite(candidates[amplitude]):
         return z
     best = np.array(z, dtype=float)
-    best[-1] = amplitude
+    best[index] = amplitude
     try:
         builder.refuse_infeasible(prom, best)
     except InputError:

@@ -10,7 +10,7 @@ from aquarom_fenics.dynamics.reduced_dynamics import reduced_stability
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.fish import Fish
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.optimization.cost import DesignSpace, Evaluation, cost_value, evaluate
+from aquarom_fenics.optimization.cost import DesignSpace, Evaluation, amplitude_of, cost_value, evaluate, scene_at
 from aquarom_fenics.reduction.cache import cached_prom
 from aquarom_fenics.reduction.prom import ReducedModel
 from aquarom_fenics.reduction.reductor import build_prom
@@ -155,12 +155,12 @@ class PromBuilder:
         thrust destabilises (``prom_tail_stability``)."""
         if not judges_stability(self.scene):
             return
-        amplitude = float(z[-1]) if self.space.with_amplitude else None
+        amplitude, scene = amplitude_of(self.space, z), scene_at(self.scene, self.space, z)
         xi = z[: self.space.n_shapes]
-        stable, reason = reduced_stability(prom, self.scene, xi, amplitude)
+        stable, reason = reduced_stability(prom, scene, xi, amplitude)
         if stable and screens_tail(self.scene):
             started = time.perf_counter()
-            stable, reason = prom_tail_stability(prom, self.scene, self.fish, xi, amplitude)
+            stable, reason = prom_tail_stability(prom, scene, self.fish, xi, amplitude)
             elapsed = time.perf_counter() - started
             self.screen_time += elapsed
             log.info("tail screen at %s: %s; %.1f s", self.space.as_dict(z), reason, elapsed)

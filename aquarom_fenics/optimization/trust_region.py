@@ -25,9 +25,11 @@ log = logging.getLogger("aquarom")
 def trust_region(scene, space, builder, weights, history, checkpoint, state, safeguard, on_iteration):
     settings = scene.optimizer
     started = safeguard.started
-    # The trust radius is a fraction of the PROM validity box; the amplitude enters the reduced
-    # actuation exactly (linearly), so its box is its whole range.
-    half_widths = np.array(scene.validity_radii() + ([space.upper[-1] - space.lower[-1]] if space.with_amplitude else []))
+    # The trust radius is a fraction of the PROM validity box; the amplitude and the gait variables enter
+    # only the reduced activations (exactly for A; the gait's on a basis that holds each pair's pattern),
+    # so their box is their whole range.
+    actuation = slice(space.n_shapes, len(space.names))
+    half_widths = np.array(scene.validity_radii() + list(space.upper[actuation] - space.lower[actuation]))
     if state is None:
         state = {"center": space.start.tolist(), "radius": settings.initial_radius, "iteration": 0, "cuts": []}
     center = np.array(state["center"])

@@ -49,6 +49,10 @@ class ActivationLaw:
     phases: tuple[float, ...]
     frequencies: tuple[float, ...]          # Hz
     ramp_time: float = 0.0                  # τ [s] of r(t)
+    extra_patterns: tuple[tuple[float, ...], ...] = ()
+    """More activation patterns the basis must follow: a gait whose phase lag or pair amplitudes are
+    design variables moves a(t) out of the span of its own two patterns; its pairs' patterns (each pair's
+    muscles at ±1, the others 0) span every such gait (io/scene_gait.py)."""
 
     @classmethod
     def antagonist(cls, frequency: float, ramp_time: float = 0.0) -> "ActivationLaw":
@@ -60,11 +64,13 @@ class ActivationLaw:
         """The law of the scene's muscles (``Scene.actuated_muscles``; phases given in degrees, reduced
         to (-360°, 360°) first, exactly: a phase of 1e300° keeps its angle, no digit is lost to 2π), with
         the scene's smooth start τ (``start_ramp_time``: "auto" ramps a gait whose muscles would jump at t = 0)."""
+        from aquarom_fenics.io.scene_gait import pair_patterns
+
         muscles, actuation = scene.actuated_muscles, scene.actuation
         return cls(tuple(muscle.scale for muscle in muscles),
                    tuple(math.radians(math.fmod(muscle.phase, 360.0)) for muscle in muscles),
                    tuple(actuation.frequency if muscle.frequency is None else muscle.frequency for muscle in muscles),
-                   start_ramp_time(scene))
+                   start_ramp_time(scene), pair_patterns(scene))
 
     @property
     def size(self) -> int:
@@ -79,13 +85,14 @@ class ActivationLaw:
     def patterns(self) -> list[np.ndarray]:
         """The independent activation patterns P_k, with a(t) = A r(t) Σ_k c_k(t) P_k: per frequency f,
         sin(2π f t + φ_j) = cos φ_j sin(2π f t) + sin φ_j cos(2π f t) gives (s_j cos φ_j) and (s_j sin φ_j)
-        over its muscles. Orthogonalised in turn (Euclidean); a pattern with nothing left is dropped. The
-        first is kept as it is: the pair's is (1, -1)."""
+        over its muscles, then the :attr:`extra_patterns`. Orthogonalised in turn (Euclidean); a pattern with
+        nothing left is dropped. The first is kept as it is: the pair's is (1, -1)."""
         candidates = []
         for frequency in dict.fromkeys(self.frequencies):
             mask = np.array([f == frequency for f in self.frequencies], dtype=float)
             candidates += [mask * np.array(self.scales) * np.cos(self.phases),
                            mask * np.array(self.scales) * np.sin(self.phases)]
+        candidates += [np.array(pattern, dtype=float) for pattern in self.extra_patterns]
         scale = max(np.linalg.norm(candidate) for candidate in candidates)
         kept: list[np.ndarray] = []
         for candidate in candidates:

@@ -14,7 +14,7 @@ from mpi4py import MPI
 
 from aquarom_fenics.studies.background_fom import BackgroundFom, start_if_useful
 from aquarom_fenics.studies.fom_cache import fom_cache_path, fom_distance
-from aquarom_fenics.optimization.cost import CostWeights, design_space
+from aquarom_fenics.optimization.cost import CostWeights, amplitude_of, design_space, scene_at
 from aquarom_fenics.errors import InputError, Interrupted, SolverError
 from aquarom_fenics.parallel import worker_threads
 from aquarom_fenics.geometry.fish import Fish, load_fish
@@ -57,7 +57,7 @@ class FomCheck:
 def design_and_amplitude(space, z: np.ndarray) -> tuple[dict[str, float], float | None]:
     """The shape values of z by name, and the amplitude A when it is optimised too."""
     shapes = space.n_shapes
-    return dict(zip(space.names[:shapes], map(float, z[:shapes]))), (float(z[-1]) if space.with_amplitude else None)
+    return dict(zip(space.names[:shapes], map(float, z[:shapes]))), amplitude_of(space, z)
 
 
 def fom_check(scene: Scene, fish: Fish, result: OptimizationResult,
@@ -70,7 +70,7 @@ def fom_check(scene: Scene, fish: Fish, result: OptimizationResult,
 
     def distance(z):
         try:
-            return fom_distance(scene, fish, *design_and_amplitude(space, z))
+            return fom_distance(scene_at(scene, space, z), fish, *design_and_amplitude(space, z))
         except SolverError as failure:
             errors.append(str(failure))
             return None
@@ -122,7 +122,8 @@ def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights:
     history_file = out_dir / "history.csv"
     writer = HistoryWriter(history_file, history_columns(space), saved["history"] if saved else []) if is_writer else None
     start_design = design_and_amplitude(space, space.start)
-    start_run = start_if_useful(scene, *start_design, cached=fom_cache_path(scene, *start_design).exists())
+    start_scene = scene_at(scene, space, space.start)
+    start_run = start_if_useful(start_scene, *start_design, cached=fom_cache_path(start_scene, *start_design).exists())
     try:
         result = optimize(scene, fish=fish, weights=weights, checkpoint_path=checkpoint, resume=resume,
                           on_iteration=writer.write if writer else None, write_checkpoint=is_writer,
