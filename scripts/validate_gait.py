@@ -6,7 +6,7 @@ gradient against the FOM, and the muscles' effort of a gait against the antagoni
    with the scene's two patterns alone (``--no-pair-patterns``, the basis before [gait]).
 2. Gradient: dd/dg of that ROM at the scene's gait against central differences of the FOM (lag ± 5°,
    f ± 0.02 Hz).
-3. Effort: the muscles' mean positive power over the last cycle (``physics.gait.mean_positive_power``) of
+3. Effort: the muscles' mean positive power over the last cycle (``dynamics.muscle_power.mean_positive_power``) of
    the ROM (built at --gait) at the scene's gait, the other gaits of 1. and --gait (all at the scene's A),
    and of the fish's antagonist pair (scenes/fish.toml, [regions] muscles, the same
    frequency and shapes) at the amplitude of equal power (bisection on ROM runs), with both FOM distances.
@@ -32,7 +32,7 @@ from aquarom_fenics.io import scene_gait
 from aquarom_fenics.io.persistence import write_json_atomic
 from aquarom_fenics.io.scene_gait import apply_gait
 from aquarom_fenics.io.versions import software_versions
-from aquarom_fenics.physics.gait import mean_positive_power
+from aquarom_fenics.dynamics.muscle_power import mean_positive_power
 from aquarom_fenics.reduction.reductor import build_prom
 
 REPOSITORY = Path(__file__).resolve().parents[1]

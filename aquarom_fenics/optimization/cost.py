@@ -313,7 +313,7 @@ def counts_power(scene: Scene, space: DesignSpace) -> bool:
 
 def _gait_run(prom: ReducedModel, scene: Scene, space: DesignSpace, z: np.ndarray, sensitivities: bool) -> PromRun:
     from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
-    from aquarom_fenics.physics.gait import mean_positive_power_gradient
+    from aquarom_fenics.dynamics.muscle_power import mean_positive_power_gradient
 
     driven, xi, amplitude = scene_at(scene, space, z), z[: space.n_shapes], amplitude_of(space, z)
     result = simulate_reduced(prom, driven, xi, sensitivities=sensitivities, amplitude=amplitude,

@@ -126,7 +126,7 @@ def test_the_distance_gradient_matches_central_differences_of_the_fom(second_sce
 def test_the_mean_positive_power_is_the_fom_muscles_power_at_the_reduced_states(scene, prom):
     """P̄ of the reduced run against f_act(V η) · V η̇ of the FOM's muscle term at the same states and times."""
     from aquarom_fenics.fem.fom import FullOrderModel
-    from aquarom_fenics.physics.gait import mean_positive_power
+    from aquarom_fenics.dynamics.muscle_power import mean_positive_power
 
     driven = apply_gait(scene, POINT)
     run = simulate_reduced(prom, driven)
@@ -145,7 +145,7 @@ def test_the_mean_positive_power_is_the_fom_muscles_power_at_the_reduced_states(
 
 def test_the_power_gradient_matches_central_differences_of_the_power():
     """dP̄/dz of the reduced run over [ξ, A, gait] against central differences of P̄ (level 1, 0.3 s)."""
-    from aquarom_fenics.physics.gait import mean_positive_power, mean_positive_power_gradient
+    from aquarom_fenics.dynamics.muscle_power import mean_positive_power, mean_positive_power_gradient
 
     scene = wave_scene(shapes={"z_tail": {"bounds": [-0.2, 0.2]}}, solver={"duration": 0.3, "tolerance": 1e-11})
     prom = build_prom(scene)
