@@ -8,17 +8,22 @@ w_cq = |det J_c| ω_q det F_1(x_cq) (ω_q the reference weights). At every quadr
 
 and the energy density ψ(E) = ½ E:ℂ_s:E is a quadratic form of E (the SVK law; of a Neo-Hookean
 scene its second-order expansion at E = 0, ``small_strain_energy_density``, so that its reduced
-model is SVK's: exact for SVK only). The coefficients e, q are
-obtained by evaluating the UFL strain of ``forms/`` at the quadrature points for u = ±V_j and
-u = V_j + V_k, and ℂ_s by evaluating the UFL energy density at unit strains: the physics stays in
-the forms, this module only samples and contracts. Sampling at the FOM's own quadrature points
-with its weights makes the reduced energy equal the FOM's quadrature sum exactly:
+model is SVK's: exact for SVK only). The strain is E = ½ (H + Hᵀ + Hᵀ H) with H = ∇u F_1⁻¹ linear
+in u (``forms/kinematics.py``), so that with H_j the relative displacement gradient of V_j
+
+    e_sj = ½ (H_j + H_jᵀ),   q_sjk = ½ (H_jᵀ H_k + H_kᵀ H_j):
+
+H_j and its ξ-derivatives are evaluated from the UFL form of ``forms/`` at the quadrature points,
+one evaluation per basis vector, and ℂ_s by evaluating the UFL energy density at unit strains.
+Sampling at the FOM's own quadrature points with its weights makes the reduced energy equal the
+FOM's quadrature sum exactly:
 
     Π(η) = ½ P2(η,η) + ½ P3(η,η,η) + ⅛ P4(η,η,η,η),
     P2_ij = Σ_s w_s e_si:ℂ_s:e_sj,  P3_ijk = Σ_s w_s e_si:ℂ_s:q_sjk,  P4_ijkl = Σ_s w_s q_sij:ℂ_s:q_skl.
 
-ξ-derivatives (Taylor terms) come from the UFL derivatives of the same expressions with respect
-to the shape gradient ∇u_ξ in the directions ∇U_k (``FullOrderModel.shape_derivative``).
+ξ-derivatives (Taylor terms) come from the UFL derivatives of H with respect to the shape gradient
+∇u_ξ in the directions ∇U_k (``FullOrderModel.shape_derivative``), combined by Leibniz' rule
+(:func:`strain_coefficients`).
 """
 from __future__ import annotations
 
@@ -30,7 +35,7 @@ from mpi4py import MPI
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.forms.elasticity import small_strain_energy_density
-from aquarom_fenics.forms.kinematics import green_lagrange_strain, volume_ratio
+from aquarom_fenics.forms.kinematics import relative_displacement_gradient, volume_ratio
 
 # Orthonormal basis of symmetric 3×3 tensors: E = Σ_a s_a B_a with s_a = E:B_a.
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
@@ -48,11 +53,12 @@ def symmetric_coordinates(tensors: np.ndarray) -> np.ndarray:
 
 
 class CellSampler:
-    """Compiled expressions of the strain, its ξ-derivatives, the weight and ψ at the quadrature
-    points of the FOM's elastic energy; every array has one row per (owned cell, point).
+    """Compiled expressions of the relative displacement gradient H = ∇u F_1⁻¹, its ξ-derivatives, the
+    weight and ψ at the quadrature points of the FOM's elastic energy; every array has one row per
+    (owned cell, point).
 
-    The strain and its p first ξ-derivatives are one stacked expression, so that each sampled u
-    costs one evaluation for all of them (the coefficient u is packed and tabulated once)."""
+    H and its ξ-derivatives (along every e_k; at Taylor order 2 also along every pair e_k, e_l, k ≤ l)
+    are one stacked expression: each basis vector costs one evaluation for all of them."""
 
     def __init__(self, fom, taylor_order: int, n_parameters: int):
         self.fom = fom
@@ -63,7 +69,6 @@ class CellSampler:
         self.direction = fx.new_function(fom.space, "direction")
         self.shape_directions = [fom.shape_direction(f"shape_direction_{i}") for i in range(2)]
         shape_gradient = fom.shape_gradients["stiffness"]
-        strain = green_lagrange_strain(self.direction, shape_gradient)
         weight = abs(ufl.JacobianDeterminant(fom.mesh)) * volume_ratio(shape_gradient)
         self.weight = [self._compile(weight)]
         first_weight = fom.shape_derivative(weight, self.shape_directions[0])
@@ -71,15 +76,21 @@ class CellSampler:
             self.weight.append(self._compile(first_weight))
         if taylor_order >= 2:
             self.weight.append(self._compile(fom.shape_derivative(first_weight, self.shape_directions[1])))
-            self.second_strain = self._compile(ufl.as_vector(_flat(fom.shape_derivative(
-                fom.shape_derivative(strain, self.shape_directions[0]), self.shape_directions[1]))))
         self.parameter_directions = []
         for k in range(n_parameters if taylor_order >= 1 else 0):
             self.parameter_directions.append(fom.shape_direction(f"parameter_direction_{k}"))
             self.parameter_directions[k].set_parameter(k)
-        self.strains = self._compile(ufl.as_vector(
-            _flat(strain) + [value for direction in self.parameter_directions
-                             for value in _flat(fom.shape_derivative(strain, direction))]))
+        p = len(self.parameter_directions)
+        gradient = relative_displacement_gradient(self.direction, shape_gradient)
+        derivatives = {(): gradient}
+        for k, direction in enumerate(self.parameter_directions):
+            derivatives[k,] = fom.shape_derivative(gradient, direction)
+        for k, l in (pair_list(p) if taylor_order >= 2 else []):
+            derivatives[k, l] = fom.shape_derivative(derivatives[k,], self.parameter_directions[l])
+        self.strain_indices = list(derivatives)
+        """The ξ-derivatives of the strain the sampler gives: (), (k,) and, at order 2, (k, l) with k ≤ l."""
+        self.gradients = self._compile(ufl.as_vector([value for indices in self.strain_indices
+                                                      for value in _flat(derivatives[indices])]))
         self.unit_strain = fx.tensor_constant(fom.mesh, (3, 3))
         self.energy_density = self._compile(small_strain_energy_density(
             fom.elastic.law, self.unit_strain, fom.elastic.young_modulus, fom.elastic.poisson_ratio))
@@ -115,34 +126,52 @@ class CellSampler:
                 moduli[:, a, b] = moduli[:, b, a] = density(SYMMETRIC_BASIS[a] + SYMMETRIC_BASIS[b]) - single[a] - single[b]
         return moduli
 
-    def whitened_strain_coefficients(self, vectors: np.ndarray, expression, count: int,
-                                     transform: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-        """(ẽ, q̃) = (Rᵀ e, Rᵀ q) of E(V η) = e η + ½ q η η for each of the ``count`` strains stacked in
-        ``expression``: shapes (m, 6 n_samples) and (n_pairs, 6 n_samples), R from :func:`whitening`.
+    def relative_gradients(self, vectors: np.ndarray) -> dict[tuple, np.ndarray]:
+        """H_j = ∇V_j F_1⁻¹ and its ξ-derivatives at every sample, (m, n_samples, 3, 3) for each index
+        tuple of ``strain_indices``: one evaluation per basis vector V_j."""
+        count = len(self.strain_indices)
+        values = np.empty((count, vectors.shape[1], self.n_samples, 3, 3))
+        for j in range(vectors.shape[1]):
+            fx.set_owned_values(self.direction, vectors[:, j])
+            values[:, j] = self.evaluate(self.gradients, 9 * count).reshape(self.n_samples, count, 3, 3).transpose(1, 0, 2, 3)
+        return dict(zip(self.strain_indices, values))
 
-        q is stored for the pairs j ≤ k of :func:`pair_index`. Sampled at u = ±V_j and u = V_j + V_k
-        (exact: E is quadratic in u, its ξ-derivatives as well), whitened sample by sample.
-        """
-        m = vectors.shape[1]
+    def whitened_strain_coefficients(self, vectors: np.ndarray,
+                                     transform: np.ndarray) -> dict[tuple, tuple[np.ndarray, np.ndarray]]:
+        """(ẽ, q̃) = (Rᵀ e, Rᵀ q) of E(V η) = e η + ½ q η η and of each of its ξ-derivatives (by the index
+        tuples of ``strain_indices``): shapes (m, 6 n_samples) and (n_pairs, 6 n_samples), R from
+        :func:`whitening`, q for the pairs j ≤ k of :func:`pair_index` (:func:`strain_coefficients`)."""
+        gradients = self.relative_gradients(vectors)
+        return {indices: tuple(whiten(part, transform) for part in strain_coefficients(gradients, indices))
+                for indices in self.strain_indices}
 
-        def strains_of(owned):         # (count, 6 n_samples)
-            fx.set_owned_values(self.direction, owned)
-            values = self.evaluate(expression, 9 * count).reshape(self.n_samples, count, 9)
-            return whiten(symmetric_coordinates(values).transpose(1, 0, 2), transform)
 
-        signed = [(strains_of(vectors[:, j]), strains_of(-vectors[:, j])) for j in range(m)]
-        linear = np.stack([(plus - minus) / 2.0 for plus, minus in signed], axis=1)
-        diagonal = [plus + minus for plus, minus in signed]
-        del signed
-        pairs = pair_list(m)
-        quadratic = np.empty((count, len(pairs), linear.shape[2]))
-        for number, (j, k) in enumerate(pairs):
-            if j == k:
-                quadratic[:, number] = diagonal[j]
-            else:
-                both = strains_of(vectors[:, j] + vectors[:, k])
-                quadratic[:, number] = both - linear[:, j] - linear[:, k] - 0.5 * (diagonal[j] + diagonal[k])
-        return [(linear[i], quadratic[i]) for i in range(count)]
+def strain_coefficients(gradients: dict[tuple, np.ndarray], indices: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """(e, q) in symmetric coordinates of the ξ-derivative ∂_I E (I = ``indices``) of E(V η) = e η + ½ q η η,
+    from the relative displacement gradients: ``gradients[J]`` is ∂_J H_j, (m, n_samples, 3, 3).
+
+    E = ½ (H + Hᵀ + Hᵀ H) with H = Σ_j η_j H_j, so by Leibniz' rule over the two factors of Hᵀ H
+
+        e_j = sym ∂_I H_j,   q_jk = Σ_{A ⊔ B = I} sym(∂_A H_jᵀ ∂_B H_k)
+
+    (the sum over every way to split the indices between the factors; it holds each split and its
+    mirror, so that q_jk = q_kj). Shapes (m, n_samples, 6) and (n_pairs, n_samples, 6), q for the
+    pairs j ≤ k of :func:`pair_list`; sym X and X have the same coordinates X:B_a.
+    """
+    value = gradients[indices]
+    m, n_samples = value.shape[:2]
+    rows, columns = np.array(pair_list(m)).T
+    quadratic = np.zeros((rows.size, n_samples, 3, 3))
+    for left, right in _splits(indices):
+        quadratic += np.matmul(gradients[left][rows].swapaxes(-1, -2), gradients[right][columns])
+    return (symmetric_coordinates(value.reshape(m, n_samples, 9)),
+            symmetric_coordinates(quadratic.reshape(rows.size, n_samples, 9)))
+
+
+def _splits(indices: tuple):
+    """Every (A, B) with A ⊔ B = ``indices`` (each index to the left or the right factor), A and B sorted."""
+    for assignment in itertools.product(range(2), repeat=len(indices)):
+        yield tuple(tuple(sorted(index for index, side in zip(indices, assignment) if side == slot)) for slot in range(2))
 
 
 def _flat(tensor) -> list:
@@ -212,16 +241,9 @@ def internal_force_taylor(sampler: CellSampler, vectors: np.ndarray, n_parameter
     whitened, weight_ratio = {}, {}
 
     def strain(indices):
-        if indices not in whitened:
-            if len(indices) <= 1:       # E and every ∂E/∂ξ_k from one evaluation per sampled u
-                stacked = [()] + [(k,) for k in range(len(sampler.parameter_directions))]
-                whitened.update(zip(stacked, sampler.whitened_strain_coefficients(
-                    vectors, sampler.strains, len(stacked), transform)))
-            else:
-                sampler.set_shape_directions(*indices)
-                whitened[indices] = sampler.whitened_strain_coefficients(vectors, sampler.second_strain, 1,
-                                                                         transform)[0]
-        return whitened[indices]
+        if not whitened:               # E and all its ξ-derivatives from one evaluation per basis vector
+            whitened.update(sampler.whitened_strain_coefficients(vectors, transform))
+        return whitened[tuple(sorted(indices))]
 
     def weight(indices):
         if indices not in weight_ratio:
