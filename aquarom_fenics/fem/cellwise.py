@@ -92,6 +92,7 @@ class CellSampler:
         self.gradients = self._compile(ufl.as_vector([value for indices in self.strain_indices
                                                       for value in _flat(derivatives[indices])]))
         self.unit_strain = fx.tensor_constant(fom.mesh, (3, 3))
+        self._moduli = None
         self.energy_density = self._compile(small_strain_energy_density(
             fom.elastic.law, self.unit_strain, fom.elastic.young_modulus, fom.elastic.poisson_ratio))
 
@@ -113,7 +114,13 @@ class CellSampler:
             direction.set_parameter(k)
 
     def elasticity(self) -> np.ndarray:
-        """ℂ_s in symmetric coordinates, (n_samples, 6, 6): ψ(s) = ½ sᵀ ℂ_s s."""
+        """ℂ_s in symmetric coordinates, (n_samples, 6, 6): ψ(s) = ½ sᵀ ℂ_s s. The material's, not the
+        design's: evaluated once per sampler."""
+        if self._moduli is None:
+            self._moduli = self._evaluated_elasticity()
+        return self._moduli
+
+    def _evaluated_elasticity(self) -> np.ndarray:
         def density(tensor):
             self.unit_strain.value = tensor
             return self.evaluate(self.energy_density)[:, 0]
@@ -161,11 +168,32 @@ def strain_coefficients(gradients: dict[tuple, np.ndarray], indices: tuple) -> t
     value = gradients[indices]
     m, n_samples = value.shape[:2]
     rows, columns = np.array(pair_list(m)).T
-    quadratic = np.zeros((rows.size, n_samples, 3, 3))
-    for left, right in _splits(indices):
-        quadratic += np.matmul(gradients[left][rows].swapaxes(-1, -2), gradients[right][columns])
-    return (symmetric_coordinates(value.reshape(m, n_samples, 9)),
-            symmetric_coordinates(quadratic.reshape(rows.size, n_samples, 9)))
+    quadratic = np.empty((rows.size, n_samples, 6))
+    step = max(1, PRODUCT_ENTRIES // (9 * m * m))
+    for start in range(0, n_samples, step):
+        chunk = slice(start, start + step)
+        products = 0.0
+        for left, right in _splits(indices):
+            if left < right:     # the mirror split (right, left) gives the transposed blocks: added below
+                continue
+            block = _transposed_products(gradients[left][:, chunk], gradients[right][:, chunk])
+            products = products + (block if left == right else block + block.transpose(0, 2, 1))
+        blocks = products.reshape(-1, m, 3, m, 3).transpose(1, 3, 0, 2, 4)[rows, columns]    # (pairs, chunk, 3, 3)
+        quadratic[:, chunk] = symmetric_coordinates(blocks.reshape(rows.size, -1, 9))
+    return symmetric_coordinates(value.reshape(m, n_samples, 9)), quadratic
+
+
+PRODUCT_ENTRIES = 1 << 22
+"""Entries of the per-sample products A_jᵀ B_k :func:`strain_coefficients` holds at once (32 MB)."""
+
+
+def _transposed_products(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """(n, 3m, 3m): every block A_jᵀ B_k (rows j, columns k) at each of the n samples of (m, n, 3, 3)
+    arrays A, B, as one (3m × 3) (3 × 3m) matrix product per sample."""
+    m, n = left.shape[:2]
+    a = np.ascontiguousarray(left.transpose(1, 2, 0, 3)).reshape(n, 3, 3 * m)
+    b = np.ascontiguousarray(right.transpose(1, 2, 0, 3)).reshape(n, 3, 3 * m)
+    return np.matmul(a.transpose(0, 2, 1), b)
 
 
 def _splits(indices: tuple):
