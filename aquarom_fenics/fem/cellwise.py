@@ -282,18 +282,22 @@ def internal_force_taylor(sampler: CellSampler, vectors: np.ndarray, n_parameter
 
     def tensors_for(derivative_indices):
         totals = [np.zeros((m, m)), np.zeros((m, m, m)), np.zeros((m, m, m, m))]
-        # energy_tensors is symmetric in its two factors: (w, E_a, E_b) and (w, E_b, E_a) are equal.
-        terms: dict[tuple, int] = {}
+        # energy_tensors is bilinear and symmetric in its two factors, and the weight, a scalar per sample,
+        # may go with either: the terms of one right factor (the lesser of the two) are summed on the left
+        # first, one call per right factor (w_k E + 2 ∂_k E against E for a first derivative).
+        lefts: dict[tuple, list] = {}
         for weight_indices, left_indices, right_indices in _leibniz(derivative_indices):
-            key = (weight_indices,) + ((left_indices, right_indices) if weight_indices
-                                       else tuple(sorted((left_indices, right_indices))))
-            terms[key] = terms.get(key, 0) + 1
-        for (weight_indices, left_indices, right_indices), count in terms.items():
-            left = strain(left_indices)
-            if weight_indices:
-                left = tuple(part * weight(weight_indices) for part in left)
-            for total, part in zip(totals, energy_tensors(left, strain(right_indices), m)):
-                total += count * part
+            left_indices, right_indices = sorted((left_indices, right_indices), reverse=True)
+            lefts.setdefault(right_indices, []).append((weight_indices, left_indices))
+        for right_indices, terms in lefts.items():
+            combined = None
+            for weight_indices, left_indices in terms:
+                left = strain(left_indices)
+                if weight_indices:
+                    left = tuple(part * weight(weight_indices) for part in left)
+                combined = left if combined is None else tuple(a + b for a, b in zip(combined, left))
+            for total, part in zip(totals, energy_tensors(combined, strain(right_indices), m)):
+                total += part
         return force_tensors(*(comm.allreduce(total, op=MPI.SUM) for total in totals))
 
     taylor = [tensors_for(())]
