@@ -385,8 +385,9 @@ class FullOrderModel:
         calls this; the model is unusable afterwards."""
         self.newton_solver.destroy()
         self.newton_matrix.destroy()
-        for term in (self.elastic, self.muscle, self.inertia):
-            term.destroy()
+        for term in (self.elastic, self.muscle, self.inertia, self.drag):
+            if term is not None:
+                term.destroy()
         for petsc_object in (self.rest_stiffness, self._work_in, self._work_out):
             petsc_object.destroy()
 

@@ -47,6 +47,10 @@ class DragTerm:
         self._vector = fx.create_vector(self._compiled)
         self.assemble()
 
+    def destroy(self) -> None:
+        """Release g's PETSc vector."""
+        self._vector.destroy()
+
     def assemble(self) -> None:
         """g at the FOM's design (again after the design moved), its rows."""
         self.direction = fx.assemble_vector_into(self._vector, self._compiled).copy()

@@ -12,6 +12,7 @@ import threading
 from contextlib import contextmanager
 
 from mpi4py import MPI
+from petsc4py import PETSc
 
 from aquarom_fenics.fem.fom import FullOrderModel
 from aquarom_fenics.geometry.fish import Fish
@@ -50,8 +51,20 @@ class KeptModel:
         """Free the kept model (when the builds are done: an optimisation's end)."""
         with self.lock:
             if self.model is not None:
+                release_kept(self.model)
                 self.model.destroy()
             self.key = self.model = None
+
+
+def release_kept(model: FullOrderModel) -> None:
+    """Destroy the PETSc objects the reductions keep on the model (``FullOrderModel.keep``: storages of
+    projected forms, a work vector), in a kept tuple or as attributes of a kept object."""
+    for value in model.kept.values():
+        items = value if isinstance(value, (tuple, list)) else tuple(getattr(value, "__dict__", {}).values())
+        for item in items:
+            if isinstance(item, PETSc.Object):
+                item.destroy()
+    model.kept.clear()
 
 
 KEPT_MODEL = KeptModel()

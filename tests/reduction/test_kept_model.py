@@ -1,6 +1,7 @@
 """Builds on the kept model (moved from design to design) give the PROM of a model made at the design."""
 import numpy as np
 import pytest
+from petsc4py import PETSc
 
 from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.reduction.kept_model import KEPT_MODEL
@@ -49,5 +50,9 @@ def test_another_scene_replaces_the_kept_model():
     other = scene.replace("material", young_modulus=2 * scene.material.young_modulus)
     build_prom(other, fish=fish)
     assert KEPT_MODEL.model is not model and KEPT_MODEL.key[0] == other.hash
+    storages = [value[2] for value in KEPT_MODEL.model.kept.values() if isinstance(value, tuple) and len(value) == 3
+                and isinstance(value[2], PETSc.Object)]
+    assert storages and all(storage.handle != 0 for storage in storages)
     KEPT_MODEL.release()
     assert KEPT_MODEL.model is None
+    assert all(storage.handle == 0 for storage in storages)
