@@ -8,17 +8,22 @@ w_cq = |det J_c| ω_q det F_1(x_cq) (ω_q the reference weights). At every quadr
 
 and the energy density ψ(E) = ½ E:ℂ_s:E is a quadratic form of E (the SVK law; of a Neo-Hookean
 scene its second-order expansion at E = 0, ``small_strain_energy_density``, so that its reduced
-model is SVK's: exact for SVK only). The coefficients e, q are
-obtained by evaluating the UFL strain of ``forms/`` at the quadrature points for u = ±V_j and
-u = V_j + V_k, and ℂ_s by evaluating the UFL energy density at unit strains: the physics stays in
-the forms, this module only samples and contracts. Sampling at the FOM's own quadrature points
-with its weights makes the reduced energy equal the FOM's quadrature sum exactly:
+model is SVK's: exact for SVK only). The strain is E = ½ (H + Hᵀ + Hᵀ H) with H = ∇u F_1⁻¹ linear
+in u (``forms/kinematics.py``), so that with H_j the relative displacement gradient of V_j
+
+    e_sj = ½ (H_j + H_jᵀ),   q_sjk = ½ (H_jᵀ H_k + H_kᵀ H_j):
+
+H_j and its ξ-derivatives are evaluated from the UFL form of ``forms/`` at the quadrature points,
+one evaluation per basis vector, and ℂ_s by evaluating the UFL energy density at unit strains.
+Sampling at the FOM's own quadrature points with its weights makes the reduced energy equal the
+FOM's quadrature sum exactly:
 
     Π(η) = ½ P2(η,η) + ½ P3(η,η,η) + ⅛ P4(η,η,η,η),
     P2_ij = Σ_s w_s e_si:ℂ_s:e_sj,  P3_ijk = Σ_s w_s e_si:ℂ_s:q_sjk,  P4_ijkl = Σ_s w_s q_sij:ℂ_s:q_skl.
 
-ξ-derivatives (Taylor terms) come from the UFL derivatives of the same expressions with respect
-to the shape gradient ∇u_ξ in the directions ∇U_k (``FullOrderModel.shape_derivative``).
+ξ-derivatives (Taylor terms) come from the UFL derivatives of H with respect to the shape gradient
+∇u_ξ in the directions ∇U_k (``FullOrderModel.shape_derivative``), combined by Leibniz' rule
+(:func:`strain_coefficients`).
 """
 from __future__ import annotations
 
@@ -30,7 +35,7 @@ from mpi4py import MPI
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.forms.elasticity import small_strain_energy_density
-from aquarom_fenics.forms.kinematics import green_lagrange_strain, volume_ratio
+from aquarom_fenics.forms.kinematics import relative_displacement_gradient, volume_ratio
 
 # Orthonormal basis of symmetric 3×3 tensors: E = Σ_a s_a B_a with s_a = E:B_a.
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
@@ -48,11 +53,12 @@ def symmetric_coordinates(tensors: np.ndarray) -> np.ndarray:
 
 
 class CellSampler:
-    """Compiled expressions of the strain, its ξ-derivatives, the weight and ψ at the quadrature
-    points of the FOM's elastic energy; every array has one row per (owned cell, point).
+    """Compiled expressions of the relative displacement gradient H = ∇u F_1⁻¹, its ξ-derivatives, the
+    weight and ψ at the quadrature points of the FOM's elastic energy; every array has one row per
+    (owned cell, point).
 
-    The strain and its p first ξ-derivatives are one stacked expression, so that each sampled u
-    costs one evaluation for all of them (the coefficient u is packed and tabulated once)."""
+    H and its ξ-derivatives (along every e_k; at Taylor order 2 also along every pair e_k, e_l, k ≤ l)
+    are one stacked expression: each basis vector costs one evaluation for all of them."""
 
     def __init__(self, fom, taylor_order: int, n_parameters: int):
         self.fom = fom
@@ -63,7 +69,6 @@ class CellSampler:
         self.direction = fx.new_function(fom.space, "direction")
         self.shape_directions = [fom.shape_direction(f"shape_direction_{i}") for i in range(2)]
         shape_gradient = fom.shape_gradients["stiffness"]
-        strain = green_lagrange_strain(self.direction, shape_gradient)
         weight = abs(ufl.JacobianDeterminant(fom.mesh)) * volume_ratio(shape_gradient)
         self.weight = [self._compile(weight)]
         first_weight = fom.shape_derivative(weight, self.shape_directions[0])
@@ -71,16 +76,23 @@ class CellSampler:
             self.weight.append(self._compile(first_weight))
         if taylor_order >= 2:
             self.weight.append(self._compile(fom.shape_derivative(first_weight, self.shape_directions[1])))
-            self.second_strain = self._compile(ufl.as_vector(_flat(fom.shape_derivative(
-                fom.shape_derivative(strain, self.shape_directions[0]), self.shape_directions[1]))))
         self.parameter_directions = []
         for k in range(n_parameters if taylor_order >= 1 else 0):
             self.parameter_directions.append(fom.shape_direction(f"parameter_direction_{k}"))
             self.parameter_directions[k].set_parameter(k)
-        self.strains = self._compile(ufl.as_vector(
-            _flat(strain) + [value for direction in self.parameter_directions
-                             for value in _flat(fom.shape_derivative(strain, direction))]))
+        p = len(self.parameter_directions)
+        gradient = relative_displacement_gradient(self.direction, shape_gradient)
+        derivatives = {(): gradient}
+        for k, direction in enumerate(self.parameter_directions):
+            derivatives[k,] = fom.shape_derivative(gradient, direction)
+        for k, l in (pair_list(p) if taylor_order >= 2 else []):
+            derivatives[k, l] = fom.shape_derivative(derivatives[k,], self.parameter_directions[l])
+        self.strain_indices = list(derivatives)
+        """The ξ-derivatives of the strain the sampler gives: (), (k,) and, at order 2, (k, l) with k ≤ l."""
+        self.gradients = self._compile(ufl.as_vector([value for indices in self.strain_indices
+                                                      for value in _flat(derivatives[indices])]))
         self.unit_strain = fx.tensor_constant(fom.mesh, (3, 3))
+        self._moduli = None
         self.energy_density = self._compile(small_strain_energy_density(
             fom.elastic.law, self.unit_strain, fom.elastic.young_modulus, fom.elastic.poisson_ratio))
 
@@ -102,7 +114,13 @@ class CellSampler:
             direction.set_parameter(k)
 
     def elasticity(self) -> np.ndarray:
-        """ℂ_s in symmetric coordinates, (n_samples, 6, 6): ψ(s) = ½ sᵀ ℂ_s s."""
+        """ℂ_s in symmetric coordinates, (n_samples, 6, 6): ψ(s) = ½ sᵀ ℂ_s s. The material's, not the
+        design's: evaluated once per sampler."""
+        if self._moduli is None:
+            self._moduli = self._evaluated_elasticity()
+        return self._moduli
+
+    def _evaluated_elasticity(self) -> np.ndarray:
         def density(tensor):
             self.unit_strain.value = tensor
             return self.evaluate(self.energy_density)[:, 0]
@@ -115,34 +133,73 @@ class CellSampler:
                 moduli[:, a, b] = moduli[:, b, a] = density(SYMMETRIC_BASIS[a] + SYMMETRIC_BASIS[b]) - single[a] - single[b]
         return moduli
 
-    def whitened_strain_coefficients(self, vectors: np.ndarray, expression, count: int,
-                                     transform: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-        """(ẽ, q̃) = (Rᵀ e, Rᵀ q) of E(V η) = e η + ½ q η η for each of the ``count`` strains stacked in
-        ``expression``: shapes (m, 6 n_samples) and (n_pairs, 6 n_samples), R from :func:`whitening`.
+    def relative_gradients(self, vectors: np.ndarray) -> dict[tuple, np.ndarray]:
+        """H_j = ∇V_j F_1⁻¹ and its ξ-derivatives at every sample, (m, n_samples, 3, 3) for each index
+        tuple of ``strain_indices``: one evaluation per basis vector V_j."""
+        count = len(self.strain_indices)
+        values = np.empty((count, vectors.shape[1], self.n_samples, 3, 3))
+        for j in range(vectors.shape[1]):
+            fx.set_owned_values(self.direction, vectors[:, j])
+            values[:, j] = self.evaluate(self.gradients, 9 * count).reshape(self.n_samples, count, 3, 3).transpose(1, 0, 2, 3)
+        return dict(zip(self.strain_indices, values))
 
-        q is stored for the pairs j ≤ k of :func:`pair_index`. Sampled at u = ±V_j and u = V_j + V_k
-        (exact: E is quadratic in u, its ξ-derivatives as well), whitened sample by sample.
-        """
-        m = vectors.shape[1]
+    def whitened_strain_coefficients(self, vectors: np.ndarray,
+                                     transform: np.ndarray) -> dict[tuple, tuple[np.ndarray, np.ndarray]]:
+        """(ẽ, q̃) = (Rᵀ e, Rᵀ q) of E(V η) = e η + ½ q η η and of each of its ξ-derivatives (by the index
+        tuples of ``strain_indices``): shapes (m, 6 n_samples) and (n_pairs, 6 n_samples), R from
+        :func:`whitening`, q for the pairs j ≤ k of :func:`pair_index` (:func:`strain_coefficients`)."""
+        gradients = self.relative_gradients(vectors)
+        return {indices: tuple(whiten(part, transform) for part in strain_coefficients(gradients, indices))
+                for indices in self.strain_indices}
 
-        def strains_of(owned):         # (count, 6 n_samples)
-            fx.set_owned_values(self.direction, owned)
-            values = self.evaluate(expression, 9 * count).reshape(self.n_samples, count, 9)
-            return whiten(symmetric_coordinates(values).transpose(1, 0, 2), transform)
 
-        signed = [(strains_of(vectors[:, j]), strains_of(-vectors[:, j])) for j in range(m)]
-        linear = np.stack([(plus - minus) / 2.0 for plus, minus in signed], axis=1)
-        diagonal = [plus + minus for plus, minus in signed]
-        del signed
-        pairs = pair_list(m)
-        quadratic = np.empty((count, len(pairs), linear.shape[2]))
-        for number, (j, k) in enumerate(pairs):
-            if j == k:
-                quadratic[:, number] = diagonal[j]
-            else:
-                both = strains_of(vectors[:, j] + vectors[:, k])
-                quadratic[:, number] = both - linear[:, j] - linear[:, k] - 0.5 * (diagonal[j] + diagonal[k])
-        return [(linear[i], quadratic[i]) for i in range(count)]
+def strain_coefficients(gradients: dict[tuple, np.ndarray], indices: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """(e, q) in symmetric coordinates of the ξ-derivative ∂_I E (I = ``indices``) of E(V η) = e η + ½ q η η,
+    from the relative displacement gradients: ``gradients[J]`` is ∂_J H_j, (m, n_samples, 3, 3).
+
+    E = ½ (H + Hᵀ + Hᵀ H) with H = Σ_j η_j H_j, so by Leibniz' rule over the two factors of Hᵀ H
+
+        e_j = sym ∂_I H_j,   q_jk = Σ_{A ⊔ B = I} sym(∂_A H_jᵀ ∂_B H_k)
+
+    (the sum over every way to split the indices between the factors; it holds each split and its
+    mirror, so that q_jk = q_kj). Shapes (m, n_samples, 6) and (n_pairs, n_samples, 6), q for the
+    pairs j ≤ k of :func:`pair_list`; sym X and X have the same coordinates X:B_a.
+    """
+    value = gradients[indices]
+    m, n_samples = value.shape[:2]
+    rows, columns = np.array(pair_list(m)).T
+    quadratic = np.empty((rows.size, n_samples, 6))
+    step = max(1, PRODUCT_ENTRIES // (9 * m * m))
+    for start in range(0, n_samples, step):
+        chunk = slice(start, start + step)
+        products = 0.0
+        for left, right in _splits(indices):
+            if left < right:     # the mirror split (right, left) gives the transposed blocks: added below
+                continue
+            block = _transposed_products(gradients[left][:, chunk], gradients[right][:, chunk])
+            products = products + (block if left == right else block + block.transpose(0, 2, 1))
+        blocks = products.reshape(-1, m, 3, m, 3).transpose(1, 3, 0, 2, 4)[rows, columns]    # (pairs, chunk, 3, 3)
+        quadratic[:, chunk] = symmetric_coordinates(blocks.reshape(rows.size, -1, 9))
+    return symmetric_coordinates(value.reshape(m, n_samples, 9)), quadratic
+
+
+PRODUCT_ENTRIES = 1 << 22
+"""Entries of the per-sample products A_jᵀ B_k :func:`strain_coefficients` holds at once (32 MB)."""
+
+
+def _transposed_products(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """(n, 3m, 3m): every block A_jᵀ B_k (rows j, columns k) at each of the n samples of (m, n, 3, 3)
+    arrays A, B, as one (3m × 3) (3 × 3m) matrix product per sample."""
+    m, n = left.shape[:2]
+    a = np.ascontiguousarray(left.transpose(1, 2, 0, 3)).reshape(n, 3, 3 * m)
+    b = np.ascontiguousarray(right.transpose(1, 2, 0, 3)).reshape(n, 3, 3 * m)
+    return np.matmul(a.transpose(0, 2, 1), b)
+
+
+def _splits(indices: tuple):
+    """Every (A, B) with A ⊔ B = ``indices`` (each index to the left or the right factor), A and B sorted."""
+    for assignment in itertools.product(range(2), repeat=len(indices)):
+        yield tuple(tuple(sorted(index for index, side in zip(indices, assignment) if side == slot)) for slot in range(2))
 
 
 def _flat(tensor) -> list:
@@ -216,16 +273,9 @@ def internal_force_taylor(sampler: CellSampler, vectors: np.ndarray, n_parameter
     whitened, weight_ratio = {}, {}
 
     def strain(indices):
-        if indices not in whitened:
-            if len(indices) <= 1:       # E and every ∂E/∂ξ_k from one evaluation per sampled u
-                stacked = [()] + [(k,) for k in range(len(sampler.parameter_directions))]
-                whitened.update(zip(stacked, sampler.whitened_strain_coefficients(
-                    vectors, sampler.strains, len(stacked), transform)))
-            else:
-                sampler.set_shape_directions(*indices)
-                whitened[indices] = sampler.whitened_strain_coefficients(vectors, sampler.second_strain, 1,
-                                                                         transform)[0]
-        return whitened[indices]
+        if not whitened:               # E and all its ξ-derivatives from one evaluation per basis vector
+            whitened.update(sampler.whitened_strain_coefficients(vectors, transform))
+        return whitened[tuple(sorted(indices))]
 
     def weight(indices):
         if indices not in weight_ratio:
@@ -236,18 +286,22 @@ def internal_force_taylor(sampler: CellSampler, vectors: np.ndarray, n_parameter
 
     def tensors_for(derivative_indices):
         totals = [np.zeros((m, m)), np.zeros((m, m, m)), np.zeros((m, m, m, m))]
-        # energy_tensors is symmetric in its two factors: (w, E_a, E_b) and (w, E_b, E_a) are equal.
-        terms: dict[tuple, int] = {}
+        # energy_tensors is bilinear and symmetric in its two factors, and the weight, a scalar per sample,
+        # may go with either: the terms of one right factor (the lesser of the two) are summed on the left
+        # first, one call per right factor (w_k E + 2 ∂_k E against E for a first derivative).
+        lefts: dict[tuple, list] = {}
         for weight_indices, left_indices, right_indices in _leibniz(derivative_indices):
-            key = (weight_indices,) + ((left_indices, right_indices) if weight_indices
-                                       else tuple(sorted((left_indices, right_indices))))
-            terms[key] = terms.get(key, 0) + 1
-        for (weight_indices, left_indices, right_indices), count in terms.items():
-            left = strain(left_indices)
-            if weight_indices:
-                left = tuple(part * weight(weight_indices) for part in left)
-            for total, part in zip(totals, energy_tensors(left, strain(right_indices), m)):
-                total += count * part
+            left_indices, right_indices = sorted((left_indices, right_indices), reverse=True)
+            lefts.setdefault(right_indices, []).append((weight_indices, left_indices))
+        for right_indices, terms in lefts.items():
+            combined = None
+            for weight_indices, left_indices in terms:
+                left = strain(left_indices)
+                if weight_indices:
+                    left = tuple(part * weight(weight_indices) for part in left)
+                combined = left if combined is None else tuple(a + b for a, b in zip(combined, left))
+            for total, part in zip(totals, energy_tensors(combined, strain(right_indices), m)):
+                total += part
         return force_tensors(*(comm.allreduce(total, op=MPI.SUM) for total in totals))
 
     taylor = [tensors_for(())]

@@ -24,6 +24,7 @@ from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.errors import InputError, SolverError
 from aquarom_fenics.fem.linear_solver import mumps_solver, solve_into
 from aquarom_fenics.fem.newton_system import NewtonMatrix, NewtonSolver, SolveProfile
+from aquarom_fenics.fem.shape_direction import ShapeDirection
 from aquarom_fenics.fem.time_scheme import TimeScheme
 from aquarom_fenics.geometry.fish import Fish, quadrature_degrees
 from aquarom_fenics.io.scene import Scene
@@ -67,9 +68,41 @@ class FullOrderModel:
         self._build_terms(rest_points)
         self._work_in = PETSc.Vec().createMPI((self.n_owned_dofs, self.n_global_dofs), comm=comm)
         self._work_out = self._work_in.duplicate()
+        self._build_newton_system()
+        self.kept: dict = {}
+        """What the reductions compile on this model (:meth:`keep`), kept for its next designs (:meth:`move_to`)."""
+
+    def _build_newton_system(self) -> None:
         self.newton_matrix = NewtonMatrix(self)
         self.newton_solver = NewtonSolver(self, self.newton_matrix)
-        self.set_time_step(TimeScheme.from_solver(scene.solver))
+        self.set_time_step(TimeScheme.from_solver(self.scene.solver))
+
+    def move_to(self, xi) -> None:
+        """This pulled-back model at the design ξ of the same mesh: the shape coefficients take ξ's values,
+        what is assembled at the design is assembled again, the compiled forms are kept (as a new
+        model at ξ, without its set-up). InputError where the design check refuses ξ."""
+        if self.moved_mesh:
+            raise ValueError("only a model with the design pulled back to the nominal mesh moves (moved_mesh=False)")
+        xi = self.fish.parameter_vector(xi)
+        self.rest_points, self.xi = self.fish.design(xi), xi
+        fx.set_nodal_values(self.shape_displacement, self.layout, self.rest_points - self.fish.nodes.points)
+        for family, gradient in self.shape_gradients.items():
+            fx.set_quadrature_values(gradient, self.fish.shape_gradient(self.xi, self.quadrature_points[family].reshape(-1, 3)))
+        self.elastic.rest_stiffness(self.rest_stiffness)
+        self.inertia.assemble(self.rest_stiffness)
+        if self.drag is not None:
+            self.drag.assemble()
+        if self.thrust is not None:
+            self.thrust = type(self.thrust)(self, self.rest_points)
+        self.newton_solver.destroy()
+        self.newton_matrix.destroy()
+        self._build_newton_system()
+
+    def keep(self, key, make):
+        """``make()`` on this model once per ``key``, kept in :attr:`kept` for its next designs."""
+        if key not in self.kept:
+            self.kept[key] = make()
+        return self.kept[key]
 
     # ------------------------------------------------------------------ set-up
     def cell_field(self, values_by_cell: np.ndarray, name: str):
@@ -99,7 +132,7 @@ class FullOrderModel:
             self._direction_gradients[key] = self.fish.shape_direction_gradient(k, points)
         return self._direction_gradients[key]
 
-    def shape_direction(self, name: str) -> "ShapeDirection":
+    def shape_direction(self, name: str) -> ShapeDirection:
         """A design direction δξ as coefficients of this model's forms (see ``shape_derivative``).
 
         Only on the pulled-back model: ∇U_k is the gradient with respect to nominal coordinates.
@@ -108,7 +141,7 @@ class FullOrderModel:
             raise ValueError("shape derivatives need the design pulled back to the nominal mesh (moved_mesh=False)")
         return ShapeDirection(self, name)
 
-    def shape_derivative(self, form, direction: "ShapeDirection"):
+    def shape_derivative(self, form, direction: ShapeDirection):
         """d/dε form(ξ + ε δξ) at ε = 0: the UFL derivative along δu_ξ = U δξ and ∇δu_ξ = ∇U δξ
         of every shape coefficient that appears in the form."""
         present = set(extract_coefficients(form))
@@ -353,8 +386,9 @@ class FullOrderModel:
         calls this; the model is unusable afterwards."""
         self.newton_solver.destroy()
         self.newton_matrix.destroy()
-        for term in (self.elastic, self.muscle, self.inertia):
-            term.destroy()
+        for term in (self.elastic, self.muscle, self.inertia, self.drag):
+            if term is not None:
+                term.destroy()
         for petsc_object in (self.rest_stiffness, self._work_in, self._work_out):
             petsc_object.destroy()
 
@@ -414,29 +448,3 @@ class FullOrderModel:
         nodal[self.layout.owned_nodes] = u.reshape(-1, 3)
         return self.comm.allreduce(nodal, op=MPI.SUM)
 
-
-class ShapeDirection:
-    """A design direction δξ as the coefficients the forms are differentiated along.
-
-    δu_ξ = U δξ at the displacement nodes (the skin form) and ∇δu_ξ = ∇U δξ, exact, at the points
-    of each quadrature rule (the volume forms), on the model's nominal mesh.
-    """
-
-    def __init__(self, fom: FullOrderModel, name: str):
-        self.fom = fom
-        self.nodal = fx.new_function(fom.space, f"{name}_nodal")
-        self.gradients = {family: fx.new_function(gradient.function_space, f"{name}_{family}")
-                          for family, gradient in fom.shape_gradients.items()}
-
-    def pairs(self):
-        """(shape coefficient, its variation) for every representation of u_ξ."""
-        fom = self.fom
-        return [(fom.shape_displacement, self.nodal)] + [(fom.shape_gradients[family], self.gradients[family])
-                                                        for family in self.gradients]
-
-    def set_parameter(self, k: int) -> None:
-        """δξ = e_k: δu_ξ = U_k."""
-        fom = self.fom
-        fx.set_owned_values(self.nodal, fom.owned_values(fom.fish.shape_matrix[:, k].reshape(-1, 3)))
-        for family, function in self.gradients.items():
-            fx.set_quadrature_values(function, fom.shape_direction_gradient(family, k))

@@ -40,6 +40,7 @@ from scipy.stats import qmc
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.fish import Fish, load_fish
 from aquarom_fenics.reduction.basis import KEPT_FACTORS
+from aquarom_fenics.reduction.kept_model import KEPT_MODEL
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.optimization.cost import (CostWeights, DesignSpace, Evaluation, FirstOrder, design_space,
                                               first_order_at, meshable_space)
@@ -140,7 +141,8 @@ def optimize(scene: Scene, fish: Fish | None = None, weights: CostWeights | None
                                                     on_iteration or (lambda row: None))
             checkpoint.finish(optimum, evaluation, reason, history, builder)
     finally:
-        KEPT_FACTORS.release()      # the builds' K_0 factorisation: not needed by the FOM check that follows
+        KEPT_FACTORS.release()      # the builds' K_0 factorisation and model: not needed by the FOM check that follows
+        KEPT_MODEL.release()
     timings = {"prom_builds": builder.build_time, "prom_solves": builder.solve_time,
                "tail_screens": builder.screen_time, "total": time.perf_counter() - started}
     optimality = first_order_at(scene, space, evaluation)

@@ -43,10 +43,19 @@ class DragTerm:
         # The skin of the rest shape: u_ξ interpolated at the displacement nodes (SPEC §5).
         self.direction_form = fom.mass_rule(drag_direction_form(
             fom.test_function, ufl.grad(fom.shape_displacement), fluid_density, fom.mesh))
-        compiled = fx.compile_form(self.direction_form)
-        self.direction = fx.assemble_vector_into(fx.create_vector(compiled), compiled).copy()
+        self._compiled = fx.compile_form(self.direction_form)
+        self._vector = fx.create_vector(self._compiled)
+        self.assemble()
+
+    def destroy(self) -> None:
+        """Release g's PETSc vector."""
+        self._vector.destroy()
+
+    def assemble(self) -> None:
+        """g at the FOM's design (again after the design moved), its rows."""
+        self.direction = fx.assemble_vector_into(self._vector, self._compiled).copy()
         self.rows = np.flatnonzero(self.direction)
-        self.global_rows = fom.global_dofs(self.rows)
+        self.global_rows = self.fom.global_dofs(self.rows)
 
     def force(self, v: np.ndarray) -> np.ndarray:
         """f_drag on the owned dofs [N]."""

@@ -40,6 +40,7 @@ class ElasticTerm:
         self._energy = fx.compile_form(self.energy_form)
         self._force = fx.compile_form(self.force_form)
         self._vector = fx.create_vector(self._force)
+        self._tangent = None
 
     def destroy(self) -> None:
         """Release the force's PETSc vector."""
@@ -53,18 +54,21 @@ class ElasticTerm:
         """Π at the FOM's displacement [J]."""
         return fx.assemble_scalar(self._energy, self.fom.comm)
 
-    def rest_stiffness(self) -> PETSc.Mat:
-        """K_0 = ∂f_int/∂u at u = 0 (no boundary conditions)."""
+    def rest_stiffness(self, into: PETSc.Mat | None = None) -> PETSc.Mat:
+        """K_0 = ∂f_int/∂u at u = 0 (no boundary conditions), assembled into ``into`` when given (a
+        matrix of this tangent's pattern), else into a new matrix."""
         self.fom.set_displacement(np.zeros(self.fom.n_owned_dofs))
-        tangent = fx.compile_form(self.tangent_form)
-        return fx.assemble_matrix_into(fx.create_matrix(tangent), tangent)
+        if self._tangent is None:
+            self._tangent = fx.compile_form(self.tangent_form)
+        return fx.assemble_matrix_into(into or fx.create_matrix(self._tangent), self._tangent)
 
     def reduce(self, projector, head_only: bool = False) -> "ElasticTensors":
         """(K1, K2, K3) on the projector's basis with their Taylor terms in ξ, sampled at the quadrature points;
         with ``head_only`` the head cells' share alone (the sums restricted to their samples, dx(head)): the
         tensors are linear in each cell's modulus, so at a head factor h the total is
         rest + (h / h_0) head = total + (h / h_0 - 1) head, h_0 the scene's."""
-        sampler = CellSampler(self.fom, projector.order, projector.n_parameters)
+        sampler = self.fom.keep(("cell_sampler", projector.order, projector.n_parameters),
+                                lambda: CellSampler(self.fom, projector.order, projector.n_parameters))
         samples = None
         if head_only:
             head = np.isin(sampler.cells, fx.owned_cells_among(self.fom.mesh, self.fom.fish.tags.head_cells))

@@ -67,22 +67,33 @@ class InertiaTerm:
         self.mass_moment_form = fom.mass_rule(mass_moment_x(test, shape_gradient, density))
         self.mass_moment_y_form = fom.mass_rule(mass_moment_y(test, shape_gradient, density))
         self.total_mass_form = fom.mass_rule(total_mass(shape_gradient, density, fom.mesh))
-        mass = fx.compile_form(self.mass_form)
-        self.mass_matrix = fx.assemble_matrix_into(fx.create_matrix(mass), mass)
+        self._compiled = [fx.compile_form(form) for form in (self.mass_form, self.mass_moment_form, self.total_mass_form,
+                                                                 self.mass_moment_y_form)]
+        self.mass_matrix = fx.create_matrix(self._compiled[0])
+        self._moment_vector = fx.create_vector(self._compiled[1])
+        self._moment_y_vector = fx.create_vector(self._compiled[3])
+        self.damping_matrix = None
+        self.assemble(rest_stiffness)
+
+    def assemble(self, rest_stiffness: PETSc.Mat) -> None:
+        """M, C = α_R M + β_R K_0, the mass moment and the total mass at the FOM's design (again after
+        the design moved)."""
+        mass, moment, total, moment_y = self._compiled
+        fx.assemble_matrix_into(self.mass_matrix, mass)
         if self.lumped:
             lump(self.mass_matrix)
+        if self.damping_matrix is not None:
+            self.damping_matrix.destroy()
         self.damping_matrix = rayleigh_damping(self.alpha, self.mass_matrix, self.beta, rest_stiffness,
                                                petsc_linear_combination)
-        moment = fx.compile_form(self.mass_moment_form)
-        self.mass_moment_x = fx.assemble_vector_into(fx.create_vector(moment), moment).copy()
-        moment_y = fx.compile_form(self.mass_moment_y_form)
-        self.mass_moment_y = fx.assemble_vector_into(fx.create_vector(moment_y), moment_y).copy()
-        self.total_mass = fx.assemble_scalar(fx.compile_form(self.total_mass_form), fom.comm)
+        self.mass_moment_x = fx.assemble_vector_into(self._moment_vector, moment).copy()
+        self.mass_moment_y = fx.assemble_vector_into(self._moment_y_vector, moment_y).copy()
+        self.total_mass = fx.assemble_scalar(total, self.fom.comm)
 
     def destroy(self) -> None:
         """Release the mass and damping matrices."""
-        self.mass_matrix.destroy()
-        self.damping_matrix.destroy()
+        for petsc_object in (self.mass_matrix, self.damping_matrix, self._moment_vector, self._moment_y_vector):
+            petsc_object.destroy()
 
     def newton_block(self, acceleration_factor: float, velocity_factor: float) -> PETSc.Mat:
         """k_a M + k_v C, the inertia and damping part of the Newton matrix."""
@@ -114,21 +125,24 @@ def sampled_inertia(fom, projector, density) -> tuple[Taylor, Taylor, Taylor, Ta
     reference_weights = fx.quadrature_rule(degree)[1]
     n_samples = cells.size * reference_weights.size
     vectors = projector.vectors
-    field = fx.new_function(fom.space, "inertia_sample")
-    at_points = fx.compile_quadrature_expression(field, degree)
+
+    def compile_sampling():        # kept on the model: the sample's field, its values, ρ_s and its ξ-derivatives
+        field = fx.new_function(fom.space, "inertia_sample")
+        weighted_density = abs(ufl.JacobianDeterminant(mesh)) * mass_density(fom.shape_gradients["mass"], density)
+        compiled = [fx.compile_quadrature_expression(weighted_density, degree)]
+        if projector.order >= 1:
+            first = fom.shape_derivative(weighted_density, projector.directions[0])
+            compiled.append(fx.compile_quadrature_expression(first, degree))
+        if projector.order >= 2:
+            compiled.append(fx.compile_quadrature_expression(
+                fom.shape_derivative(first, projector.directions[1]), degree))
+        return field, fx.compile_quadrature_expression(field, degree), compiled
+
+    field, at_points, compiled = fom.keep(("inertia_sampling", projector.order), compile_sampling)
     values = np.empty((n_samples, 3, vectors.shape[1]))
     for j in range(vectors.shape[1]):
         fx.set_owned_values(field, vectors[:, j])
         values[:, :, j] = fx.evaluate_expression(at_points, cells).reshape(n_samples, 3)
-
-    weighted_density = abs(ufl.JacobianDeterminant(mesh)) * mass_density(fom.shape_gradients["mass"], density)
-    compiled = [fx.compile_quadrature_expression(weighted_density, degree)]
-    if projector.order >= 1:
-        first = fom.shape_derivative(weighted_density, projector.directions[0])
-        compiled.append(fx.compile_quadrature_expression(first, degree))
-    if projector.order >= 2:
-        compiled.append(fx.compile_quadrature_expression(
-            fom.shape_derivative(first, projector.directions[1]), degree))
 
     def sums(derivative: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         weights = (fx.evaluate_expression(compiled[derivative], cells).reshape(cells.size, -1)

@@ -199,28 +199,13 @@ def sampled_muscle_tensors(fom, projector) -> "MuscleTensors":
     """
     scene, vectors = fom.scene, projector.vectors
     m, p, order = vectors.shape[1], projector.n_parameters, projector.order
-    sample = fx.new_function(fom.space, "muscle_sample")
-    directions = [fom.shape_direction(f"muscle_direction_{k}") for k in range(p if order >= 1 else 0)]
-    for k, direction in enumerate(directions):
-        direction.set_parameter(k)
+    sample, expressions = fom.keep(("muscle_sampling", p, order), lambda: _muscle_expressions(fom, p, order))
     pairs = [(k, l) for k in range(p) for l in range(k, p)] if order >= 2 else []
     degree = fom.quadrature_degrees["stiffness"]
     reference_weights = fx.quadrature_rule(degree)[1]
-    n_terms = 1 + len(directions) + len(pairs)
-    # the sampled terms: [value, ∂/∂ξ_k (k < p), ∂²/∂ξ_k∂ξ_l (the pairs k ≤ l)], by derivative indices
-    column = {indices: n for n, indices in enumerate([()] + [(k,) for k in range(len(directions))] + pairs)}
-
-    def compiled(fibre):          # the terms' expression for one fibre direction
-        density = muscle_energy_density(sample, fom.shape_gradients["stiffness"],
-                                        fx.constant(fom.mesh, scene.actuation.stiffness),
-                                        nominal_volume=scene.actuation.muscle_volume == "nominal", fibre=fibre)
-        first = [fom.shape_derivative(density, direction) for direction in directions]
-        second = [fom.shape_derivative(first[k], directions[l]) for k, l in pairs]
-        return fx.compile_quadrature_expression(
-            abs(ufl.JacobianDeterminant(fom.mesh)) * ufl.as_vector([density] + first + second), degree)
-
+    n_terms = 1 + (p if order >= 1 else 0) + len(pairs)
+    column = {indices: n for n, indices in enumerate([()] + [(k,) for k in range(p if order >= 1 else 0)] + pairs)}
     fibres = [tuple(muscle.fibre) for muscle in scene.actuated_muscles]
-    expressions = {fibre: compiled(fibre) for fibre in dict.fromkeys(fibres)}
 
     def energies(expression, cells, displacement):        # (Π, ∂Π/∂ξ_k, ∂²Π/∂ξ_k∂ξ_l) at u
         fx.set_owned_values(sample, displacement)
@@ -249,6 +234,30 @@ def sampled_muscle_tensors(fom, projector) -> "MuscleTensors":
         linears.append(b_matrix)
     return MuscleTensors(stack_taylor(constants), stack_taylor(linears))
 
+
+def _muscle_expressions(fom, p: int, order: int) -> tuple:
+    """(the sampled u, one compiled expression per fibre direction of the scene's muscles) of
+    :func:`sampled_muscle_tensors`: |det J| (ψ, ∂ψ/∂ξ_k, ∂²ψ/∂ξ_k∂ξ_l) at the points of the stiffness rule
+    (the reference weights ω_q not included), kept on the model for its next designs."""
+    scene = fom.scene
+    sample = fx.new_function(fom.space, "muscle_sample")
+    directions = [fom.shape_direction(f"muscle_direction_{k}") for k in range(p if order >= 1 else 0)]
+    for k, direction in enumerate(directions):
+        direction.set_parameter(k)
+    pairs = [(k, l) for k in range(p) for l in range(k, p)] if order >= 2 else []
+    degree = fom.quadrature_degrees["stiffness"]
+
+    def compiled(fibre):          # the terms' expression for one fibre direction
+        density = muscle_energy_density(sample, fom.shape_gradients["stiffness"],
+                                        fx.constant(fom.mesh, scene.actuation.stiffness),
+                                        nominal_volume=scene.actuation.muscle_volume == "nominal", fibre=fibre)
+        first = [fom.shape_derivative(density, direction) for direction in directions]
+        second = [fom.shape_derivative(first[k], directions[l]) for k, l in pairs]
+        return fx.compile_quadrature_expression(
+            abs(ufl.JacobianDeterminant(fom.mesh)) * ufl.as_vector([density] + first + second), degree)
+
+    fibres = [tuple(muscle.fibre) for muscle in scene.actuated_muscles]
+    return sample, {fibre: compiled(fibre) for fibre in dict.fromkeys(fibres)}
 
 @dataclass
 class MuscleTensors:

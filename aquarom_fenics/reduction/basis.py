@@ -291,7 +291,7 @@ def _build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
     modes = [modes[:, i] / fom.norm(modes[:, i]) for i in range(modes.shape[1])]
     candidates += modes
 
-    variations = _SecondVariations(fom)
+    variations = fom.keep("second_variations", lambda: _SecondVariations(fom))
     if settings.modal_derivatives:
         for i, j in ((i, j) for j in range(len(modes)) for i in range(j + 1)):
             candidates.append(-static_solve(variations.evaluate(variations.modal, modes[i], modes[j])))
@@ -321,7 +321,6 @@ def _build_basis(fom: FullOrderModel, n_parameters: int) -> ReductionBasis:
     if strokes:
         candidates += stroke_vectors(fom, strokes, static_solve, variations, psi, tail)
     timings["static_solves"] = time.perf_counter() - started - timings["vibration_modes"]
-    variations.vector.destroy()
     labels = candidate_labels(len(modes), settings.modal_derivatives, n_parameters, actuation_modes,
                               responses + strokes)
     vectors, labels, dropped = mass_orthonormalise(fom, list(zip(labels, candidates)), settings.drop_tolerance)

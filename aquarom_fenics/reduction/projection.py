@@ -35,7 +35,8 @@ class Projector:
     def __init__(self, fom, vectors: np.ndarray, n_parameters: int, order: int):
         self.fom, self.vectors = fom, vectors
         self.n_parameters, self.order = n_parameters, order
-        self.directions = [fom.shape_direction(f"projection_direction_{i}") for i in range(min(order, 2))]
+        self.directions = fom.keep("projection_directions", lambda: [fom.shape_direction(f"projection_direction_{i}")
+                                                                     for i in range(2)])[: min(order, 2)]
 
     def vector(self, owned: np.ndarray) -> np.ndarray:
         return project_vector(self.fom.comm, self.vectors, owned)
@@ -46,14 +47,8 @@ class Projector:
     def taylor(self, form, transform: Callable | None = None) -> Taylor:
         """Taylor in Δξ of the projected form (scalar, Vᵀ b or Vᵀ A V); ``transform`` acts on the
         assembled matrix before the projection (e.g. lumping)."""
-        compiled = [fx.compile_form(form)]
-        if self.order >= 1:
-            first = self.fom.shape_derivative(form, self.directions[0])
-            compiled.append(fx.compile_form(first))
-        if self.order >= 2:
-            compiled.append(fx.compile_form(self.fom.shape_derivative(first, self.directions[1])))
+        _, compiled, storage = self.fom.keep(("taylor", id(form), self.order), lambda: self._compiled(form))
         rank = len(form.arguments())
-        storage = fx.create_matrix(compiled[0]) if rank == 2 else fx.create_vector(compiled[0]) if rank == 1 else None
 
         def project(derivative: int) -> np.ndarray:
             if rank == 0:
@@ -64,9 +59,20 @@ class Projector:
             return self.matrix(transform(matrix) if transform else matrix)
 
         [taylor] = self.taylor_terms(lambda derivative: (project(derivative),))
-        if storage is not None:
-            storage.destroy()
         return taylor
+
+    def _compiled(self, form) -> tuple:
+        """(the form, its compiled ξ-derivatives up to the order, its PETSc storage or None), kept on the
+        model (the form with them: its id names them while it lives)."""
+        compiled = [fx.compile_form(form)]
+        if self.order >= 1:
+            first = self.fom.shape_derivative(form, self.directions[0])
+            compiled.append(fx.compile_form(first))
+        if self.order >= 2:
+            compiled.append(fx.compile_form(self.fom.shape_derivative(first, self.directions[1])))
+        rank = len(form.arguments())
+        storage = fx.create_matrix(compiled[0]) if rank == 2 else fx.create_vector(compiled[0]) if rank == 1 else None
+        return form, compiled, storage
 
     def taylor_terms(self, evaluate: Callable[[int], tuple]) -> list[Taylor]:
         """The Taylor in Δξ of each value of ``evaluate(d)``, a tuple whose entries are the d-th

@@ -17,6 +17,7 @@ from aquarom_fenics import __version__
 from aquarom_fenics.reduction.basis import ReductionBasis, build_basis
 from aquarom_fenics.geometry.fish import Fish, load_fish
 from aquarom_fenics.fem.fom import FullOrderModel
+from aquarom_fenics.reduction.kept_model import KEPT_MODEL
 from aquarom_fenics.physics.thrust_full_order import check_spine_is_not_moved
 from aquarom_fenics.reduction.projection import Projector
 from aquarom_fenics.reduction.prom import Observation, ReducedModel
@@ -42,8 +43,16 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
     warning = material_law_warning(scene)
     if warning:
         log.warning("%s", warning)
-    fom = FullOrderModel(scene, fish, xi_center, comm=comm)
-    timings["fom_setup"] = time.perf_counter() - started
+    with KEPT_MODEL.model_at(scene, fish, xi_center, comm) as fom:
+        timings["fom_setup"] = time.perf_counter() - started
+        return _reduced_model(scene, fish, fom, xi_center, comm, parametric, basis_from, started, timings,
+                              head_share)
+
+
+def _reduced_model(scene: Scene, fish: Fish, fom: FullOrderModel, xi_center: np.ndarray, comm: MPI.Comm,
+                   parametric: bool, basis_from: ReducedModel | None, started: float, timings: dict,
+                   head_share: bool = False) -> ReducedModel:
+    """The PROM of ``build_prom`` on the model ``fom`` at ξ_c."""
     p = len(fish.shape_names) if parametric else 0
     order = scene.reduction.taylor_order if p else 0
     if scene.fluid.thrust and scene.fluid.stations == "nodes":
@@ -100,7 +109,6 @@ def build_prom(scene: Scene, xi_center=None, fish: Fish | None = None, comm: MPI
         frequencies=basis.frequencies, elastic=elastic, muscle=muscle, inertia=inertia, drag=drag, thrust=thrust,
         observation=observation, cells=fom.n_cells, dofs=fom.n_global_dofs, timings=timings,
         head_elastic=head_elastic)
-    fom.destroy()
     return prom
 
 
