@@ -153,7 +153,7 @@ class CalibratedSystem(ReducedSystem):
         self.rest_stiffness = self.elastic.k1                          # K_0 at E_0 and h
         self.mass = self.inertia.mass
         self.alpha, self.beta = theta[ALPHA], theta[BETA]
-        if (self.alpha, self.beta, self.elastic_scale) != (prom.inertia.rayleigh_alpha, prom.inertia.rayleigh_beta, 1.0):
+        if (self.alpha, self.beta, self.elastic_scale) != (*prom.inertia.rayleigh, 1.0):
             self.inertia.damping = rayleigh_damping(self.alpha, self.mass, self.beta,
                                                     self.elastic_scale * self.rest_stiffness)
         self.damping = self.inertia.damping

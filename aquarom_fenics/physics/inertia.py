@@ -169,6 +169,11 @@ class InertiaTensors:
         """At Δξ, with the Taylor of K_0,r and its value at Δξ."""
         return ReducedInertia(self, delta, rest_stiffness, rest_stiffness_value)
 
+    @property
+    def rayleigh(self) -> tuple[float, float]:
+        """(α_R, β_R) of C_r = α_R M_r + β_R K1."""
+        return self.rayleigh_alpha, self.rayleigh_beta
+
     def damping(self, mass, rest_stiffness):
         """C_r = α_R M_r + β_R K1 (or ∂C_r/∂ξ_k from ∂M_r/∂ξ_k, ∂K1/∂ξ_k), of arrays with any leading axes."""
         return rayleigh_damping(self.rayleigh_alpha, mass, self.rayleigh_beta, rest_stiffness)
