@@ -20,7 +20,7 @@ def test_the_python_page_runs(tmp_path, monkeypatch, capsys):
     namespace = {}
     exec(compile(blocks[0].replace(SCENE_LINE, SHORT), str(PAGE), "exec"), namespace)
     samples = namespace["fom"].trajectory.arrays()
-    assert set(samples) == {"time", "head_x", "tail_y", "com_x", "newton_iterations"}
+    assert set(samples) == {"time", "head_x", "tail_y", "tail_x", "com_x", "com_y", "newton_iterations"}
     assert samples["time"][-1] == 0.2 or abs(samples["time"][-1] - 0.2) < 1e-12
     assert namespace["result"].optimum_dict.keys() == {"z_tail", "z_head", "y_thin"}
     assert (tmp_path / "so1-prom.npz").is_file() and (tmp_path / "results" / "my-so1" / "manifest.json").is_file()
