@@ -3,7 +3,7 @@
 The design vector z is ξ (the scene's shape parameters), followed by the actuation amplitude A
 when co-optimisation is on, then the ``[gait]`` variables g (io/scene_gait.py). Cost
 L(z) = w_1 (-d(z)) + w_2 α E, d the swimming distance [m] and E the effort: A² or, with
-``[cooptimization] effort = "power"``, the muscles' mean positive power P̄ [W] (physics/gait.py).
+``[cooptimization] effort = "power"``, the muscles' mean positive power P̄ [W] (dynamics/muscle_power.py).
 """
 from __future__ import annotations
 
