@@ -5,6 +5,7 @@ sampled at the data's times (shifted by the time offset τ when it is fitted, 0 
 interpolation of the reduced trajectory and its velocity on the time grid (:func:`hermite`), its Jacobian
 J = dy/dθ the same interpolation of the forward sensitivities of y and ẏ (``parameters.simulate_parameters``)
 and dy/dτ the interpolant's time derivative (ẏ at the grid's times): the exact derivatives of what is sampled.
+The FOM is sampled the same way, from its positions and velocities on its grid (:func:`sample_trajectory`).
 Levenberg–Marquardt on the relative parameters θ/θ_start (τ, which starts at 0, relative to its
 bounds' half-width), with bounds by projection:
 
@@ -95,6 +96,16 @@ def sample_at(swim: ModelSwim, times: np.ndarray, columns: list[int], keys: list
             derivative[:, :, k] = hermite(at, swim.time, swim.derivative[:, columns, index],
                                           swim.velocity_derivative[:, columns, index])[0]
     return values, derivative
+
+
+def sample_trajectory(trajectory, times: np.ndarray, names) -> np.ndarray:
+    """A run's observed points ``names`` (n, k) [m] at ``times`` [s] by :func:`hermite` of its positions and
+    velocities on the time grid (``Trajectory.rate_arrays``): the FOM sampled as :func:`sample_at` samples
+    the reduced model, zero before t = 0."""
+    arrays, rates = trajectory.arrays(), trajectory.rate_arrays()
+    values = np.column_stack([arrays[name] for name in names])
+    velocity = np.column_stack([rates[name] for name in names])
+    return hermite(np.asarray(times, dtype=float), arrays["time"], values, velocity)[0]
 
 
 def model_at(prom, built, data, columns: list[int], keys: list[str], values: np.ndarray):

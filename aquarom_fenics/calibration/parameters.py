@@ -37,6 +37,7 @@ import numpy as np
 
 from aquarom_fenics.dynamics.integrator import NewtonSettings, TimeScheme, integrate
 from aquarom_fenics.dynamics.reduced_dynamics import ReducedSystem, one_blas_thread, propagate_sensitivity
+from aquarom_fenics.dynamics.trajectory import OBSERVED as TRAJECTORY_OBSERVED
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.physics.elastic import ElasticTensors
@@ -60,7 +61,7 @@ TIME_OFFSET = "time_offset"
 """Not a scene key: a constant shift τ [s] between the data's clock and the model's, y_data(t) = y_model(t + τ)
 (the model at rest before t = 0). Its derivative is the model's velocity, dy/dτ = ẏ(t + τ)."""
 
-OBSERVED = ("head_x", "tail_y", "com_x", "tail_x", "com_y")
+OBSERVED = TRAJECTORY_OBSERVED
 """The observed points and axes of the reduced model (trajectory.csv's columns, without the unit)."""
 
 

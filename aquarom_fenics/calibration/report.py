@@ -18,16 +18,16 @@ def residual_rms(residual: np.ndarray, observables) -> dict[str, float]:
 
 def fom_model(scene, design: dict, fish, data, progress: bool = True, offset: float = 0.0):
     """The FOM run at ``scene``'s values and its observed points at the data's times shifted by the time
-    offset [s] (at rest before t = 0), (n, k) [m]; raises SolverError when it stops."""
+    offset [s] (at rest before t = 0), (n, k) [m], by cubic Hermite interpolation of its positions and
+    velocities (``fit.sample_trajectory``, as the reduced model); raises SolverError when it stops."""
+    from aquarom_fenics.calibration.fit import sample_trajectory
     from aquarom_fenics.dynamics.simulate import simulate_fom
     from aquarom_fenics.errors import SolverError
 
     run = simulate_fom(scene, xi=design, fish=fish, progress=progress)
     if not run.completed:
         raise SolverError(f"the FOM at the fitted values stopped: {run.error}")
-    arrays = run.trajectory.arrays()
-    at = data.time + offset
-    return run, np.column_stack([np.interp(at, arrays["time"], arrays[name]) for name in data.observables])
+    return run, sample_trajectory(run.trajectory, data.time + offset, data.observables)
 
 
 def fom_record(run, fom: np.ndarray, prom: np.ndarray, data) -> dict:

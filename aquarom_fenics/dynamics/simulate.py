@@ -24,7 +24,7 @@ from aquarom_fenics.io.run_outputs import write_run_outputs
 from aquarom_fenics.io.xdmf import cell_regions
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.parallel import in_worker
-from aquarom_fenics.dynamics.trajectory import DISTANCE_WINDOW, Trajectory, swimming_distance, tail_amplitude
+from aquarom_fenics.dynamics.trajectory import DISTANCE_WINDOW, OBSERVED, Trajectory, swimming_distance, tail_amplitude
 
 log = logging.getLogger("aquarom")
 
@@ -104,9 +104,9 @@ def simulate_fom(scene: Scene, xi=None, fish: Fish | None = None, moved_mesh: bo
         nonlocal cut_steps, factorizations
         cut_steps = report.cut_steps
         factorizations += report.factorizations
-        values = model.observables(u)
-        observed = [values[name] for name in ("head_x", "tail_y", "com_x", "tail_x", "com_y")]
-        trajectory.append(report.time, *observed, report.iterations)
+        values, rates = model.observables(u), model.observables(v)    # both linear in their argument
+        observed = [values[name] for name in OBSERVED]
+        trajectory.append(report.time, *observed, report.iterations, rates=[rates[name] for name in OBSERVED])
         probe.observe(report.step, report.time, u)
         if csv:
             csv.write(report.time, *observed, report.iterations)
