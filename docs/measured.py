@@ -524,7 +524,10 @@ def calibration_table(folder: Path = SNAPSHOT) -> str:
                          + f" (target: at least {targets['coverage']}).")
     note = (f"The {data['scene']} scene (degree {data['mesh']['degree']}, level {data['mesh']['level']}), "
             f"{data['duration']:g} s swims of the FOM at the truth, head x, tail y and centre-of-mass x sampled at "
-            f"{data['frame_rate_hz']:g} Hz with noise σ = {1e3 * data['noise_m']:g} mm, fitted from the scene's values. "
+            f"{data['frame_rate_hz']:g} Hz (time step {data['time_step']:g} s: most frames fall between its steps; "
+            f"the FOM sampled there as the fit samples it, by cubic Hermite interpolation) with independent noise "
+            f"σ = {1e3 * data['noise_m']:g} mm on every frame, fitted from the scene's values. Real tracking noise is "
+            "correlated between frames: intervals from real data at a high frame rate are optimistic. "
             f"Targets: within {100 * targets['error']:g} % of the truth, the 95 % interval within "
             f"±{100 * targets['half_width']:g} %. " + " ".join(notes) + " "
             + f"`{command_of('validation/calibration.json')}`. " + sources_note([("validation/calibration.json", data)]))

@@ -28,7 +28,7 @@ Studies (SPEC §11 "Validation studies", the validation issue):
           Richardson's, or without an observed order the finest level with the three finest levels'
           spread as its error).
   calibration
-          `aquarom calibrate` on synthetic FOM swims of the nominal fish (1 s, 50 Hz, noise 0.4 mm) at
+          `aquarom calibrate` on synthetic FOM swims of the nominal fish (2 s, 240 Hz, noise 0.3 mm) at
           parameters away from the scene's: cases (E, k), (E, α), (k, drag factor), (E, k, thrust factor);
           each fitted value's error and 95 % interval, and the interval's coverage over 20 noise draws
           for (E, k) (not cached: every run fits again).

@@ -7,6 +7,7 @@ import tomllib
 import numpy as np
 import pytest
 
+from aquarom_fenics.calibration.fit import sample_trajectory
 from aquarom_fenics.calibration.parameters import with_values
 from aquarom_fenics.cli import main
 from aquarom_fenics.dynamics.simulate import simulate_fom
@@ -19,11 +20,12 @@ TRUTH = {"material.young_modulus": 1.15 * 260e3, "fluid.thrust_factor": 0.85}
 
 @pytest.fixture(scope="module")
 def swim():
-    """The FOM's head x, tail y and centre-of-mass x at the :data:`TRUTH` values, at 60 Hz, no noise."""
+    """The FOM's head x, tail y and centre-of-mass x at the :data:`TRUTH` values, at 60 Hz (sampled as the fit
+    samples the FOM), no noise."""
     run = simulate_fom(with_values(coarse_scene(solver={"duration": DURATION}), TRUTH), progress=False)
-    arrays = run.trajectory.arrays()
     times = np.arange(1, int(DURATION * 60) + 1) / 60.0
-    return times, {name: np.interp(times, arrays["time"], arrays[name]) for name in ("head_x", "tail_y", "com_x")}
+    names = ("head_x", "tail_y", "com_x")
+    return times, dict(zip(names, sample_trajectory(run.trajectory, times, names).T))
 
 
 def write_swim(path, swim, names):

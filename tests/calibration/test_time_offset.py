@@ -6,7 +6,7 @@ import tomllib
 import numpy as np
 import pytest
 
-from aquarom_fenics.calibration.fit import model_at
+from aquarom_fenics.calibration.fit import model_at, sample_trajectory
 from aquarom_fenics.calibration.parameters import OBSERVED, TIME_OFFSET, with_values
 from aquarom_fenics.cli import main
 from aquarom_fenics.dynamics.simulate import simulate_fom
@@ -64,13 +64,11 @@ def test_a_fit_finds_the_shift_put_into_a_fom_swim(tmp_path, capsys):
     truth_offset, truth_modulus = 0.012, 1.1 * E0
     run = simulate_fom(with_values(coarse_scene(solver={"duration": DURATION}),
                                    {"material.young_modulus": truth_modulus}), progress=False)
-    arrays = run.trajectory.arrays()
     times = np.arange(1, 19) / 50.0                           # up to 0.36 s: room for the shift within 0.4 s
     names = ("head_x", "tail_y", "com_x")
+    shifted = sample_trajectory(run.trajectory, times + truth_offset, names)   # as the fit samples the FOM
     lines = ["time_s," + ",".join(f"{name}_m" for name in names)]
-    for t in times:
-        lines.append(f"{t:.6f}," + ",".join(f"{np.interp(t + truth_offset, arrays['time'], arrays[name]):.12e}"
-                                            for name in names))
+    lines += [f"{t:.6f}," + ",".join(f"{value:.12e}" for value in row) for t, row in zip(times, shifted)]
     (tmp_path / "swim.csv").write_text("\n".join(lines) + "\n")
     scene_file = tmp_path / "scene.toml"
     scene_file.write_text(f"[mesh]\nlevel = 1\n[solver]\nduration = {DURATION}\n")

@@ -141,8 +141,10 @@ def section_calibration(lines, study) -> None:
               f"`aquarom calibrate`'s fit (Levenberg–Marquardt on the PROM, the last Gauss–Newton iterations on the "
               f"FOM) of FOM swims of the {study['scene']} scene (level {study['mesh']['level']}, degree "
               f"{study['mesh']['degree']}, {study['duration']:g} s) at parameters away from the scene's, head x, tail y "
-              f"and centre-of-mass x sampled at {study['frame_rate_hz']:g} Hz (time step {study['time_step']:g} s) with "
-              f"Gaussian noise σ = {1e3 * study['noise_m']:g} mm, fitted from the scene's values. Targets: within "
+              f"and centre-of-mass x sampled at {study['frame_rate_hz']:g} Hz (time step {study['time_step']:g} s; the FOM "
+              f"sampled between its steps by cubic Hermite interpolation, as the fit samples it) with independent "
+              f"Gaussian noise σ = {1e3 * study['noise_m']:g} mm, fitted from the scene's values (real tracking noise "
+              f"is correlated between frames: intervals from real data at a high frame rate are optimistic). Targets: within "
               f"{100 * study['targets']['error']:g} % of the truth, a 95 % interval within ±"
               f"{100 * study['targets']['half_width']:g} %.", ""]
     rows = []
