@@ -21,6 +21,13 @@ def design_columns(space: DesignSpace) -> list[str]:
     return [f"{'gait' if k >= first_gait else 'xi'}_{name}" for k, name in enumerate(space.names)]
 
 
+def relabelled(space: DesignSpace, row: dict) -> dict:
+    """A history row of a checkpoint written before the gait's columns were named ``gait_<name>`` (they were
+    ``xi_<name>``), in today's columns; other rows as they are."""
+    renamed = {f"xi_{column[5:]}": column for column in design_columns(space) if column.startswith("gait_")}
+    return {renamed.get(key, key): value for key, value in row.items()}
+
+
 def history_columns(space: DesignSpace) -> list[str]:
     """The columns of a history row, in the order :func:`history_row` makes them."""
     return (["iteration", *design_columns(space), "cost", *(f"grad_{name}" for name in space.names)]
@@ -97,6 +104,7 @@ class Checkpoint:
                              f"method {data['method']}, not this scene ({self.scene_hash}, {self.method}); "
                              "start without --resume")
         self.state = data["state"]
+        data["history"] = [relabelled(space, row) for row in data["history"]]
         return data
 
 
