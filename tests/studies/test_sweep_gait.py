@@ -101,3 +101,17 @@ def test_a_scene_of_gait_variables_alone_sweeps_with_one_prom(tmp_path):
     prom = sweep.reduced_model(scene, {"frequency": 1.0, "phase_lag": 120.0}, "prom")
     single = simulate_reduced(prom, apply_gait(scene, {"phase_lag": 60.0}), np.zeros(0))
     assert abs(float(rows[0]["distance_m"]) - single.distance) <= 1e-12 * abs(single.distance)
+
+
+def test_a_rom_sweep_row_of_a_gait_is_the_rom_run_at_that_gait(tmp_path):
+    path = write_scene(tmp_path, duration=0.2)
+    scene = Scene.load(path)
+    out = tmp_path / "out"
+    assert main(["sweep", str(path), "--grid", "frequency=1.3:1.3:1", "--grid", "phase_lag=90:90:1", "--model", "rom",
+                 "--workers", "1", "--out", str(out)]) == 0
+    [row] = read_csv(out / "sweep.csv")
+    assert row["status"] == "completed", row["reason"]
+    rom = sweep.reduced_model(scene, {"z_tail": 0.0, "frequency": 1.3, "phase_lag": 90.0}, "rom")
+    single = simulate_reduced(rom, apply_gait(scene, {"frequency": 1.3, "phase_lag": 90.0}), np.zeros(0))
+    assert abs(float(row["distance_m"]) - single.distance) <= 1e-12 * abs(single.distance)
+    assert single.distance != pytest.approx(simulate_reduced(rom, scene, np.zeros(0)).distance, rel=1e-3)
