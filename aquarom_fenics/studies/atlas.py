@@ -19,8 +19,8 @@ A scene with ``[gait]`` variables is cut in cells over its shapes only: a centre
 itself, whose basis holds its gait's patterns and, where the phase lag or a pair's amplitude is a variable, each
 pair's pattern (``scene_gait.pair_patterns``), so that one basis spans every lag and amplitude of the ``[gait]``
 box, and the frequency enters only a(t). No validity radius bounds the gait: how far such a PROM follows a gait
-other than the one it was built at is measured in docs/devlog.md ("gait variables as design variables"). Each
-design with a gait is one single reduced run (:func:`_answer_gaits`).
+other than the one it was built at is measured in docs/devlog.md ("gait variables as design variables"). The
+designs of a centre are integrated together, each with its own gait's activations (:func:`_answer_gaits`).
 
 The atlas's radius is h: inside it the PROM is to stay within 3 % of the FOM in distance, tighter than
 SPEC §8's 5 %. It is set by s, the scale of the validity radius, checked by ``scripts/validate_atlas.py``
@@ -217,7 +217,7 @@ def evaluate_center(task: CenterTask) -> dict:
 
 def _answer(prom, scene: Scene, rows: list[dict], designs: tuple, simulate_batch, refuse_outside) -> None:
     """Fill the rows of the designs inside the PROM's radius from one batched solve (with ``[gait]`` variables
-    one single reduced run per design, :func:`_answer_gaits`); refuse the others."""
+    each design driven by its own gait, :func:`_answer_gaits`); refuse the others."""
     fish = shared_fish(scene)
     inside = []
     for row, (_, design) in zip(rows, designs):
@@ -230,7 +230,7 @@ def _answer(prom, scene: Scene, rows: list[dict], designs: tuple, simulate_batch
     if not inside:
         return
     if scene.gait:
-        _answer_gaits(prom, scene, inside)
+        _answer_gaits(prom, scene, inside, simulate_batch)
         return
     xis = np.array([[design[name] for name in prom.shape_names] for _, design in inside])
     result = simulate_batch(prom, scene, xis)
@@ -241,24 +241,27 @@ def _answer(prom, scene: Scene, rows: list[dict], designs: tuple, simulate_batch
             row.update(status="stopped", reason=result.errors[b])
 
 
-def _answer_gaits(prom, scene: Scene, inside: list[tuple[dict, dict]]) -> None:
-    """The rows of designs with a gait: ``simulate_reduced`` of the centre's PROM on the scene driven by each
-    design's gait (``apply_gait``), one run each, as ``simulate`` or the optimiser's cost would run it (the batched
-    and compiled engines share one activation law across a batch). A gait the scene refuses is a refused row."""
-    from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
+def _answer_gaits(prom, scene: Scene, inside: list[tuple[dict, dict]], simulate_batch) -> None:
+    """The rows of designs with a gait: the centre's PROM on the scene driven by each design's gait (``apply_gait``),
+    integrated together (``simulate_batch`` with a scene per design: each design its own activation law), as
+    ``simulate_reduced`` would one by one. A gait the scene refuses is a refused row."""
     from aquarom_fenics.io.scene_gait import apply_gait
 
+    driven = []
     for row, design in inside:
         try:
-            driven = apply_gait(scene, {name: design[name] for name in scene.gait_names})
+            driven.append((row, design, apply_gait(scene, {name: design[name] for name in scene.gait_names})))
         except InputError as refused:
             row.update(status="refused", reason=str(refused))
-            continue
-        result = simulate_reduced(prom, driven, np.array([design[name] for name in prom.shape_names]))
-        if result.completed:
-            row.update(distance_m=float(result.distance), tail_amplitude_m=float(result.tail_amplitude))
+    if not driven:
+        return
+    xis = np.array([[design[name] for name in prom.shape_names] for _, design, _ in driven]).reshape(len(driven), -1)
+    result = simulate_batch(prom, scene, xis, scenes=[own for _, _, own in driven])
+    for b, (row, _, _) in enumerate(driven):
+        if result.completed[b]:
+            row.update(distance_m=float(result.distance[b]), tail_amplitude_m=float(result.tail_amplitude[b]))
         else:
-            row.update(status="stopped", reason=result.error)
+            row.update(status="stopped", reason=result.errors[b])
 
 
 # ---------------------------------------------------------------------- atlas.json

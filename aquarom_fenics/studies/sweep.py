@@ -357,15 +357,10 @@ BATCHED_SECONDS_PER_DESIGN = 0.03
 in a 20,000-design atlas sweep of SO1 on a loaded one (docs/devlog.md)."""
 
 
-SINGLE_SECONDS_PER_DESIGN = 0.5
-"""A design's single reduced run in a PROM sweep of a scene with ``[gait]`` variables (the block's wave, level 1,
-degree 2, 2 s, m = 34: 0.51 s on a loaded two-core host, against 0.10 s per design in a batch of 12; docs/devlog.md)."""
-
-
 def estimate(scene: Scene, missing: int, model: str, workers: int, centres: int = 1) -> float:
     """Estimated wall time [s] of the missing designs on ``workers`` workers (:mod:`~aquarom_fenics.studies.estimate`);
     model prom: ``centres`` PROM builds of the atlas, shared by the workers, and
-    :data:`BATCHED_SECONDS_PER_DESIGN` per design (:data:`SINGLE_SECONDS_PER_DESIGN` with ``[gait]`` variables)."""
+    :data:`BATCHED_SECONDS_PER_DESIGN` per design (each with its own gait too: ``simulate_batch``'s ``scenes``)."""
     from aquarom_fenics.studies.estimate import fom_seconds, prom_build_seconds, scene_cells
 
     cells = scene_cells(scene)
@@ -377,7 +372,7 @@ def estimate(scene: Scene, missing: int, model: str, workers: int, centres: int 
     if model == "rom":
         return start_up + math.ceil(missing / workers) * (prom_build_seconds(cells, 0, degree) + 0.2)
     return (math.ceil(centres / workers) * prom_build_seconds(cells, len(scene.shapes), degree) + start_up
-            + math.ceil(missing / workers) * (SINGLE_SECONDS_PER_DESIGN if scene.gait else BATCHED_SECONDS_PER_DESIGN))
+            + math.ceil(missing / workers) * BATCHED_SECONDS_PER_DESIGN)
 
 
 def cached_designs(scene: Scene, designs: list[dict], model: str) -> int:

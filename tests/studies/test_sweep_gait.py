@@ -43,26 +43,34 @@ def test_the_designs_span_the_gait_variables_named_as_in_the_scene(tmp_path):
     assert sweep.csv_designs(table, scene) == [{"z_tail": 0.1, "frequency": 1.0, "phase_lag": 90.0}]
 
 
-def test_a_prom_sweep_row_of_a_gait_equals_a_single_reduced_run_at_that_gait(tmp_path):
+def test_a_prom_sweep_row_of_a_gait_equals_a_single_reduced_run_at_that_gait(tmp_path, monkeypatch):
+    """The centre's designs are integrated together, each with its own gait's activations, and their rows are
+    the single runs' answers to 1e-12."""
+    from aquarom_fenics.dynamics import batched, reduced_dynamics
+
     path = write_scene(tmp_path)
     scene = Scene.load(path)
+    prom = sweep.reduced_model(scene, {"z_tail": 0.02, "frequency": 1.0, "phase_lag": 60.0}, "prom")
+    singles = [simulate_reduced(prom, apply_gait(scene, {"frequency": f, "phase_lag": 60.0}), np.array([0.02]))
+               for f in (1.0, 1.4)]
+    at_start = simulate_reduced(prom, scene, np.array([0.02]))
+
+    def one_by_one(*args, **kwargs):
+        raise AssertionError("a design of an atlas centre was integrated alone")
+
+    monkeypatch.setattr(reduced_dynamics, "simulate_reduced", one_by_one)
+    monkeypatch.setattr(batched, "simulate_reduced", one_by_one)
     out = tmp_path / "out"
     assert main(["sweep", str(path), "--grid", "z_tail=0.02:0.02:1", "--grid", "frequency=1:1.4:2",
                  "--grid", "phase_lag=60:60:1", "--model", "prom", "--workers", "1", "--out", str(out)]) == 0
     rows = read_csv(out / "sweep.csv")
     assert [row["status"] for row in rows] == ["completed"] * 2, [row["reason"] for row in rows]
-    distances = []
-    for row in rows:
-        design = {name: float(row[name]) for name in ("z_tail", "frequency", "phase_lag")}
-        prom = sweep.reduced_model(scene, design, "prom")
-        single = simulate_reduced(prom, apply_gait(scene, {"frequency": design["frequency"], "phase_lag": 60.0}),
-                                  np.array([design["z_tail"]]))
+    for row, single in zip(rows, singles):
+        assert float(row["frequency"]) in (1.0, 1.4)
         assert abs(float(row["distance_m"]) - single.distance) <= 1e-12 * abs(single.distance)
         assert abs(float(row["tail_amplitude_m"]) - single.tail_amplitude) <= 1e-12 * single.tail_amplitude
-        distances.append(single.distance)
-    at_start = simulate_reduced(prom, scene, np.array([0.02]))
-    assert distances[0] != pytest.approx(distances[1], rel=1e-3)          # the frequency moves the answer
-    assert distances[0] != pytest.approx(at_start.distance, rel=1e-3)     # and so does the lag (60° vs 120°)
+    assert singles[0].distance != pytest.approx(singles[1].distance, rel=1e-3)     # the frequency moves the answer
+    assert singles[0].distance != pytest.approx(at_start.distance, rel=1e-3)       # and so does the lag (60° vs 120°)
 
 
 def test_a_fom_sweep_row_of_a_gait_is_the_fom_run_at_that_gait(tmp_path):
