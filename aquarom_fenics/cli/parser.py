@@ -181,11 +181,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def add_sweep(sweep: argparse.ArgumentParser) -> None:
     """The options of ``aquarom sweep``: where the designs come from, the model, where it runs."""
-    designs = sweep.add_argument_group("designs (give one source; shapes not set keep their start values)")
+    designs = sweep.add_argument_group("designs (give one source; the scene's shapes and [gait] variables; those not set keep their start values)")
     designs.add_argument("--designs", type=Path, metavar="FILE.csv",
-                         help="CSV file with a header of shape names and one design per row")
+                         help="CSV file with a header of variable names (shapes, [gait] variables) and one design per row")
     designs.add_argument("--grid", action="append", metavar="NAME=LO:HI:N",
-                         help="N evenly spaced values of a shape from LO to HI (repeatable: the grid is the product)")
+                         help="N evenly spaced values of a shape or [gait] variable from LO to HI (repeatable: the grid is the product)")
     designs.add_argument("--samples", type=int, metavar="N",
                          help="N designs of a Latin hypercube over the scene's bounds")
     designs.add_argument("--seed", type=int, default=0, help="seed of --samples (default 0)")

@@ -96,7 +96,7 @@ def run_sweep(args) -> int:
             f"{backend}" + (f", {len(kept)} kept from sweep.csv" if kept else ""))
         rows = sweep.run_sweep(scene, designs, args.model, out, pool, resume=args.resume,
                                on_row=None if args.no_progress else progress_line(len(designs), len(kept),
-                                                                                  scene.shape_names))
+                                                                                  sweep.variable_names(scene)))
     result = sweep.summary(rows)
     args.timings = {"sweep": time.perf_counter() - started}
     args.manifest_extra = {"sweep": {"designs": len(designs), "source": source, "model": args.model,
@@ -111,7 +111,7 @@ def run_sweep(args) -> int:
         + (", atlas.json" if atlas else "") + (", sweep.png)" if scene.output.plots else ")"))
     if result["best"] is not None:
         best = result["best"]
-        say("farthest: " + ", ".join(f"{n} = {best[n]:.4g}" for n in scene.shape_names)
+        say("farthest: " + ", ".join(f"{n} = {best[n]:.4g}" for n in sweep.variable_names(scene))
             + f" ({100 * best['distance_m']:.3f} cm)")
     return 0
 
@@ -167,7 +167,9 @@ def dry_run(args, scene, designs, source, kept, cluster, workers) -> int:
     say("plan for `aquarom sweep` (dry run, nothing is written):")
     for line in lines:
         say(f"  {line}")
-    say(f"  designs: {len(designs)} ({source}) of {', '.join(scene.shape_names)}; model {args.model}")
+    from aquarom_fenics.studies.sweep_designs import variable_names
+
+    say(f"  designs: {len(designs)} ({source}) of {', '.join(variable_names(scene))}; model {args.model}")
     if kept:
         say(f"  resume: {len(kept)} rows kept from sweep.csv")
     if args.model == "fom":

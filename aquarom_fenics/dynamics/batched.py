@@ -22,6 +22,7 @@ from aquarom_fenics.dynamics.reduced_dynamics import (newton_matrix, one_blas_th
 from aquarom_fenics.dynamics.trajectory import AMPLITUDE_WINDOW, DISTANCE_WINDOW, window_mask
 from aquarom_fenics.fem.time_scheme import TimeScheme
 from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.physics.muscle import ActivationLaw
 from aquarom_fenics.reduction.prom import ReducedModel
 
 CHUNK_SIZE = 1024
@@ -68,9 +69,13 @@ class BatchedResult:
 @one_blas_thread
 def simulate_batch(prom: ReducedModel, scene: Scene, xis, sensitivities: bool = False, amplitudes=None,
                    amplitude_sensitivity: bool = False, chunk_size: int = CHUNK_SIZE,
-                   engine: str | None = None) -> BatchedResult:
+                   engine: str | None = None, scenes: list | None = None) -> BatchedResult:
     """Integrate the PROM at the designs ``xis`` (B, p) (amplitudes A_b: ``amplitudes`` (B,), default the
     scene's) over the scene's horizon, as ``simulate_reduced`` would one by one.
+
+    ``scenes`` (B,): each design's own scene, the scene driven by its gait (``apply_gait``: frequency, phases and
+    scales; the same time grid, body and fluid), whose activation law drives that design and with which a design
+    that leaves the batch is integrated alone; default ``scene`` for all.
 
     With ``sensitivities`` the gradient dd/dξ of each design, with ``amplitude_sensitivity`` one more column
     dd/dA. InputError (as ``simulate_reduced``) for a design beyond the PROM's validity radius. ``engine``: one
@@ -90,12 +95,15 @@ def simulate_batch(prom: ReducedModel, scene: Scene, xis, sensitivities: bool = 
     amplitudes = (np.full(batch, scene.actuation.amplitude) if amplitudes is None
                   else np.asarray(amplitudes, dtype=float).reshape(batch))
     columns = (prom.n_parameters if sensitivities else 0) + (1 if amplitude_sensitivity else 0)
+    if scenes is not None and len(scenes) != batch:
+        raise ValueError(f"{len(scenes)} scenes for {batch} designs")
     result = BatchedResult(np.full(batch, np.nan), np.full(batch, np.nan), np.zeros(batch, bool), [None] * batch,
                            np.full((batch, columns), np.nan) if columns else None, np.zeros(batch, bool),
                            np.zeros(batch, int), 0.0)
     for start in range(0, batch, chunk_size):
         part = slice(start, min(start + chunk_size, batch))
-        system = BatchedSystem(prom, scene, xis[part], TimeScheme.from_solver(scene.solver), amplitudes[part])
+        laws = None if scenes is None else [ActivationLaw.of(own) for own in scenes[part]]
+        system = BatchedSystem(prom, scene, xis[part], TimeScheme.from_solver(scene.solver), amplitudes[part], laws)
         if engine == "compiled":
             outcome = reduced_kernel.integrate_packed(reduced_kernel.pack(system, scene, n_steps, sensitivities,
                                                                           amplitude_sensitivity))
@@ -105,7 +113,7 @@ def simulate_batch(prom: ReducedModel, scene: Scene, xis, sensitivities: bool = 
         if columns:
             result.distance_gradient[part] = outcome[3]
         for b in np.flatnonzero(failed) + start:
-            alone = simulate_reduced(prom, scene, xis[b], sensitivities=sensitivities, amplitude=amplitudes[b],
+            alone = simulate_reduced(prom, scene if scenes is None else scenes[b], xis[b], sensitivities=sensitivities, amplitude=amplitudes[b],
                                      amplitude_sensitivity=amplitude_sensitivity)
             result.alone[b], result.cut_steps[b], result.errors[b] = True, alone.cut_steps, alone.error
             if alone.completed:

@@ -166,7 +166,7 @@ class BatchedSystem:
     """
 
     def __init__(self, prom: ReducedModel, scene: Scene, xis: np.ndarray, scheme: TimeScheme,
-                 amplitudes: np.ndarray | None = None):
+                 amplitudes: np.ndarray | None = None, laws: list | None = None):
         self.prom, self.scheme = prom, scheme
         xis = design_rows(xis, prom.n_parameters)
         self.deltas = d = np.array([prom.delta(xi) for xi in xis]).reshape(xis.shape)
@@ -186,6 +186,11 @@ class BatchedSystem:
                                  [:, :, None] * self.com_weights[:, None, :]) / total_mass[:, None, None]
         amplitude = np.full(batch, scene.actuation.amplitude) if amplitudes is None else np.asarray(amplitudes, float)
         self.amplitudes, self.law = amplitude.reshape(batch), ActivationLaw.of(scene)
+        self.laws = None                        # (B,) ActivationLaw: a gait per design, else the scene's law
+        if laws is not None:
+            self.laws = np.empty(batch, dtype=object)
+            for b, law in enumerate(laws):
+                self.laws[b] = law
         muscle = prom.muscle
         self.muscle_constant = taylor_at(muscle.constant, d)                               # (B, N, m)
         self.muscle_linear = taylor_at(muscle.linear, d)                                   # (B, N, m, m)
@@ -203,7 +208,8 @@ class BatchedSystem:
         return self.deltas.shape[0]
 
     PER_DESIGN = ("deltas", "mass", "damping", "com_weights", "mass_gradient", "damping_gradient", "com_gradient",
-                  "amplitudes", "muscle_constant", "muscle_linear", "muscle_constant_gradient", "muscle_linear_gradient")
+                  "amplitudes", "muscle_constant", "muscle_linear", "muscle_constant_gradient", "muscle_linear_gradient",
+                  "laws")
     """The attributes with one entry per design (leading axis)."""
 
     def select(self, rows: np.ndarray) -> "BatchedSystem":
@@ -212,7 +218,8 @@ class BatchedSystem:
             return self
         part = copy.copy(self)
         for name in self.PER_DESIGN:
-            setattr(part, name, getattr(self, name)[rows])
+            if getattr(self, name) is not None:
+                setattr(part, name, getattr(self, name)[rows])
         part.elastic = self.elastic.select(rows)
         part.thrust = self.thrust.select(rows) if self.thrust is not None else None
         if self.drag is not None:
@@ -223,9 +230,16 @@ class BatchedSystem:
         self.scheme = scheme
 
     # ------------------------------------------------------------------ forces
+    def units(self, time: float) -> np.ndarray:
+        """(B, N) each design's activations per unit amplitude at time t: the scene's law, or each design's own
+        (``laws``: the scene driven by each design's gait)."""
+        if self.laws is None:
+            return np.broadcast_to(self.law.unit(time), (self.size, self.law.size))
+        return np.array([law.unit(time) for law in self.laws])
+
     def _muscle_stiffness(self, time: float) -> tuple[np.ndarray, np.ndarray]:
         """(a_b (B, N), Σ_j a_j B_j (B, m, m)) at time t."""
-        activations = self.amplitudes[:, None] * self.law.unit(time)
+        activations = self.amplitudes[:, None] * self.units(time)
         return activations, np.einsum("bn,bnkl->bkl", activations, self.muscle_linear)
 
     def residual(self, time, eta, eta_dot, eta_ddot) -> tuple[np.ndarray, np.ndarray]:
@@ -277,7 +291,7 @@ class BatchedSystem:
         if p == 0 or self.prom.inertia.mass.first is None:
             return np.zeros((batch, m, p))
         derivative = self.elastic.force_gradient(eta)
-        activations = self.amplitudes[:, None] * self.law.unit(time)
+        activations = self.amplitudes[:, None] * self.units(time)
         derivative = derivative + (np.einsum("bn,bknl->bkl", activations, self.muscle_constant_gradient)
                                    + np.einsum("bn,bknil,bl->bki", activations, self.muscle_linear_gradient, eta))
         derivative = derivative + (np.einsum("bkij,bj->bki", self.mass_gradient, eta_ddot)
@@ -291,9 +305,9 @@ class BatchedSystem:
 
     def amplitude_derivative(self, time, eta) -> np.ndarray:
         """∂r/∂A_b = Σ_j (∂a_j/∂A) (b_j + B_j η), (B, m)."""
-        unit = self.law.unit(time)
-        return (np.einsum("n,bnk->bk", unit, self.muscle_constant)
-                + np.einsum("n,bnkl,bl->bk", unit, self.muscle_linear, eta))
+        unit = self.units(time)
+        return (np.einsum("bn,bnk->bk", unit, self.muscle_constant)
+                + np.einsum("bn,bnkl,bl->bk", unit, self.muscle_linear, eta))
 
     def observables(self, eta) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(head x, tail y, centre-of-mass x) [m] of every design, each (B,)."""

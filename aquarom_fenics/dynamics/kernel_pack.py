@@ -39,9 +39,9 @@ def pack(system, scene, n_steps: int, sensitivities: bool, amplitude_sensitivity
     batch, m, p = system.size, prom.size, system.deltas.shape[1]
     h = scheme.time_step
     times = np.arange(n_steps + 1) * h
-    units = np.zeros((n_steps + 1, system.law.size))
+    units = np.zeros((batch, n_steps + 1, system.muscle_constant.shape[1]))     # (B, steps + 1, N)
     for step in range(1, n_steps + 1):
-        units[step] = system.law.unit(step * h - scheme.alpha_f * h)
+        units[:, step] = system.units(step * h - scheme.alpha_f * h)
     elastic = system.elastic
     thrust = system.thrust
     if thrust is not None:
@@ -115,6 +115,6 @@ def synthetic(m: int = 2, p: int = 1, halves: int = 1, n_steps: int = 2) -> Pack
                   np.zeros((1, p, halves)), np.zeros((1, p)), np.zeros((1, m)), np.zeros((1, p, m)))
     masks = np.ones(n_steps + 1, np.bool_)
     arguments = ((1e-2, -0.5, 0.0, 0.5625, 1.0, 1e-8, 0.25, 1e-12), (n_steps, 30, 4),
-                 np.ones((n_steps + 1, 1)), masks, masks.copy(), shared, per_design,
+                 np.ones((1, n_steps + 1, 1)), masks, masks.copy(), shared, per_design,
                  (True, True, True, False, True, True, True))
     return Packed(arguments, p + 1, 1)

@@ -245,7 +245,8 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
 @_jit
 def integrate_all(scalars, settings, units, distance_mask, amplitude_mask, shared, per_design, flags, results,
                   gradients):
-    """Every design of the batch in turn (``Packed``'s arrays); results (B, 3), gradients (B, columns)."""
+    """Every design of the batch in turn (``Packed``'s arrays; ``units`` (B, steps + 1, N): each design's unit
+    activations at the steps' evaluation times); results (B, 3), gradients (B, columns)."""
     n_steps, max_iterations, per_factorization = settings
     h, alpha_m, alpha_f, beta, gamma, tolerance, contraction, floor = scalars
     pairs, pair_of_triple, triples, force_coefficients, tangent_coefficients, rows, own_node, other_node, \
@@ -258,7 +259,7 @@ def integrate_all(scalars, settings, units, distance_mask, amplitude_mask, share
     for b in range(results.shape[0]):
         integrate_design(
             n_steps, h, alpha_m, alpha_f, beta, gamma, tolerance, max_iterations, contraction, per_factorization,
-            floor, units, distance_mask, amplitude_mask, pairs, pair_of_triple, triples, force_coefficients,
+            floor, units[b], distance_mask, amplitude_mask, pairs, pair_of_triple, triples, force_coefficients,
             tangent_coefficients, weights[b], weight_derivatives[b], mass[b], damping[b], mass_gradient[b],
             damping_gradient[b], com_weights[b], com_gradient[b], amplitudes[b], muscle_constant[b],
             muscle_linear[b], muscle_constant_gradient[b], muscle_linear_gradient[b], has_thrust, lagrangian,

@@ -14,9 +14,23 @@ from aquarom_fenics.optimization.cost import DesignSpace
 from aquarom_fenics.optimization.prom_builder import PromBuilder
 
 
+def design_columns(space: DesignSpace) -> list[str]:
+    """The columns of z in a history row: ``xi_<name>`` of the shapes (and ``xi_amplitude`` of the co-design's
+    A), ``gait_<name>`` of the ``[gait]`` variables (``gait_frequency``, ``gait_phase_lag``, ``gait_amplitude_2``)."""
+    first_gait = len(space.names) - space.n_gait
+    return [f"{'gait' if k >= first_gait else 'xi'}_{name}" for k, name in enumerate(space.names)]
+
+
+def relabelled(space: DesignSpace, row: dict) -> dict:
+    """A history row of a checkpoint written before the gait's columns were named ``gait_<name>`` (they were
+    ``xi_<name>``), in today's columns; other rows as they are."""
+    renamed = {f"xi_{column[5:]}": column for column in design_columns(space) if column.startswith("gait_")}
+    return {renamed.get(key, key): value for key, value in row.items()}
+
+
 def history_columns(space: DesignSpace) -> list[str]:
     """The columns of a history row, in the order :func:`history_row` makes them."""
-    return (["iteration", *(f"xi_{name}" for name in space.names), "cost", *(f"grad_{name}" for name in space.names)]
+    return (["iteration", *design_columns(space), "cost", *(f"grad_{name}" for name in space.names)]
             + ["distance", "prom", "wall_time", "radius", "ratio", "optimality"])
 
 
@@ -26,7 +40,7 @@ def history_row(space: DesignSpace, iteration: int, z, cost, gradient, distance,
     measure, and for the trust region its radius (fraction of the validity box) and
     actual/predicted reduction."""
     row = {"iteration": iteration}
-    row.update({f"xi_{name}": float(value) for name, value in zip(space.names, z)})
+    row.update({column: float(value) for column, value in zip(design_columns(space), z)})
     row["cost"] = float(cost)
     row.update({f"grad_{name}": float(value) for name, value in zip(space.names, gradient)})
     row.update({"distance": float(distance), "prom": kind, "wall_time": time.perf_counter() - started,
@@ -90,6 +104,7 @@ class Checkpoint:
                              f"method {data['method']}, not this scene ({self.scene_hash}, {self.method}); "
                              "start without --resume")
         self.state = data["state"]
+        data["history"] = [relabelled(space, row) for row in data["history"]]
         return data
 
 

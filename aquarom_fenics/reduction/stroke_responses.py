@@ -38,16 +38,47 @@ def stroke_sensitivity(fom: FullOrderModel, k: int, plus: np.ndarray, minus: np.
     return (responses[0] - plus) / step, (responses[1] - minus) / step
 
 
-def stroke_response(fom: FullOrderModel, amplitude: float, steps: int = 4) -> np.ndarray:
+CONTINUATION_STEPS = 4
+"""The first increment of the amplitude continuation: 1/4 of a."""
+MAX_INCREMENTS = 32
+"""Most static solves of one continuation (accepted and refused increments together)."""
+SMALLEST_INCREMENT = 1.0 / 256
+"""The smallest increment of the continuation, as a fraction of a."""
+
+
+def stroke_response(fom: FullOrderModel, amplitude: float, steps: int = CONTINUATION_STEPS,
+                    max_increments: int = MAX_INCREMENTS) -> np.ndarray:
     """u_s(a), the static response to the activations a P_1 (the first activation pattern; the pair's
-    (1, -1)): Newton from rest or, when that fails, by continuation in ``steps`` equal steps of a, each
-    Newton from the previous solution."""
+    (1, -1)): Newton from rest or, when that fails, by continuation in the amplitude (:func:`continued_response`)."""
     activations = amplitude * fom.muscle.law.patterns()[0]
     try:
         return fom.static_response(*activations)
     except SolverError:
-        log.info("basis: the static response at a = %g needs continuation (%d steps)", amplitude, steps)
-    u = None
-    for step in range(1, steps + 1):
-        u = fom.static_response(*(step / steps * activations), start=u)
-    return u
+        log.info("basis: the static response at a = %g needs continuation", amplitude)
+    return continued_response(lambda fraction, start: fom.static_response(*(fraction * activations), start=start),
+                              1.0 / steps, max_increments)
+
+
+def continued_response(solve, first: float, max_increments: int, smallest: float = SMALLEST_INCREMENT):
+    """The solution at load fraction 1 by load stepping: ``solve(fraction, start)`` (Newton from ``start``, None:
+    rest; SolverError when it fails) at fractions λ_0 = 0 < λ_1 < … < 1, each from the previous solution. The
+    increment Δλ starts at ``first``; a failed solve halves it (down to ``smallest``), a solve that converged
+    doubles it for the next (up to ``first``). SolverError after ``max_increments`` solves, or when Δλ would fall
+    below ``smallest``, naming the fraction reached."""
+    fraction, increment, solution = 0.0, first, None
+    for _ in range(max_increments):
+        target = min(1.0, fraction + increment)
+        try:
+            solution = solve(target, solution)
+        except SolverError:
+            increment *= 0.5
+            if increment < smallest * (1 - 1e-12):
+                raise SolverError(f"continuation in the amplitude stopped at {fraction:.4g} of it: an increment "
+                                  f"of {2 * increment:.3g} did not converge") from None
+            continue
+        fraction = target
+        if fraction >= 1.0:
+            return solution
+        increment = min(2.0 * increment, first)
+    raise SolverError(f"continuation in the amplitude reached {fraction:.4g} of it in {max_increments} static "
+                      "solves")

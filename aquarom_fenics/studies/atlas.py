@@ -15,6 +15,13 @@ built, each through the PROM cache (a second sweep reuses them), one task per ce
 pool, and the designs of a centre are integrated together, one ``simulate_batch`` per centre (split
 in tasks of at most :data:`CENTER_ROWS` designs).
 
+A scene with ``[gait]`` variables is cut in cells over its shapes only: a centre's PROM is built on the scene
+itself, whose basis holds its gait's patterns and, where the phase lag or a pair's amplitude is a variable, each
+pair's pattern (``scene_gait.pair_patterns``), so that one basis spans every lag and amplitude of the ``[gait]``
+box, and the frequency enters only a(t). No validity radius bounds the gait: how far such a PROM follows a gait
+other than the one it was built at is measured in docs/devlog.md ("gait variables as design variables"). The
+designs of a centre are integrated together, each with its own gait's activations (:func:`_answer_gaits`).
+
 The atlas's radius is h: inside it the PROM is to stay within 3 % of the FOM in distance, tighter than
 SPEC §8's 5 %. It is set by s, the scale of the validity radius, checked by ``scripts/validate_atlas.py``
 (results/validation/atlas.json): the FOM at random designs of an atlas sweep of SO1's box and at the
@@ -88,7 +95,7 @@ class Cover:
 
 def cover(scene: Scene, scale: float = RADIUS_SCALE) -> Cover:
     """The atlas's grid over the scene's bounds, cells of half-width at most ``scale`` × the validity radius."""
-    if not scene.shapes:
+    if not scene.shapes and not scene.gait:
         raise InputError(f"scene {scene.source} has no [shapes]: there is no design box to cover")
     if not 0 < scale <= 1:
         raise InputError(f"atlas radius scale {scale:g}: must be in (0, 1] (a fraction of the validity radius)")
@@ -106,9 +113,18 @@ def cover(scene: Scene, scale: float = RADIUS_SCALE) -> Cover:
     return Cover(tuple(scene.shape_names), lower, upper, span / (2 * counts), counts, radius, float(scale))
 
 
+ONE_CENTRE = "0"
+"""The name of the one centre of a scene without shapes (its ``[gait]`` variables alone: no cells to cut)."""
+
+
 def center_id(cell) -> str:
-    """A centre's name: its cell indices joined by "_" (e.g. "2_0_5")."""
-    return "_".join(str(int(i)) for i in cell)
+    """A centre's name: its cell indices joined by "_" (e.g. "2_0_5"); :data:`ONE_CENTRE` without shapes."""
+    return "_".join(str(int(i)) for i in cell) or ONE_CENTRE
+
+
+def cell_of(name: str, grid: Cover) -> list[int]:
+    """The cell indices of a centre's name (:func:`center_id`)."""
+    return [int(i) for i in name.split("_")] if grid.names else []
 
 
 def assign(grid: Cover, designs: list[dict]) -> dict[tuple, list[int]]:
@@ -200,20 +216,48 @@ def evaluate_center(task: CenterTask) -> dict:
 
 
 def _answer(prom, scene: Scene, rows: list[dict], designs: tuple, simulate_batch, refuse_outside) -> None:
-    """Fill the rows of the designs inside the PROM's radius from one batched solve; refuse the others."""
+    """Fill the rows of the designs inside the PROM's radius from one batched solve (with ``[gait]`` variables
+    each design driven by its own gait, :func:`_answer_gaits`); refuse the others."""
     fish = shared_fish(scene)
     inside = []
     for row, (_, design) in zip(rows, designs):
         try:
-            refuse_outside(prom.shape_names, fish.parameter_vector(design), prom.xi_center, prom.validity_radius)
+            shapes = {name: design[name] for name in scene.shape_names}
+            refuse_outside(prom.shape_names, fish.parameter_vector(shapes), prom.xi_center, prom.validity_radius)
             inside.append((row, design))
         except InputError as refused:
             row.update(status="refused", reason=str(refused))
     if not inside:
         return
+    if scene.gait:
+        _answer_gaits(prom, scene, inside, simulate_batch)
+        return
     xis = np.array([[design[name] for name in prom.shape_names] for _, design in inside])
     result = simulate_batch(prom, scene, xis)
     for b, (row, _) in enumerate(inside):
+        if result.completed[b]:
+            row.update(distance_m=float(result.distance[b]), tail_amplitude_m=float(result.tail_amplitude[b]))
+        else:
+            row.update(status="stopped", reason=result.errors[b])
+
+
+def _answer_gaits(prom, scene: Scene, inside: list[tuple[dict, dict]], simulate_batch) -> None:
+    """The rows of designs with a gait: the centre's PROM on the scene driven by each design's gait (``apply_gait``),
+    integrated together (``simulate_batch`` with a scene per design: each design its own activation law), as
+    ``simulate_reduced`` would one by one. A gait the scene refuses is a refused row."""
+    from aquarom_fenics.io.scene_gait import apply_gait
+
+    driven = []
+    for row, design in inside:
+        try:
+            driven.append((row, design, apply_gait(scene, {name: design[name] for name in scene.gait_names})))
+        except InputError as refused:
+            row.update(status="refused", reason=str(refused))
+    if not driven:
+        return
+    xis = np.array([[design[name] for name in prom.shape_names] for _, design, _ in driven]).reshape(len(driven), -1)
+    result = simulate_batch(prom, scene, xis, scenes=[own for _, _, own in driven])
+    for b, (row, _, _) in enumerate(driven):
         if result.completed[b]:
             row.update(distance_m=float(result.distance[b]), tail_amplitude_m=float(result.tail_amplitude[b]))
         else:
@@ -251,8 +295,8 @@ def atlas_report(scene: Scene, grid: Cover, records: dict[str, dict], rows: list
         if row.get("prom_center"):
             designs[row["prom_center"]] = designs.get(row["prom_center"], 0) + 1
     centres = []
-    for name, count in sorted(designs.items(), key=lambda item: [int(i) for i in item[0].split("_")]):
-        cell = [int(i) for i in name.split("_")]
+    for name, count in sorted(designs.items(), key=lambda item: cell_of(item[0], grid)):
+        cell = cell_of(name, grid)
         record = records.get(name) or {"id": name, "cell": cell, "status": "unrecorded (a run stopped before it)",
                                        "center": dict(zip(grid.names, grid.center(cell).tolist()))}
         centres.append(record | {"designs": count})

@@ -18,7 +18,7 @@ from aquarom_fenics.optimization.cost import CostWeights, amplitude_of, design_s
 from aquarom_fenics.errors import InputError, Interrupted, SolverError
 from aquarom_fenics.parallel import worker_threads
 from aquarom_fenics.geometry.fish import Fish, load_fish
-from aquarom_fenics.optimization.history import Checkpoint, history_columns
+from aquarom_fenics.optimization.history import Checkpoint, design_columns, history_columns
 from aquarom_fenics.optimization.optimize import (DEFAULT_MAX_TIME, OptimizationResult, optimization_space, optimize,
                                                   start_points)
 from aquarom_fenics.optimization.prom_builder import PromBuilder
@@ -314,7 +314,7 @@ def _write_figures(out_dir, scene, fish, result, render):
     if scene.output.plots and is_writer:
         active = [row["constraint"] for row in result.optimality.active]
         plot_optimization_history(result.history, list(space.names), list(zip(space.lower, space.upper)), out_dir,
-                                  active=active)
+                                  active=active, columns=design_columns(space))
     shapes = space.n_shapes
     optimal = dict(zip(space.names[:shapes], map(float, result.optimum[:shapes])))
     if render and scene.output.render and shapes:
@@ -430,14 +430,15 @@ def completed_summary(folder: Path, scene: Scene, weights: CostWeights | None = 
 
 def _pareto_row(w1: float, weights: CostWeights, space, optimum: np.ndarray, prom_distance: float,
                 fom_distance: float | None, fom_error: str | None, converged: bool) -> dict:
-    """A row of pareto.csv: the amplitude is the last design variable; a FOM check that did not
-    complete leaves the distance NaN and gives the FOM's stop reason; ``converged``: the optimiser
-    stopped at a first-order point (a point that did not is left off the front)."""
-    amplitude = float(optimum[-1])
+    """A row of pareto.csv: the amplitude A (z's entry after the shapes), ``xi_<name>`` per shape and
+    ``gait_<name>`` per ``[gait]`` variable; a FOM check that did not complete leaves the distance NaN and
+    gives the FOM's stop reason; ``converged``: the optimiser stopped at a first-order point (a point that did
+    not is left off the front)."""
+    amplitude = float(optimum[space.amplitude_index])
     completed = fom_distance is not None
     return {"mode": "weight", "w1": w1, "amplitude": amplitude, "energy": weights.energy_term(amplitude),
             "distance_m": fom_distance if completed else float("nan"),
             "prom_distance_m": prom_distance,
             "fom_check": "completed" if completed else "infeasible",
             "fom_check_reason": "" if completed else (fom_error or ""), "converged": converged,
-            **{f"xi_{n}": float(v) for n, v in zip(space.names[:-1], optimum[:-1])}}
+            **{column: float(v) for column, v in zip(design_columns(space), optimum) if column != "xi_amplitude"}}

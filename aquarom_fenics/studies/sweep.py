@@ -1,8 +1,9 @@
 """Design sweeps: one model run per design of a list, grid or Latin hypercube, on the executor layer.
 
-Designs come from a CSV file (one column per shape name), a grid (``name=lo:hi:n`` per shape) or
-a seeded Latin hypercube over the scene's bounds; a shape a source does not set keeps its start
-value. Each design is one task (:func:`evaluate`) on a backend of :mod:`aquarom_fenics.parallel`
+Designs come from a CSV file (one column per variable name), a grid (``name=lo:hi:n`` per variable) or
+a seeded Latin hypercube over the scene's bounds; a variable a source does not set keeps its start
+value. The variables are the scene's shapes, then its ``[gait]`` variables: a design's gait drives the
+scene's muscles (``apply_gait``, io/scene_gait.py) for the FOM and the reduced models alike. Each design is one task (:func:`evaluate`) on a backend of :mod:`aquarom_fenics.parallel`
 (model prom: the designs of one centre of the PROM atlas, :mod:`~aquarom_fenics.studies.atlas`, are one
 task, integrated together, and atlas.json lists the centres); its row is written to ``sweep.csv`` as it finishes. The FOM's answer at a design is cached in the
 FOM cache (:func:`aquarom_fenics.studies.fom_cache.fom_answer`, one entry format shared with the
@@ -30,7 +31,7 @@ from aquarom_fenics.parallel import run_all, worker_name
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.studies.fish_cache import shared_fish
 from aquarom_fenics.studies.sweep_designs import (  # noqa: F401 — the design sources, also imported from here
-    MAX_DESIGN_FILE_BYTES, MAX_DESIGNS, csv_designs, grid_designs, latin_hypercube)
+    MAX_DESIGN_FILE_BYTES, MAX_DESIGNS, csv_designs, grid_designs, latin_hypercube, variable_names)
 
 
 log = logging.getLogger("aquarom")
@@ -44,12 +45,24 @@ radius) refused the design; stopped: the solver stopped early; error: the task f
 # ---------------------------------------------------------------------- one design
 @dataclass(frozen=True)
 class SweepTask:
-    """One design of a sweep: its number in the sweep (0-based), shape values and model."""
+    """One design of a sweep: its number in the sweep (0-based), variable values (shapes, gait) and model."""
 
     index: int
     design: dict
     model: str
     scene: Scene
+
+
+def driven(scene: Scene, design: dict) -> tuple[Scene, dict]:
+    """The scene driven by the design's ``[gait]`` values (``apply_gait``; the scene itself without
+    them) and the design's shape values: what a model runs. InputError where the gait is refused
+    (a period of too few steps, a pair's stress above the fibre stiffness)."""
+    shapes = {name: design[name] for name in scene.shape_names}
+    if not scene.gait:
+        return scene, shapes
+    from aquarom_fenics.io.scene_gait import apply_gait
+
+    return apply_gait(scene, {name: design[name] for name in scene.gait_names}), shapes
 
 
 class _Stopped(Exception):
@@ -80,15 +93,17 @@ def _fom_answer(task: SweepTask) -> dict:
     optimiser's FOM check is reused when it holds the tail amplitude)."""
     from aquarom_fenics.studies.fom_cache import fom_answer
 
-    answer = fom_answer(task.scene, task.design, need_tail=True)
+    scene, shapes = driven(task.scene, task.design)
+    answer = fom_answer(scene, shapes, need_tail=True)
     if not answer.completed:
         raise _Stopped(answer.stop_reason)
     return {"distance_m": answer.distance, "tail_amplitude_m": answer.tail_amplitude, "cached": answer.cached}
 
 
 def reduced_model(scene: Scene, design: dict, model: str):
-    """The ROM built at the design, or the PROM of the atlas centre whose cell holds it (both through the
-    PROM cache; :mod:`~aquarom_fenics.studies.atlas`).
+    """The ROM built at the design's shapes, or the PROM of the atlas centre whose cell holds them (both through
+    the PROM cache; :mod:`~aquarom_fenics.studies.atlas`), built on ``scene`` itself: its gait's patterns (with
+    each pair's where the lag or a pair's amplitude is a variable) span every gait of its ``[gait]`` box.
 
     InputError for a design beyond that PROM's validity radius."""
     from aquarom_fenics.reduction.cache import cached_prom
@@ -97,14 +112,15 @@ def reduced_model(scene: Scene, design: dict, model: str):
     from aquarom_fenics.studies import atlas
 
     fish = shared_fish(scene)
+    shapes = {name: design[name] for name in scene.shape_names}
     if model == "prom":
         grid = atlas.cover(scene)
         cell = grid.cells(np.array([design[name] for name in grid.names]))[0]
         prom, _ = atlas.center_prom(scene, dict(zip(grid.names, grid.center(cell).tolist())))
-        ReducedModel.refuse_outside_radius(prom.shape_names, fish.parameter_vector(design), prom.xi_center,
+        ReducedModel.refuse_outside_radius(prom.shape_names, fish.parameter_vector(shapes), prom.xi_center,
                                            prom.validity_radius)
         return prom
-    center = fish.parameter_vector(design)
+    center = fish.parameter_vector(shapes)
     return cached_prom(scene, center, lambda: build_prom(scene, xi_center=center, fish=fish, parametric=False),
                        parametric=False)
 
@@ -112,8 +128,9 @@ def reduced_model(scene: Scene, design: dict, model: str):
 def _reduced_answer(task: SweepTask) -> dict:
     from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
 
+    scene, _ = driven(task.scene, task.design)
     reduced = reduced_model(task.scene, task.design, task.model)
-    result = simulate_reduced(reduced, task.scene, np.array([task.design[name] for name in reduced.shape_names]))
+    result = simulate_reduced(reduced, scene, np.array([task.design[name] for name in reduced.shape_names]))
     if not result.completed:
         raise _Stopped(result.error)
     return {"distance_m": result.distance, "tail_amplitude_m": result.tail_amplitude}
@@ -122,7 +139,7 @@ def _reduced_answer(task: SweepTask) -> dict:
 # ---------------------------------------------------------------------- the sweep
 def columns(scene: Scene, model: str = "fom") -> list[str]:
     """sweep.csv's header; a PROM sweep's rows also name the atlas centre that answered them (``prom_center``)."""
-    return ["design", *scene.shape_names, "status", "distance_m", "tail_amplitude_m", "wall_time_s", "cached",
+    return ["design", *variable_names(scene), "status", "distance_m", "tail_amplitude_m", "wall_time_s", "cached",
             "worker", "reason", *(["prom_center"] if model == "prom" else [])]
 
 
@@ -179,8 +196,9 @@ def _parsed_row(row: dict, number: int, scene: Scene, where: str, remedy: str) -
     if not row["design"].isdigit():
         refuse("design", "a whole number ≥ 0")
     parsed["design"] = int(row["design"])
-    for name in (*scene.shape_names, "distance_m", "tail_amplitude_m", "wall_time_s"):
-        optional = name not in scene.shape_names
+    names = variable_names(scene)
+    for name in (*names, "distance_m", "tail_amplitude_m", "wall_time_s"):
+        optional = name not in names
         if row[name] == "" and optional:
             parsed[name] = None
             continue
@@ -209,7 +227,7 @@ def resumed_rows(path: Path, scene: Scene, designs: list[dict], model: str = "fo
     kept = {}
     for row in read_rows(path, scene, model):
         index = row["design"]
-        if not 0 <= index < len(designs) or any(row[n] != designs[index][n] for n in scene.shape_names):
+        if not 0 <= index < len(designs) or any(row[n] != designs[index][n] for n in variable_names(scene)):
             raise InputError(f"--resume: {path} row of design {index} does not match this sweep's designs "
                              "(other --designs, --grid or --samples/--seed?); run without --resume")
         if index in kept:
@@ -282,7 +300,7 @@ def run_sweep(scene: Scene, designs: list[dict], model: str, out: Path, pool, re
     if scene.output.plots:
         from aquarom_fenics.viz.sweep_plot import plot_sweep
 
-        plot_sweep(ordered, scene.shape_names, out / "sweep.png", f"{scene.name}: {model.upper()} design sweep")
+        plot_sweep(ordered, variable_names(scene), out / "sweep.png", f"{scene.name}: {model.upper()} design sweep")
     return ordered
 
 
@@ -342,7 +360,7 @@ in a 20,000-design atlas sweep of SO1 on a loaded one (docs/devlog.md)."""
 def estimate(scene: Scene, missing: int, model: str, workers: int, centres: int = 1) -> float:
     """Estimated wall time [s] of the missing designs on ``workers`` workers (:mod:`~aquarom_fenics.studies.estimate`);
     model prom: ``centres`` PROM builds of the atlas, shared by the workers, and
-    :data:`BATCHED_SECONDS_PER_DESIGN` per design."""
+    :data:`BATCHED_SECONDS_PER_DESIGN` per design (each with its own gait too: ``simulate_batch``'s ``scenes``)."""
     from aquarom_fenics.studies.estimate import fom_seconds, prom_build_seconds, scene_cells
 
     cells = scene_cells(scene)
@@ -363,4 +381,10 @@ def cached_designs(scene: Scene, designs: list[dict], model: str) -> int:
         return 0
     from aquarom_fenics.studies.fom_cache import cached_answer
 
-    return sum(cached_answer(scene, design, need_tail=True) is not None for design in designs)
+    def cached(design: dict) -> bool:
+        try:
+            return cached_answer(*driven(scene, design), need_tail=True) is not None
+        except InputError:          # a gait the scene refuses: a refused row, nothing to compute
+            return False
+
+    return sum(map(cached, designs))

@@ -1,6 +1,7 @@
 """The designs of a sweep: the rows of a CSV file, a grid or a seeded Latin hypercube over the scene's
-bounds, each a value per shape of the scene (a shape a source does not set keeps its start value).
-At most :data:`MAX_DESIGNS` designs, checked before any is made."""
+bounds, each a value per design variable of the scene, its shapes then its ``[gait]`` variables
+(:func:`variables`; a variable a source does not set keeps its start value). At most :data:`MAX_DESIGNS`
+designs, checked before any is made."""
 from __future__ import annotations
 
 import csv
@@ -21,14 +22,29 @@ MAX_DESIGN_FILE_BYTES = 64 * 1024 * 1024
 """Largest --designs file [bytes]."""
 
 
+def variables(scene: Scene) -> tuple:
+    """The sweep's design variables: the scene's shapes, then its ``[gait]`` variables (io/scene_gait.py),
+    each with its name, bounds and start."""
+    return (*scene.shapes, *scene.gait)
+
+
+def variable_names(scene: Scene) -> list[str]:
+    """The names of :func:`variables`: a design's keys and sweep.csv's columns."""
+    return [variable.name for variable in variables(scene)]
+
+
 def _require_shapes(scene: Scene) -> None:
-    if not scene.shapes:
-        raise InputError(f"scene {scene.source} has no [shapes]: there is no design space to sweep")
+    if not variables(scene):
+        raise InputError(f"scene {scene.source} has no [shapes] or [gait] variables: there is no design space to sweep")
+    shared = set(scene.shape_names) & set(scene.gait_names)
+    if shared:
+        raise InputError(f"scene {scene.source}: '{sorted(shared)[0]}' names both a shape and a [gait] variable; "
+                         "a sweep's columns need distinct names")
 
 
 def _complete(scene: Scene, values: dict[str, float]) -> dict[str, float]:
-    """Every shape of the scene, in its order: the given values, else the start values."""
-    return {shape.name: float(values.get(shape.name, shape.start)) for shape in scene.shapes}
+    """Every design variable of the scene, in its order: the given values, else the start values."""
+    return {variable.name: float(values.get(variable.name, variable.start)) for variable in variables(scene)}
 
 
 def grid_designs(specs: list[str], scene: Scene) -> list[dict[str, float]]:
@@ -42,11 +58,11 @@ def grid_designs(specs: list[str], scene: Scene) -> list[dict[str, float]]:
         if not sep or len(parts) != 3:
             raise InputError(f"{where}: expected name=lo:hi:n, e.g. --grid z_tail=-0.5:0.5:5")
         name = name.strip()
-        if name not in scene.shape_names:
-            raise InputError(f"{where}: '{name}' is not a shape variation of scene {scene.name} "
-                             f"(valid: {', '.join(scene.shape_names)})")
+        if name not in variable_names(scene):
+            raise InputError(f"{where}: '{name}' is not a shape variation or [gait] variable of scene {scene.name} "
+                             f"(valid: {', '.join(variable_names(scene))})")
         if name in axes:
-            raise InputError(f"{where}: {name} is given twice; give each shape one --grid")
+            raise InputError(f"{where}: {name} is given twice; give each variable one --grid")
         low, high = parse_number(parts[0], where), parse_number(parts[1], where)
         try:
             count = int(parts[2])
@@ -66,7 +82,7 @@ def grid_designs(specs: list[str], scene: Scene) -> list[dict[str, float]]:
 
 
 def csv_designs(path: Path, scene: Scene) -> list[dict[str, float]]:
-    """The rows of a CSV file whose header names shapes of the scene (each at most once)."""
+    """The rows of a CSV file whose header names design variables of the scene (each at most once)."""
     _require_shapes(scene)
     text = read_text_file(path, "--designs", MAX_DESIGN_FILE_BYTES)      # a byte-order mark is allowed
     try:
@@ -74,12 +90,12 @@ def csv_designs(path: Path, scene: Scene) -> list[dict[str, float]]:
     except csv.Error as error:
         raise InputError(f"--designs {path}: not a CSV file ({error})") from None
     if len(rows) < 2:
-        raise InputError(f"--designs {path}: needs a header of shape names and at least one row of values")
+        raise InputError(f"--designs {path}: needs a header of variable names and at least one row of values")
     header = [cell.strip() for cell in rows[0]]
     for name in header:
-        if name not in scene.shape_names:
-            raise InputError(f"--designs {path}: column '{name}' is not a shape variation of scene {scene.name} "
-                             f"(valid: {', '.join(scene.shape_names)})")
+        if name not in variable_names(scene):
+            raise InputError(f"--designs {path}: column '{name}' is not a shape variation or [gait] variable of "
+                             f"scene {scene.name} (valid: {', '.join(variable_names(scene))})")
         if header.count(name) > 1:
             raise InputError(f"--designs {path}: column '{name}' appears twice")
     designs = []
@@ -105,7 +121,7 @@ def _bounded_rows(reader, path: Path) -> list[list[str]]:
 
 
 def latin_hypercube(scene: Scene, samples: int, seed: int) -> list[dict[str, float]]:
-    """``samples`` designs of a Latin hypercube over the scene's bounds: in every shape's range each
+    """``samples`` designs of a Latin hypercube over the scene's bounds: in every variable's range each
     of the ``samples`` equal strata holds one design (uniform inside its stratum); numpy's PCG64
     generator seeded with ``seed``."""
     _require_shapes(scene)
@@ -115,9 +131,9 @@ def latin_hypercube(scene: Scene, samples: int, seed: int) -> list[dict[str, flo
         raise InputError(f"--seed {seed}: must be ≥ 0")
     generator = np.random.default_rng(seed)
     columns = []
-    for shape in scene.shapes:
+    for variable in variables(scene):
         strata = generator.permutation(samples)
         unit = (strata + generator.random(samples)) / samples
-        columns.append(shape.lower + unit * (shape.upper - shape.lower))
-    return [_complete(scene, {shape.name: float(column[k]) for shape, column in zip(scene.shapes, columns)})
+        columns.append(variable.lower + unit * (variable.upper - variable.lower))
+    return [_complete(scene, {variable.name: float(column[k]) for variable, column in zip(variables(scene), columns)})
             for k in range(samples)]

@@ -74,10 +74,11 @@ def _pyplot():
 
 
 def plot_optimization_history(rows: list[dict], shape_names: list[str], bounds: list[tuple[float, float]],
-                              out_dir: Path, active: list[str] = ()) -> list[Path]:
+                              out_dir: Path, active: list[str] = (), columns: list[str] | None = None) -> list[Path]:
     """Write cost.png (cost and distance [cm] per iteration) and parameters.png (ξ per iteration).
 
-    Each row holds ``iteration``, ``xi_<name>`` for every shape name, ``cost``, ``distance`` [m]
+    Each row holds ``iteration``, ``xi_<name>`` for every shape name (or the row's column of each name in
+    ``columns``, e.g. ``gait_frequency``), ``cost``, ``distance`` [m]
     and ``prom`` (one of PROM_MARKERS). ``bounds`` are the (lower, upper) box bounds of the
     parameters, in the order of ``shape_names``; ``active`` names the bounds active at the
     optimum (``"<name> = lower"`` / ``"<name> = upper"``), drawn solid and written in the panel
@@ -93,7 +94,8 @@ def plot_optimization_history(rows: list[dict], shape_names: list[str], bounds: 
     out_dir.mkdir(parents=True, exist_ok=True)
     cost_path, parameters_path = out_dir / "cost.png", out_dir / "parameters.png"
     _plot_cost_history(rows, cost_path)
-    _plot_parameter_history(rows, shape_names, bounds, parameters_path, set(active))
+    columns = columns or [f"xi_{name}" for name in shape_names]
+    _plot_parameter_history(rows, list(zip(shape_names, columns)), bounds, parameters_path, set(active))
     return [cost_path, parameters_path]
 
 
@@ -113,18 +115,18 @@ def _plot_cost_history(rows: list[dict], path: Path) -> None:
     plt.close(figure)
 
 
-def _plot_parameter_history(rows: list[dict], shape_names: list[str], bounds: list[tuple[float, float]],
+def _plot_parameter_history(rows: list[dict], named_columns: list[tuple[str, str]], bounds: list[tuple[float, float]],
                             path: Path, active: set[str]) -> None:
     plt = _pyplot()
-    n_rows, n_columns = _grid_shape(len(shape_names))
+    n_rows, n_columns = _grid_shape(len(named_columns))
     width, height = PARAMETER_PANEL_SIZE
     figure_height = n_rows * height + LEGEND_HEIGHT
     figure_width = max(MIN_FIGURE_WIDTH, n_columns * width)
     figure, axes = plt.subplots(n_rows, n_columns, figsize=(figure_width, figure_height), sharex=True, squeeze=False)
-    for axis, name, (lower, upper) in zip(axes.flat, shape_names, bounds):
+    for axis, (name, column), (lower, upper) in zip(axes.flat, named_columns, bounds):
         _plot_parameter_panel(axis, rows, name, lower, upper,
-                              [side for side in ("lower", "upper") if f"{name} = {side}" in active])
-    for axis in axes.flat[len(shape_names):]:
+                              [side for side in ("lower", "upper") if f"{name} = {side}" in active], column)
+    for axis in axes.flat[len(named_columns):]:
         axis.set_visible(False)
     for axis in _lowest_visible(axes):
         axis.set_xlabel("iteration")
@@ -149,10 +151,11 @@ def _lowest_visible(axes: np.ndarray) -> list:
 
 
 def _plot_parameter_panel(axis, rows: list[dict], name: str, lower: float, upper: float,
-                          active_sides: list[str] = ()) -> None:
-    """Path of ξ_name over the iterations between its bounds, the outside shaded, the start
-    starred, a bound active at the optimum drawn solid and named in the title."""
-    values = [row[f"xi_{name}"] for row in rows]
+                          active_sides: list[str] = (), column: str | None = None) -> None:
+    """Path of ξ_name (the rows' ``column``, ``xi_<name>`` unless given) over the iterations between its bounds,
+    the outside shaded, the start starred, a bound active at the optimum drawn solid and named in the title."""
+    column = column or f"xi_{name}"
+    values = [row[column] for row in rows]
     low, high = min(lower, *values), max(upper, *values)
     pad = 0.12 * (high - low or 1.0)
     axis.axhspan(low - pad, lower, color=INFEASIBLE_COLOUR, label="outside the bounds")
@@ -165,7 +168,7 @@ def _plot_parameter_panel(axis, rows: list[dict], name: str, lower: float, upper
         axis.axhline(lower if side == "lower" else upper, color=ACTIVE_COLOUR, linewidth=2.5,
                      label="active at the optimum")
     axis.set_ylim(low - pad, high + pad)
-    axis.set_title(f"ξ  {name}" + "".join(f"  ({side} bound active)" for side in active_sides), fontsize=10)
+    axis.set_title(f"{'g' if column.startswith('gait_') else 'ξ'}  {name}" + "".join(f"  ({side} bound active)" for side in active_sides), fontsize=10)
 
 
 def _plot_iterates(axis, rows: list[dict], values: list[float]) -> None:

@@ -22,7 +22,7 @@ def test_a_point_whose_fom_check_stops_is_marked_infeasible_with_the_reason(tmp_
         amplitude = 0.1 if weights.distance < 0.5 else 0.4
         result = SimpleNamespace(optimum=np.array([0.0] * (len(names) - 1) + [amplitude]),
                                  evaluation=SimpleNamespace(distance=0.02 if amplitude < 0.4 else 0.3),
-                                 space=SimpleNamespace(names=names), converged=amplitude < 0.4)
+                                 space=study.design_space(scene), converged=amplitude < 0.4)
         stopped = "FOM at {...} stopped: Newton did not converge at t = 1.42 s"
         check = study.FomCheck(0.045, 0.021 if amplitude < 0.4 else None, 0.045, result.evaluation.distance, 1.0,
                                None if amplitude < 0.4 else stopped)
@@ -60,7 +60,7 @@ def test_a_resumed_sweep_keeps_completed_weights_and_continues_the_others_from_t
     def optimised(scene, out_dir, weights, fish, render, resume=False):
         calls.append((Path(out_dir).name, resume))
         result = SimpleNamespace(optimum=np.array([0.0] * (len(names) - 1) + [0.4]),
-                                 evaluation=SimpleNamespace(distance=0.3), space=SimpleNamespace(names=names),
+                                 evaluation=SimpleNamespace(distance=0.3), space=study.design_space(scene),
                                  converged=True)
         return result, study.FomCheck(0.045, 0.29, 0.045, 0.3, 1.0, None)
 
