@@ -393,10 +393,10 @@ def reduced_stability(prom: ReducedModel, scene: Scene, xi=None, amplitude: floa
     the model (physical, e.g. energy fed by the thrust, or numerical). The rigid translation along x
     gives μ = 1. A PROM run that stops is unstable with its stop message as the reason.
 
-    Φ comes from the compiled kernel (``batched.compiled_transition``, the same steps to rounding) when
+    Φ comes from the compiled kernel (``floquet_kernel.compiled_transition``, the same steps to rounding) when
     ``compiled`` and it completes the run; else (and for a run whose steps must be cut) from ``transition_matrix``.
     """
-    from aquarom_fenics.dynamics.batched import compiled_transition
+    from aquarom_fenics.dynamics.floquet_kernel import compiled_transition
     from aquarom_fenics.dynamics.simulate import check_time_grid
 
     n_steps = check_time_grid(scene)

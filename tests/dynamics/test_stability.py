@@ -47,7 +47,7 @@ def test_the_compiled_transition_matrix_is_the_python_one(fish, material, stable
     """Φ of the last stroke from the compiled kernel (``compiled_transition``) against ``transition_matrix``'s, and
     the verdicts: the nominal gait (|μ| = 1) and E = 15 kPa at h = 10 ms (|μ| ≈ 1.25, a run the kernel completes)."""
     pytest.importorskip("numba")
-    from aquarom_fenics.dynamics.batched import compiled_transition
+    from aquarom_fenics.dynamics.floquet_kernel import compiled_transition
 
     scene = coarse_scene(material=material, solver={"time_step": 0.01})
     prom = build_prom(scene, fish=fish)
