@@ -16,14 +16,17 @@ def muscle_energy_density(displacement, shape_gradient_field, stiffness, nominal
 
     With ``nominal_volume`` the source's variant ½ k |F m|².
     """
+    stretch, volume = muscle_stretch(displacement, shape_gradient_field, nominal_volume, fibre)
+    return 0.5 * stiffness * ufl.inner(stretch, stretch) * volume
+
+
+def muscle_stretch(displacement, shape_gradient_field, nominal_volume=False, fibre=AXIAL):
+    """(s, v) of the density ψ = ½ k |s|² v: the stretch s = F_2 m (affine in u) and the volume ratio v = det F_1;
+    with ``nominal_volume`` s = F m and v = 1."""
     fibre = ufl.as_vector(tuple(float(component) for component in fibre))
     if nominal_volume:
-        stretch = total_gradient(displacement, shape_gradient_field) * fibre
-        volume = 1.0
-    else:
-        stretch = relative_gradient(displacement, shape_gradient_field) * fibre
-        volume = volume_ratio(shape_gradient_field)
-    return 0.5 * stiffness * ufl.inner(stretch, stretch) * volume
+        return total_gradient(displacement, shape_gradient_field) * fibre, 1.0
+    return relative_gradient(displacement, shape_gradient_field) * fibre, volume_ratio(shape_gradient_field)
 
 
 def muscle_energy(displacement, shape_gradient_field, stiffness, activations, muscle_measures,

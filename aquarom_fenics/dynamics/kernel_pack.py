@@ -29,8 +29,10 @@ def half_nodes(n_points: int, trapezoid: bool) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate([rear, rear[::-1] + 1]), np.concatenate([rear + 1, rear[::-1]])
 
 
-def pack(system, scene, n_steps: int, sensitivities: bool, amplitude_sensitivity: bool) -> Packed:
-    """The batch's arrays from a :class:`~.batched_system.BatchedSystem` (its per-design terms) and the scene."""
+def pack(system, scene, n_steps: int, sensitivities: bool, amplitude_sensitivity: bool,
+         transition_from: int = 0) -> Packed:
+    """The batch's arrays from a :class:`~.batched_system.BatchedSystem` (its per-design terms) and the scene;
+    ``transition_from`` = n > 0: the one-period transition matrix from step n on instead of sensitivities."""
     from aquarom_fenics.dynamics.integrator import NewtonSettings
     from aquarom_fenics.dynamics.trajectory import AMPLITUDE_WINDOW, DISTANCE_WINDOW, window_mask
 
@@ -65,10 +67,11 @@ def pack(system, scene, n_steps: int, sensitivities: bool, amplitude_sensitivity
         drag_direction, drag_gradient, drag_row = system.drag
     else:
         drag_direction, drag_gradient, drag_row = np.zeros((batch, m)), np.zeros((batch, p, m)), np.zeros(m)
-    columns = (p if sensitivities else 0) + (1 if amplitude_sensitivity else 0)
+    columns = 3 * m if transition_from > 0 else (p if sensitivities else 0) + (1 if amplitude_sensitivity else 0)
     scalars = (float(h), float(scheme.alpha_m), float(scheme.alpha_f), float(scheme.beta), float(scheme.gamma),
                float(settings.tolerance), float(settings.contraction_to_refactor), float(settings.force_floor))
-    integers = (int(n_steps), int(settings.max_iterations), int(settings.iterations_per_factorization))
+    integers = (int(n_steps), int(settings.max_iterations), int(settings.iterations_per_factorization),
+                int(transition_from))
     shared = (_array(elastic.pairs, np.int64), _array(elastic.pair_of_triple, np.int64),
               _array(elastic.triples, np.int64), _array(elastic.force_coefficients),
               _array(elastic.tangent_coefficients), _array(rows), _array(own_node, np.int64),
@@ -114,7 +117,7 @@ def synthetic(m: int = 2, p: int = 1, halves: int = 1, n_steps: int = 2) -> Pack
                   np.tile([1.0, 0.0], (1, halves, 1)), np.full((1, halves), 0.1), np.full(1, 0.1),
                   np.zeros((1, p, halves)), np.zeros((1, p)), np.zeros((1, m)), np.zeros((1, p, m)))
     masks = np.ones(n_steps + 1, np.bool_)
-    arguments = ((1e-2, -0.5, 0.0, 0.5625, 1.0, 1e-8, 0.25, 1e-12), (n_steps, 30, 4),
+    arguments = ((1e-2, -0.5, 0.0, 0.5625, 1.0, 1e-8, 0.25, 1e-12), (n_steps, 30, 4, 0),
                  np.ones((1, n_steps + 1, 1)), masks, masks.copy(), shared, per_design,
                  (True, True, True, False, True, True, True))
     return Packed(arguments, p + 1, 1)

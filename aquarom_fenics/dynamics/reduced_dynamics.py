@@ -380,7 +380,7 @@ def transition_matrix(system: ReducedSystem, scheme: TimeScheme, n_steps: int, s
 
 @one_blas_thread
 def reduced_stability(prom: ReducedModel, scene: Scene, xi=None, amplitude: float | None = None,
-                      limit: float = FLOQUET_LIMIT) -> Stability:
+                      limit: float = FLOQUET_LIMIT, compiled: bool = True) -> Stability:
     """Is the PROM's gait at design ξ (amplitude A) stable? Floquet test of the discrete reduced system.
 
     The state of a step is s = (η, η̇, η̈). The transition matrix Φ of the last actuation period
@@ -392,7 +392,11 @@ def reduced_stability(prom: ReducedModel, scene: Scene, xi=None, amplitude: floa
     A perturbation of the periodic gait is multiplied by μ each period: |μ| > 1 is a growing mode of
     the model (physical, e.g. energy fed by the thrust, or numerical). The rigid translation along x
     gives μ = 1. A PROM run that stops is unstable with its stop message as the reason.
+
+    Φ comes from the compiled kernel (``floquet_kernel.compiled_transition``, the same steps to rounding) when
+    ``compiled`` and it completes the run; else (and for a run whose steps must be cut) from ``transition_matrix``.
     """
+    from aquarom_fenics.dynamics.floquet_kernel import compiled_transition
     from aquarom_fenics.dynamics.simulate import check_time_grid
 
     n_steps = check_time_grid(scene)
@@ -401,9 +405,11 @@ def reduced_stability(prom: ReducedModel, scene: Scene, xi=None, amplitude: floa
     system = ReducedSystem(prom, scene, xi, scheme, amplitude)
     m = prom.size
     window_start = last_stroke_start(scene.solver.duration, scene.actuation.frequency)
+    transition = compiled_transition(prom, scene, xi, amplitude, n_steps, window_start) if compiled else None
     try:
-        transition = transition_matrix(system, scheme, n_steps, NewtonSettings.from_solver(scene.solver),
-                                       window_start)
+        if transition is None:
+            transition = transition_matrix(system, scheme, n_steps, NewtonSettings.from_solver(scene.solver),
+                                           window_start)
     except IntegrationStopped as failure:
         return Stability(False, f"unstable: the PROM stops ({failure})")
     if not np.all(np.isfinite(transition)):

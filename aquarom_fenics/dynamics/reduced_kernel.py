@@ -27,7 +27,7 @@ from aquarom_fenics.dynamics.kernel_terms import (between, derivative_at, design
                                                   residual_at, tangents_at)
 from aquarom_fenics.dynamics.kernel_thrust import half_blocks, project_blocks, rows_times
 
-__all__ = ["available", "integrate_all", "integrate_packed", "pack", "Packed", "synthetic", "warm_up", "OK", "FAILED"]
+__all__ = ["available", "integrate_all", "integrate_packed", "transition_packed", "pack", "Packed", "synthetic", "warm_up", "OK", "FAILED"]
 
 OK, FAILED = 0, 1
 
@@ -61,13 +61,18 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
         has_thrust, lagrangian, moving_rest, rows, own_node, other_node, rest_rows, length, rest_tangent,
         thrust_weights, tail_weight, thrust_weight_gradient, tail_weight_gradient,
         has_drag, drag_direction, drag_gradient, drag_row, tail_row,
-        sensitivities, amplitude_sensitivity, parameter_terms, result, gradient_out):
-    """Integrate one design; result = (distance, tail amplitude, status), gradient_out (columns,)."""
+        sensitivities, amplitude_sensitivity, parameter_terms, transition_from, result, gradient_out, transition_out):
+    """Integrate one design; result = (distance, tail amplitude, status), gradient_out (columns,).
+
+    ``transition_from`` = n > 0 (the step whose start t_{n-1} opens the window): instead of the sensitivities,
+    transition_out (3, m, 3m) = Φ = ∂s(T)/∂s(t_{n-1}) of s = (η, η̇, η̈), the columns ∂s/∂s(t_{n-1}) started at
+    the identity and propagated with ∂r/∂ξ = 0 over steps n … N (``reduced_dynamics.transition_matrix``)."""
     m = mass.shape[0]
     p = weight_derivatives.shape[0]
     n_muscles = muscle_constant.shape[0]
     halves = own_node.size
-    columns = (p if sensitivities else 0) + (1 if amplitude_sensitivity else 0)
+    transition = transition_from > 0
+    columns = 3 * m if transition else (p if sensitivities else 0) + (1 if amplitude_sensitivity else 0)
     k_u = 1.0 - alpha_f
     k_v = (1.0 - alpha_f) * gamma / (beta * h)
     k_a = (1.0 - alpha_m) / (beta * h * h)
@@ -161,19 +166,27 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
         for i in range(m):
             a_new[i] = (u_new[i] - u_pred[i]) * (1.0 / (beta * h * h))
             v_new[i] = v_pred[i] + gamma * h * a_new[i]
-        if columns:
+        if transition and step == transition_from:
+            sens[:] = 0.0
+            for i in range(m):
+                for block in range(3):
+                    sens[block, i, block * m + i] = 1.0
+        if columns and (not transition or step >= transition_from):
             # the converged step differentiated (reduced_dynamics.propagate_sensitivity) at its evaluation point
             # (eu, ev, ea), where the last residual was evaluated: its monomials and thrust state are current
             tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass, damping, muscle_linear,
                         has_drag, drag_direction, drag_row, stiffness, damping_t, mass_t)
             if has_thrust:
                 half_blocks(state, length, thrust_weights, tail_weight, lagrangian, k_blocks, c_blocks, m_blocks)
-            derivative_at(parameter_terms, eu, ev, ea, activations, units[step], mono, elastic_gradient, mass_gradient,
-                          damping_gradient, muscle_constant, muscle_linear, muscle_constant_gradient,
-                          muscle_linear_gradient, has_thrust, moving_rest, rows, own_node, other_node, rest_rows,
-                          state, per_mass, length, thrust_weights, tail_weight, thrust_weight_gradient,
-                          tail_weight_gradient, lagrangian, k_blocks, c_blocks, m_blocks, has_drag,
-                          drag_gradient, drag_row, sensitivities, amplitude_sensitivity, rhs)
+            if transition:
+                rhs[:] = 0.0
+            else:
+                derivative_at(parameter_terms, eu, ev, ea, activations, units[step], mono, elastic_gradient,
+                              mass_gradient, damping_gradient, muscle_constant, muscle_linear, muscle_constant_gradient,
+                              muscle_linear_gradient, has_thrust, moving_rest, rows, own_node, other_node, rest_rows,
+                              state, per_mass, length, thrust_weights, tail_weight, thrust_weight_gradient,
+                              tail_weight_gradient, lagrangian, k_blocks, c_blocks, m_blocks, has_drag,
+                              drag_gradient, drag_row, sensitivities, amplitude_sensitivity, rhs)
             # rhs = -∂r/∂ξ - C (η̇'_{n+1-α_f} - v_f η'_p) + a_f M η'_p - α_f K η'_n - α_m M η̈'_n, with
             # η̇'_{n+1-α_f} = (1 - α_f) η̇'_p + α_f η̇'_n: combination = that bracket
             for i in range(m):
@@ -239,15 +252,18 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
             amplitude_max = max(amplitude_max, abs(tail))
     result[0] = distance_sum / distance_count
     result[1] = amplitude_max
+    if transition:
+        transition_out[:] = sens
     for c in range(columns):
         gradient_out[c] = gradient_sum[c] / distance_count
 
 @_jit
 def integrate_all(scalars, settings, units, distance_mask, amplitude_mask, shared, per_design, flags, results,
-                  gradients):
+                  gradients, transitions):
     """Every design of the batch in turn (``Packed``'s arrays; ``units`` (B, steps + 1, N): each design's unit
-    activations at the steps' evaluation times); results (B, 3), gradients (B, columns)."""
-    n_steps, max_iterations, per_factorization = settings
+    activations at the steps' evaluation times); results (B, 3), gradients (B, columns); transitions
+    (B, 3, m, 3m) if settings' ``transition_from`` > 0 (else unused)."""
+    n_steps, max_iterations, per_factorization, transition_from = settings
     h, alpha_m, alpha_f, beta, gamma, tolerance, contraction, floor = scalars
     pairs, pair_of_triple, triples, force_coefficients, tangent_coefficients, rows, own_node, other_node, \
         rest_rows, drag_row, tail_row = shared
@@ -266,18 +282,28 @@ def integrate_all(scalars, settings, units, distance_mask, amplitude_mask, share
             moving_rest, rows, own_node, other_node, rest_rows, length[b], rest_tangent[b], thrust_weights[b],
             tail_weight[b], thrust_weight_gradient[b], tail_weight_gradient[b], has_drag, drag_direction[b],
             drag_gradient[b], drag_row, tail_row, sensitivities, amplitude_sensitivity, parameter_terms,
-            results[b], gradients[b])
+            transition_from, results[b], gradients[b], transitions[b])
 
 
 def integrate_packed(packed: Packed):
     """(distance (B,), tail amplitude (B,), failed (B,) bool, distance gradient (B, columns) or None)."""
     results = np.zeros((packed.batch, 3))
     gradients = np.zeros((packed.batch, packed.columns))
-    integrate_all(*packed.arguments, results, gradients)
+    integrate_all(*packed.arguments, results, gradients, np.zeros((packed.batch, 0, 0, 0)))
     failed = results[:, 2] != OK
     distance, amplitude = results[:, 0].copy(), results[:, 1].copy()
     distance[failed] = amplitude[failed] = np.nan
     return distance, amplitude, failed, gradients if packed.columns else None
+
+
+def transition_packed(packed: Packed, m: int):
+    """(Φ (B, 3m, 3m), failed (B,) bool) of a batch packed with ``transition_from`` > 0: Φ = ∂s(T)/∂s(t_w) of
+    s = (η, η̇, η̈) of each design (``reduced_dynamics.transition_matrix``)."""
+    results = np.zeros((packed.batch, 3))
+    gradients = np.zeros((packed.batch, packed.columns))
+    transitions = np.zeros((packed.batch, 3, m, 3 * m))
+    integrate_all(*packed.arguments, results, gradients, transitions)
+    return transitions.reshape(packed.batch, 3 * m, 3 * m), results[:, 2] != OK
 
 
 def warm_up() -> None:

@@ -15,15 +15,17 @@ projected force and tangent of muscle j alone at unit activation.
 """
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 import ufl
 from mpi4py import MPI
+from ufl.algorithms import extract_coefficients
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
-from aquarom_fenics.forms.muscle import muscle_energy, muscle_energy_density
+from aquarom_fenics.forms.muscle import muscle_energy, muscle_stretch
 from aquarom_fenics.io.scene_muscles import start_ramp_time
 from aquarom_fenics.physics.taylor import Taylor, stack_taylor, taylor_of
 
@@ -185,76 +187,94 @@ class MuscleTerm:
 
 
 def sampled_muscle_tensors(fom, projector) -> "MuscleTensors":
-    """b_j and B_j of each muscle j with their Taylor terms in ξ, from its energy at unit activation
-    sampled on the basis. Π_j(u) = ∫_muscle_j ψ(u) dV_0 with the density ψ of ``forms/muscle.py``,
-    quadratic in u (the stretch F_2 m is affine in u), so that on u = V η
+    """b_j and B_j of each muscle j with their Taylor terms in ξ, from the stretch of each basis vector.
 
-        Π_j(V η) = Π_j(0) + b_jᵀ η + ½ ηᵀ B_j η,
-        b_j,i = (Π_j(V_i) - Π_j(-V_i)) / 2,   B_j,ii = Π_j(V_i) + Π_j(-V_i) - 2 Π_j(0),
-        B_j,ik = Π_j(V_i + V_k) - Π_j(0) - b_j,i - b_j,k - ½ (B_j,ii + B_j,kk),
+    Π_j(u) = ∫_muscle_j ½ w |s(u)|² dV_0 with the density ψ = ½ k |s|² v of ``forms/muscle.py``: the stretch
+    s = F_2 m is affine in u, s(V η) = s_0 + Σ_i η_i s_i with s_0 = s(0) and s_i = s(V_i) - s_0, and w = k v. So
 
-    each Π_j the FOM's quadrature sum Σ_c Σ_q ω_q |det J_c| ψ over muscle j's cells, and its ξ-derivatives
-    (UFL derivatives of ψ along the shape directions) in the same evaluations; ψ has muscle j's fibre
-    (one compiled expression per fibre direction).
+        b_j,i = ∂Π_j/∂η_i |_0 = ∫ w s_0·s_i,   B_j,ik = ∂²Π_j/∂η_i∂η_k = ∫ w s_i·s_k,
+
+    each ∫ the FOM's quadrature sum Σ_c Σ_q ω_q |det J_c| over muscle j's cells, and their ξ-derivatives by
+    Leibniz' rule over the three factors, ∂_I (w a·b) = Σ_{A⊔B⊔C=I} ∂_A w ∂_B a·∂_C b, from w, s and their
+    ξ-derivatives (UFL derivatives along the shape directions), one stacked expression per fibre direction
+    evaluated at u = 0 and at each basis vector: 1 + m evaluations per muscle.
     """
     scene, vectors = fom.scene, projector.vectors
     m, p, order = vectors.shape[1], projector.n_parameters, projector.order
-    sample, expressions = fom.keep(("muscle_sampling", p, order), lambda: _muscle_expressions(fom, p, order))
-    pairs = [(k, l) for k in range(p) for l in range(k, p)] if order >= 2 else []
-    degree = fom.quadrature_degrees["stiffness"]
-    reference_weights = fx.quadrature_rule(degree)[1]
-    n_terms = 1 + (p if order >= 1 else 0) + len(pairs)
-    column = {indices: n for n, indices in enumerate([()] + [(k,) for k in range(p if order >= 1 else 0)] + pairs)}
+    sample, expressions = fom.keep(("muscle_stretch", p, order), lambda: _muscle_expressions(fom, p, order))
+    indices = derivative_indices(p, order)
+    column = {index: n for n, index in enumerate(indices)}
+    reference_weights = fx.quadrature_rule(fom.quadrature_degrees["stiffness"])[1]
     fibres = [tuple(muscle.fibre) for muscle in scene.actuated_muscles]
 
-    def energies(expression, cells, displacement):        # (Π, ∂Π/∂ξ_k, ∂²Π/∂ξ_k∂ξ_l) at u
+    def evaluated(expression, cells, displacement):        # (n_samples, n_terms, 4): (w, s) and ξ-derivatives
         fx.set_owned_values(sample, displacement)
-        values = fx.evaluate_expression(expression, cells).reshape(cells.size, reference_weights.size, n_terms)
-        return np.einsum("cqt,q->t", values, reference_weights)
+        return fx.evaluate_expression(expression, cells).reshape(-1, len(indices), 4)
 
-    shifts = [vectors[:, i] for i in range(m)] + [-vectors[:, i] for i in range(m)]
-    pair_list = [(i, k) for i in range(m) for k in range(i + 1, m)]
-    shifts += [vectors[:, i] + vectors[:, k] for i, k in pair_list]
     constants, linears = [], []
     for region, fibre in zip(muscle_cells(scene, fom.fish.tags), fibres):
         cells, expression = fx.owned_cells_among(fom.mesh, region), expressions[fibre]
-        sampled = np.stack([energies(expression, cells, np.zeros(fom.n_owned_dofs))]
-                           + [energies(expression, cells, u) for u in shifts])
-        sampled = fom.comm.allreduce(sampled, op=MPI.SUM)
-        rest, plus, minus, both = sampled[0], sampled[1: 1 + m], sampled[1 + m: 1 + 2 * m], sampled[1 + 2 * m:]
-        gradient = (plus - minus) / 2.0                                                   # (m, n_terms)
-        hessian = np.empty((m, m, n_terms))
-        for i in range(m):
-            hessian[i, i] = plus[i] + minus[i] - 2.0 * rest
-        for (i, k), value in zip(pair_list, both):
-            hessian[i, k] = hessian[k, i] = value - rest - gradient[i] - gradient[k] - 0.5 * (hessian[i, i] + hessian[k, k])
-        b, b_matrix = taylor_of(lambda indices: (gradient[..., column[indices]], hessian[..., column[indices]]),
+        rest = evaluated(expression, cells, np.zeros(fom.n_owned_dofs))
+        weight = (rest[..., 0].reshape(cells.size, reference_weights.size, -1)
+                  * reference_weights[:, None]).reshape(-1, len(indices))            # ω_q |det J| ∂_A w
+        stretch = np.stack([rest[..., 1:]] + [evaluated(expression, cells, vectors[:, i])[..., 1:] - rest[..., 1:]
+                                              for i in range(m)])                   # (1 + m, n_samples, n_terms, 3)
+        products = np.stack([stretch_products(weight, stretch, index, column) for index in indices])
+        products = fom.comm.allreduce(products, op=MPI.SUM)
+        b, b_matrix = taylor_of(lambda index: (products[column[index], 0, 1:], products[column[index], 1:, 1:]),
                                 p, order)
         constants.append(b)
         linears.append(b_matrix)
     return MuscleTensors(stack_taylor(constants), stack_taylor(linears))
 
 
+def derivative_indices(p: int, order: int) -> list[tuple[int, ...]]:
+    """The ξ-derivatives the Taylor terms need: (), (k,) at order ≥ 1, (k, l) with k ≤ l at order 2."""
+    first = [(k,) for k in range(p)] if order >= 1 else []
+    return [()] + first + ([(k, l) for k in range(p) for l in range(k, p)] if order >= 2 else [])
+
+
+def stretch_products(weight: np.ndarray, stretch: np.ndarray, index: tuple, column: dict) -> np.ndarray:
+    """∂_I Σ_s w_s a_s·b_s for every pair (a, b) of the stretches (s_0, s_1, …, s_m), (1 + m, 1 + m): Leibniz'
+    rule, each position of I = ``index`` given to w, a or b (3^|I| terms); ``weight`` (n_samples, n_terms),
+    ``stretch`` (1 + m, n_samples, n_terms, 3), their terms in the order of ``column``."""
+    total = 0.0
+    for owners in itertools.product(range(3), repeat=len(index)):
+        parts = [column[tuple(sorted(k for k, owner in zip(index, owners) if owner == factor))] for factor in range(3)]
+        left = stretch[:, :, parts[1]] * weight[:, parts[0], None]
+        right = stretch[:, :, parts[2]]
+        total = total + left.reshape(left.shape[0], -1) @ right.reshape(right.shape[0], -1).T
+    return total
+
+
 def _muscle_expressions(fom, p: int, order: int) -> tuple:
     """(the sampled u, one compiled expression per fibre direction of the scene's muscles) of
-    :func:`sampled_muscle_tensors`: |det J| (ψ, ∂ψ/∂ξ_k, ∂²ψ/∂ξ_k∂ξ_l) at the points of the stiffness rule
-    (the reference weights ω_q not included), kept on the model for its next designs."""
+    :func:`sampled_muscle_tensors`: for each ξ-derivative ∂_I of ``derivative_indices`` (|det J| ∂_I w, ∂_I s) at
+    the points of the stiffness rule (the reference weights ω_q not included), kept on the model for its next
+    designs."""
     scene = fom.scene
     sample = fx.new_function(fom.space, "muscle_sample")
     directions = [fom.shape_direction(f"muscle_direction_{k}") for k in range(p if order >= 1 else 0)]
     for k, direction in enumerate(directions):
         direction.set_parameter(k)
-    pairs = [(k, l) for k in range(p) for l in range(k, p)] if order >= 2 else []
-    degree = fom.quadrature_degrees["stiffness"]
+    stiffness = fx.constant(fom.mesh, scene.actuation.stiffness)
+    jacobian = abs(ufl.JacobianDeterminant(fom.mesh))
 
-    def compiled(fibre):          # the terms' expression for one fibre direction
-        density = muscle_energy_density(sample, fom.shape_gradients["stiffness"],
-                                        fx.constant(fom.mesh, scene.actuation.stiffness),
-                                        nominal_volume=scene.actuation.muscle_volume == "nominal", fibre=fibre)
-        first = [fom.shape_derivative(density, direction) for direction in directions]
-        second = [fom.shape_derivative(first[k], directions[l]) for k, l in pairs]
-        return fx.compile_quadrature_expression(
-            abs(ufl.JacobianDeterminant(fom.mesh)) * ufl.as_vector([density] + first + second), degree)
+    def derivatives(expression):          # {I: ∂_I expression}; 0 · expression for one free of the shape (k v = k)
+        values = {(): expression}
+        for index in derivative_indices(p, order)[1:]:
+            previous = values[index[:-1]]
+            values[index] = (fom.shape_derivative(previous, directions[index[-1]]) if extract_coefficients(previous)
+                             else 0.0 * previous)
+        return values
+
+    def compiled(fibre):          # the stacked expression for one fibre direction
+        stretch, volume = muscle_stretch(sample, fom.shape_gradients["stiffness"],
+                                         nominal_volume=scene.actuation.muscle_volume == "nominal", fibre=fibre)
+        weights, stretches = derivatives(stiffness * volume), derivatives(stretch)
+        return fx.compile_quadrature_expression(ufl.as_vector(
+            [value for index in weights for value in (jacobian * weights[index], *(stretches[index][i] for i in range(3)))]),
+            fom.quadrature_degrees["stiffness"])
 
     fibres = [tuple(muscle.fibre) for muscle in scene.actuated_muscles]
     return sample, {fibre: compiled(fibre) for fibre in dict.fromkeys(fibres)}

@@ -7,6 +7,7 @@ from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.dynamics.integrator import NewtonSettings, TimeScheme, integrate
 from aquarom_fenics.dynamics.reduced_dynamics import (FLOQUET_LIMIT, ReducedSystem, reduced_stability, simulate_reduced,
                                              transition_matrix)
+from aquarom_fenics.dynamics.trajectory import last_stroke_start
 from aquarom_fenics.reduction.reductor import build_prom
 from conftest import coarse_scene
 
@@ -39,6 +40,26 @@ def test_the_transition_matrix_is_the_derivative_of_the_discrete_flow(fish, solv
     differences = np.column_stack([(final_state(step * e) - final_state(-step * e)) / (2 * step)
                                    for e in np.eye(3 * m)])
     assert np.linalg.norm(differences - transition) < 1e-7 * np.linalg.norm(transition)
+
+
+@pytest.mark.parametrize("material, stable", [({}, True), ({"young_modulus": 15e3}, False)])
+def test_the_compiled_transition_matrix_is_the_python_one(fish, material, stable):
+    """Φ of the last stroke from the compiled kernel (``compiled_transition``) against ``transition_matrix``'s, and
+    the verdicts: the nominal gait (|μ| = 1) and E = 15 kPa at h = 10 ms (|μ| ≈ 1.25, a run the kernel completes)."""
+    pytest.importorskip("numba")
+    from aquarom_fenics.dynamics.floquet_kernel import compiled_transition
+
+    scene = coarse_scene(material=material, solver={"time_step": 0.01})
+    prom = build_prom(scene, fish=fish)
+    scheme, settings = TimeScheme.from_solver(scene.solver), NewtonSettings.from_solver(scene.solver)
+    window_start = last_stroke_start(scene.solver.duration, scene.actuation.frequency)
+    compiled = compiled_transition(prom, scene, prom.xi_center, None, scene.n_steps, window_start)
+    python = transition_matrix(ReducedSystem(prom, scene, prom.xi_center, scheme), scheme, scene.n_steps, settings,
+                               window_start)
+    assert compiled is not None and np.linalg.norm(compiled - python) < 1e-10 * np.linalg.norm(python)
+    radius = [np.max(np.abs(np.linalg.eigvals(matrix))) for matrix in (compiled, python)]
+    assert radius[0] == pytest.approx(radius[1], abs=1e-10) and (radius[0] <= FLOQUET_LIMIT) == stable
+    assert reduced_stability(prom, scene) == reduced_stability(prom, scene, compiled=False)
 
 
 def test_the_nominal_gait_is_stable(fish):
