@@ -29,11 +29,13 @@ def test_diverging_fom_names_the_step_residuals_linear_solve_and_hints():
     result = simulate_fom(scene, progress=False)
     message = result.error
     assert not result.completed and len(message.splitlines()) == 1
-    # k·A near E: after the peak activation (t = 0.25 s) the muscles crush the body and a step soon after
-    # finds no solution even when cut to the minimum step (t = 0.26 s on the conforming level-1 mesh,
-    # 0.3 s on the earlier centroid-region mesh, 0.28 s there with the rear spine rule).
+    # k·A near E: after the peak activation (t = 0.25 s) the muscles crush the body and a step before the
+    # activation returns to zero (t = 0.5 s) finds no solution even when cut to the minimum step. Which step
+    # that is turns on rounding in a body strained some 300 %: 0.26 s and 0.32 s on the conforming level-1
+    # mesh on two machines, 0.3 s on the earlier centroid-region mesh, 0.28 s there
+    # with the rear spine rule.
     failed = re.search(r"at t = (\d\.\d+) s \(step (\d+) of 100\)", message)
-    assert failed and 0.25 < float(failed.group(1)) <= 0.3 and float(failed.group(1)) == pytest.approx(
+    assert failed and 0.25 < float(failed.group(1)) < 0.5 and float(failed.group(1)) == pytest.approx(
         0.02 * int(failed.group(2)))
     assert "cut to h = 0.00125 s, the minimum is 0.001 s" in message and result.cut_steps > 0
     assert re.search(r"relative residuals (\d\.\d\de[+-]\d\d, ){5}\d\.\d\de[+-]\d\d", message)
