@@ -102,6 +102,18 @@ def make_scene():
     return coarse_scene
 
 
+@pytest.fixture
+def no_single_reduced_runs(monkeypatch):
+    """Make any ``simulate_reduced`` call of the batched path fail: a sweep's designs must be integrated together."""
+    from aquarom_fenics.dynamics import batched, reduced_dynamics
+
+    def one_by_one(*args, **kwargs):
+        raise AssertionError("a design of an atlas centre was integrated alone")
+
+    monkeypatch.setattr(reduced_dynamics, "simulate_reduced", one_by_one)
+    monkeypatch.setattr(batched, "simulate_reduced", one_by_one)
+
+
 @pytest.fixture(scope="session")
 def dask_cluster():
     """A real Dask distributed cluster on this machine: TCP scheduler, 2 worker processes of one

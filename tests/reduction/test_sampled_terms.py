@@ -37,6 +37,15 @@ def test_sampled_inertia_equals_the_projected_assembled_forms(degree, order):
     assert assembled[0].second is not None or order == 1
 
 
+def muscle_tensor_pairs(expected, computed):
+    """(part, name, reference, value, scale) of the muscle tensors' constant and linear parts, each Taylor term
+    (constant, first, second; None where not built); scale = max |part's constant term| of ``expected``."""
+    for part in ("constant", "linear"):
+        scale = np.abs(getattr(expected, part).constant).max()
+        for name in ("constant", "first", "second"):
+            yield part, name, getattr(getattr(expected, part), name), getattr(getattr(computed, part), name), scale
+
+
 @pytest.mark.parametrize("degree, order, volume", [(1, 2, "shape"), (2, 1, "shape"), (1, 1, "nominal")])
 def test_sampled_muscle_tensors_equal_the_projected_assembled_forms(degree, order, volume):
     """b_j, B_j of both muscles and their ξ-derivatives, off the nominal design, either muscle volume."""
@@ -44,13 +53,10 @@ def test_sampled_muscle_tensors_equal_the_projected_assembled_forms(degree, orde
     model = FullOrderModel(scene, load_fish(scene), np.array([0.1, -0.2, 0.05]))
     projector = Projector(model, build_basis(model, 3).vectors, 3, order)
     expected, sampled = projected_muscle_tensors(model, projector), model.muscle.reduce(projector)
-    for part in ("constant", "linear"):
-        scale = np.abs(getattr(expected, part).constant).max()
-        for name in ("constant", "first", "second"):
-            reference, value = getattr(getattr(expected, part), name), getattr(getattr(sampled, part), name)
-            assert (reference is None) == (value is None), (part, name)
-            if reference is not None:
-                assert np.abs(value - reference).max() <= 1e-11 * scale, (part, name)
+    for part, name, reference, value, scale in muscle_tensor_pairs(expected, sampled):
+        assert (reference is None) == (value is None), (part, name)
+        if reference is not None:
+            assert np.abs(value - reference).max() <= 1e-11 * scale, (part, name)
 
 
 @pytest.mark.parametrize("degree, order, volume", [(1, 2, "shape"), (2, 2, "shape"), (2, 1, "nominal")])
@@ -61,17 +67,14 @@ def test_muscle_tensors_from_the_stretch_equal_the_sampled_energy(degree, order,
     model = FullOrderModel(scene, load_fish(scene), np.array([0.1, -0.2, 0.05]))
     projector = Projector(model, build_basis(model, 3).vectors, 3, order)
     expected, computed = energy_sampled_muscle_tensors(model, projector), model.muscle.reduce(projector)
-    for part in ("constant", "linear"):
-        part_scale = np.abs(getattr(expected, part).constant).max()
-        for name in ("constant", "first", "second"):
-            reference, value = getattr(getattr(expected, part), name), getattr(getattr(computed, part), name)
-            assert (reference is None) == (value is None) and (reference is not None or (name, order) == ("second", 1))
-            if reference is not None:
-                # relative to the term itself; to the part's value for a term zero but for rounding (with the
-                # nominal muscle volume B_j does not vary with ξ)
-                scale = np.abs(reference).max()
-                scale = part_scale if scale < 1e-6 * part_scale else scale
-                assert scale > 0 and np.abs(value - reference).max() <= 1e-12 * scale, (part, name)
+    for part, name, reference, value, part_scale in muscle_tensor_pairs(expected, computed):
+        assert (reference is None) == (value is None) and (reference is not None or (name, order) == ("second", 1))
+        if reference is not None:
+            # relative to the term itself; to the part's value for a term zero but for rounding (with the
+            # nominal muscle volume B_j does not vary with ξ)
+            scale = np.abs(reference).max()
+            scale = part_scale if scale < 1e-6 * part_scale else scale
+            assert scale > 0 and np.abs(value - reference).max() <= 1e-12 * scale, (part, name)
 
 
 def test_sampled_tensors_of_several_muscles_with_their_own_fibres():

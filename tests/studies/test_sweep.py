@@ -260,10 +260,10 @@ def test_the_sweep_figure_for_one_two_and_more_parameters(tmp_path, names):
     assert path.stat().st_size > 10_000
 
 
-def test_a_prom_sweep_answers_its_designs_in_a_batch_as_single_runs_would(tmp_path, monkeypatch):
+def test_a_prom_sweep_answers_its_designs_in_a_batch_as_single_runs_would(tmp_path, request):
     """The designs of each atlas centre are integrated together (``simulate_batch``), not one
     ``simulate_reduced`` each, and their rows are the single runs' answers to 1e-12."""
-    from aquarom_fenics.dynamics import batched, reduced_dynamics
+    from aquarom_fenics.dynamics import reduced_dynamics
 
     path = write_scene(tmp_path)
     scene = Scene.load(path)
@@ -272,12 +272,7 @@ def test_a_prom_sweep_answers_its_designs_in_a_batch_as_single_runs_would(tmp_pa
     assert len({tuple(prom.xi_center) for prom in proms}) == 2
     expected = [reduced_dynamics.simulate_reduced(prom, scene, np.array([d[n] for n in prom.shape_names]))
                 for prom, d in zip(proms, designs)]
-
-    def one_by_one(*args, **kwargs):
-        raise AssertionError("a design of an atlas centre was integrated alone")
-
-    monkeypatch.setattr(reduced_dynamics, "simulate_reduced", one_by_one)
-    monkeypatch.setattr(batched, "simulate_reduced", one_by_one)
+    request.getfixturevalue("no_single_reduced_runs")     # from here on, only the batched path may run
     out = tmp_path / "out"
     assert main(["sweep", str(path), "--grid", "z_tail=-0.04:0.04:3", "--grid", "y_thin=0:0.02:2",
                  "--model", "prom", "--workers", "1", "--out", str(out)]) == 0

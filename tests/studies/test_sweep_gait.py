@@ -43,23 +43,16 @@ def test_the_designs_span_the_gait_variables_named_as_in_the_scene(tmp_path):
     assert sweep.csv_designs(table, scene) == [{"z_tail": 0.1, "frequency": 1.0, "phase_lag": 90.0}]
 
 
-def test_a_prom_sweep_row_of_a_gait_equals_a_single_reduced_run_at_that_gait(tmp_path, monkeypatch):
+def test_a_prom_sweep_row_of_a_gait_equals_a_single_reduced_run_at_that_gait(tmp_path, request):
     """The centre's designs are integrated together, each with its own gait's activations, and their rows are
     the single runs' answers to 1e-12."""
-    from aquarom_fenics.dynamics import batched, reduced_dynamics
-
     path = write_scene(tmp_path)
     scene = Scene.load(path)
     prom = sweep.reduced_model(scene, {"z_tail": 0.02, "frequency": 1.0, "phase_lag": 60.0}, "prom")
     singles = [simulate_reduced(prom, apply_gait(scene, {"frequency": f, "phase_lag": 60.0}), np.array([0.02]))
                for f in (1.0, 1.4)]
     at_start = simulate_reduced(prom, scene, np.array([0.02]))
-
-    def one_by_one(*args, **kwargs):
-        raise AssertionError("a design of an atlas centre was integrated alone")
-
-    monkeypatch.setattr(reduced_dynamics, "simulate_reduced", one_by_one)
-    monkeypatch.setattr(batched, "simulate_reduced", one_by_one)
+    request.getfixturevalue("no_single_reduced_runs")     # from here on, only the batched path may run
     out = tmp_path / "out"
     assert main(["sweep", str(path), "--grid", "z_tail=0.02:0.02:1", "--grid", "frequency=1:1.4:2",
                  "--grid", "phase_lag=60:60:1", "--model", "prom", "--workers", "1", "--out", str(out)]) == 0
