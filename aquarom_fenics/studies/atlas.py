@@ -20,7 +20,7 @@ itself, whose basis holds its gait's patterns and, where the phase lag or a pair
 pair's pattern (``scene_gait.pair_patterns``), so that one basis spans every lag and amplitude of the ``[gait]``
 box, and the frequency enters only a(t). No validity radius bounds the gait: how far such a PROM follows a gait
 other than the one it was built at is measured in docs/devlog.md ("gait variables as design variables"). The
-designs of a centre are integrated together, each with its own gait's activations (:func:`_answer_gaits`).
+designs of a centre are integrated together, each with its own gait's activations (:func:`_answer`).
 
 The atlas's radius is h: inside it the PROM is to stay within 3 % of the FOM in distance, tighter than
 SPEC §8's 5 %. It is set by s, the scale of the validity radius, checked by ``scripts/validate_atlas.py``
@@ -44,6 +44,7 @@ from aquarom_fenics.files import read_text_file
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.parallel import worker_name
 from aquarom_fenics.studies.fish_cache import shared_fish
+from aquarom_fenics.studies.sweep_designs import driven
 
 RADIUS_SCALE = 1.0
 """s: the atlas's cell half-width ÷ the scene's validity radius (scripts/validate_atlas.py measures the PROM
@@ -216,48 +217,24 @@ def evaluate_center(task: CenterTask) -> dict:
 
 
 def _answer(prom, scene: Scene, rows: list[dict], designs: tuple, simulate_batch, refuse_outside) -> None:
-    """Fill the rows of the designs inside the PROM's radius from one batched solve (with ``[gait]`` variables
-    each design driven by its own gait, :func:`_answer_gaits`); refuse the others."""
+    """Fill the rows of the designs inside the PROM's radius from one batched solve; refuse the others. With
+    ``[gait]`` variables each design runs the scene driven by its own gait (``sweep_designs.driven``: its own activation
+    law, ``simulate_batch``'s ``scenes``), as ``simulate_reduced`` would one by one; a gait the scene refuses is
+    a refused row."""
     fish = shared_fish(scene)
     inside = []
     for row, (_, design) in zip(rows, designs):
         try:
             shapes = {name: design[name] for name in scene.shape_names}
             refuse_outside(prom.shape_names, fish.parameter_vector(shapes), prom.xi_center, prom.validity_radius)
-            inside.append((row, design))
+            inside.append((row, shapes, driven(scene, design)[0]))
         except InputError as refused:
             row.update(status="refused", reason=str(refused))
     if not inside:
         return
-    if scene.gait:
-        _answer_gaits(prom, scene, inside, simulate_batch)
-        return
-    xis = np.array([[design[name] for name in prom.shape_names] for _, design in inside])
-    result = simulate_batch(prom, scene, xis)
-    for b, (row, _) in enumerate(inside):
-        if result.completed[b]:
-            row.update(distance_m=float(result.distance[b]), tail_amplitude_m=float(result.tail_amplitude[b]))
-        else:
-            row.update(status="stopped", reason=result.errors[b])
-
-
-def _answer_gaits(prom, scene: Scene, inside: list[tuple[dict, dict]], simulate_batch) -> None:
-    """The rows of designs with a gait: the centre's PROM on the scene driven by each design's gait (``apply_gait``),
-    integrated together (``simulate_batch`` with a scene per design: each design its own activation law), as
-    ``simulate_reduced`` would one by one. A gait the scene refuses is a refused row."""
-    from aquarom_fenics.io.scene_gait import apply_gait
-
-    driven = []
-    for row, design in inside:
-        try:
-            driven.append((row, design, apply_gait(scene, {name: design[name] for name in scene.gait_names})))
-        except InputError as refused:
-            row.update(status="refused", reason=str(refused))
-    if not driven:
-        return
-    xis = np.array([[design[name] for name in prom.shape_names] for _, design, _ in driven]).reshape(len(driven), -1)
-    result = simulate_batch(prom, scene, xis, scenes=[own for _, _, own in driven])
-    for b, (row, _, _) in enumerate(driven):
+    xis = np.array([[shapes[name] for name in prom.shape_names] for _, shapes, _ in inside]).reshape(len(inside), -1)
+    result = simulate_batch(prom, scene, xis, scenes=[own for _, _, own in inside] if scene.gait else None)
+    for b, (row, _, _) in enumerate(inside):
         if result.completed[b]:
             row.update(distance_m=float(result.distance[b]), tail_amplitude_m=float(result.tail_amplitude[b]))
         else:

@@ -31,7 +31,7 @@ from aquarom_fenics.parallel import run_all, worker_name
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.studies.fish_cache import shared_fish
 from aquarom_fenics.studies.sweep_designs import (  # noqa: F401 — the design sources, also imported from here
-    MAX_DESIGN_FILE_BYTES, MAX_DESIGNS, csv_designs, grid_designs, latin_hypercube, variable_names)
+    MAX_DESIGN_FILE_BYTES, MAX_DESIGNS, csv_designs, driven, grid_designs, latin_hypercube, variable_names)
 
 
 log = logging.getLogger("aquarom")
@@ -51,18 +51,6 @@ class SweepTask:
     design: dict
     model: str
     scene: Scene
-
-
-def driven(scene: Scene, design: dict) -> tuple[Scene, dict]:
-    """The scene driven by the design's ``[gait]`` values (``apply_gait``; the scene itself without
-    them) and the design's shape values: what a model runs. InputError where the gait is refused
-    (a period of too few steps, a pair's stress above the fibre stiffness)."""
-    shapes = {name: design[name] for name in scene.shape_names}
-    if not scene.gait:
-        return scene, shapes
-    from aquarom_fenics.io.scene_gait import apply_gait
-
-    return apply_gait(scene, {name: design[name] for name in scene.gait_names}), shapes
 
 
 class _Stopped(Exception):

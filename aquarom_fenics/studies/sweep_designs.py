@@ -137,3 +137,15 @@ def latin_hypercube(scene: Scene, samples: int, seed: int) -> list[dict[str, flo
         columns.append(variable.lower + unit * (variable.upper - variable.lower))
     return [_complete(scene, {variable.name: float(column[k]) for variable, column in zip(variables(scene), columns)})
             for k in range(samples)]
+
+
+def driven(scene: Scene, design: dict) -> tuple[Scene, dict]:
+    """The scene driven by the design's ``[gait]`` values (``apply_gait``; the scene itself without
+    them) and the design's shape values: what a model runs. InputError where the gait is refused
+    (a period of too few steps, a pair's stress above the fibre stiffness)."""
+    shapes = {name: design[name] for name in scene.shape_names}
+    if not scene.gait:
+        return scene, shapes
+    from aquarom_fenics.io.scene_gait import apply_gait
+
+    return apply_gait(scene, {name: design[name] for name in scene.gait_names}), shapes
