@@ -31,7 +31,7 @@ class CalibrationModels:
     def prom_run(self, theta: np.ndarray):
         """The PROM's observed points (n, k) and Jacobian (n k, q) at the data's times, at θ."""
         from aquarom_fenics.calibration.fit import model_at, moved_beyond
-        from aquarom_fenics.calibration.parameters import OBSERVED
+        from aquarom_fenics.dynamics.trajectory import OBSERVED
 
         if moved_beyond(self.keys, theta, self.built_at, self.settings.rebuild_fraction):
             self.build(dict(zip(self.keys, theta)))
@@ -67,7 +67,7 @@ def fit_swim(models: CalibrationModels, start: np.ndarray, bounds: np.ndarray, r
     """The whole fit of ``models.data``: Levenberg–Marquardt on the PROM, the last iterations on the FOM,
     the statistics at the FOM's point and the FOM's check there; (FitResult, Statistics, FOM record)."""
     from aquarom_fenics.calibration.fit import calibrate, refine_on_fom, statistics
-    from aquarom_fenics.calibration.parameters import OBSERVED
+    from aquarom_fenics.dynamics.trajectory import OBSERVED
 
     data, keys = models.data, models.keys
     columns = [OBSERVED.index(name) for name in data.observables]

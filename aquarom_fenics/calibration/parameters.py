@@ -37,7 +37,6 @@ import numpy as np
 
 from aquarom_fenics.dynamics.integrator import NewtonSettings, TimeScheme, integrate
 from aquarom_fenics.dynamics.reduced_dynamics import ReducedSystem, one_blas_thread, propagate_sensitivity
-from aquarom_fenics.dynamics.trajectory import OBSERVED as TRAJECTORY_OBSERVED
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.physics.elastic import ElasticTensors
@@ -60,9 +59,6 @@ CALIBRATION_KEYS = ("material.young_modulus", HEAD, ALPHA, BETA,
 TIME_OFFSET = "time_offset"
 """Not a scene key: a constant shift τ [s] between the data's clock and the model's, y_data(t) = y_model(t + τ)
 (the model at rest before t = 0). Its derivative is the model's velocity, dy/dτ = ẏ(t + τ)."""
-
-OBSERVED = TRAJECTORY_OBSERVED
-"""The observed points and axes of the reduced model (trajectory.csv's columns, without the unit)."""
 
 
 def scene_value(scene: Scene, key: str) -> float:
@@ -191,7 +187,8 @@ class CalibratedSystem(ReducedSystem):
         raise ValueError(key)
 
     def observation_rows(self) -> np.ndarray:
-        """(5, m): head x, tail y, centre-of-mass x, tail x and centre-of-mass y from η (:data:`OBSERVED`)."""
+        """(5, m): head x, tail y, centre-of-mass x, tail x and centre-of-mass y from η
+        (``dynamics.trajectory.OBSERVED``)."""
         observation = self.prom.observation
         return np.vstack([observation.head_x_row, observation.tail_y_row, self.com_weights, observation.tail_x_row,
                           self.com_y_weights])
@@ -202,7 +199,7 @@ class ModelSwim:
     """The PROM's observed motion at θ on the time-step grid and, with sensitivities, its θ-derivative."""
 
     time: np.ndarray                     # (n,) [s]
-    observed: np.ndarray                 # (n, 5) the points of OBSERVED [m] (displacements)
+    observed: np.ndarray                 # (n, 5) the points of trajectory.OBSERVED [m] (displacements)
     velocity: np.ndarray                 # (n, 5) their velocities [m/s]
     derivative: np.ndarray | None        # (n, 5, q) d(observed)/dθ [m per unit of θ]
     velocity_derivative: np.ndarray | None   # (n, 5, q) d(velocity)/dθ
@@ -245,5 +242,5 @@ def simulate_parameters(prom: ReducedModel, built: Scene, values: dict[str, floa
     return ModelSwim(np.array(times), observed, np.array(velocities) @ rows.T, derivative, rate, list(values))
 
 
-__all__ = ["CALIBRATION_KEYS", "OBSERVED", "TIME_OFFSET", "CalibratedSystem", "ModelSwim", "check_keys", "scene_value",
+__all__ = ["CALIBRATION_KEYS", "TIME_OFFSET", "CalibratedSystem", "ModelSwim", "check_keys", "scene_value",
            "scene_values", "simulate_parameters", "with_values"]

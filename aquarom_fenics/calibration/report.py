@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aquarom_fenics.calibration.parameters import OBSERVED, with_values
+from aquarom_fenics.calibration.parameters import with_values
 from aquarom_fenics.io.persistence import write_json_atomic, write_text_atomic
 
 
@@ -94,4 +94,4 @@ def write_outputs(out: Path, scene, data_path, data, result, stats, fom: dict, s
     write_text_atomic(out / "calibrated.toml", fitted.to_toml())
 
 
-__all__ = ["OBSERVED", "calibration_record", "fom_model", "fom_record", "plot_fit", "residual_rms", "write_outputs"]
+__all__ = ["calibration_record", "fom_model", "fom_record", "plot_fit", "residual_rms", "write_outputs"]

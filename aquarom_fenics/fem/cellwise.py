@@ -32,6 +32,7 @@ import itertools
 import numpy as np
 import ufl
 from mpi4py import MPI
+from scipy.linalg import blas
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
 from aquarom_fenics.forms.elasticity import small_strain_energy_density
@@ -45,6 +46,7 @@ for _a, (_i, _j) in enumerate(_PAIRS):
 
 
 _TO_SYMMETRIC = np.ascontiguousarray(SYMMETRIC_BASIS.reshape(6, 9).T)   # contiguous: a fast matmul
+_HALF_ROOT = 1.0 / np.sqrt(2.0)
 
 
 def symmetric_coordinates(tensors: np.ndarray) -> np.ndarray:
@@ -134,19 +136,20 @@ class CellSampler:
         return moduli
 
     def relative_gradients(self, vectors: np.ndarray) -> dict[tuple, np.ndarray]:
-        """H_j = ∇V_j F_1⁻¹ and its ξ-derivatives at every sample, (m, n_samples, 3, 3) for each index
-        tuple of ``strain_indices``: one evaluation per basis vector V_j."""
+        """H_j = ∇V_j F_1⁻¹ and its ξ-derivatives at every sample, (3, 3, m, n_samples) (row, column, basis
+        vector, sample) for each index tuple of ``strain_indices``: one evaluation per basis vector V_j."""
         count = len(self.strain_indices)
-        values = np.empty((count, vectors.shape[1], self.n_samples, 3, 3))
+        values = np.empty((count, 3, 3, vectors.shape[1], self.n_samples))
         for j in range(vectors.shape[1]):
             fx.set_owned_values(self.direction, vectors[:, j])
-            values[:, j] = self.evaluate(self.gradients, 9 * count).reshape(self.n_samples, count, 3, 3).transpose(1, 0, 2, 3)
+            values[:, :, :, j] = (self.evaluate(self.gradients, 9 * count).reshape(self.n_samples, count, 3, 3)
+                                  .transpose(1, 2, 3, 0))
         return dict(zip(self.strain_indices, values))
 
     def whitened_strain_coefficients(self, vectors: np.ndarray,
-                                     transform: np.ndarray) -> dict[tuple, tuple[np.ndarray, np.ndarray]]:
+                                     transform: "Whitening") -> dict[tuple, tuple[np.ndarray, np.ndarray]]:
         """(ẽ, q̃) = (Rᵀ e, Rᵀ q) of E(V η) = e η + ½ q η η and of each of its ξ-derivatives (by the index
-        tuples of ``strain_indices``): shapes (m, 6 n_samples) and (n_pairs, 6 n_samples), R from
+        tuples of ``strain_indices``): shapes (m, 6, n_samples) and (n_pairs, 6, n_samples), R from
         :func:`whitening`, q for the pairs j ≤ k of :func:`pair_index` (:func:`strain_coefficients`)."""
         gradients = self.relative_gradients(vectors)
         return {indices: tuple(whiten(part, transform) for part in strain_coefficients(gradients, indices))
@@ -155,51 +158,60 @@ class CellSampler:
 
 def strain_coefficients(gradients: dict[tuple, np.ndarray], indices: tuple) -> tuple[np.ndarray, np.ndarray]:
     """(e, q) in symmetric coordinates of the ξ-derivative ∂_I E (I = ``indices``) of E(V η) = e η + ½ q η η,
-    from the relative displacement gradients: ``gradients[J]`` is ∂_J H_j, (m, n_samples, 3, 3).
+    from the relative displacement gradients: ``gradients[J]`` is ∂_J H_j, (3, 3, m, n_samples).
 
     E = ½ (H + Hᵀ + Hᵀ H) with H = Σ_j η_j H_j, so by Leibniz' rule over the two factors of Hᵀ H
 
         e_j = sym ∂_I H_j,   q_jk = Σ_{A ⊔ B = I} sym(∂_A H_jᵀ ∂_B H_k)
 
-    (the sum over every way to split the indices between the factors; it holds each split and its
-    mirror, so that q_jk = q_kj). Shapes (m, n_samples, 6) and (n_pairs, n_samples, 6), q for the
-    pairs j ≤ k of :func:`pair_list`; sym X and X have the same coordinates X:B_a.
+    (the sum over every way to split the indices between the factors, :func:`leibniz_terms`; it holds each
+    split and its mirror, so that q_jk = q_kj). Shapes (m, 6, n_samples) and (n_pairs, 6, n_samples), q for
+    the pairs j ≤ k of :func:`pair_list`; sym X and X have the same coordinates X:B_a.
     """
     value = gradients[indices]
-    m, n_samples = value.shape[:2]
-    rows, columns = np.array(pair_list(m)).T
-    quadratic = np.empty((rows.size, n_samples, 6))
-    step = max(1, PRODUCT_ENTRIES // (9 * m * m))
-    for start in range(0, n_samples, step):
-        chunk = slice(start, start + step)
-        products = 0.0
-        for left, right in _splits(indices):
-            if left < right:     # the mirror split (right, left) gives the transposed blocks: added below
-                continue
-            block = _transposed_products(gradients[left][:, chunk], gradients[right][:, chunk])
-            products = products + (block if left == right else block + block.transpose(0, 2, 1))
-        blocks = products.reshape(-1, m, 3, m, 3).transpose(1, 3, 0, 2, 4)[rows, columns]    # (pairs, chunk, 3, 3)
-        quadratic[:, chunk] = symmetric_coordinates(blocks.reshape(rows.size, -1, 9))
-    return symmetric_coordinates(value.reshape(m, n_samples, 9)), quadratic
+    m, n_samples = value.shape[2:]
+    quadratic = np.zeros((m * (m + 1) // 2, 6, n_samples))
+    for left, right in leibniz_terms(indices, 2):
+        if left < right:     # the mirror split (right, left): sym(∂_B H_jᵀ ∂_A H_k), added with its own
+            continue
+        add_pair_products(quadratic, gradients[left], gradients[right])
+        if left != right:
+            add_pair_products(quadratic, gradients[right], gradients[left])
+    return symmetric_parts(value), quadratic
 
 
-PRODUCT_ENTRIES = 1 << 22
-"""Entries of the per-sample products A_jᵀ B_k :func:`strain_coefficients` holds at once (32 MB)."""
+def symmetric_parts(tensors: np.ndarray) -> np.ndarray:
+    """(3, 3, m, n) tensors X_j → (m, 6, n) coordinates X_j:B_a."""
+    parts = np.empty((tensors.shape[2], 6, tensors.shape[3]))
+    for a, (r, c) in enumerate(_PAIRS):
+        parts[:, a] = tensors[r, r] if r == c else (tensors[r, c] + tensors[c, r]) * _HALF_ROOT
+    return parts
 
 
-def _transposed_products(left: np.ndarray, right: np.ndarray) -> np.ndarray:
-    """(n, 3m, 3m): every block A_jᵀ B_k (rows j, columns k) at each of the n samples of (m, n, 3, 3)
-    arrays A, B, as one (3m × 3) (3 × 3m) matrix product per sample."""
-    m, n = left.shape[:2]
-    a = np.ascontiguousarray(left.transpose(1, 2, 0, 3)).reshape(n, 3, 3 * m)
-    b = np.ascontiguousarray(right.transpose(1, 2, 0, 3)).reshape(n, 3, 3 * m)
-    return np.matmul(a.transpose(0, 2, 1), b)
+def add_pair_products(into: np.ndarray, left: np.ndarray, right: np.ndarray) -> None:
+    """into[(j, k), a] += (A_jᵀ B_k):B_a for the pairs j ≤ k of :func:`pair_list` at every sample, of the
+    (3, 3, m, n) tensors A = ``left`` and B = ``right``: (AᵀB)_rc = Σ_i A_ir B_ic, its coordinate a = (r, c)
+    X_rr, or (X_rc + X_cr)/√2 off the diagonal. One row j (its pairs k ≥ j) at a time, every sample at once."""
+    m = left.shape[2]
+    start = 0
+    for j in range(m):
+        stop = start + m - j
+        for a, (r, c) in enumerate(_PAIRS):
+            value = np.einsum("is,iks->ks", left[:, r, j], right[:, c, j:])
+            if r != c:
+                value += np.einsum("is,iks->ks", left[:, c, j], right[:, r, j:])
+                value *= _HALF_ROOT
+            into[start:stop, a] += value
+        start = stop
 
 
-def _splits(indices: tuple):
-    """Every (A, B) with A ⊔ B = ``indices`` (each index to the left or the right factor), A and B sorted."""
-    for assignment in itertools.product(range(2), repeat=len(indices)):
-        yield tuple(tuple(sorted(index for index, side in zip(indices, assignment) if side == slot)) for slot in range(2))
+def leibniz_terms(indices: tuple, factors: int):
+    """Every way to distribute the ξ-derivative indices I among the ``factors`` factors f_1 … f_n of a
+    product: ∂_I (f_1 ⋯ f_n) = Σ_{A_1 ⊔ … ⊔ A_n = I} ∂_{A_1} f_1 ⋯ ∂_{A_n} f_n, one (A_1, …, A_n) per term, each A_i
+    sorted (n^|I| terms; a derivative is symmetric in its indices)."""
+    for owners in itertools.product(range(factors), repeat=len(indices)):
+        yield tuple(tuple(sorted(index for index, owner in zip(indices, owners) if owner == factor))
+                    for factor in range(factors))
 
 
 def _flat(tensor) -> list:
@@ -219,30 +231,71 @@ def pair_index(m: int) -> np.ndarray:
     return index
 
 
-def whitening(weight: np.ndarray, moduli: np.ndarray) -> np.ndarray:
-    """R_c with w_c ℂ_c = R_c R_cᵀ (Cholesky), so that w x:ℂ:y = (R_cᵀ x)·(R_cᵀ y)."""
-    return np.sqrt(weight)[:, None, None] * np.linalg.cholesky(moduli)
+class Whitening:
+    """R_s with w_s ℂ_s = R_s R_sᵀ (Cholesky) at every sample s, so that w x:ℂ:y = (R_sᵀ x)·(R_sᵀ y).
+
+    Where every ℂ_s is one matrix scaled, ℂ_s = c_s ℂ̂ (an isotropic law with one Poisson ratio: c_s ∝ E_s),
+    to ``SHARED_TOLERANCE`` relative, R_s = √(w_s c_s) R̂ with ℂ̂ = R̂ R̂ᵀ: Rᵀ x is one 6 × 6 product and a
+    scaling per sample (``shared``); otherwise each sample has its own R_s. ``samples`` (bool) zeroes R_s
+    outside a region."""
+
+    SHARED_TOLERANCE = 1e-13
+
+    def __init__(self, weight: np.ndarray, moduli: np.ndarray, samples: np.ndarray | None = None,
+                 allow_shared: bool = True):
+        mask = 1.0 if samples is None else samples
+        size = np.abs(moduli).max(axis=(1, 2))
+        shapes = moduli / np.where(size > 0, size, 1.0)[:, None, None]
+        self.shared = bool(allow_shared and np.all(size > 0)
+                           and np.abs(shapes - shapes[0]).max() <= self.SHARED_TOLERANCE)
+        if self.shared:
+            self.factor = np.ascontiguousarray(np.linalg.cholesky(shapes[0]).T)          # R̂ᵀ
+            self.scale = np.sqrt(weight * size) * mask                                    # √(w_s c_s)
+        else:
+            self.factors = (np.sqrt(weight) * mask)[:, None, None] * np.linalg.cholesky(moduli)   # R_s
+
+    def apply(self, factor: np.ndarray) -> np.ndarray:
+        """R_sᵀ x at every sample of a (count, 6, n_samples) array x, the same shape."""
+        if self.shared:
+            whitened = np.matmul(self.factor, factor)
+            whitened *= self.scale
+            return whitened
+        return np.einsum("sab,kas->kbs", self.factors, factor)
 
 
-def whiten(factor: np.ndarray, transform: np.ndarray) -> np.ndarray:
-    """R_cᵀ x for every cell of an (n, n_cells, 6) array, flattened to (n, 6 n_cells)."""
-    whitened = np.matmul(factor.transpose(1, 0, 2), transform)        # (c, n, 6): x R = (Rᵀ x)ᵀ
-    return np.ascontiguousarray(whitened.transpose(1, 0, 2)).reshape(factor.shape[0], -1)
+def whitening(weight: np.ndarray, moduli: np.ndarray, samples: np.ndarray | None = None) -> Whitening:
+    """R_s with w_s ℂ_s = R_s R_sᵀ (:class:`Whitening`), zero outside ``samples`` when given."""
+    return Whitening(weight, moduli, samples)
+
+
+def whiten(factor: np.ndarray, transform: Whitening) -> np.ndarray:
+    """R_sᵀ x for every sample of a (count, 6, n_samples) array x, the same shape."""
+    return transform.apply(factor)
+
+
+def symmetric_product(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """½ (L Rᵀ + R Lᵀ) of two (count, …) arrays flattened to (count, k): BLAS' symmetric rank-2k update, half
+    the operations of the product L Rᵀ; L Lᵀ when ``right`` is ``left``."""
+    a, b = left.reshape(left.shape[0], -1), right.reshape(right.shape[0], -1)
+    upper = blas.dsyrk(1.0, a.T, trans=1) if right is left else blas.dsyr2k(0.5, a.T, b.T, trans=1)
+    return np.triu(upper) + np.triu(upper, 1).T
 
 
 def energy_tensors(left, right, m: int):
-    """Symmetrised Σ_c w (e_l·ℂ·e_r, ½(e_l·ℂ·q_r + e_r·ℂ·q_l), q_l·ℂ·q_r) from whitened factors.
+    """Symmetrised Σ_s w (e_l·ℂ·e_r, ½(e_l·ℂ·q_r + e_r·ℂ·q_l), q_l·ℂ·q_r) from whitened factors.
 
-    ``left`` and ``right`` are (ẽ, q̃) pairs; P3 and P4 are expanded from the pairs j ≤ k.
+    ``left`` and ``right`` are (ẽ, q̃) pairs, (count, 6, n_samples) each; P3 and P4 are expanded from the pairs
+    j ≤ k.
     """
     (e_left, q_left), (e_right, q_right) = left, right
-    p2 = e_left @ e_right.T
-    p3_pairs = 0.5 * (e_left @ q_right.T + e_right @ q_left.T)
-    p4_pairs = q_left @ q_right.T
+    flat = [part.reshape(part.shape[0], -1) for part in (e_left, q_left, e_right, q_right)]
+    e_left, q_left, e_right, q_right = flat
+    same = left is right
+    p2 = symmetric_product(e_left, e_left if same else e_right)
+    p3_pairs = e_left @ q_right.T if same else 0.5 * (e_left @ q_right.T + e_right @ q_left.T)
+    p4_pairs = symmetric_product(q_left, q_left if same else q_right)
     index = pair_index(m)
-    p2 = 0.5 * (p2 + p2.T)
     p3 = p3_pairs[:, index]
-    p4_pairs = 0.5 * (p4_pairs + p4_pairs.T)
     p4 = p4_pairs[index[:, :, None, None], index[None, None, :, :]]
     return p2, p3, p4
 
@@ -264,11 +317,8 @@ def internal_force_taylor(sampler: CellSampler, vectors: np.ndarray, n_parameter
     the other samples' whitened strains are zero.
     """
     m = vectors.shape[1]
-    moduli = sampler.elasticity()
     base_weight = sampler.weights(sampler.weight[0])
-    transform = whitening(base_weight, moduli)
-    if samples is not None:
-        transform = transform * samples[:, None, None]
+    transform = whitening(base_weight, sampler.elasticity(), samples)
     p = n_parameters if order >= 1 else 0
     whitened, weight_ratio = {}, {}
 
@@ -280,8 +330,7 @@ def internal_force_taylor(sampler: CellSampler, vectors: np.ndarray, n_parameter
     def weight(indices):
         if indices not in weight_ratio:
             sampler.set_shape_directions(*indices)
-            ratio = sampler.weights(sampler.weight[len(indices)]) / base_weight
-            weight_ratio[indices] = np.repeat(ratio, 6)
+            weight_ratio[indices] = sampler.weights(sampler.weight[len(indices)]) / base_weight
         return weight_ratio[indices]
 
     def tensors_for(derivative_indices):
@@ -290,7 +339,7 @@ def internal_force_taylor(sampler: CellSampler, vectors: np.ndarray, n_parameter
         # may go with either: the terms of one right factor (the lesser of the two) are summed on the left
         # first, one call per right factor (w_k E + 2 ∂_k E against E for a first derivative).
         lefts: dict[tuple, list] = {}
-        for weight_indices, left_indices, right_indices in _leibniz(derivative_indices):
+        for weight_indices, left_indices, right_indices in leibniz_terms(derivative_indices, 3):
             left_indices, right_indices = sorted((left_indices, right_indices), reverse=True)
             lefts.setdefault(right_indices, []).append((weight_indices, left_indices))
         for right_indices, terms in lefts.items():
@@ -316,10 +365,3 @@ def internal_force_taylor(sampler: CellSampler, vectors: np.ndarray, n_parameter
         taylor.append(tuple(np.stack([np.stack([second[k, l][i] for l in range(p)]) for k in range(p)])
                             for i in range(3)))
     return taylor
-
-
-def _leibniz(derivative_indices):
-    """Every way to distribute the ξ-derivative indices among the factors (w, E_left, E_right)."""
-    count = len(derivative_indices)
-    for assignment in itertools.product(range(3), repeat=count):
-        yield tuple(tuple(derivative_indices[i] for i in range(count) if assignment[i] == slot) for slot in range(3))

@@ -15,7 +15,6 @@ projected force and tangent of muscle j alone at unit activation.
 """
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass
 
@@ -25,6 +24,7 @@ from mpi4py import MPI
 from ufl.algorithms import extract_coefficients
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
+from aquarom_fenics.fem.cellwise import leibniz_terms
 from aquarom_fenics.forms.muscle import muscle_energy, muscle_stretch
 from aquarom_fenics.io.scene_muscles import start_ramp_time
 from aquarom_fenics.physics.taylor import Taylor, stack_taylor, taylor_of
@@ -236,11 +236,11 @@ def derivative_indices(p: int, order: int) -> list[tuple[int, ...]]:
 
 def stretch_products(weight: np.ndarray, stretch: np.ndarray, index: tuple, column: dict) -> np.ndarray:
     """∂_I Σ_s w_s a_s·b_s for every pair (a, b) of the stretches (s_0, s_1, …, s_m), (1 + m, 1 + m): Leibniz'
-    rule, each position of I = ``index`` given to w, a or b (3^|I| terms); ``weight`` (n_samples, n_terms),
-    ``stretch`` (1 + m, n_samples, n_terms, 3), their terms in the order of ``column``."""
+    rule, each position of I = ``index`` given to w, a or b (:func:`leibniz_terms`, 3^|I| terms); ``weight``
+    (n_samples, n_terms), ``stretch`` (1 + m, n_samples, n_terms, 3), their terms in the order of ``column``."""
     total = 0.0
-    for owners in itertools.product(range(3), repeat=len(index)):
-        parts = [column[tuple(sorted(k for k, owner in zip(index, owners) if owner == factor))] for factor in range(3)]
+    for term in leibniz_terms(index, 3):
+        parts = [column[indices] for indices in term]
         left = stretch[:, :, parts[1]] * weight[:, parts[0], None]
         right = stretch[:, :, parts[2]]
         total = total + left.reshape(left.shape[0], -1) @ right.reshape(right.shape[0], -1).T
