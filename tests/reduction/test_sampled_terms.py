@@ -21,13 +21,13 @@ from prom_checks import SO1_SHAPES
 
 @pytest.mark.parametrize("degree, order", [(1, 2), (2, 1)])
 def test_sampled_inertia_equals_the_projected_assembled_forms(degree, order):
-    """Vᵀ M V, Vᵀ m, ∫ρ dV_ξ and their first and second ξ-derivatives, off the nominal design."""
+    """Vᵀ M V, Vᵀ m_x, ∫ρ dV_ξ, Vᵀ m_y and their first and second ξ-derivatives, off the nominal design."""
     scene = coarse_scene(mesh={"degree": degree}, shapes=SO1_SHAPES)
     model = FullOrderModel(scene, load_fish(scene), np.array([0.1, -0.2, 0.05]))
     projector = Projector(model, build_basis(model, 3).vectors, 3, order)
     inertia = model.inertia
     assembled = [projector.taylor(form) for form in (inertia.mass_form, inertia.mass_moment_form,
-                                                     inertia.total_mass_form)]
+                                                     inertia.total_mass_form, inertia.mass_moment_y_form)]
     for expected, sampled in zip(assembled, sampled_inertia(model, projector, inertia.density)):
         for name in ("constant", "first", "second"):
             reference, value = getattr(expected, name), getattr(sampled, name)
