@@ -149,12 +149,14 @@ def sampled_inertia(fom, projector, density) -> tuple[Taylor, Taylor, Taylor, Ta
     weights = (fx.evaluate_expression(stacked, cells).reshape(cells.size, reference_weights.size, len(indices))
                * reference_weights[:, None]).reshape(n_samples, len(indices))
     column = {index: n for n, index in enumerate(indices)}
+    m = vectors.shape[1]
+    products = np.matmul(values.transpose(0, 2, 1), values).reshape(n_samples, m * m)      # V(x_s)ᵀ V(x_s)
+    local = (weights.T @ products, weights.T @ values[:, 0, :], weights.sum(axis=0), weights.T @ values[:, 1, :])
+    mass, moment_x, total, moment_y = (comm.allreduce(part, op=MPI.SUM) for part in local)
 
     def sums(index: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        weight = weights[:, column[index]]
-        local = (np.tensordot(values * weight[:, None, None], values, axes=([0, 1], [0, 1])),
-                 weight @ values[:, 0, :], np.array(weight.sum()), weight @ values[:, 1, :])
-        return tuple(comm.allreduce(part, op=MPI.SUM) for part in local)
+        n = column[index]
+        return mass[n].reshape(m, m), moment_x[n], np.array(total[n]), moment_y[n]
 
     return tuple(taylor_of(sums, p, projector.order))
 
