@@ -343,12 +343,19 @@ def internal_force_taylor(sampler: CellSampler, vectors: np.ndarray, n_parameter
             left_indices, right_indices = sorted((left_indices, right_indices), reverse=True)
             lefts.setdefault(right_indices, []).append((weight_indices, left_indices))
         for right_indices, terms in lefts.items():
+            terms.sort(key=lambda term: not term[0])          # the weighted terms first: they make the sum's arrays
             combined = None
             for weight_indices, left_indices in terms:
                 left = strain(left_indices)
-                if weight_indices:
-                    left = tuple(part * weight(weight_indices) for part in left)
-                combined = left if combined is None else tuple(a + b for a, b in zip(combined, left))
+                if combined is None:
+                    combined = (tuple(part * weight(weight_indices) for part in left) if weight_indices
+                                else left if len(terms) == 1 else tuple(part.copy() for part in left))
+                    continue
+                for total, part in zip(combined, left):
+                    if weight_indices:
+                        total += part * weight(weight_indices)
+                    else:
+                        total += part
             for total, part in zip(totals, energy_tensors(combined, strain(right_indices), m)):
                 total += part
         return force_tensors(*(comm.allreduce(total, op=MPI.SUM) for total in totals))
