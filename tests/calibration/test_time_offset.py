@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from aquarom_fenics.calibration.fit import model_at, sample_trajectory
-from aquarom_fenics.calibration.parameters import OBSERVED, TIME_OFFSET, with_values
+from aquarom_fenics.calibration.parameters import TIME_OFFSET, with_values
+from aquarom_fenics.dynamics.trajectory import OBSERVED
 from aquarom_fenics.cli import main
 from aquarom_fenics.dynamics.simulate import simulate_fom
 from aquarom_fenics.io.swim_data import SwimData
