@@ -207,8 +207,8 @@ def add_pair_products(into: np.ndarray, left: np.ndarray, right: np.ndarray) -> 
 
 def leibniz_terms(indices: tuple, factors: int):
     """Every way to distribute the ξ-derivative indices I among the ``factors`` factors f_1 … f_n of a
-    product: ∂_I (f_1 ⋯ f_n) = Σ_{A_1 ⊔ … ⊔ A_n = I} ∂_{A_1} f_1 ⋯ ∂_{A_n} f_n, one (A_1, …, A_n) per term, each A_i
-    sorted (n^|I| terms; a derivative is symmetric in its indices)."""
+    product: ∂_I (f_1 ⋯ f_n) = Σ_{A_1 ⊔ … ⊔ A_n = I} ∂_{A_1} f_1 ⋯ ∂_{A_n} f_n, one (A_1, …, A_n) per
+    term, each A_i sorted (n^|I| terms; a derivative is symmetric in its indices)."""
     for owners in itertools.product(range(factors), repeat=len(indices)):
         yield tuple(tuple(sorted(index for index, owner in zip(indices, owners) if owner == factor))
                     for factor in range(factors))
@@ -274,8 +274,9 @@ def whiten(factor: np.ndarray, transform: Whitening) -> np.ndarray:
 
 
 def symmetric_product(left: np.ndarray, right: np.ndarray) -> np.ndarray:
-    """½ (L Rᵀ + R Lᵀ) of two (count, …) arrays flattened to (count, k): BLAS' symmetric rank-2k update, half
-    the operations of the product L Rᵀ; L Lᵀ when ``right`` is ``left``."""
+    """½ (L Rᵀ + R Lᵀ) of two (count, …) arrays flattened to (count, k), by BLAS' symmetric rank-2k update (the
+    symmetrised product in the operations of L Rᵀ alone); L Lᵀ by the rank-k update, half of them, when
+    ``right`` is ``left``."""
     a, b = left.reshape(left.shape[0], -1), right.reshape(right.shape[0], -1)
     upper = blas.dsyrk(1.0, a.T, trans=1) if right is left else blas.dsyr2k(0.5, a.T, b.T, trans=1)
     return np.triu(upper) + np.triu(upper, 1).T
