@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from aquarom_fenics.dynamics.compiled import jit as _jit
-from aquarom_fenics.dynamics.kernel_thrust import add_projected_force, half_forces, half_state, project_blocks
+from aquarom_fenics.dynamics.kernel_thrust import add_projected_force, banded_times, half_forces, half_state, point_forces
 
 
 @_jit
@@ -116,18 +116,20 @@ def muscle_force(activations, muscle_constant, muscle_linear, eta, i):
 
 @_jit
 def residual_at(eu, ev, ea, out, activations, mono, tangent_mono, pairs, pair_of_triple, triples, elastic_force,
-                mass, damping, muscle_constant, muscle_linear, has_thrust, lagrangian, rows, own_node, other_node, length,
-                rest_tangent, thrust_weights, tail_weight, state, per_mass, has_drag, drag_direction, drag_row):
+                mass, damping, muscle_constant, muscle_linear, has_thrust, lagrangian, points, transposed, own_node,
+                other_node, length, rest_tangent, thrust_weights, tail_weight, state, per_mass, has_drag, drag_direction,
+                drag_row):
     """out = r_r = M η̈ + C η̇ + f_int(η) - f_ext at the evaluation point; (‖r‖, the force scale of Newton's
-    test max(‖f_int‖, ‖f_ext‖, ‖M η̈‖)). f_ext = -Σ_j a_j (b_j + B_j η) + f_thrust + f_drag."""
+    test max(‖f_int‖, ‖f_ext‖, ‖M η̈‖)). f_ext = -Σ_j a_j (b_j + B_j η) + f_thrust + f_drag; ``points`` = W
+    (2 n_points, m) of the thrust's points, ``transposed`` = Wᵀ."""
     m = eu.size
     monomials(eu, pairs, pair_of_triple, triples, mono, tangent_mono)
     external = np.zeros(m)
     if has_thrust:
-        half_state(eu, ev, ea, rows, own_node, other_node, length, rest_tangent, state)
+        half_state(eu, ev, ea, points, own_node, other_node, length, rest_tangent, state)
         tail_x, tail_y = half_forces(state, length, lagrangian, per_mass)
-        add_projected_force(per_mass, tail_x, tail_y, thrust_weights, tail_weight, rows, own_node, other_node, 1.0,
-                            external)
+        add_projected_force(per_mass, tail_x, tail_y, thrust_weights, tail_weight, transposed, own_node, other_node,
+                            1.0, external)
     speed = 0.0
     if has_drag:
         for k in range(m):
@@ -176,11 +178,12 @@ def tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass,
 @_jit
 def derivative_at(parameter_terms, eu, ev, ea, activations, units, mono, elastic_gradient, mass_gradient,
                   damping_gradient, muscle_constant, muscle_linear, muscle_constant_gradient,
-                  muscle_linear_gradient, has_thrust, moving_rest, rows, own_node, other_node, rest_rows, state,
-                  per_mass, length, thrust_weights, tail_weight, thrust_weight_gradient, tail_weight_gradient,
-                  lagrangian, k_blocks, c_blocks, m_blocks, has_drag, drag_gradient, drag_row, sensitivities,
-                  amplitude_sensitivity, out):
-    """out (m, columns) = ∂r/∂ξ_k (and ∂r/∂A) at fixed (η, η̇, η̈), as ``BatchedSystem.parameter_derivative``."""
+                  muscle_linear_gradient, has_thrust, moving_rest, transposed, own_node, other_node, rest_points,
+                  state, per_mass, length, thrust_weights, tail_weight, thrust_weight_gradient, tail_weight_gradient,
+                  lagrangian, k_banded, has_drag, drag_gradient, drag_row, sensitivities, amplitude_sensitivity, out):
+    """out (m, columns) = ∂r/∂ξ_k (and ∂r/∂A) at fixed (η, η̇, η̈), as ``BatchedSystem.parameter_derivative``;
+    the thrust's part -Wᵀ (∂f/∂ξ_k + K ∂x_rest/∂ξ_k), K the points' stiffness (``half_blocks``), ``rest_points``
+    ∂x_rest/∂ξ (2 n_points, p)."""
     m = eu.size
     p = elastic_gradient.shape[0]
     out[:] = 0.0
@@ -189,10 +192,20 @@ def derivative_at(parameter_terms, eu, ev, ea, activations, units, mono, elastic
         if has_drag:
             for k in range(m):
                 speed += drag_row[k] * ev[k]
-        column = np.zeros(m)
-        tail_x, tail_y = 0.0, 0.0
+        thrust = np.zeros((m, p))
         if has_thrust:
             tail_x, tail_y = half_forces(state, length, lagrangian, per_mass)
+            forces = np.zeros((p, transposed.shape[1]))        # ∂f/∂ξ_k on the points, then one projection
+            for c in range(p):
+                point_forces(per_mass, tail_x, tail_y, thrust_weight_gradient[c], tail_weight_gradient[c], own_node,
+                             other_node, forces[c])
+            if moving_rest:
+                moved = np.zeros((transposed.shape[1], p))
+                banded_times(k_banded, rest_points, 0, 1.0, moved)
+                for c in range(p):
+                    for row in range(transposed.shape[1]):
+                        forces[c, row] += moved[row, c]
+            thrust = np.dot(transposed, forces.T)
         for c in range(p):
             elastic = np.dot(mono, elastic_gradient[c])        # BLAS, as the force
             for i in range(m):
@@ -206,15 +219,9 @@ def derivative_at(parameter_terms, eu, ev, ea, activations, units, mono, elastic
                     total += mass_gradient[c, i, k] * ea[k] + damping_gradient[c, i, k] * ev[k]
                 if has_drag:
                     total -= drag_gradient[c, i] * speed * speed
+                if has_thrust:
+                    total -= thrust[i, c]
                 out[i, c] = total
-            if has_thrust:
-                column[:] = 0.0
-                add_projected_force(per_mass, tail_x, tail_y, thrust_weight_gradient[c], tail_weight_gradient[c],
-                                    rows, own_node, other_node, -1.0, column)
-                for i in range(m):
-                    out[i, c] += column[i]
-        if has_thrust and moving_rest:
-            project_blocks(k_blocks, 4 if lagrangian else 2, rows, own_node, other_node, rest_rows, -1.0, out[:, :p])
     if amplitude_sensitivity:
         c = out.shape[1] - 1
         for i in range(m):
