@@ -151,13 +151,15 @@ def half_blocks(state, length, weights, tail_weight, lagrangian, own_node, other
 @_jit
 def banded_times(banded, right, first, factor, out):
     """out (2 n_points, r) += factor J R of the block-tridiagonal J (``scatter``'s storage) and the columns
-    first … first + r - 1 of R (2 n_points, ·)."""
+    first … first + r - 1 of R (2 n_points, ·): a point's two rows at once from each neighbour's two."""
     n_points, r = banded.shape[0], out.shape[1]
     for a in range(n_points):
-        for i in range(2):
-            row = 2 * a + i
-            for b in range(max(a - 1, 0), min(a + 2, n_points)):
-                d = b - a + 1
-                j0, j1 = factor * banded[a, d, i, 0], factor * banded[a, d, i, 1]
-                for j in range(r):
-                    out[row, j] += j0 * right[2 * b, first + j] + j1 * right[2 * b + 1, first + j]
+        top, bottom = out[2 * a], out[2 * a + 1]
+        for b in range(max(a - 1, 0), min(a + 2, n_points)):
+            d = b - a + 1
+            j00, j01 = factor * banded[a, d, 0, 0], factor * banded[a, d, 0, 1]
+            j10, j11 = factor * banded[a, d, 1, 0], factor * banded[a, d, 1, 1]
+            x, y = right[2 * b, first:first + r], right[2 * b + 1, first:first + r]
+            for j in range(r):
+                top[j] += j00 * x[j] + j01 * y[j]
+                bottom[j] += j10 * x[j] + j11 * y[j]
