@@ -117,8 +117,8 @@ def muscle_force(activations, muscle_constant, muscle_linear, eta, i):
 @_jit
 def residual_at(eu, ev, ea, out, activations, mono, tangent_mono, pairs, pair_of_triple, triples, elastic_force,
                 mass, damping, muscle_constant, muscle_linear, has_thrust, lagrangian, points, transposed, own_node,
-                other_node, length, rest_tangent, thrust_weights, tail_weight, state, per_mass, has_drag, drag_direction,
-                drag_row):
+                other_node, length, inverse_length, rest_tangent, thrust_weights, tail_weight, state, per_mass, has_drag,
+                drag_direction, drag_row):
     """out = r_r = M η̈ + C η̇ + f_int(η) - f_ext at the evaluation point; (‖r‖, the force scale of Newton's
     test max(‖f_int‖, ‖f_ext‖, ‖M η̈‖)). f_ext = -Σ_j a_j (b_j + B_j η) + f_thrust + f_drag; ``points`` = W
     (2 n_points, m) of the thrust's points, ``transposed`` = Wᵀ."""
@@ -126,7 +126,7 @@ def residual_at(eu, ev, ea, out, activations, mono, tangent_mono, pairs, pair_of
     monomials(eu, pairs, pair_of_triple, triples, mono, tangent_mono)
     external = np.zeros(m)
     if has_thrust:
-        half_state(eu, ev, ea, points, own_node, other_node, length, rest_tangent, state)
+        half_state(eu, ev, ea, points, own_node, other_node, inverse_length, rest_tangent, state)
         tail_x, tail_y = half_forces(state, length, lagrangian, per_mass)
         add_projected_force(per_mass, tail_x, tail_y, thrust_weights, tail_weight, transposed, own_node, other_node,
                             1.0, external)

@@ -16,9 +16,10 @@ from aquarom_fenics.dynamics.compiled import jit as _jit
 
 
 @_jit
-def half_state(eta, eta_dot, eta_ddot, points, own_node, other_node, length, rest_tangent, state):
+def half_state(eta, eta_dot, eta_ddot, points, own_node, other_node, inverse_length, rest_tangent, state):
     """Per half-segment h: state[h] = (t, n, ṅ, v, a) as 10 numbers (x, y each), from the points' kinematics
-    (W η, W η̇, W η̈) computed once per point; ``points`` = W as (2 n_points, m), rows (x, y) of each point."""
+    (W η, W η̇, W η̈) computed once per point; ``points`` = W as (2 n_points, m), rows (x, y) of each point;
+    ``inverse_length`` 1/ℓ₀ per half-segment."""
     m = eta.size
     stacked = np.empty((m, 3))
     for k in range(m):
@@ -26,9 +27,10 @@ def half_state(eta, eta_dot, eta_ddot, points, own_node, other_node, length, res
     kinematics = np.dot(points, stacked)              # BLAS: (2 n_points, 3) = (position, velocity, acceleration)
     for h in range(own_node.size):
         o, x = 2 * own_node[h], 2 * other_node[h]
+        scale = inverse_length[h]
         for c in range(2):
-            state[h, c] = rest_tangent[h, c] + (kinematics[x + c, 0] - kinematics[o + c, 0]) / length[h]    # t
-            state[h, 4 + c] = (kinematics[x + c, 1] - kinematics[o + c, 1]) / length[h]                      # ṫ
+            state[h, c] = rest_tangent[h, c] + (kinematics[x + c, 0] - kinematics[o + c, 0]) * scale       # t
+            state[h, 4 + c] = (kinematics[x + c, 1] - kinematics[o + c, 1]) * scale                         # ṫ
             state[h, 6 + c] = kinematics[o + c, 1]                                                          # v
             state[h, 8 + c] = kinematics[o + c, 2]                                                          # a
         state[h, 2], state[h, 3] = -state[h, 1], state[h, 0]                  # n = R t

@@ -95,6 +95,7 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
     k_banded, c_banded = np.zeros((n_points, 3, 2, 2)), np.zeros((n_points, 3, 2, 2))
     m_banded, s_banded = np.zeros((n_points, 3, 2, 2)), np.zeros((n_points, 3, 2, 2))
     work = np.zeros((2 * n_points, m))
+    inverse_length = 1.0 / length
     u, v, a = np.zeros(m), np.zeros(m), np.zeros(m)
     u_new, v_new, a_new = np.zeros(m), np.zeros(m), np.zeros(m)
     u_pred, v_pred = np.zeros(m), np.zeros(m)
@@ -140,8 +141,8 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
             norm, scale = residual_at(eu, ev, ea, residual[:, 0], activations, mono, tangent_mono, pairs,
                                       pair_of_triple, triples, elastic_force, mass, damping, muscle_constant,
                                       muscle_linear, has_thrust, lagrangian, points, transposed, own_node, other_node,
-                                      length, rest_tangent, thrust_weights, tail_weight, state, per_mass, has_drag,
-                                      drag_direction, drag_row)
+                                      length, inverse_length, rest_tangent, thrust_weights, tail_weight, state,
+                                      per_mass, has_drag, drag_direction, drag_row)
             if not math.isfinite(norm):
                 result[2] = FAILED
                 return
