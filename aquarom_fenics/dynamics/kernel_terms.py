@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from aquarom_fenics.dynamics.compiled import jit as _jit
-from aquarom_fenics.dynamics.kernel_thrust import add_projected_force, banded_times, half_forces, half_state, point_forces
+from aquarom_fenics.dynamics.kernel_thrust import banded_times, half_forces, point_forces, thrust_force
 
 
 @_jit
@@ -80,13 +80,13 @@ def monomials(eta, pairs, pair_of_triple, triples, out, tangent_out):
 
 @_jit
 def design_elastic(weights, weight_derivatives, force_coefficients, tangent_coefficients, m):
-    """F (n_mono, m), T (n_t, m m), G (p, n_mono, m) of one design: Σ_j c_j of the Taylor terms' coefficients
-    and Σ_j ∂c_j/∂ξ_k of their forces."""
+    """F (n_mono, m), T (n_t, m m), G (n_mono, p m) of one design: Σ_j c_j of the Taylor terms' coefficients
+    and Σ_j ∂c_j/∂ξ_k of their forces (G[q, k m + i]: one product with the monomials gives every ξ_k's)."""
     n_terms, p = weights.size, weight_derivatives.shape[0]
     n_mono, n_t = force_coefficients.shape[0], tangent_coefficients.shape[0]
     force = np.zeros((n_mono, m))
     tangent = np.zeros((n_t, m * m))
-    gradient = np.zeros((p, n_mono, m))
+    gradient = np.zeros((n_mono, p * m))
     for j in range(n_terms):
         c = weights[j]
         for q in range(n_mono):
@@ -94,7 +94,7 @@ def design_elastic(weights, weight_derivatives, force_coefficients, tangent_coef
                 value = force_coefficients[q, j * m + i]
                 force[q, i] += c * value
                 for k in range(p):
-                    gradient[k, q, i] += weight_derivatives[k, j] * value
+                    gradient[q, k * m + i] += weight_derivatives[k, j] * value
         if c != 0.0:
             for q in range(n_t):
                 for i in range(m * m):
@@ -117,7 +117,7 @@ def muscle_force(activations, muscle_constant, muscle_linear, eta, i):
 @_jit
 def residual_at(eu, ev, ea, out, activations, mono, tangent_mono, pairs, pair_of_triple, triples, elastic_force,
                 mass, damping, muscle_constant, muscle_linear, has_thrust, lagrangian, points, transposed, own_node,
-                other_node, length, inverse_length, rest_tangent, thrust_weights, tail_weight, state, per_mass, has_drag,
+                other_node, length, inverse_length, rest_tangent, thrust_weights, tail_weight, state, has_drag,
                 drag_direction, drag_row):
     """out = r_r = M η̈ + C η̇ + f_int(η) - f_ext at the evaluation point; (‖r‖, the force scale of Newton's
     test max(‖f_int‖, ‖f_ext‖, ‖M η̈‖)). f_ext = -Σ_j a_j (b_j + B_j η) + f_thrust + f_drag; ``points`` = W
@@ -126,10 +126,8 @@ def residual_at(eu, ev, ea, out, activations, mono, tangent_mono, pairs, pair_of
     monomials(eu, pairs, pair_of_triple, triples, mono, tangent_mono)
     external = np.zeros(m)
     if has_thrust:
-        half_state(eu, ev, ea, points, own_node, other_node, inverse_length, rest_tangent, state)
-        tail_x, tail_y = half_forces(state, length, lagrangian, per_mass)
-        add_projected_force(per_mass, tail_x, tail_y, thrust_weights, tail_weight, transposed, own_node, other_node,
-                            1.0, external)
+        thrust_force(eu, ev, ea, points, transposed, own_node, other_node, length, inverse_length, rest_tangent,
+                     thrust_weights, tail_weight, lagrangian, state, external)
     speed = 0.0
     if has_drag:
         for k in range(m):
@@ -185,7 +183,7 @@ def derivative_at(parameter_terms, eu, ev, ea, activations, units, mono, elastic
     the thrust's part -Wᵀ (∂f/∂ξ_k + K ∂x_rest/∂ξ_k), K the points' stiffness (``half_blocks``), ``rest_points``
     ∂x_rest/∂ξ (2 n_points, p)."""
     m = eu.size
-    p = elastic_gradient.shape[0]
+    p = elastic_gradient.shape[1] // m
     out[:] = 0.0
     if sensitivities and parameter_terms:
         speed = 0.0
@@ -206,10 +204,10 @@ def derivative_at(parameter_terms, eu, ev, ea, activations, units, mono, elastic
                     for row in range(transposed.shape[1]):
                         forces[c, row] += moved[row, c]
             thrust = np.dot(transposed, forces.T)
+        elastic = np.dot(mono, elastic_gradient)               # BLAS, as the force: (p m,)
         for c in range(p):
-            elastic = np.dot(mono, elastic_gradient[c])        # BLAS, as the force
             for i in range(m):
-                total = elastic[i]
+                total = elastic[c * m + i]
                 for n in range(activations.size):
                     muscle = muscle_constant_gradient[c, n, i]
                     for k in range(m):

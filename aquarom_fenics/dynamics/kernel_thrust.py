@@ -16,26 +16,51 @@ from aquarom_fenics.dynamics.compiled import jit as _jit
 
 
 @_jit
-def half_state(eta, eta_dot, eta_ddot, points, own_node, other_node, inverse_length, rest_tangent, state):
-    """Per half-segment h: state[h] = (t, n, ṅ, v, a) as 10 numbers (x, y each), from the points' kinematics
-    (W η, W η̇, W η̈) computed once per point; ``points`` = W as (2 n_points, m), rows (x, y) of each point;
-    ``inverse_length`` 1/ℓ₀ per half-segment."""
-    m = eta.size
+def thrust_force(eta, eta_dot, eta_ddot, points, transposed, own_node, other_node, length, inverse_length,
+                 rest_tangent, weights, tail_weight, lagrangian, state, out):
+    """out += Wᵀ f_thrust: per half-segment h its state[h] = (t, n, ṅ, v, a) (10 numbers, x and y each; kept for
+    the Jacobian blocks at this point) from the points' kinematics (W η, W η̇, W η̈), and its weighted forces
+    assembled on the points in the same pass (as ``half_forces`` and ``point_forces``). ``points`` = W as
+    (2 n_points, m), rows (x, y) of each point, ``transposed`` = Wᵀ; ``inverse_length`` 1/ℓ₀ per half-segment."""
+    m, n_rows = eta.size, points.shape[0]
     stacked = np.empty((m, 3))
     for k in range(m):
         stacked[k, 0], stacked[k, 1], stacked[k, 2] = eta[k], eta_dot[k], eta_ddot[k]
     kinematics = np.dot(points, stacked)              # BLAS: (2 n_points, 3) = (position, velocity, acceleration)
+    force = np.zeros(n_rows)
     for h in range(own_node.size):
         o, x = 2 * own_node[h], 2 * other_node[h]
         scale = inverse_length[h]
-        for c in range(2):
-            state[h, c] = rest_tangent[h, c] + (kinematics[x + c, 0] - kinematics[o + c, 0]) * scale       # t
-            state[h, 4 + c] = (kinematics[x + c, 1] - kinematics[o + c, 1]) * scale                         # ṫ
-            state[h, 6 + c] = kinematics[o + c, 1]                                                          # v
-            state[h, 8 + c] = kinematics[o + c, 2]                                                          # a
-        state[h, 2], state[h, 3] = -state[h, 1], state[h, 0]                  # n = R t
-        rate_x, rate_y = state[h, 4], state[h, 5]
-        state[h, 4], state[h, 5] = -rate_y, rate_x                            # ṅ = R ṫ
+        tx = rest_tangent[h, 0] + (kinematics[x, 0] - kinematics[o, 0]) * scale
+        ty = rest_tangent[h, 1] + (kinematics[x + 1, 0] - kinematics[o + 1, 0]) * scale
+        nx, ny = -ty, tx                                                      # n = R t
+        ndx = -(kinematics[x + 1, 1] - kinematics[o + 1, 1]) * scale         # ṅ = R ṫ
+        ndy = (kinematics[x, 1] - kinematics[o, 1]) * scale
+        vx, vy, ax, ay = kinematics[o, 1], kinematics[o + 1, 1], kinematics[o, 2], kinematics[o + 1, 2]
+        state[h, 0], state[h, 1], state[h, 2], state[h, 3], state[h, 4] = tx, ty, nx, ny, ndx
+        state[h, 5], state[h, 6], state[h, 7], state[h, 8], state[h, 9] = ndy, vx, vy, ax, ay
+        v_n = vx * nx + vy * ny
+        along = ax * nx + ay * ny + vx * ndx + vy * ndy
+        w = weights[h]
+        spine_x = -length[h] * (along * nx + v_n * ndx)
+        spine_y = -length[h] * (along * ny + v_n * ndy)
+        if lagrangian:
+            g_x, g_y = v_n * vy, -v_n * vx                                    # (v·n) Rᵀ v
+            force[o] += w * (spine_x - g_x)
+            force[o + 1] += w * (spine_y - g_y)
+            force[x] += w * g_x
+            force[x + 1] += w * g_y
+        else:
+            force[o] += w * spine_x
+            force[o + 1] += w * spine_y
+    v_n = state[0, 6] * state[0, 2] + state[0, 7] * state[0, 3]
+    o = 2 * own_node[0]
+    force[o] += tail_weight * 0.5 * v_n * v_n * state[0, 0]                  # the tail: ½ m̃₀ (v·n)² t
+    force[o + 1] += tail_weight * 0.5 * v_n * v_n * state[0, 1]
+    projected = np.dot(transposed, force)
+    for k in range(m):
+        out[k] += projected[k]
+
 
 @_jit
 def half_forces(state, length, lagrangian, per_mass):
@@ -73,17 +98,6 @@ def point_forces(per_mass, tail_x, tail_y, weights, tail_weight, own_node, other
     force[2 * own_node[0]] += tail_weight * tail_x
     force[2 * own_node[0] + 1] += tail_weight * tail_y
 
-
-@_jit
-def add_projected_force(per_mass, tail_x, tail_y, weights, tail_weight, transposed, own_node, other_node, sign,
-                        out):
-    """out += sign Wᵀ f of the forces ``per_mass`` weighted by ``weights`` (H,) and ``tail_weight``, assembled
-    on the points first; ``transposed`` = Wᵀ (m, 2 n_points)."""
-    force = np.empty(transposed.shape[1])
-    point_forces(per_mass, tail_x, tail_y, weights, tail_weight, own_node, other_node, force)
-    projected = np.dot(transposed, force)
-    for k in range(out.size):
-        out[k] += sign * projected[k]
 
 @_jit
 def scatter(banded, a, b, sign, b00, b01, b10, b11):

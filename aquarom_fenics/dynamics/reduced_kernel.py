@@ -142,7 +142,7 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
                                       pair_of_triple, triples, elastic_force, mass, damping, muscle_constant,
                                       muscle_linear, has_thrust, lagrangian, points, transposed, own_node, other_node,
                                       length, inverse_length, rest_tangent, thrust_weights, tail_weight, state,
-                                      per_mass, has_drag, drag_direction, drag_row)
+                                      has_drag, drag_direction, drag_row)
             if not math.isfinite(norm):
                 result[2] = FAILED
                 return
