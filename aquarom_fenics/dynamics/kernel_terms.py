@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from aquarom_fenics.dynamics.compiled import jit as _jit
-from aquarom_fenics.dynamics.kernel_thrust import banded_times, half_forces, point_forces, thrust_force
+from aquarom_fenics.dynamics.kernel_thrust import force_gradients, thrust_force
 
 
 @_jit
@@ -176,12 +176,12 @@ def tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass,
 @_jit
 def derivative_at(parameter_terms, eu, ev, ea, activations, units, mono, elastic_gradient, mass_gradient,
                   damping_gradient, muscle_constant, muscle_linear, muscle_constant_gradient,
-                  muscle_linear_gradient, has_thrust, moving_rest, transposed, own_node, other_node, rest_points,
-                  state, per_mass, length, thrust_weights, tail_weight, thrust_weight_gradient, tail_weight_gradient,
-                  lagrangian, k_banded, has_drag, drag_gradient, drag_row, sensitivities, amplitude_sensitivity, out):
-    """out (m, columns) = ∂r/∂ξ_k (and ∂r/∂A) at fixed (η, η̇, η̈), as ``BatchedSystem.parameter_derivative``;
-    the thrust's part -Wᵀ (∂f/∂ξ_k + K ∂x_rest/∂ξ_k), K the points' stiffness (``half_blocks``), ``rest_points``
-    ∂x_rest/∂ξ (2 n_points, p)."""
+                  muscle_linear_gradient, has_thrust, points, own_node, other_node, state, length,
+                  thrust_weight_gradient, tail_weight_gradient, lagrangian, has_drag, drag_gradient, drag_row,
+                  sensitivities, amplitude_sensitivity, out):
+    """out (m, columns) = ∂r/∂ξ_k (and ∂r/∂A) at fixed (η, η̇, η̈), as ``BatchedSystem.parameter_derivative``,
+    but for the thrust's part from rest stations that move with ξ, -Wᵀ K ∂x_rest/∂ξ_k (K the points' stiffness):
+    the caller adds it with the thrust's tangents (``reduced_kernel``). The thrust's part here: -Wᵀ ∂f/∂ξ_k."""
     m = eu.size
     p = elastic_gradient.shape[1] // m
     out[:] = 0.0
@@ -190,20 +190,12 @@ def derivative_at(parameter_terms, eu, ev, ea, activations, units, mono, elastic
         if has_drag:
             for k in range(m):
                 speed += drag_row[k] * ev[k]
-        thrust = np.zeros((m, p))
+        thrust = np.zeros((p, m))
         if has_thrust:
-            tail_x, tail_y = half_forces(state, length, lagrangian, per_mass)
-            forces = np.zeros((p, transposed.shape[1]))        # ∂f/∂ξ_k on the points, then one projection
-            for c in range(p):
-                point_forces(per_mass, tail_x, tail_y, thrust_weight_gradient[c], tail_weight_gradient[c], own_node,
-                             other_node, forces[c])
-            if moving_rest:
-                moved = np.zeros((transposed.shape[1], p))
-                banded_times(k_banded, rest_points, 0, 1.0, moved)
-                for c in range(p):
-                    for row in range(transposed.shape[1]):
-                        forces[c, row] += moved[row, c]
-            thrust = np.dot(transposed, forces.T)
+            forces = np.empty((p, points.shape[0]))        # ∂f/∂ξ_k on the points, then one projection
+            force_gradients(state, length, lagrangian, thrust_weight_gradient, tail_weight_gradient, own_node,
+                            other_node, forces)
+            thrust = np.dot(forces, points)               # (p, m): (Wᵀ forces)ᵀ
         elastic = np.dot(mono, elastic_gradient)               # BLAS, as the force: (p m,)
         for c in range(p):
             for i in range(m):
@@ -218,7 +210,7 @@ def derivative_at(parameter_terms, eu, ev, ea, activations, units, mono, elastic
                 if has_drag:
                     total -= drag_gradient[c, i] * speed * speed
                 if has_thrust:
-                    total -= thrust[i, c]
+                    total -= thrust[c, i]
                 out[i, c] = total
     if amplitude_sensitivity:
         c = out.shape[1] - 1

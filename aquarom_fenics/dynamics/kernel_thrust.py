@@ -63,40 +63,32 @@ def thrust_force(eta, eta_dot, eta_ddot, points, transposed, own_node, other_nod
 
 
 @_jit
-def half_forces(state, length, lagrangian, per_mass):
-    """Per-mass forces of each half-segment: per_mass[h] = (f_spine/m̃ on o (2), g/m̃ (2)), the tail's
-    f_tail/m̃₀ = ½ (v·n)² t of half-segment 0 returned."""
+def force_gradients(state, length, lagrangian, weight_gradients, tail_gradient, own_node, other_node, forces):
+    """forces (p, 2 n_points) = ∂f/∂ξ_k on the points at fixed kinematics: the half-segments' per-mass forces
+    (f_spine/m̃ on o, g/m̃ on x and -g/m̃ on o, the tail's ½ (v·n)² t) weighted by ∂w_h/∂ξ_k (p, H) and
+    ∂m̃₀/∂ξ_k (p,)."""
+    forces[:] = 0.0
+    p = forces.shape[0]
     for h in range(state.shape[0]):
         tx, ty, nx, ny, ndx, ndy, vx, vy, ax, ay = state[h]
-        a_n = ax * nx + ay * ny
-        v_nd = vx * ndx + vy * ndy
-        v_n = vx * nx + vy * ny
-        per_mass[h, 0] = -length[h] * ((a_n + v_nd) * nx + v_n * ndx)
-        per_mass[h, 1] = -length[h] * ((a_n + v_nd) * ny + v_n * ndy)
-        if lagrangian:
-            per_mass[h, 2] = v_n * vy          # (v·n) Rᵀ v, Rᵀ v = (v_y, -v_x)
-            per_mass[h, 3] = -v_n * vx
-        else:
-            per_mass[h, 2] = 0.0
-            per_mass[h, 3] = 0.0
-    tx, ty, nx, ny = state[0, 0], state[0, 1], state[0, 2], state[0, 3]
-    v_n = state[0, 6] * nx + state[0, 7] * ny
-    return 0.5 * v_n * v_n * tx, 0.5 * v_n * v_n * ty
-
-@_jit
-def point_forces(per_mass, tail_x, tail_y, weights, tail_weight, own_node, other_node, force):
-    """force (2 n_points,) = the forces ``per_mass`` weighted by ``weights`` (H,) and ``tail_weight`` assembled on
-    the points (x, y of each)."""
-    force[:] = 0.0
-    for h in range(per_mass.shape[0]):
-        w = weights[h]
         o, x = 2 * own_node[h], 2 * other_node[h]
-        force[o] += w * (per_mass[h, 0] - per_mass[h, 2])
-        force[o + 1] += w * (per_mass[h, 1] - per_mass[h, 3])
-        force[x] += w * per_mass[h, 2]
-        force[x + 1] += w * per_mass[h, 3]
-    force[2 * own_node[0]] += tail_weight * tail_x
-    force[2 * own_node[0] + 1] += tail_weight * tail_y
+        v_n = vx * nx + vy * ny
+        along = ax * nx + ay * ny + vx * ndx + vy * ndy
+        spine_x = -length[h] * (along * nx + v_n * ndx)
+        spine_y = -length[h] * (along * ny + v_n * ndy)
+        g_x, g_y = (v_n * vy, -v_n * vx) if lagrangian else (0.0, 0.0)      # (v·n) Rᵀ v
+        for c in range(p):
+            w = weight_gradients[c, h]
+            forces[c, o] += w * (spine_x - g_x)
+            forces[c, o + 1] += w * (spine_y - g_y)
+            forces[c, x] += w * g_x
+            forces[c, x + 1] += w * g_y
+    v_n = state[0, 6] * state[0, 2] + state[0, 7] * state[0, 3]
+    tail_x, tail_y = 0.5 * v_n * v_n * state[0, 0], 0.5 * v_n * v_n * state[0, 1]
+    o = 2 * own_node[0]
+    for c in range(p):
+        forces[c, o] += tail_gradient[c] * tail_x
+        forces[c, o + 1] += tail_gradient[c] * tail_y
 
 
 @_jit
@@ -179,3 +171,28 @@ def banded_times(banded, right, first, factor, out):
             for j in range(r):
                 top[j] += j00 * x[j] + j01 * y[j]
                 bottom[j] += j10 * x[j] + j11 * y[j]
+
+
+@_jit
+def banded_tangents(stiffness, damping, mass, right, out):
+    """out (2 n_points, r) += K R₀ + C R₁ - M R₂ of the points' stiffness, damping and added mass (``scatter``'s
+    storage; M block-diagonal) and the column sets R = [R₀ R₁ R₂] (2 n_points, 3r): ``banded_times`` of the three
+    in one pass."""
+    n_points, r = stiffness.shape[0], out.shape[1]
+    for a in range(n_points):
+        top, bottom = out[2 * a], out[2 * a + 1]
+        for b in range(max(a - 1, 0), min(a + 2, n_points)):
+            d = b - a + 1
+            k00, k01, k10, k11 = stiffness[a, d, 0, 0], stiffness[a, d, 0, 1], stiffness[a, d, 1, 0], stiffness[a, d, 1, 1]
+            c00, c01, c10, c11 = damping[a, d, 0, 0], damping[a, d, 0, 1], damping[a, d, 1, 0], damping[a, d, 1, 1]
+            x, y = right[2 * b], right[2 * b + 1]
+            for j in range(r):
+                x0, y0, x1, y1 = x[j], y[j], x[r + j], y[r + j]
+                top[j] += k00 * x0 + k01 * y0 + c00 * x1 + c01 * y1
+                bottom[j] += k10 * x0 + k11 * y0 + c10 * x1 + c11 * y1
+        m00, m01, m10, m11 = mass[a, 1, 0, 0], mass[a, 1, 0, 1], mass[a, 1, 1, 0], mass[a, 1, 1, 1]
+        x, y = right[2 * a], right[2 * a + 1]
+        for j in range(r):
+            x2, y2 = x[2 * r + j], y[2 * r + j]
+            top[j] -= m00 * x2 + m01 * y2
+            bottom[j] -= m10 * x2 + m11 * y2

@@ -25,7 +25,7 @@ from aquarom_fenics.dynamics.compiled import available, jit as _jit, refresh_sta
 from aquarom_fenics.dynamics.kernel_pack import Packed, pack, synthetic
 from aquarom_fenics.dynamics.kernel_terms import (between, derivative_at, design_elastic, lu_factor, lu_solve,
                                                   residual_at, tangents_at)
-from aquarom_fenics.dynamics.kernel_thrust import banded_times, half_blocks
+from aquarom_fenics.dynamics.kernel_thrust import banded_tangents, banded_times, half_blocks
 
 __all__ = ["available", "integrate_all", "integrate_packed", "transition_packed", "pack", "Packed", "synthetic", "warm_up", "OK", "FAILED"]
 
@@ -87,7 +87,6 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
     n_mono, n_t = force_coefficients.shape[0], tangent_coefficients.shape[0]
     mono, tangent_mono = np.empty(n_mono), np.empty(n_t)
     state = np.zeros((halves, 10))
-    per_mass = np.zeros((halves, 4))
     n_points = rows.shape[0]
     points = rows.reshape((2 * n_points, m))                       # W: rows (x, y) of each point
     transposed = np.ascontiguousarray(points.T)                    # Wᵀ
@@ -195,10 +194,9 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
             else:
                 derivative_at(parameter_terms, eu, ev, ea, activations, units[step], mono, elastic_gradient,
                               mass_gradient, damping_gradient, muscle_constant, muscle_linear, muscle_constant_gradient,
-                              muscle_linear_gradient, has_thrust, moving_rest, transposed, own_node, other_node,
-                              rest_points, state, per_mass, length, thrust_weights, tail_weight,
-                              thrust_weight_gradient, tail_weight_gradient, lagrangian, k_banded, has_drag,
-                              drag_gradient, drag_row, sensitivities, amplitude_sensitivity, rhs)
+                              muscle_linear_gradient, has_thrust, points, own_node, other_node, state, length,
+                              thrust_weight_gradient, tail_weight_gradient, lagrangian, has_drag, drag_gradient,
+                              drag_row, sensitivities, amplitude_sensitivity, rhs)
             # rhs = -∂r/∂ξ - C (η̇'_{n+1-α_f} - v_f η'_p) + a_f M η'_p - α_f K η'_n - α_m M η̈'_n, with
             # η̇'_{n+1-α_f} = (1 - α_f) η̇'_p + α_f η̇'_n: combination = that bracket
             for i in range(m):
@@ -217,19 +215,21 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
                                   - alpha_m * mass_t[i, k] * sens[2, k, c])
                     thrust_rhs[i, c] = total
             if has_thrust:
-                # the thrust's tangents -Wᵀ J W on the same columns: Wᵀ (α_f K W η'_n + C W (the bracket)
-                # - M W (a_f η'_p - α_m η̈'_n)), one product W X of the three column sets and one Wᵀ Y
+                # the thrust's tangents -Wᵀ J W on the same columns: Wᵀ (K (α_f W η'_n + ∂x_rest/∂ξ) + C W (the
+                # bracket) - M W (a_f η'_p - α_m η̈'_n)), with -∂r/∂ξ's part from rest stations that move (-Wᵀ K
+                # ∂x_rest/∂ξ_k, columns k < p): one product W X of the three column sets, one Wᵀ Y
                 for i in range(m):
                     for c in range(columns):
-                        stacked[i, c] = sens[0, i, c]
+                        stacked[i, c] = alpha_f * sens[0, i, c]
                         stacked[i, columns + c] = combination[i, c]
                         stacked[i, 2 * columns + c] = k_a * sens_new[0, i, c] - alpha_m * sens[2, i, c]
                 moved = np.dot(points, stacked)
+                if moving_rest and parameter_terms and sensitivities and not transition:
+                    for row in range(2 * n_points):
+                        for c in range(p):
+                            moved[row, c] += rest_points[row, c]
                 right[:] = 0.0
-                if alpha_f != 0.0:
-                    banded_times(k_banded, moved, 0, alpha_f, right)
-                banded_times(c_banded, moved, columns, 1.0, right)
-                banded_times(m_banded, moved, 2 * columns, -1.0, right)
+                banded_tangents(k_banded, c_banded, m_banded, moved, right)
                 projected = np.dot(transposed, right)
                 for i in range(m):
                     for c in range(columns):
