@@ -79,27 +79,22 @@ def monomials(eta, pairs, pair_of_triple, triples, out, tangent_out):
         out[m + n2 + q] = out[m + pair_of_triple[q]] * eta[triples[q, 2]]
 
 @_jit
-def design_elastic(weights, weight_derivatives, force_coefficients, tangent_coefficients, m):
-    """F (n_mono, m), T (n_t, m m), G (n_mono, p m) of one design: Σ_j c_j of the Taylor terms' coefficients
-    and Σ_j ∂c_j/∂ξ_k of their forces (G[q, k m + i]: one product with the monomials gives every ξ_k's)."""
-    n_terms, p = weights.size, weight_derivatives.shape[0]
+def design_elastic(weights, force_coefficients, tangent_coefficients, m):
+    """F (n_mono, m), T (n_t, m m) of one design: Σ_j c_j of the Taylor terms' coefficients."""
+    n_terms = weights.size
     n_mono, n_t = force_coefficients.shape[0], tangent_coefficients.shape[0]
     force = np.zeros((n_mono, m))
     tangent = np.zeros((n_t, m * m))
-    gradient = np.zeros((n_mono, p * m))
     for j in range(n_terms):
         c = weights[j]
-        for q in range(n_mono):
-            for i in range(m):
-                value = force_coefficients[q, j * m + i]
-                force[q, i] += c * value
-                for k in range(p):
-                    gradient[q, k * m + i] += weight_derivatives[k, j] * value
         if c != 0.0:
+            for q in range(n_mono):
+                for i in range(m):
+                    force[q, i] += c * force_coefficients[q, j * m + i]
             for q in range(n_t):
                 for i in range(m * m):
                     tangent[q, i] += c * tangent_coefficients[q, j * m * m + i]
-    return force, tangent, gradient
+    return force, tangent
 
 
 @_jit
@@ -174,7 +169,8 @@ def tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass,
                 damping_out[i, k] -= 2.0 * speed * drag_direction[i] * drag_row[k]
 
 @_jit
-def derivative_at(parameter_terms, eu, ev, ea, activations, units, mono, elastic_gradient, mass_gradient,
+def derivative_at(parameter_terms, eu, ev, ea, activations, units, mono, force_coefficients, weight_derivatives,
+                  mass_gradient,
                   damping_gradient, muscle_constant, muscle_linear, muscle_constant_gradient,
                   muscle_linear_gradient, has_thrust, points, own_node, other_node, state, length,
                   thrust_weight_gradient, tail_weight_gradient, lagrangian, has_drag, drag_gradient, drag_row,
@@ -183,7 +179,7 @@ def derivative_at(parameter_terms, eu, ev, ea, activations, units, mono, elastic
     but for the thrust's part from rest stations that move with ξ, -Wᵀ K ∂x_rest/∂ξ_k (K the points' stiffness):
     the caller adds it with the thrust's tangents (``reduced_kernel``). The thrust's part here: -Wᵀ ∂f/∂ξ_k."""
     m = eu.size
-    p = elastic_gradient.shape[1] // m
+    p = weight_derivatives.shape[0]
     out[:] = 0.0
     if sensitivities and parameter_terms:
         speed = 0.0
@@ -196,7 +192,16 @@ def derivative_at(parameter_terms, eu, ev, ea, activations, units, mono, elastic
             force_gradients(state, length, lagrangian, thrust_weight_gradient, tail_weight_gradient, own_node,
                             other_node, forces)
             thrust = np.dot(forces, points)               # (p, m): (Wᵀ forces)ᵀ
-        elastic = np.dot(mono, elastic_gradient)               # BLAS, as the force: (p m,)
+        # ∂f_int/∂ξ_k = Σ_j ∂c_j/∂ξ_k f_j(η): the Taylor terms' forces f_j from one product with their shared
+        # coefficients (BLAS, as the force), then the design's weights' derivatives (mostly zeros)
+        terms = np.dot(mono, force_coefficients)               # (n_terms m,)
+        elastic = np.zeros(p * m)
+        for c in range(p):
+            for j in range(weight_derivatives.shape[1]):
+                factor = weight_derivatives[c, j]
+                if factor != 0.0:
+                    for i in range(m):
+                        elastic[c * m + i] += factor * terms[j * m + i]
         for c in range(p):
             for i in range(m):
                 total = elastic[c * m + i]

@@ -82,8 +82,7 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
     k_u = 1.0 - alpha_f
     k_v = (1.0 - alpha_f) * gamma / (beta * h)
     k_a = (1.0 - alpha_m) / (beta * h * h)
-    elastic_force, elastic_tangent, elastic_gradient = design_elastic(
-        weights, weight_derivatives, force_coefficients, tangent_coefficients, m)
+    elastic_force, elastic_tangent = design_elastic(weights, force_coefficients, tangent_coefficients, m)
     n_mono, n_t = force_coefficients.shape[0], tangent_coefficients.shape[0]
     mono, tangent_mono = np.empty(n_mono), np.empty(n_t)
     state = np.zeros((halves, 10))
@@ -192,9 +191,9 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
             if transition:
                 rhs[:] = 0.0
             else:
-                derivative_at(parameter_terms, eu, ev, ea, activations, units[step], mono, elastic_gradient,
-                              mass_gradient, damping_gradient, muscle_constant, muscle_linear, muscle_constant_gradient,
-                              muscle_linear_gradient, has_thrust, points, own_node, other_node, state, length,
+                derivative_at(parameter_terms, eu, ev, ea, activations, units[step], mono, force_coefficients,
+                              weight_derivatives, mass_gradient, damping_gradient, muscle_constant, muscle_linear,
+                              muscle_constant_gradient, muscle_linear_gradient, has_thrust, points, own_node, other_node, state, length,
                               thrust_weight_gradient, tail_weight_gradient, lagrangian, has_drag, drag_gradient,
                               drag_row, sensitivities, amplitude_sensitivity, rhs)
             # rhs = -∂r/∂ξ - C (η̇'_{n+1-α_f} - v_f η'_p) + a_f M η'_p - α_f K η'_n - α_m M η̈'_n, with
