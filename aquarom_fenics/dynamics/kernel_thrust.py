@@ -6,7 +6,8 @@
     f_0 += m̃₀ ½ (v·n)² t  (segment 0's rear half: the tail)
 
 with w the half-segment's virtual mass (½ m̃ of its point for the trapezoid rule), and the Jacobian blocks of
-``physics/thrust_jacobians.py`` on (o, x), projected Wᵀ J W through the points' block-tridiagonal matrix.
+``physics/thrust_jacobians.py`` on (o, x), assembled into the points' block-tridiagonal matrices J (stiffness,
+damping, added mass) and projected as Wᵀ (J W): the banded product here, the product with Wᵀ one BLAS call.
 """
 from __future__ import annotations
 
@@ -20,8 +21,9 @@ def thrust_force(eta, eta_dot, eta_ddot, points, transposed, own_node, other_nod
                  rest_tangent, weights, tail_weight, lagrangian, state, out):
     """out += Wᵀ f_thrust: per half-segment h its state[h] = (t, n, ṅ, v, a) (10 numbers, x and y each; kept for
     the Jacobian blocks at this point) from the points' kinematics (W η, W η̇, W η̈), and its weighted forces
-    assembled on the points in the same pass (as ``half_forces`` and ``point_forces``). ``points`` = W as
-    (2 n_points, m), rows (x, y) of each point, ``transposed`` = Wᵀ; ``inverse_length`` 1/ℓ₀ per half-segment."""
+    assembled on the points in the same pass (the module's law; ``force_gradients`` weights the same per-mass
+    forces by their ξ-derivatives). ``points`` = W as (2 n_points, m), rows (x, y) of each point, ``transposed`` =
+    Wᵀ; ``inverse_length`` 1/ℓ₀ per half-segment."""
     m, n_rows = eta.size, points.shape[0]
     stacked = np.empty((m, 3))
     for k in range(m):
