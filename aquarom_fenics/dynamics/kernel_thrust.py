@@ -73,7 +73,7 @@ def force_gradients(state, length, lagrangian, weight_gradients, tail_gradient, 
     p = forces.shape[0]
     for h in range(state.shape[0]):
         tx, ty, nx, ny, ndx, ndy = state[h, 0], state[h, 1], state[h, 2], state[h, 3], state[h, 4], state[h, 5]
-        vx, vy, ax, ay = state[h, 6], state[h, 7], state[h, 8], state[h, 9]      # (not a row's unpacking: slower)
+        vx, vy, ax, ay = state[h, 6], state[h, 7], state[h, 8], state[h, 9]      # not a row's unpacking: slower
         o, x = 2 * own_node[h], 2 * other_node[h]
         v_n = vx * nx + vy * ny
         along = ax * nx + ay * ny + vx * ndx + vy * ndy
@@ -113,7 +113,7 @@ def half_blocks(state, length, weights, tail_weight, lagrangian, own_node, other
     mass[:] = 0.0
     for h in range(state.shape[0]):
         tx, ty, nx, ny, ndx, ndy = state[h, 0], state[h, 1], state[h, 2], state[h, 3], state[h, 4], state[h, 5]
-        vx, vy, ax, ay = state[h, 6], state[h, 7], state[h, 8], state[h, 9]      # (not a row's unpacking: slower)
+        vx, vy, ax, ay = state[h, 6], state[h, 7], state[h, 8], state[h, 9]      # not a row's unpacking: slower
         o, x = own_node[h], other_node[h]
         w, ell = weights[h], length[h]
         a_n = ax * nx + ay * ny
@@ -187,7 +187,8 @@ def banded_tangents(stiffness, damping, mass, right, out):
         top, bottom = out[2 * a], out[2 * a + 1]
         for b in range(max(a - 1, 0), min(a + 2, n_points)):
             d = b - a + 1
-            k00, k01, k10, k11 = stiffness[a, d, 0, 0], stiffness[a, d, 0, 1], stiffness[a, d, 1, 0], stiffness[a, d, 1, 1]
+            k00, k01 = stiffness[a, d, 0, 0], stiffness[a, d, 0, 1]
+            k10, k11 = stiffness[a, d, 1, 0], stiffness[a, d, 1, 1]
             c00, c01, c10, c11 = damping[a, d, 0, 0], damping[a, d, 0, 1], damping[a, d, 1, 0], damping[a, d, 1, 1]
             x, y = right[2 * b], right[2 * b + 1]
             for j in range(r):

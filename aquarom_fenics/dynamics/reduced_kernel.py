@@ -193,9 +193,9 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
             else:
                 derivative_at(parameter_terms, eu, ev, ea, activations, units[step], mono, force_coefficients,
                               weight_derivatives, mass_gradient, damping_gradient, muscle_constant, muscle_linear,
-                              muscle_constant_gradient, muscle_linear_gradient, has_thrust, points, own_node, other_node, state, length,
-                              thrust_weight_gradient, tail_weight_gradient, lagrangian, has_drag, drag_gradient,
-                              drag_row, sensitivities, amplitude_sensitivity, rhs)
+                              muscle_constant_gradient, muscle_linear_gradient, has_thrust, points, own_node,
+                              other_node, state, length, thrust_weight_gradient, tail_weight_gradient, lagrangian,
+                              has_drag, drag_gradient, drag_row, sensitivities, amplitude_sensitivity, rhs)
             # rhs = -∂r/∂ξ - C (η̇'_{n+1-α_f} - v_f η'_p) + a_f M η'_p - α_f K η'_n - α_m M η̈'_n, with
             # η̇'_{n+1-α_f} = (1 - α_f) η̇'_p + α_f η̇'_n: combination = that bracket
             for i in range(m):
