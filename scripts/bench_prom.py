@@ -11,7 +11,8 @@ without sensitivities (fastest and median of 20), and the FOM time on the same m
 The reduced solves (``--only solve``, quick: level-1 PROMs, no FOM): one ``simulate_reduced`` with
 sensitivities (fastest and median of 20) and ``simulate_batch`` per design with the compiled kernel for batches
 of 1, 10, 100 and 1000 designs with sensitivities, and for 100 designs without them and with the numpy engine
-(fastest of a few runs), for SO1, SO2, SO3 and bases of 24 and 26 vectors.
+(fastest of a few runs), for SO1, SO2, SO3 and bases of 24 and 26 vectors; per scene its "targets": the CPU time of one
+design (a batch of one) against 5 ms and the least per design in batches of 100 or more against 1 ms.
 Writes results/bench/prom.json (``--only solve`` its "reduced_solves" entry, the rest kept).
 """
 import argparse
@@ -98,6 +99,20 @@ def batch_seconds(prom, scene, xis, repeats: int, engine: str = "compiled",
     return min(times), min(cpu)
 
 
+ONE_DESIGN_TARGET, PER_DESIGN_TARGET = 5e-3, 1e-3
+"""[s] of CPU with sensitivities: one design (a batch of one), and per design in a batch of 100 or more."""
+
+
+def targets(cpu_per_design: dict) -> dict:
+    """The issue's targets against the CPU times per design (``batch_seconds``) of a scene: one design ≤ 5 ms,
+    ≤ 1 ms per design in a batch of 100 or more (both with sensitivities)."""
+    one = cpu_per_design["1"]
+    batched = min(value for size, value in cpu_per_design.items() if int(size) >= 100)
+    return {"one_design": one, "one_design_target": ONE_DESIGN_TARGET, "one_design_met": one <= ONE_DESIGN_TARGET,
+            "per_design_in_batch": batched, "per_design_target": PER_DESIGN_TARGET,
+            "per_design_met": batched <= PER_DESIGN_TARGET}
+
+
 def reduced_solves() -> list[dict]:
     """One reduced solve and batched solves per design, with sensitivities, per scene of SOLVE_SCENES."""
     solves = []
@@ -123,6 +138,7 @@ def reduced_solves() -> list[dict]:
         entry["batched_time_per_design_no_sensitivities"] = {"100": batch_seconds(prom, scene, xis, 2,
                                                                                   sensitivities=False)[0]}
         entry["batched_time_per_design_numpy"] = {"100": batch_seconds(prom, scene, xis, 1, engine="numpy")[0]}
+        entry["targets"] = targets(entry["batched_cpu_time_per_design"])
         solves.append(entry)
         print(entry, flush=True)
     return solves

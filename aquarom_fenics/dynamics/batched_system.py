@@ -96,16 +96,14 @@ def monomial_indices(m: int, degree: int) -> tuple[np.ndarray, np.ndarray]:
     return tuples, counts
 
 
-class BatchedElastic:
-    """f_int,r(η_b; ξ_b) = Σ_j c_j(Δξ_b) (T1_j η + T2_j η η + T3_j η η η) of B designs."""
+class SharedElastic:
+    """The design-independent part of :class:`BatchedElastic` for one PROM's elastic tensors: the Taylor order,
+    the monomials' indices and the Taylor terms' force and tangent coefficients."""
 
-    def __init__(self, prom: ReducedModel, deltas: np.ndarray):
-        tensors = prom.elastic
-        m, p = prom.size, deltas.shape[1]
+    def __init__(self, tensors, m: int, p: int):
         taylors = (tensors.linear, tensors.quadratic, tensors.cubic)
-        order = taylor_order(taylors, p)
-        self.weights, self.weight_derivatives = taylor_weights(deltas, order)        # (B, J), (B, p, J)
-        linear, quadratic, cubic = (taylor_terms(t, p, order) for t in taylors)
+        self.order = taylor_order(taylors, p)
+        linear, quadratic, cubic = (taylor_terms(t, p, self.order) for t in taylors)
         self.n_terms = linear.shape[0]
         self.pairs, pair_counts = monomial_indices(m, 2)
         self.triples, triple_counts = monomial_indices(m, 3)
@@ -119,10 +117,39 @@ class BatchedElastic:
         self.tangent_coefficients = np.concatenate(
             [linear[..., None], 2.0 * quadratic, tangent_pairs], axis=3).transpose(3, 0, 1, 2) \
             .reshape(-1, self.n_terms * m * m).copy()
-        self.linear = taylor_at(tensors.linear, deltas)                                     # K1 = K_0,r (B, m, m)
-
         index = {tuple(pair): n for n, pair in enumerate(self.pairs.tolist())}
         self.pair_of_triple = np.array([index[(k, l)] for k, l, _ in self.triples.tolist()], dtype=int)
+
+
+_SHARED_ELASTIC: dict = {}
+"""id(tensors), p -> (tensors, SharedElastic): the last few PROMs' (a batch of one design would otherwise spend a
+fifth of its time forming them again)."""
+
+
+def shared_elastic(tensors, m: int, p: int) -> SharedElastic:
+    """The :class:`SharedElastic` of these elastic tensors, formed once (the last 8 kept)."""
+    key = (id(tensors), p)
+    kept = _SHARED_ELASTIC.get(key)
+    if kept is not None and kept[0] is tensors:
+        return kept[1]
+    shared = SharedElastic(tensors, m, p)
+    if len(_SHARED_ELASTIC) >= 8:
+        _SHARED_ELASTIC.pop(next(iter(_SHARED_ELASTIC)))
+    _SHARED_ELASTIC[key] = (tensors, shared)
+    return shared
+
+
+class BatchedElastic:
+    """f_int,r(η_b; ξ_b) = Σ_j c_j(Δξ_b) (T1_j η + T2_j η η + T3_j η η η) of B designs."""
+
+    def __init__(self, prom: ReducedModel, deltas: np.ndarray):
+        tensors = prom.elastic
+        shared = shared_elastic(tensors, prom.size, deltas.shape[1])
+        self.weights, self.weight_derivatives = taylor_weights(deltas, shared.order)  # (B, J), (B, p, J)
+        self.n_terms, self.pairs, self.triples = shared.n_terms, shared.pairs, shared.triples
+        self.force_coefficients, self.tangent_coefficients = shared.force_coefficients, shared.tangent_coefficients
+        self.pair_of_triple = shared.pair_of_triple
+        self.linear = taylor_at(tensors.linear, deltas)                                     # K1 = K_0,r (B, m, m)
 
     def select(self, rows: np.ndarray) -> "BatchedElastic":
         """The term of the designs ``rows``."""

@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from aquarom_fenics.dynamics.compiled import jit as _jit
-from aquarom_fenics.dynamics.kernel_thrust import add_projected_force, half_forces, half_state, project_blocks
+from aquarom_fenics.dynamics.kernel_thrust import force_gradients, thrust_force
 
 
 @_jit
@@ -79,27 +79,22 @@ def monomials(eta, pairs, pair_of_triple, triples, out, tangent_out):
         out[m + n2 + q] = out[m + pair_of_triple[q]] * eta[triples[q, 2]]
 
 @_jit
-def design_elastic(weights, weight_derivatives, force_coefficients, tangent_coefficients, m):
-    """F (n_mono, m), T (n_t, m m), G (p, n_mono, m) of one design: Σ_j c_j of the Taylor terms' coefficients
-    and Σ_j ∂c_j/∂ξ_k of their forces."""
-    n_terms, p = weights.size, weight_derivatives.shape[0]
+def design_elastic(weights, force_coefficients, tangent_coefficients, m):
+    """F (n_mono, m), T (n_t, m m) of one design: Σ_j c_j of the Taylor terms' coefficients."""
+    n_terms = weights.size
     n_mono, n_t = force_coefficients.shape[0], tangent_coefficients.shape[0]
     force = np.zeros((n_mono, m))
     tangent = np.zeros((n_t, m * m))
-    gradient = np.zeros((p, n_mono, m))
     for j in range(n_terms):
         c = weights[j]
-        for q in range(n_mono):
-            for i in range(m):
-                value = force_coefficients[q, j * m + i]
-                force[q, i] += c * value
-                for k in range(p):
-                    gradient[k, q, i] += weight_derivatives[k, j] * value
         if c != 0.0:
+            for q in range(n_mono):
+                for i in range(m):
+                    force[q, i] += c * force_coefficients[q, j * m + i]
             for q in range(n_t):
                 for i in range(m * m):
                     tangent[q, i] += c * tangent_coefficients[q, j * m * m + i]
-    return force, tangent, gradient
+    return force, tangent
 
 
 @_jit
@@ -116,18 +111,18 @@ def muscle_force(activations, muscle_constant, muscle_linear, eta, i):
 
 @_jit
 def residual_at(eu, ev, ea, out, activations, mono, tangent_mono, pairs, pair_of_triple, triples, elastic_force,
-                mass, damping, muscle_constant, muscle_linear, has_thrust, lagrangian, rows, own_node, other_node, length,
-                rest_tangent, thrust_weights, tail_weight, state, per_mass, has_drag, drag_direction, drag_row):
+                mass, damping, muscle_constant, muscle_linear, has_thrust, lagrangian, points, transposed, own_node,
+                other_node, length, inverse_length, rest_tangent, thrust_weights, tail_weight, state, has_drag,
+                drag_direction, drag_row):
     """out = r_r = M η̈ + C η̇ + f_int(η) - f_ext at the evaluation point; (‖r‖, the force scale of Newton's
-    test max(‖f_int‖, ‖f_ext‖, ‖M η̈‖)). f_ext = -Σ_j a_j (b_j + B_j η) + f_thrust + f_drag."""
+    test max(‖f_int‖, ‖f_ext‖, ‖M η̈‖)). f_ext = -Σ_j a_j (b_j + B_j η) + f_thrust + f_drag; ``points`` = W
+    (2 n_points, m) of the thrust's points, ``transposed`` = Wᵀ."""
     m = eu.size
     monomials(eu, pairs, pair_of_triple, triples, mono, tangent_mono)
     external = np.zeros(m)
     if has_thrust:
-        half_state(eu, ev, ea, rows, own_node, other_node, length, rest_tangent, state)
-        tail_x, tail_y = half_forces(state, length, lagrangian, per_mass)
-        add_projected_force(per_mass, tail_x, tail_y, thrust_weights, tail_weight, rows, own_node, other_node, 1.0,
-                            external)
+        thrust_force(eu, ev, ea, points, transposed, own_node, other_node, length, inverse_length, rest_tangent,
+                     thrust_weights, tail_weight, lagrangian, state, external)
     speed = 0.0
     if has_drag:
         for k in range(m):
@@ -174,29 +169,42 @@ def tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass,
                 damping_out[i, k] -= 2.0 * speed * drag_direction[i] * drag_row[k]
 
 @_jit
-def derivative_at(parameter_terms, eu, ev, ea, activations, units, mono, elastic_gradient, mass_gradient,
+def derivative_at(parameter_terms, eu, ev, ea, activations, units, mono, force_coefficients, weight_derivatives,
+                  mass_gradient,
                   damping_gradient, muscle_constant, muscle_linear, muscle_constant_gradient,
-                  muscle_linear_gradient, has_thrust, moving_rest, rows, own_node, other_node, rest_rows, state,
-                  per_mass, length, thrust_weights, tail_weight, thrust_weight_gradient, tail_weight_gradient,
-                  lagrangian, k_blocks, c_blocks, m_blocks, has_drag, drag_gradient, drag_row, sensitivities,
-                  amplitude_sensitivity, out):
-    """out (m, columns) = ∂r/∂ξ_k (and ∂r/∂A) at fixed (η, η̇, η̈), as ``BatchedSystem.parameter_derivative``."""
+                  muscle_linear_gradient, has_thrust, points, own_node, other_node, state, length,
+                  thrust_weight_gradient, tail_weight_gradient, lagrangian, has_drag, drag_gradient, drag_row,
+                  sensitivities, amplitude_sensitivity, out):
+    """out (m, columns) = ∂r/∂ξ_k (and ∂r/∂A) at fixed (η, η̇, η̈), as ``BatchedSystem.parameter_derivative``,
+    but for the thrust's part from rest stations that move with ξ, -Wᵀ K ∂x_rest/∂ξ_k (K the points' stiffness):
+    the caller adds it with the thrust's tangents (``reduced_kernel``). The thrust's part here: -Wᵀ ∂f/∂ξ_k."""
     m = eu.size
-    p = elastic_gradient.shape[0]
+    p = weight_derivatives.shape[0]
     out[:] = 0.0
     if sensitivities and parameter_terms:
         speed = 0.0
         if has_drag:
             for k in range(m):
                 speed += drag_row[k] * ev[k]
-        column = np.zeros(m)
-        tail_x, tail_y = 0.0, 0.0
+        thrust = np.zeros((p, m))
         if has_thrust:
-            tail_x, tail_y = half_forces(state, length, lagrangian, per_mass)
+            forces = np.empty((p, points.shape[0]))        # ∂f/∂ξ_k on the points, then one projection
+            force_gradients(state, length, lagrangian, thrust_weight_gradient, tail_weight_gradient, own_node,
+                            other_node, forces)
+            thrust = np.dot(forces, points)               # (p, m): (Wᵀ forces)ᵀ
+        # ∂f_int/∂ξ_k = Σ_j ∂c_j/∂ξ_k f_j(η): the Taylor terms' forces f_j from one product with their shared
+        # coefficients (BLAS, as the force), then the design's weights' derivatives (mostly zeros)
+        terms = np.dot(mono, force_coefficients)               # (n_terms m,)
+        elastic = np.zeros(p * m)
         for c in range(p):
-            elastic = np.dot(mono, elastic_gradient[c])        # BLAS, as the force
+            for j in range(weight_derivatives.shape[1]):
+                factor = weight_derivatives[c, j]
+                if factor != 0.0:
+                    for i in range(m):
+                        elastic[c * m + i] += factor * terms[j * m + i]
+        for c in range(p):
             for i in range(m):
-                total = elastic[i]
+                total = elastic[c * m + i]
                 for n in range(activations.size):
                     muscle = muscle_constant_gradient[c, n, i]
                     for k in range(m):
@@ -206,15 +214,9 @@ def derivative_at(parameter_terms, eu, ev, ea, activations, units, mono, elastic
                     total += mass_gradient[c, i, k] * ea[k] + damping_gradient[c, i, k] * ev[k]
                 if has_drag:
                     total -= drag_gradient[c, i] * speed * speed
+                if has_thrust:
+                    total -= thrust[c, i]
                 out[i, c] = total
-            if has_thrust:
-                column[:] = 0.0
-                add_projected_force(per_mass, tail_x, tail_y, thrust_weight_gradient[c], tail_weight_gradient[c],
-                                    rows, own_node, other_node, -1.0, column)
-                for i in range(m):
-                    out[i, c] += column[i]
-        if has_thrust and moving_rest:
-            project_blocks(k_blocks, 4 if lagrangian else 2, rows, own_node, other_node, rest_rows, -1.0, out[:, :p])
     if amplitude_sensitivity:
         c = out.shape[1] - 1
         for i in range(m):

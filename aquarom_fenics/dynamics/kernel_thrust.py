@@ -6,7 +6,8 @@
     f_0 += m̃₀ ½ (v·n)² t  (segment 0's rear half: the tail)
 
 with w the half-segment's virtual mass (½ m̃ of its point for the trapezoid rule), and the Jacobian blocks of
-``physics/thrust_jacobians.py`` on (o, x), projected Wᵀ J W through the points' block-tridiagonal matrix.
+``physics/thrust_jacobians.py`` on (o, x), assembled into the points' block-tridiagonal matrices J (stiffness,
+damping, added mass) and projected as Wᵀ (J W): the banded product here, the product with Wᵀ one BLAS call.
 """
 from __future__ import annotations
 
@@ -16,182 +17,187 @@ from aquarom_fenics.dynamics.compiled import jit as _jit
 
 
 @_jit
-def half_state(eta, eta_dot, eta_ddot, rows, own_node, other_node, length, rest_tangent, state):
-    """Per half-segment h: state[h] = (t, n, ṅ, v, a) as 10 numbers (x, y each), from the points' kinematics
-    (W η, W η̇, W η̈) computed once per point."""
-    n_points, m = rows.shape[0], eta.size
-    kinematics = np.empty((3, n_points, 2))
-    for point in range(n_points):
-        for c in range(2):
-            position, velocity, acceleration = 0.0, 0.0, 0.0
-            for k in range(m):
-                position += rows[point, c, k] * eta[k]
-                velocity += rows[point, c, k] * eta_dot[k]
-                acceleration += rows[point, c, k] * eta_ddot[k]
-            kinematics[0, point, c], kinematics[1, point, c], kinematics[2, point, c] = position, velocity, acceleration
-    for h in range(own_node.size):
-        o, x = own_node[h], other_node[h]
-        for c in range(2):
-            state[h, c] = rest_tangent[h, c] + (kinematics[0, x, c] - kinematics[0, o, c]) / length[h]    # t
-            state[h, 4 + c] = (kinematics[1, x, c] - kinematics[1, o, c]) / length[h]                      # ṫ
-            state[h, 6 + c] = kinematics[1, o, c]                                                          # v
-            state[h, 8 + c] = kinematics[2, o, c]                                                          # a
-        state[h, 2], state[h, 3] = -state[h, 1], state[h, 0]                  # n = R t
-        rate_x, rate_y = state[h, 4], state[h, 5]
-        state[h, 4], state[h, 5] = -rate_y, rate_x                            # ṅ = R ṫ
-
-@_jit
-def half_forces(state, length, lagrangian, per_mass):
-    """Per-mass forces of each half-segment: per_mass[h] = (f_spine/m̃ on o (2), g/m̃ (2)), the tail's
-    f_tail/m̃₀ = ½ (v·n)² t of half-segment 0 returned."""
-    for h in range(state.shape[0]):
-        tx, ty, nx, ny, ndx, ndy, vx, vy, ax, ay = state[h]
-        a_n = ax * nx + ay * ny
-        v_nd = vx * ndx + vy * ndy
-        v_n = vx * nx + vy * ny
-        per_mass[h, 0] = -length[h] * ((a_n + v_nd) * nx + v_n * ndx)
-        per_mass[h, 1] = -length[h] * ((a_n + v_nd) * ny + v_n * ndy)
-        if lagrangian:
-            per_mass[h, 2] = v_n * vy          # (v·n) Rᵀ v, Rᵀ v = (v_y, -v_x)
-            per_mass[h, 3] = -v_n * vx
-        else:
-            per_mass[h, 2] = 0.0
-            per_mass[h, 3] = 0.0
-    tx, ty, nx, ny = state[0, 0], state[0, 1], state[0, 2], state[0, 3]
-    v_n = state[0, 6] * nx + state[0, 7] * ny
-    return 0.5 * v_n * v_n * tx, 0.5 * v_n * v_n * ty
-
-@_jit
-def add_projected_force(per_mass, tail_x, tail_y, weights, tail_weight, rows, own_node, other_node, sign, out):
-    """out += sign Wᵀ f of the forces ``per_mass`` weighted by ``weights`` (H,) and ``tail_weight``, assembled
-    on the points first."""
-    m, n_points = out.size, rows.shape[0]
-    force = np.zeros((n_points, 2))
-    for h in range(per_mass.shape[0]):
-        w = weights[h]
-        o, x = own_node[h], other_node[h]
-        force[o, 0] += w * (per_mass[h, 0] - per_mass[h, 2])
-        force[o, 1] += w * (per_mass[h, 1] - per_mass[h, 3])
-        force[x, 0] += w * per_mass[h, 2]
-        force[x, 1] += w * per_mass[h, 3]
-    force[own_node[0], 0] += tail_weight * tail_x
-    force[own_node[0], 1] += tail_weight * tail_y
+def thrust_force(eta, eta_dot, eta_ddot, points, transposed, own_node, other_node, length, inverse_length,
+                 rest_tangent, weights, tail_weight, lagrangian, state, out):
+    """out += Wᵀ f_thrust: per half-segment h its state[h] = (t, n, ṅ, v, a) (10 numbers, x and y each; kept for
+    the Jacobian blocks at this point) from the points' kinematics (W η, W η̇, W η̈), and its weighted forces
+    assembled on the points in the same pass (the module's law; ``force_gradients`` weights the same per-mass
+    forces by their ξ-derivatives). ``points`` = W as (2 n_points, m), rows (x, y) of each point, ``transposed`` =
+    Wᵀ; ``inverse_length`` 1/ℓ₀ per half-segment."""
+    m, n_rows = eta.size, points.shape[0]
+    stacked = np.empty((m, 3))
     for k in range(m):
-        total = 0.0
-        for point in range(n_points):
-            total += rows[point, 0, k] * force[point, 0] + rows[point, 1, k] * force[point, 1]
-        out[k] += sign * total
+        stacked[k, 0], stacked[k, 1], stacked[k, 2] = eta[k], eta_dot[k], eta_ddot[k]
+    kinematics = np.dot(points, stacked)              # BLAS: (2 n_points, 3) = (position, velocity, acceleration)
+    force = np.zeros(n_rows)
+    for h in range(own_node.size):
+        o, x = 2 * own_node[h], 2 * other_node[h]
+        scale = inverse_length[h]
+        tx = rest_tangent[h, 0] + (kinematics[x, 0] - kinematics[o, 0]) * scale
+        ty = rest_tangent[h, 1] + (kinematics[x + 1, 0] - kinematics[o + 1, 0]) * scale
+        nx, ny = -ty, tx                                                      # n = R t
+        ndx = -(kinematics[x + 1, 1] - kinematics[o + 1, 1]) * scale         # ṅ = R ṫ
+        ndy = (kinematics[x, 1] - kinematics[o, 1]) * scale
+        vx, vy, ax, ay = kinematics[o, 1], kinematics[o + 1, 1], kinematics[o, 2], kinematics[o + 1, 2]
+        state[h, 0], state[h, 1], state[h, 2], state[h, 3], state[h, 4] = tx, ty, nx, ny, ndx
+        state[h, 5], state[h, 6], state[h, 7], state[h, 8], state[h, 9] = ndy, vx, vy, ax, ay
+        v_n = vx * nx + vy * ny
+        along = ax * nx + ay * ny + vx * ndx + vy * ndy
+        w = weights[h]
+        spine_x = -length[h] * (along * nx + v_n * ndx)
+        spine_y = -length[h] * (along * ny + v_n * ndy)
+        if lagrangian:
+            g_x, g_y = v_n * vy, -v_n * vx                                    # (v·n) Rᵀ v
+            force[o] += w * (spine_x - g_x)
+            force[o + 1] += w * (spine_y - g_y)
+            force[x] += w * g_x
+            force[x + 1] += w * g_y
+        else:
+            force[o] += w * spine_x
+            force[o + 1] += w * spine_y
+    v_n = state[0, 6] * state[0, 2] + state[0, 7] * state[0, 3]
+    o = 2 * own_node[0]
+    force[o] += tail_weight * 0.5 * v_n * v_n * state[0, 0]                  # the tail: ½ m̃₀ (v·n)² t
+    force[o + 1] += tail_weight * 0.5 * v_n * v_n * state[0, 1]
+    projected = np.dot(transposed, force)
+    for k in range(m):
+        out[k] += projected[k]
+
 
 @_jit
-def add_block(block, sign, b00, b01, b10, b11):
-    """block (2, 2) += sign [[b00, b01], [b10, b11]]."""
-    block[0, 0] += sign * b00
-    block[0, 1] += sign * b01
-    block[1, 0] += sign * b10
-    block[1, 1] += sign * b11
+def force_gradients(state, length, lagrangian, weight_gradients, tail_gradient, own_node, other_node, forces):
+    """forces (p, 2 n_points) = ∂f/∂ξ_k on the points at fixed kinematics: the half-segments' per-mass forces
+    (f_spine/m̃ on o, g/m̃ on x and -g/m̃ on o, the tail's ½ (v·n)² t) weighted by ∂w_h/∂ξ_k (p, H) and
+    ∂m̃₀/∂ξ_k (p,)."""
+    forces[:] = 0.0
+    p = forces.shape[0]
+    for h in range(state.shape[0]):
+        tx, ty, nx, ny, ndx, ndy = state[h, 0], state[h, 1], state[h, 2], state[h, 3], state[h, 4], state[h, 5]
+        vx, vy, ax, ay = state[h, 6], state[h, 7], state[h, 8], state[h, 9]      # not a row's unpacking: slower
+        o, x = 2 * own_node[h], 2 * other_node[h]
+        v_n = vx * nx + vy * ny
+        along = ax * nx + ay * ny + vx * ndx + vy * ndy
+        spine_x = -length[h] * (along * nx + v_n * ndx)
+        spine_y = -length[h] * (along * ny + v_n * ndy)
+        g_x, g_y = (v_n * vy, -v_n * vx) if lagrangian else (0.0, 0.0)      # (v·n) Rᵀ v
+        for c in range(p):
+            w = weight_gradients[c, h]
+            forces[c, o] += w * (spine_x - g_x)
+            forces[c, o + 1] += w * (spine_y - g_y)
+            forces[c, x] += w * g_x
+            forces[c, x + 1] += w * g_y
+    v_n = state[0, 6] * state[0, 2] + state[0, 7] * state[0, 3]
+    tail_x, tail_y = 0.5 * v_n * v_n * state[0, 0], 0.5 * v_n * v_n * state[0, 1]
+    o = 2 * own_node[0]
+    for c in range(p):
+        forces[c, o] += tail_gradient[c] * tail_x
+        forces[c, o + 1] += tail_gradient[c] * tail_y
 
 
 @_jit
-def half_blocks(state, length, weights, tail_weight, lagrangian, stiffness, damping, mass):
-    """The Jacobian blocks of ``thrust_jacobians`` per half-segment on (o, x): stiffness and damping
-    (H, 4, 2, 2) in the order (oo, ox, xo, xx), the added mass on oo only."""
+def scatter(banded, a, b, sign, b00, b01, b10, b11):
+    """J's block (a, b) += sign [[b00, b01], [b10, b11]], J stored by block rows: banded[a, b - a + 1] (|a - b| ≤ 1)."""
+    d = b - a + 1
+    banded[a, d, 0, 0] += sign * b00
+    banded[a, d, 0, 1] += sign * b01
+    banded[a, d, 1, 0] += sign * b10
+    banded[a, d, 1, 1] += sign * b11
+
+
+@_jit
+def half_blocks(state, length, weights, tail_weight, lagrangian, own_node, other_node, stiffness, damping, mass):
+    """The Jacobian blocks of ``thrust_jacobians`` per half-segment on (o, x), assembled into the points'
+    block-tridiagonal stiffness, damping and added-mass matrices (n_points, 3, 2, 2) (``scatter``'s storage)."""
     stiffness[:] = 0.0
     damping[:] = 0.0
     mass[:] = 0.0
     for h in range(state.shape[0]):
-        tx, ty, nx, ny, ndx, ndy, vx, vy, ax, ay = state[h]
+        tx, ty, nx, ny, ndx, ndy = state[h, 0], state[h, 1], state[h, 2], state[h, 3], state[h, 4], state[h, 5]
+        vx, vy, ax, ay = state[h, 6], state[h, 7], state[h, 8], state[h, 9]      # not a row's unpacking: slower
+        o, x = own_node[h], other_node[h]
         w, ell = weights[h], length[h]
         a_n = ax * nx + ay * ny
         v_nd = vx * ndx + vy * ndy
         v_n = vx * nx + vy * ny
-        # ∂B/∂n = (a·n + v·ṅ) I + n aᵀ + ṅ vᵀ; ∂f/∂u_x = -w (∂B/∂n) R = -∂f/∂u_o
+        # ∂B/∂n = (a·n + v·ṅ) I + n aᵀ + ṅ vᵀ; ∂f/∂u_x = -w (∂B/∂n) R = -∂f/∂u_o, with M R = [[M01, -M00], [M11, -M10]]
         b00 = a_n + v_nd + nx * ax + ndx * vx
         b01 = nx * ay + ndx * vy
         b10 = ny * ax + ndy * vx
         b11 = a_n + v_nd + ny * ay + ndy * vy
-        # M R = [[M01, -M00], [M11, -M10]]
-        stiffness[h, 1, 0, 0], stiffness[h, 1, 0, 1] = -w * b01, w * b00
-        stiffness[h, 1, 1, 0], stiffness[h, 1, 1, 1] = -w * b11, w * b10
-        for i in range(2):
-            for j in range(2):
-                stiffness[h, 0, i, j] = -stiffness[h, 1, i, j]
-        # ∂B/∂ṅ = n vᵀ + (v·n) I; ∂f/∂u̇_x = -w (∂B/∂ṅ) R; ∂f/∂u̇_o = -w ℓ (n ṅᵀ + ṅ nᵀ) - ∂f/∂u̇_x
-        c00 = nx * vx + v_n
-        c01 = nx * vy
-        c10 = ny * vx
-        c11 = ny * vy + v_n
-        damping[h, 1, 0, 0], damping[h, 1, 0, 1] = -w * c01, w * c00
-        damping[h, 1, 1, 0], damping[h, 1, 1, 1] = -w * c11, w * c10
-        damping[h, 0, 0, 0] = -w * ell * (2.0 * nx * ndx) - damping[h, 1, 0, 0]
-        damping[h, 0, 0, 1] = -w * ell * (nx * ndy + ndx * ny) - damping[h, 1, 0, 1]
-        damping[h, 0, 1, 0] = -w * ell * (ny * ndx + ndy * nx) - damping[h, 1, 1, 0]
-        damping[h, 0, 1, 1] = -w * ell * (2.0 * ny * ndy) - damping[h, 1, 1, 1]
-        mass[h, 0, 0, 0], mass[h, 0, 0, 1] = -w * ell * nx * nx, -w * ell * nx * ny
-        mass[h, 0, 1, 0], mass[h, 0, 1, 1] = -w * ell * ny * nx, -w * ell * ny * ny
+        k00, k01, k10, k11 = -w * b01, w * b00, -w * b11, w * b10
         if h == 0:
             # f_tail = ½ m̃₀ (v·n)² t: ∂/∂u_x = -∂/∂u_o = (m̃₀/ℓ) [(v·n) t (Rᵀ v)ᵀ + ½ (v·n)² I]; ∂/∂u̇_o = m̃₀ (v·n) t nᵀ
             scale = tail_weight / ell
             half = 0.5 * v_n * v_n
-            tail00 = scale * (v_n * tx * vy + half)
-            tail01 = scale * (v_n * tx * -vx)
-            tail10 = scale * (v_n * ty * vy)
-            tail11 = scale * (v_n * ty * -vx + half)
-            add_block(stiffness[h, 1], 1.0, tail00, tail01, tail10, tail11)
-            add_block(stiffness[h, 0], -1.0, tail00, tail01, tail10, tail11)
+            k00 += scale * (v_n * tx * vy + half)
+            k01 += scale * (v_n * tx * -vx)
+            k10 += scale * (v_n * ty * vy)
+            k11 += scale * (v_n * ty * -vx + half)
             normal_mass = tail_weight * v_n
-            add_block(damping[h, 0], 1.0, normal_mass * tx * nx, normal_mass * tx * ny, normal_mass * ty * nx,
-                      normal_mass * ty * ny)
+            scatter(damping, o, o, 1.0, normal_mass * tx * nx, normal_mass * tx * ny, normal_mass * ty * nx,
+                    normal_mass * ty * ny)
+        scatter(stiffness, o, x, 1.0, k00, k01, k10, k11)
+        scatter(stiffness, o, o, -1.0, k00, k01, k10, k11)
+        # ∂B/∂ṅ = n vᵀ + (v·n) I; ∂f/∂u̇_x = -w (∂B/∂ṅ) R; ∂f/∂u̇_o = -w ℓ (n ṅᵀ + ṅ nᵀ) - ∂f/∂u̇_x
+        c00, c01 = -w * (nx * vy), w * (nx * vx + v_n)
+        c10, c11 = -w * (ny * vy + v_n), w * (ny * vx)
+        scatter(damping, o, x, 1.0, c00, c01, c10, c11)
+        scatter(damping, o, o, 1.0, -w * ell * (2.0 * nx * ndx) - c00, -w * ell * (nx * ndy + ndx * ny) - c01,
+                -w * ell * (ny * ndx + ndy * nx) - c10, -w * ell * (2.0 * ny * ndy) - c11)
+        scatter(mass, o, o, -w * ell, nx * nx, nx * ny, ny * nx, ny * ny)
         if lagrangian:
             # g = w (v·n) Rᵀ v: ∂g/∂u_x = -∂g/∂u_o = (w/ℓ) (Rᵀ v)(Rᵀ v)ᵀ (front +g, own -g)
             rx, ry = vy, -vx
             scale = w / ell
             p00, p01, p11 = scale * rx * rx, scale * rx * ry, scale * ry * ry
-            for pair, sign in ((0, 1.0), (1, -1.0), (2, -1.0), (3, 1.0)):     # oo, ox, xo, xx
-                add_block(stiffness[h, pair], sign, p00, p01, p01, p11)
+            scatter(stiffness, o, o, 1.0, p00, p01, p01, p11)
+            scatter(stiffness, o, x, -1.0, p00, p01, p01, p11)
+            scatter(stiffness, x, o, -1.0, p00, p01, p01, p11)
+            scatter(stiffness, x, x, 1.0, p00, p01, p01, p11)
             # ∂g/∂v = w [Rᵀ v nᵀ + (v·n) Rᵀ], Rᵀ = [[0, 1], [-1, 0]]: own -, other +
-            g00 = w * (rx * nx)
-            g01 = w * (rx * ny + v_n)
-            g10 = w * (ry * nx - v_n)
-            g11 = w * (ry * ny)
-            add_block(damping[h, 0], -1.0, g00, g01, g10, g11)
-            add_block(damping[h, 2], 1.0, g00, g01, g10, g11)
+            g00, g01, g10, g11 = w * (rx * nx), w * (rx * ny + v_n), w * (ry * nx - v_n), w * (ry * ny)
+            scatter(damping, o, o, -1.0, g00, g01, g10, g11)
+            scatter(damping, x, o, 1.0, g00, g01, g10, g11)
+
 
 @_jit
-def project_blocks(blocks, n_pairs, rows, own_node, other_node, right, factor, out):
-    """out (m, r) += factor Wᵀ J R: the first ``n_pairs`` of the blocks (oo, ox, xo, xx) of every half-segment
-    assembled into the points' block-tridiagonal J (n_points, 3, 2, 2), then Y = J R of the right rows R
-    (n_points, 2, r) and Wᵀ Y, W the points' rows (n_points, 2, m)."""
-    n_points, m, r = rows.shape[0], out.shape[0], out.shape[1]
-    nodal = np.zeros((n_points, 3, 2, 2))
-    for h in range(blocks.shape[0]):
-        for pair in range(n_pairs):
-            a = own_node[h] if pair < 2 else other_node[h]
-            b = own_node[h] if pair % 2 == 0 else other_node[h]
-            for i in range(2):
-                for j in range(2):
-                    nodal[a, b - a + 1, i, j] += blocks[h, pair, i, j]
-    product = np.empty((2, r))
+def banded_times(banded, right, first, factor, out):
+    """out (2 n_points, r) += factor J R of the block-tridiagonal J (``scatter``'s storage) and the columns
+    first … first + r - 1 of R (2 n_points, ·): a point's two rows at once from each neighbour's two."""
+    n_points, r = banded.shape[0], out.shape[1]
     for a in range(n_points):
-        product[:] = 0.0
-        for d in range(3):
-            b = a + d - 1
-            if b < 0 or b >= n_points:
-                continue
-            for i in range(2):
-                for j in range(r):
-                    product[i, j] += nodal[a, d, i, 0] * right[b, 0, j] + nodal[a, d, i, 1] * right[b, 1, j]
-        for k in range(m):
-            l0, l1 = factor * rows[a, 0, k], factor * rows[a, 1, k]
+        top, bottom = out[2 * a], out[2 * a + 1]
+        for b in range(max(a - 1, 0), min(a + 2, n_points)):
+            d = b - a + 1
+            j00, j01 = factor * banded[a, d, 0, 0], factor * banded[a, d, 0, 1]
+            j10, j11 = factor * banded[a, d, 1, 0], factor * banded[a, d, 1, 1]
+            x, y = right[2 * b, first:first + r], right[2 * b + 1, first:first + r]
             for j in range(r):
-                out[k, j] += l0 * product[0, j] + l1 * product[1, j]
+                top[j] += j00 * x[j] + j01 * y[j]
+                bottom[j] += j10 * x[j] + j11 * y[j]
+
 
 @_jit
-def rows_times(rows, values, out):
-    """out (n_points, 2, c) = W (n_points, 2, m) @ values (m, c)."""
-    out[:] = 0.0
-    for point in range(rows.shape[0]):
-        for i in range(2):
-            for k in range(rows.shape[2]):
-                weight = rows[point, i, k]
-                for j in range(values.shape[1]):
-                    out[point, i, j] += weight * values[k, j]
+def banded_tangents(stiffness, damping, mass, right, out):
+    """out (2 n_points, r) += K R₀ + C R₁ - M R₂ of the points' stiffness, damping and added mass (``scatter``'s
+    storage; M block-diagonal) and the column sets R = [R₀ R₁ R₂] (2 n_points, 3r): ``banded_times`` of the three
+    in one pass."""
+    n_points, r = stiffness.shape[0], out.shape[1]
+    for a in range(n_points):
+        top, bottom = out[2 * a], out[2 * a + 1]
+        for b in range(max(a - 1, 0), min(a + 2, n_points)):
+            d = b - a + 1
+            k00, k01 = stiffness[a, d, 0, 0], stiffness[a, d, 0, 1]
+            k10, k11 = stiffness[a, d, 1, 0], stiffness[a, d, 1, 1]
+            c00, c01, c10, c11 = damping[a, d, 0, 0], damping[a, d, 0, 1], damping[a, d, 1, 0], damping[a, d, 1, 1]
+            x, y = right[2 * b], right[2 * b + 1]
+            for j in range(r):
+                x0, y0, x1, y1 = x[j], y[j], x[r + j], y[r + j]
+                top[j] += k00 * x0 + k01 * y0 + c00 * x1 + c01 * y1
+                bottom[j] += k10 * x0 + k11 * y0 + c10 * x1 + c11 * y1
+        m00, m01, m10, m11 = mass[a, 1, 0, 0], mass[a, 1, 0, 1], mass[a, 1, 1, 0], mass[a, 1, 1, 1]
+        x, y = right[2 * a], right[2 * a + 1]
+        for j in range(r):
+            x2, y2 = x[2 * r + j], y[2 * r + j]
+            top[j] -= m00 * x2 + m01 * y2
+            bottom[j] -= m10 * x2 + m11 * y2

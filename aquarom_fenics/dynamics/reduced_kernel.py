@@ -25,7 +25,7 @@ from aquarom_fenics.dynamics.compiled import available, jit as _jit, refresh_sta
 from aquarom_fenics.dynamics.kernel_pack import Packed, pack, synthetic
 from aquarom_fenics.dynamics.kernel_terms import (between, derivative_at, design_elastic, lu_factor, lu_solve,
                                                   residual_at, tangents_at)
-from aquarom_fenics.dynamics.kernel_thrust import half_blocks, project_blocks, rows_times
+from aquarom_fenics.dynamics.kernel_thrust import banded_tangents, banded_times, half_blocks
 
 __all__ = ["available", "integrate_all", "integrate_packed", "transition_packed", "pack", "Packed", "synthetic", "warm_up", "OK", "FAILED"]
 
@@ -33,22 +33,28 @@ OK, FAILED = 0, 1
 
 
 @_jit
-def newton_matrix_into(k_u, k_v, k_a, stiffness, damping, mass, has_thrust, k_blocks, c_blocks, m_blocks, s_blocks,
-                       n_pairs, rows, own_node, other_node, out):
+def newton_matrix_into(k_u, k_v, k_a, stiffness, damping, mass, has_thrust, k_banded, c_banded, m_banded, s_banded,
+                       points, transposed, work, out):
     """out = S = k_u K_t + k_v C_t + k_a M_t (``reduced_dynamics.newton_matrix``): the dense tangents of every term
-    but the thrust, and the thrust's blocks combined before their one projection -Wᵀ J W."""
+    but the thrust, and the thrust's point matrices (``half_blocks``) combined before their one projection
+    -Wᵀ J W (J W banded, then one BLAS product with Wᵀ; ``work`` (2 n_points, m))."""
     m = out.shape[0]
     for i in range(m):
         for k in range(m):
             out[i, k] = k_u * stiffness[i, k] + k_v * damping[i, k] + k_a * mass[i, k]
     if has_thrust:
-        for h in range(k_blocks.shape[0]):
-            for pair in range(4):
+        for a in range(k_banded.shape[0]):
+            for d in range(3):
                 for i in range(2):
                     for j in range(2):
-                        s_blocks[h, pair, i, j] = (k_u * k_blocks[h, pair, i, j] + k_v * c_blocks[h, pair, i, j]
-                                                   + k_a * m_blocks[h, pair, i, j])
-        project_blocks(s_blocks, n_pairs, rows, own_node, other_node, rows, -1.0, out)
+                        s_banded[a, d, i, j] = (k_u * k_banded[a, d, i, j] + k_v * c_banded[a, d, i, j]
+                                                + k_a * m_banded[a, d, i, j])
+        work[:] = 0.0
+        banded_times(s_banded, points, 0, 1.0, work)
+        projected = np.dot(transposed, work)
+        for i in range(m):
+            for k in range(m):
+                out[i, k] -= projected[i, k]
 
 
 @_jit
@@ -76,16 +82,18 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
     k_u = 1.0 - alpha_f
     k_v = (1.0 - alpha_f) * gamma / (beta * h)
     k_a = (1.0 - alpha_m) / (beta * h * h)
-    elastic_force, elastic_tangent, elastic_gradient = design_elastic(
-        weights, weight_derivatives, force_coefficients, tangent_coefficients, m)
+    elastic_force, elastic_tangent = design_elastic(weights, force_coefficients, tangent_coefficients, m)
     n_mono, n_t = force_coefficients.shape[0], tangent_coefficients.shape[0]
     mono, tangent_mono = np.empty(n_mono), np.empty(n_t)
     state = np.zeros((halves, 10))
-    per_mass = np.zeros((halves, 4))
-    k_blocks, c_blocks, m_blocks = (np.zeros((halves, 4, 2, 2)), np.zeros((halves, 4, 2, 2)),
-                                    np.zeros((halves, 4, 2, 2)))
-    s_blocks = np.zeros((halves, 4, 2, 2))
-    n_pairs = 4 if lagrangian else 2
+    n_points = rows.shape[0]
+    points = rows.reshape((2 * n_points, m))                       # W: rows (x, y) of each point
+    transposed = np.ascontiguousarray(points.T)                    # Wᵀ
+    rest_points = rest_rows.reshape((2 * n_points, rest_rows.shape[2]))
+    k_banded, c_banded = np.zeros((n_points, 3, 2, 2)), np.zeros((n_points, 3, 2, 2))
+    m_banded, s_banded = np.zeros((n_points, 3, 2, 2)), np.zeros((n_points, 3, 2, 2))
+    work = np.zeros((2 * n_points, m))
+    inverse_length = 1.0 / length
     u, v, a = np.zeros(m), np.zeros(m), np.zeros(m)
     u_new, v_new, a_new = np.zeros(m), np.zeros(m), np.zeros(m)
     u_pred, v_pred = np.zeros(m), np.zeros(m)
@@ -100,7 +108,8 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
     sens_new = np.zeros((3, m, columns))
     rhs = np.zeros((m, columns))
     thrust_rhs = np.zeros((m, columns))
-    right = np.zeros((rows.shape[0], 2, max(columns, 1)))
+    stacked = np.zeros((m, 3 * columns))
+    right = np.zeros((2 * n_points, columns))
     combination = np.zeros((m, columns))
     have_factors = False
     distance_sum, distance_count, amplitude_max = 0.0, 0, 0.0
@@ -129,9 +138,9 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
             between(a, a_new, alpha_m, ea)
             norm, scale = residual_at(eu, ev, ea, residual[:, 0], activations, mono, tangent_mono, pairs,
                                       pair_of_triple, triples, elastic_force, mass, damping, muscle_constant,
-                                      muscle_linear, has_thrust, lagrangian, rows, own_node, other_node, length, rest_tangent,
-                                      thrust_weights, tail_weight, state, per_mass, has_drag, drag_direction,
-                                      drag_row)
+                                      muscle_linear, has_thrust, lagrangian, points, transposed, own_node, other_node,
+                                      length, inverse_length, rest_tangent, thrust_weights, tail_weight, state,
+                                      has_drag, drag_direction, drag_row)
             if not math.isfinite(norm):
                 result[2] = FAILED
                 return
@@ -146,10 +155,10 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
                 tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass, damping, muscle_linear,
                             has_drag, drag_direction, drag_row, stiffness, damping_t, mass_t)
                 if has_thrust:
-                    half_blocks(state, length, thrust_weights, tail_weight, lagrangian, k_blocks, c_blocks,
-                                m_blocks)
-                newton_matrix_into(k_u, k_v, k_a, stiffness, damping_t, mass_t, has_thrust, k_blocks, c_blocks,
-                                   m_blocks, s_blocks, n_pairs, rows, own_node, other_node, matrix)
+                    half_blocks(state, length, thrust_weights, tail_weight, lagrangian, own_node, other_node,
+                                k_banded, c_banded, m_banded)
+                newton_matrix_into(k_u, k_v, k_a, stiffness, damping_t, mass_t, has_thrust, k_banded, c_banded,
+                                   m_banded, s_banded, points, transposed, work, matrix)
                 if not lu_factor(matrix, pivots):
                     result[2] = FAILED
                     return
@@ -177,16 +186,16 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
             tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass, damping, muscle_linear,
                         has_drag, drag_direction, drag_row, stiffness, damping_t, mass_t)
             if has_thrust:
-                half_blocks(state, length, thrust_weights, tail_weight, lagrangian, k_blocks, c_blocks, m_blocks)
+                half_blocks(state, length, thrust_weights, tail_weight, lagrangian, own_node, other_node, k_banded,
+                            c_banded, m_banded)
             if transition:
                 rhs[:] = 0.0
             else:
-                derivative_at(parameter_terms, eu, ev, ea, activations, units[step], mono, elastic_gradient,
-                              mass_gradient, damping_gradient, muscle_constant, muscle_linear, muscle_constant_gradient,
-                              muscle_linear_gradient, has_thrust, moving_rest, rows, own_node, other_node, rest_rows,
-                              state, per_mass, length, thrust_weights, tail_weight, thrust_weight_gradient,
-                              tail_weight_gradient, lagrangian, k_blocks, c_blocks, m_blocks, has_drag,
-                              drag_gradient, drag_row, sensitivities, amplitude_sensitivity, rhs)
+                derivative_at(parameter_terms, eu, ev, ea, activations, units[step], mono, force_coefficients,
+                              weight_derivatives, mass_gradient, damping_gradient, muscle_constant, muscle_linear,
+                              muscle_constant_gradient, muscle_linear_gradient, has_thrust, points, own_node,
+                              other_node, state, length, thrust_weight_gradient, tail_weight_gradient, lagrangian,
+                              has_drag, drag_gradient, drag_row, sensitivities, amplitude_sensitivity, rhs)
             # rhs = -∂r/∂ξ - C (η̇'_{n+1-α_f} - v_f η'_p) + a_f M η'_p - α_f K η'_n - α_m M η̈'_n, with
             # η̇'_{n+1-α_f} = (1 - α_f) η̇'_p + α_f η̇'_n: combination = that bracket
             for i in range(m):
@@ -205,19 +214,27 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
                                   - alpha_m * mass_t[i, k] * sens[2, k, c])
                     thrust_rhs[i, c] = total
             if has_thrust:
-                # the thrust's tangents -Wᵀ J W applied to the same columns
-                if alpha_f != 0.0:
-                    rows_times(rows, sens[0], right)
-                    project_blocks(k_blocks, n_pairs, rows, own_node, other_node, right, alpha_f, thrust_rhs)
-                rows_times(rows, combination, right)
-                project_blocks(c_blocks, n_pairs, rows, own_node, other_node, right, 1.0, thrust_rhs)
+                # the thrust's tangents -Wᵀ J W on the same columns: Wᵀ (K (α_f W η'_n + ∂x_rest/∂ξ) + C W (the
+                # bracket) - M W (a_f η'_p - α_m η̈'_n)), with -∂r/∂ξ's part from rest stations that move (-Wᵀ K
+                # ∂x_rest/∂ξ_k, columns k < p): one product W X of the three column sets, one Wᵀ Y
                 for i in range(m):
                     for c in range(columns):
-                        combination[i, c] = k_a * sens_new[0, i, c] - alpha_m * sens[2, i, c]
-                rows_times(rows, combination, right)
-                project_blocks(m_blocks, 1, rows, own_node, other_node, right, -1.0, thrust_rhs)
-            newton_matrix_into(k_u, k_v, k_a, stiffness, damping_t, mass_t, has_thrust, k_blocks, c_blocks, m_blocks,
-                               s_blocks, n_pairs, rows, own_node, other_node, exact)
+                        stacked[i, c] = alpha_f * sens[0, i, c]
+                        stacked[i, columns + c] = combination[i, c]
+                        stacked[i, 2 * columns + c] = k_a * sens_new[0, i, c] - alpha_m * sens[2, i, c]
+                moved = np.dot(points, stacked)
+                if moving_rest and parameter_terms and sensitivities and not transition:
+                    for row in range(2 * n_points):
+                        for c in range(p):
+                            moved[row, c] += rest_points[row, c]
+                right[:] = 0.0
+                banded_tangents(k_banded, c_banded, m_banded, moved, right)
+                projected = np.dot(transposed, right)
+                for i in range(m):
+                    for c in range(columns):
+                        thrust_rhs[i, c] += projected[i, c]
+            newton_matrix_into(k_u, k_v, k_a, stiffness, damping_t, mass_t, has_thrust, k_banded, c_banded, m_banded,
+                               s_banded, points, transposed, work, exact)
             if not lu_factor(exact, exact_pivots):
                 result[2] = FAILED
                 return

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -80,20 +81,36 @@ class BatchedThrust:
         self.half_rest_tangent = np.asfortranarray(self.half_rest_tangent)
         self.difference_rows = difference_rows.reshape(-1, m)
         self.rear_rows = own_rows.reshape(-1, m)
-        single = SpineGeometry(data.rest_xy, virtual_mass(data.dorsal_z, data.fluid_density), spine_force,
-                               virtual_mass(data.front_dorsal_z, data.fluid_density) if trapezoid else None)
-        self.block_kinds = block_kinds(single)
-        self.block_products = block_products(rear, front, rear, front, self.block_kinds)
+        self._data, self._spine_force = data, spine_force
         mass_gradient = virtual_mass_gradient(dorsal_z, data.dorsal_z_gradient, data.fluid_density)
         length_gradient = None
         if self.moving_rest:
             gradient = data.rest_xy_gradient
-            self.rest_products = block_products(rear, front, gradient[:-1], gradient[1:], self.block_kinds)
             length_gradient = np.einsum("bsc,sck->bsk", rest_tangent, gradient[1:] - gradient[:-1])
         front_gradient = (virtual_mass_gradient(front_z, data.front_dorsal_z_gradient, data.fluid_density)
                           if trapezoid else None)
         self.derivative_weights = derivative_weights(spine, mass_gradient, length_gradient, front_gradient)
         self._point, self._state, self._blocks = None, None, None
+
+    # the projection's kinds and products, shared by all designs, formed when the numpy batch first needs them
+    # (the compiled kernel projects through the points' banded matrices instead)
+    @cached_property
+    def block_kinds(self):
+        data = self._data
+        trapezoid = data.front_dorsal_z is not None
+        single = SpineGeometry(data.rest_xy, virtual_mass(data.dorsal_z, data.fluid_density), self._spine_force,
+                               virtual_mass(data.front_dorsal_z, data.fluid_density) if trapezoid else None)
+        return block_kinds(single)
+
+    @cached_property
+    def block_products(self):
+        rear, front = self._data.rows[:-1], self._data.rows[1:]
+        return block_products(rear, front, rear, front, self.block_kinds)
+
+    @cached_property
+    def rest_products(self):
+        rows, gradient = self._data.rows, self._data.rest_xy_gradient
+        return block_products(rows[:-1], rows[1:], gradient[:-1], gradient[1:], self.block_kinds)
 
     def select(self, rows: np.ndarray) -> "BatchedThrust":
         """The term of the designs ``rows`` (indices)."""
