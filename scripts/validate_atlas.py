@@ -56,6 +56,31 @@ def atlas_sweep(scene, designs, workers: int, folder: Path) -> dict:
     return {"wall_time": wall, "rows": rows, "atlas": json.loads((folder / "sweep" / "atlas.json").read_text())}
 
 
+def cover_record(atlas: dict) -> dict:
+    """The atlas's radii: the scale s, the validity radius r, the cells' half-width h ≤ s r, cells per shape."""
+    return {key: atlas[key] for key in ("radius_scale", "validity_radius", "cell_half_width", "cells_per_shape",
+                                        "cells_in_box")}
+
+
+def time_split(atlas: dict) -> dict:
+    """Where the sweep's worker time went, from atlas.json's centre records: builds (wall and thread CPU [s],
+    the first of each worker apart: it sets up the FOM the later builds move) and batched solves."""
+    centres = atlas["centres"]
+    built = [c for c in centres if c["status"] == "built"]
+    first = [c["build_time_s"] for c in built if c.get("builds_in_worker") == 1]
+    later = [c["build_time_s"] for c in built if c.get("builds_in_worker", 0) > 1]
+    designs = max(atlas["totals"]["designs"], 1)
+    return {"builds": len(built), "build_wall_s": sum(c["build_time_s"] for c in built),
+            "build_cpu_s": sum(c.get("build_cpu_s", 0.0) for c in built),
+            "workers": len({c.get("worker") for c in built}), "first_build_per_worker_s": first,
+            "later_build_mean_s": float(np.mean(later)) if later else None,
+            "later_build_cpu_mean_s": float(np.mean([c.get("build_cpu_s", 0.0) for c in built
+                                                     if c.get("builds_in_worker", 0) > 1])) if later else None,
+            "solve_wall_s": sum(c.get("solve_time_s", 0.0) for c in centres),
+            "solve_cpu_s": sum(c.get("solve_cpu_s", 0.0) for c in centres),
+            "solve_cpu_per_design_s": sum(c.get("solve_cpu_s", 0.0) for c in centres) / designs}
+
+
 def checked_designs(scene, rows: list[dict], random: int, farthest: int, seed: int) -> list[tuple[str, dict]]:
     """(why, row) of ``random`` completed rows drawn with ``seed`` and the ``farthest`` completed rows
     farthest from their centre (max_k |ξ_k - c_k| / h_k), none twice."""
@@ -121,8 +146,13 @@ def main() -> int:
         sweep = atlas_sweep(scene, designs, args.workers, Path(scratch))
         counts = summary(sweep["rows"])["counts"]
         totals = sweep["atlas"]["totals"]
+        split = time_split(sweep["atlas"])
         print(f"atlas sweep: {len(designs)} designs, {counts}, {totals['centres']} centres built "
-              f"({totals['build_time_s']:.1f} s of builds), {sweep['wall_time']:.1f} s", flush=True)
+              f"({totals['build_time_s']:.1f} s of builds), {sweep['wall_time']:.1f} s; worker time: builds "
+              f"{split['build_wall_s']:.1f} s (CPU {split['build_cpu_s']:.1f} s; first per worker "
+              f"{', '.join(f'{t:.2f}' for t in split['first_build_per_worker_s'])} s, others "
+              f"{split['later_build_mean_s'] or 0.0:.3f} s each), solves {split['solve_wall_s']:.1f} s "
+              f"(CPU {split['solve_cpu_s']:.1f} s, {1e3 * split['solve_cpu_per_design_s']:.2f} ms per design)", flush=True)
         load_after_sweep = os.getloadavg()
         common = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "machine": machine(), "versions": software_versions(),
                   "scene": args.scene, "samples": args.samples, "seed": args.seed, "workers": args.workers,
@@ -130,7 +160,8 @@ def main() -> int:
         sweep_record = {"wall_time_s": sweep["wall_time"], "counts": counts, "every_design_answered":
                         counts["completed"] == len(designs), "centres": totals["centres"],
                         "build_time_s": totals["build_time_s"], "cells_in_box": sweep["atlas"]["cells_in_box"],
-                        "seconds_per_design": sweep["wall_time"] / len(designs)}
+                        "seconds_per_design": sweep["wall_time"] / len(designs),
+                        "atlas": cover_record(sweep["atlas"]), "where_the_time_goes": time_split(sweep["atlas"])}
         write_json_atomic(args.bench, common | {"sweep": sweep_record})
         if args.sweep_only:
             print(f"wrote {args.bench}")

@@ -121,8 +121,14 @@ def test_only_the_centres_holding_designs_are_built_and_atlas_json_lists_them(sw
     assert report["centres"][1]["center"] == pytest.approx({"z_tail": 0.075, "y_thin": 0.075})
     assert report["centres"][1]["prom_radius"] == pytest.approx({"z_tail": 0.075, "y_thin": 0.025})
     assert report["cells_in_box"] == 8 and report["cell_half_width"] == pytest.approx({"z_tail": 0.075, "y_thin": 0.025})
-    assert report["totals"] | {"build_time_s": 0} == {"centres": 3, "built": 3, "from_the_cache": 0,
-                                                      "build_time_s": 0, "designs": 6}
+    times = ("build_time_s", "build_cpu_s", "solve_time_s", "solve_cpu_s")
+    assert report["totals"] | dict.fromkeys(times, 0) == {"centres": 3, "built": 3, "from_the_cache": 0,
+                                                          "designs": 6} | dict.fromkeys(times, 0)
+    for key in times:
+        assert all(c[key] > 0 for c in report["centres"])
+        assert report["totals"][key] == pytest.approx(sum(c[key] for c in report["centres"]))
+    first = min(c["builds_in_worker"] for c in report["centres"])     # one worker, in this process: 1, 2, 3 here
+    assert sorted(c["builds_in_worker"] for c in report["centres"]) == [first, first + 1, first + 2]
     proms = [f for f in (swept["folder"] / "cache" / "prom").rglob("*.npz")]
     assert len(proms) == 3
 
@@ -132,6 +138,7 @@ def test_a_second_sweep_takes_the_centres_from_the_prom_cache(swept):
     assert run([*swept["argv"], "--out", str(out)]) == 0
     report = json.loads((out / "atlas.json").read_text())
     assert [c["status"] for c in report["centres"]] == ["from the cache"] * 3
+    assert len({c["builds_in_worker"] for c in report["centres"]}) == 1 and report["totals"]["build_cpu_s"] == 0
     first = read_csv(swept["folder"] / "out" / "sweep.csv")
     assert [r["distance_m"] for r in read_csv(out / "sweep.csv")] == [r["distance_m"] for r in first]
 
@@ -179,6 +186,14 @@ def _in_process():
     from aquarom_fenics.parallel import InProcess
 
     return InProcess()
+
+
+def test_a_centres_later_task_keeps_its_build_and_adds_its_solve_times():
+    built = {"id": "0_1", "status": "built", "build_time_s": 2.0, "solve_time_s": 1.5, "solve_cpu_s": 1.25}
+    later = {"id": "0_1", "status": "from the cache", "build_time_s": 0.1, "solve_time_s": 0.5, "solve_cpu_s": 0.25}
+    assert atlas.merged_record(built, later) == built | {"solve_time_s": 2.0, "solve_cpu_s": 1.5}
+    assert atlas.merged_record(None, later) == later
+    assert atlas.merged_record(later, built) == built | {"solve_time_s": 2.0, "solve_cpu_s": 1.5}
 
 
 def test_a_scale_outside_zero_to_one_is_refused():
