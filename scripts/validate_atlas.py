@@ -77,13 +77,11 @@ def atlas_sweep(scene, designs, workers: int, folder: Path) -> dict:
     return {"wall_time": wall, "rows": rows, "atlas": json.loads((folder / "sweep" / "atlas.json").read_text())}
 
 
-def corner_check(scene, results: list[dict], cells: int, workers: int, folder: Path) -> list[dict]:
-    """The FOM against the atlas at the 2^p corners c ± (1 - 1e-9) h of the ``cells`` cells whose checked
-    designs erred most (the corners pulled inside by 1e-9 h, so that the cell's own PROM answers them, from
-    the atlas's PROM cache in ``folder``): every shape at its largest offset at once."""
-    from aquarom_fenics.studies.atlas import cell_of, cover
+def corner_designs(grid, results: list[dict], cells: int) -> list[dict]:
+    """The 2^p corners c ± (1 - 1e-9) h of the ``cells`` cells whose checked designs erred most (distinct
+    centres, by |relative error|), pulled inside by 1e-9 h so that the cell's own PROM answers them."""
+    from aquarom_fenics.studies.atlas import cell_of
 
-    grid = cover(scene)
     worst = []
     for entry in sorted(results, key=lambda entry: -abs(entry.get("relative_error", 0.0))):
         if entry["prom_center"] not in worst:
@@ -93,8 +91,17 @@ def corner_check(scene, results: list[dict], cells: int, workers: int, folder: P
         center = grid.center(cell_of(name, grid))
         for signs in itertools.product((-1.0, 1.0), repeat=len(grid.names)):
             corners.append(dict(zip(grid.names, (center + (1 - 1e-9) * np.array(signs) * grid.half_width).tolist())))
+    return corners
+
+
+def corner_check(scene, results: list[dict], cells: int, workers: int, folder: Path) -> list[dict]:
+    """The FOM against the atlas at the corners of :func:`corner_designs` (every shape at its largest offset at
+    once), the atlas's answers from its PROM cache in ``folder``."""
+    from aquarom_fenics.studies.atlas import cell_of, cover
+
+    grid = cover(scene)
     with atlas_cache(folder):
-        rows = prom_sweep(scene, corners, workers, folder / "corners")
+        rows = prom_sweep(scene, corner_designs(grid, results, cells), workers, folder / "corners")
     checked = [("corner", row | {"reach": float(grid.scaled_distance(np.array([[row[n] for n in grid.names]]),
                                                                      cell_of(row["prom_center"], grid))[0])})
                for row in rows if row["status"] == "completed"]
