@@ -8,7 +8,6 @@
    centre relative to the cell's half-width (the atlas's radius); per design the relative distance error
    (d_PROM - d_FOM) / |d_FOM|, and the largest, against the limit 3 % (the atlas's radius is set so that
    it holds: aquarom_fenics.studies.atlas.RADIUS_SCALE).
-
 3. With --corners K, apart from that check: the FOM at the 2^p corners of the K cells whose checked designs
    erred most (every shape at its cell's half-width from the centre at once).
 
