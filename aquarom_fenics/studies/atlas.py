@@ -28,8 +28,8 @@ SPEC §8's 5 %. It is set by s, the scale of the validity radius, checked by ``s
 at the 5 designs farthest from their centres (on the cells' faces, where the Taylor terms in Δξ are largest),
 and with ``--corners`` at the corners of the cells that erred most. On SO1: at s = 1 (4 × 4 × 6 cells, h = r)
 the largest error was 3.19 %; at s = 0.9 (5 × 5 × 7 cells) 2.22 %, but 3.38 % at a cell's corner; at s = 0.8
-(5 × 5 × 8 cells: h = 0.8 r for the heights, 0.75 r for the thickness) 2.15 %, and at most 2.99 % at the 24
-corners of the three cells that erred most (docs/devlog.md, "2026-12-06: the atlas at its targets").
+(5 × 5 × 8 cells: h = 0.8 r for the heights, 0.75 r for the thickness) 2.15 %, and at most 2.99 % at the
+corners of the five cells that erred most with two seeds (docs/devlog.md, "2026-12-06: the atlas at its targets").
 """
 from __future__ import annotations
 
