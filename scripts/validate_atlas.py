@@ -8,20 +8,26 @@
    centre relative to the cell's half-width (the atlas's radius); per design the relative distance error
    (d_PROM - d_FOM) / |d_FOM|, and the largest, against the limit 3 % (the atlas's radius is set so that
    it holds: aquarom_fenics.studies.atlas.RADIUS_SCALE).
+3. With --corners K, apart from that check: the FOM at the 2^p corners of the K cells whose checked designs
+   erred most (every shape at its cell's half-width from the centre at once).
 
-Writes results/validation/atlas.json (and results/bench/atlas_sweep.json: the sweep's time and builds;
-`--sweep-only`, as `make bench` runs it, skips the FOM check and writes only that).
+Writes results/validation/atlas.json (and results/bench/atlas_sweep.json: the sweep's time, builds and radii,
+and where the workers' time went: builds and batched solves, wall and thread CPU, each worker's first build
+apart; `--sweep-only`, as `make bench` runs it, skips the FOM check and writes only that).
 
-    .venv/bin/python scripts/validate_atlas.py            # ~4 min of sweep and ~2 min of FOM runs on 2 idle cores
+    .venv/bin/python scripts/validate_atlas.py            # 1.6-3.3 min of sweep at s = 0.8 on 2 shared cores,
+                                                          # then 25 FOM runs (through the FOM cache)
 """
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import shutil
 import tempfile
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -31,29 +37,99 @@ LIMIT = 0.03
 """Largest relative distance error of the atlas against the FOM."""
 
 
-def atlas_sweep(scene, designs, workers: int, folder: Path) -> dict:
-    """The PROM sweep of ``designs`` from an empty PROM cache in ``folder``: wall time, rows, atlas.json."""
-    from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
+@contextmanager
+def atlas_cache(folder: Path):
+    """$AQUAROM_CACHE at ``folder``/cache for the block (the workers, spawned inside it, read it too), the mesh
+    cache copied in on first use."""
     from aquarom_fenics.io.paths import mesh_cache
-    from aquarom_fenics.parallel import open_pool, shutting_down
-    from aquarom_fenics.studies.sweep import run_sweep
 
     meshes = mesh_cache()
     previous = os.environ.get("AQUAROM_CACHE")
-    os.environ["AQUAROM_CACHE"] = str(folder / "cache")          # the workers, spawned next, read it too
-    if meshes.is_dir():
+    if meshes.is_dir() and not (folder / "cache" / "meshes").exists():
         shutil.copytree(meshes, folder / "cache" / "meshes")
+    os.environ["AQUAROM_CACHE"] = str(folder / "cache")
     try:
-        started = time.perf_counter()
-        with shutting_down(open_pool(workers, None, SWIMMER_WORKERS)) as pool:
-            rows = run_sweep(scene, designs, "prom", folder / "sweep", pool)
-        wall = time.perf_counter() - started
+        yield
     finally:
         if previous is None:
             os.environ.pop("AQUAROM_CACHE")
         else:
             os.environ["AQUAROM_CACHE"] = previous
+
+
+def prom_sweep(scene, designs, workers: int, out: Path) -> list[dict]:
+    """The atlas's rows of ``designs`` on a new pool of ``workers`` local processes."""
+    from aquarom_fenics.dynamics.workers import SWIMMER_WORKERS
+    from aquarom_fenics.parallel import open_pool, shutting_down
+    from aquarom_fenics.studies.sweep import run_sweep
+
+    with shutting_down(open_pool(min(workers, len(designs)), None, SWIMMER_WORKERS)) as pool:
+        return run_sweep(scene, designs, "prom", out, pool)
+
+
+def atlas_sweep(scene, designs, workers: int, folder: Path) -> dict:
+    """The PROM sweep of ``designs`` from an empty PROM cache in ``folder``: wall time, rows, atlas.json."""
+    with atlas_cache(folder):
+        started = time.perf_counter()
+        rows = prom_sweep(scene, designs, workers, folder / "sweep")
+        wall = time.perf_counter() - started
     return {"wall_time": wall, "rows": rows, "atlas": json.loads((folder / "sweep" / "atlas.json").read_text())}
+
+
+def corner_designs(grid, results: list[dict], cells: int) -> list[dict]:
+    """The 2^p corners c ± (1 - 1e-9) h of the ``cells`` cells whose checked designs erred most (distinct
+    centres, by |relative error|), pulled inside by 1e-9 h so that the cell's own PROM answers them."""
+    from aquarom_fenics.studies.atlas import cell_of
+
+    worst = []
+    for entry in sorted(results, key=lambda entry: -abs(entry.get("relative_error", 0.0))):
+        if entry["prom_center"] not in worst:
+            worst.append(entry["prom_center"])
+    corners = []
+    for name in worst[:cells]:
+        center = grid.center(cell_of(name, grid))
+        for signs in itertools.product((-1.0, 1.0), repeat=len(grid.names)):
+            corners.append(dict(zip(grid.names, (center + (1 - 1e-9) * np.array(signs) * grid.half_width).tolist())))
+    return corners
+
+
+def corner_check(scene, results: list[dict], cells: int, workers: int, folder: Path) -> list[dict]:
+    """The FOM against the atlas at the corners of :func:`corner_designs` (every shape at its largest offset at
+    once), the atlas's answers from its PROM cache in ``folder``."""
+    from aquarom_fenics.studies.atlas import cell_of, cover
+
+    grid = cover(scene)
+    with atlas_cache(folder):
+        rows = prom_sweep(scene, corner_designs(grid, results, cells), workers, folder / "corners")
+    checked = [("corner", row | {"reach": float(grid.scaled_distance(np.array([[row[n] for n in grid.names]]),
+                                                                     cell_of(row["prom_center"], grid))[0])})
+               for row in rows if row["status"] == "completed"]
+    return fom_check(scene, checked, workers, folder)
+
+
+def cover_record(atlas: dict) -> dict:
+    """The atlas's radii: the scale s, the validity radius r, the cells' half-width h ≤ s r, cells per shape."""
+    return {key: atlas[key] for key in ("radius_scale", "validity_radius", "cell_half_width", "cells_per_shape",
+                                        "cells_in_box")}
+
+
+def time_split(atlas: dict) -> dict:
+    """Where the sweep's worker time went, from atlas.json's centre records: builds (wall and thread CPU [s],
+    the first of each worker apart: it sets up the FOM the later builds move) and batched solves."""
+    centres = atlas["centres"]
+    built = [c for c in centres if c["status"] == "built"]
+    first = [c["build_time_s"] for c in built if c.get("builds_in_worker") == 1]
+    later = [c["build_time_s"] for c in built if c.get("builds_in_worker", 0) > 1]
+    designs = max(atlas["totals"]["designs"], 1)
+    return {"builds": len(built), "build_wall_s": sum(c["build_time_s"] for c in built),
+            "build_cpu_s": sum(c.get("build_cpu_s", 0.0) for c in built),
+            "workers": len({c.get("worker") for c in built}), "first_build_per_worker_s": first,
+            "later_build_mean_s": float(np.mean(later)) if later else None,
+            "later_build_cpu_mean_s": float(np.mean([c.get("build_cpu_s", 0.0) for c in built
+                                                     if c.get("builds_in_worker", 0) > 1])) if later else None,
+            "solve_wall_s": sum(c.get("solve_time_s", 0.0) for c in centres),
+            "solve_cpu_s": sum(c.get("solve_cpu_s", 0.0) for c in centres),
+            "solve_cpu_per_design_s": sum(c.get("solve_cpu_s", 0.0) for c in centres) / designs}
 
 
 def checked_designs(scene, rows: list[dict], random: int, farthest: int, seed: int) -> list[tuple[str, dict]]:
@@ -79,7 +155,7 @@ def fom_check(scene, checked: list[tuple[str, dict]], workers: int, folder: Path
 
     designs = [{name: row[name] for name in scene.shape_names} for _, row in checked]
     with shutting_down(open_pool(min(workers, len(designs)), None, SWIMMER_WORKERS)) as pool:
-        fom_rows = run_sweep(scene, designs, "fom", folder / "fom", pool)
+        fom_rows = run_sweep(scene, designs, "fom", folder / f"fom-{checked[0][0]}", pool)
     results = []
     for (why, row), fom in zip(checked, fom_rows):
         entry = {"why": why, "design": {name: row[name] for name in scene.shape_names},
@@ -100,6 +176,9 @@ def main() -> int:
     parser.add_argument("--random", type=int, default=20, help="random designs checked with the FOM (default 20)")
     parser.add_argument("--farthest", type=int, default=5, help="farthest designs checked with the FOM (default 5)")
     parser.add_argument("--check-seed", type=int, default=0, help="seed of the random designs checked (default 0)")
+    parser.add_argument("--corners", type=int, default=0,
+                        help="also the FOM at the 2^p corners of this many cells, those of the largest errors "
+                             "checked (default 0; reported apart from the check)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "validation" / "atlas.json")
     parser.add_argument("--sweep-only", action="store_true",
@@ -121,8 +200,13 @@ def main() -> int:
         sweep = atlas_sweep(scene, designs, args.workers, Path(scratch))
         counts = summary(sweep["rows"])["counts"]
         totals = sweep["atlas"]["totals"]
+        split = time_split(sweep["atlas"])
         print(f"atlas sweep: {len(designs)} designs, {counts}, {totals['centres']} centres built "
-              f"({totals['build_time_s']:.1f} s of builds), {sweep['wall_time']:.1f} s", flush=True)
+              f"({totals['build_time_s']:.1f} s of builds), {sweep['wall_time']:.1f} s; worker time: builds "
+              f"{split['build_wall_s']:.1f} s (CPU {split['build_cpu_s']:.1f} s; first per worker "
+              f"{', '.join(f'{t:.2f}' for t in split['first_build_per_worker_s'])} s, others "
+              f"{split['later_build_mean_s'] or 0.0:.3f} s each), solves {split['solve_wall_s']:.1f} s "
+              f"(CPU {split['solve_cpu_s']:.1f} s, {1e3 * split['solve_cpu_per_design_s']:.2f} ms per design)", flush=True)
         load_after_sweep = os.getloadavg()
         common = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "machine": machine(), "versions": software_versions(),
                   "scene": args.scene, "samples": args.samples, "seed": args.seed, "workers": args.workers,
@@ -130,13 +214,15 @@ def main() -> int:
         sweep_record = {"wall_time_s": sweep["wall_time"], "counts": counts, "every_design_answered":
                         counts["completed"] == len(designs), "centres": totals["centres"],
                         "build_time_s": totals["build_time_s"], "cells_in_box": sweep["atlas"]["cells_in_box"],
-                        "seconds_per_design": sweep["wall_time"] / len(designs)}
+                        "seconds_per_design": sweep["wall_time"] / len(designs),
+                        "atlas": cover_record(sweep["atlas"]), "where_the_time_goes": time_split(sweep["atlas"])}
         write_json_atomic(args.bench, common | {"sweep": sweep_record})
         if args.sweep_only:
             print(f"wrote {args.bench}")
             return 0
         checked = checked_designs(scene, sweep["rows"], args.random, args.farthest, args.check_seed)
         results = fom_check(scene, checked, args.workers, Path(scratch))
+        corners = corner_check(scene, results, args.corners, args.workers, Path(scratch)) if args.corners else []
     errors = [abs(entry["relative_error"]) for entry in results if "relative_error" in entry]
     worst = max(results, key=lambda entry: abs(entry.get("relative_error", np.inf)))
     report = common | {"sweep": sweep_record, "atlas": {key: value for key, value in sweep["atlas"].items()},
@@ -145,6 +231,12 @@ def main() -> int:
                                  "largest_relative_error": worst.get("relative_error"),
                                  "largest_at": worst["design"], "limit": LIMIT,
                                  "within_limit": len(errors) == len(results) and max(errors) <= LIMIT}}
+    if corners:
+        largest = max(corners, key=lambda entry: abs(entry.get("relative_error", np.inf)))
+        report["corners"] = {"cells": args.corners, "designs": corners, "largest_relative_error":
+                             largest.get("relative_error"), "largest_at": largest["design"]}
+        print(f"corners of {args.corners} cells: {len(corners)} designs, largest relative distance error "
+              f"{100 * largest.get('relative_error', np.nan):+.2f} % at {largest['design']} ({largest['prom_center']})")
     write_json_atomic(args.out, report)
     print(f"FOM check: {len(errors)} of {len(results)} designs, largest relative distance error "
           f"{100 * worst.get('relative_error', np.nan):+.2f} % at {worst['design']} (limit {100 * LIMIT:g} %); "

@@ -340,9 +340,10 @@ def summary(rows: list[dict]) -> dict:
             "cached": sum(bool(row.get("cached")) for row in rows)}
 
 
-BATCHED_SECONDS_PER_DESIGN = 0.03
-"""A design's share of a batched reduced solve (the 2 s swim, level 1): 0.025 s on an idle two-core host, 0.031 s
-in a 20,000-design atlas sweep of SO1 on a loaded one (docs/devlog.md)."""
+BATCHED_SECONDS_PER_DESIGN = 0.006
+"""A design's share of a batched reduced solve (the 2 s swim, level 1, the compiled kernel) [s of a worker's wall
+time]: in 20,000-design atlas sweeps of SO1 on the shared two-core host (load average 1.4–4.8), 2.8–5.2 ms of the
+worker thread's CPU and 3.9–9.6 ms of its wall time (docs/devlog.md, "2026-12-06: the atlas at its targets")."""
 
 
 def estimate(scene: Scene, missing: int, model: str, workers: int, centres: int = 1) -> float:

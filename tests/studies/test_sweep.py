@@ -243,7 +243,7 @@ def test_a_prom_sweep_answers_designs_beyond_one_validity_radius(tmp_path, capsy
                  "--out", str(out)]) == 0
     rows = read_csv(out / "sweep.csv")
     assert [row["status"] for row in rows] == ["completed"] * 3, [row["reason"] for row in rows]
-    assert [row["prom_center"] for row in rows] == ["0_0", "2_0", "3_0"]
+    assert [row["prom_center"] for row in rows] == ["0_0", "2_0", "4_0"]         # 5 cells of half-width 0.06
     assert all(float(row["tail_amplitude_m"]) > 0 for row in rows)
     assert "PROM atlas: 3 centre(s) used" in capsys.readouterr().out
 
@@ -267,14 +267,14 @@ def test_a_prom_sweep_answers_its_designs_in_a_batch_as_single_runs_would(tmp_pa
 
     path = write_scene(tmp_path)
     scene = Scene.load(path)
-    designs = sweep.grid_designs(["z_tail=-0.04:0.04:3", "y_thin=0:0.02:2"], scene)
-    proms = [sweep.reduced_model(scene, design, "prom") for design in designs]     # two centres: z_tail < 0, ≥ 0
-    assert len({tuple(prom.xi_center) for prom in proms}) == 2
+    designs = sweep.grid_designs(["z_tail=-0.08:0.08:3", "y_thin=0:0.02:2"], scene)
+    proms = [sweep.reduced_model(scene, design, "prom") for design in designs]     # a centre per z_tail, 2 designs each
+    assert len({tuple(prom.xi_center) for prom in proms}) == 3
     expected = [reduced_dynamics.simulate_reduced(prom, scene, np.array([d[n] for n in prom.shape_names]))
                 for prom, d in zip(proms, designs)]
     request.getfixturevalue("no_single_reduced_runs")     # from here on, only the batched path may run
     out = tmp_path / "out"
-    assert main(["sweep", str(path), "--grid", "z_tail=-0.04:0.04:3", "--grid", "y_thin=0:0.02:2",
+    assert main(["sweep", str(path), "--grid", "z_tail=-0.08:0.08:3", "--grid", "y_thin=0:0.02:2",
                  "--model", "prom", "--workers", "1", "--out", str(out)]) == 0
     rows = read_csv(out / "sweep.csv")
     assert [row["status"] for row in rows] == ["completed"] * 6, [row["reason"] for row in rows]

@@ -1,0 +1,55 @@
+"""scripts/validate_atlas.py's pure parts: the corners it checks with the FOM and where it says the time went."""
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from aquarom_fenics.io.scene import scene_from_dict
+from aquarom_fenics.studies import atlas
+
+REPOSITORY = Path(__file__).resolve().parents[2]
+SPEC = importlib.util.spec_from_file_location("validate_atlas", REPOSITORY / "scripts" / "validate_atlas.py")
+script = importlib.util.module_from_spec(SPEC)
+SPEC.loader.exec_module(script)
+
+
+def so1_like():
+    return scene_from_dict({"shapes": {"z_tail": {"bounds": [-0.5, 0.5]}, "z_head": {"bounds": [-0.5, 0.5]},
+                                       "y_thin": {"bounds": [-0.15, 0.15], "radius": 0.025}}}, source="<test>")
+
+
+def test_the_corners_are_those_of_the_cells_that_erred_most_each_answered_by_its_own_cell():
+    grid = atlas.cover(so1_like())
+    results = [{"prom_center": "0_4_3", "relative_error": 0.0222}, {"prom_center": "1_0_1", "relative_error": -0.03},
+               {"prom_center": "0_4_3", "relative_error": 0.01}, {"prom_center": "2_2_2", "relative_error": 0.005},
+               {"prom_center": "4_4_6"}]                                     # a FOM that did not complete
+    corners = script.corner_designs(grid, results, 2)
+    assert len(corners) == 16
+    xis = np.array([[corner[name] for name in grid.names] for corner in corners])
+    cells = [atlas.center_id(cell) for cell in grid.cells(xis)]
+    assert cells == ["1_0_1"] * 8 + ["0_4_3"] * 8                           # |-3 %| first, each cell once
+    for xi, name in zip(xis, cells):
+        offset = np.abs(xi - grid.center(atlas.cell_of(name, grid))) / grid.half_width
+        assert np.allclose(offset, 1, rtol=0, atol=2e-9) and np.all(offset < 1)      # every shape at ±h at once
+    assert len({tuple(xi) for xi in xis}) == 16
+
+
+def test_the_time_split_counts_builds_made_here_and_each_workers_first_apart():
+    centres = [{"status": "built", "build_time_s": 2.0, "build_cpu_s": 1.0, "builds_in_worker": 1, "worker": "a",
+                "solve_time_s": 1.0, "solve_cpu_s": 0.5},
+               {"status": "built", "build_time_s": 0.8, "build_cpu_s": 0.4, "builds_in_worker": 2, "worker": "a",
+                "solve_time_s": 2.0, "solve_cpu_s": 1.0},
+               {"status": "built", "build_time_s": 3.0, "build_cpu_s": 1.5, "builds_in_worker": 1, "worker": "b",
+                "solve_time_s": 1.0, "solve_cpu_s": 0.5},
+               {"status": "built", "build_time_s": 0.6, "build_cpu_s": 0.2, "builds_in_worker": 2, "worker": "b",
+                "solve_time_s": 1.0, "solve_cpu_s": 0.5},
+               {"status": "from the cache", "build_time_s": 0.1, "build_cpu_s": 0.05, "builds_in_worker": 2,
+                "worker": "b", "solve_time_s": 1.0, "solve_cpu_s": 0.5}]
+    split = script.time_split({"centres": centres, "totals": {"designs": 1000}})
+    assert split["builds"] == 4 and split["workers"] == 2
+    assert split["build_wall_s"] == pytest.approx(6.4) and split["build_cpu_s"] == pytest.approx(3.1)
+    assert split["first_build_per_worker_s"] == [2.0, 3.0]
+    assert split["later_build_mean_s"] == pytest.approx(0.7) and split["later_build_cpu_mean_s"] == pytest.approx(0.3)
+    assert split["solve_wall_s"] == pytest.approx(6.0) and split["solve_cpu_s"] == pytest.approx(3.0)
+    assert split["solve_cpu_per_design_s"] == pytest.approx(3e-3)
