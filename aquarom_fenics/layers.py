@@ -18,7 +18,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("forms", ("forms", "scenes", "meshes")),
     ("shape catalogue", ("geometry.shapes", "geometry.shape_registry")),
     ("io", ("io",)),
-    ("discretisation", ("fem.jit_cache", "fem.dolfinx_adapter", "fem.cellwise")),
+    ("discretisation", ("fem.jit_cache", "fem.dolfinx_adapter", "fem.cellwise", "fem.pair_kernel")),
     ("run files", ("io.xdmf", "io.run_outputs")),
     ("geometry", ("geometry",)),
     ("physics", ("physics",)),

@@ -46,3 +46,5 @@ fi
 # The compiled reduced kernel (numba): compiled once into numba's cache beside its module (about half a
 # minute), loaded from there afterwards (a second or two).
 .venv/bin/python -m aquarom_fenics.dynamics.reduced_kernel
+# The internal force's pair products (numba), the same way: a few seconds to compile.
+.venv/bin/python -m aquarom_fenics.fem.pair_kernel

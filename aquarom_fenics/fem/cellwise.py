@@ -27,6 +27,7 @@ FOM's quadrature sum exactly:
 """
 from __future__ import annotations
 
+import collections
 import itertools
 
 import numpy as np
@@ -35,6 +36,7 @@ from mpi4py import MPI
 from scipy.linalg import blas
 
 from aquarom_fenics.fem import dolfinx_adapter as fx
+from aquarom_fenics.fem import pair_kernel
 from aquarom_fenics.forms.elasticity import small_strain_energy_density
 from aquarom_fenics.forms.kinematics import relative_displacement_gradient, volume_ratio
 
@@ -135,25 +137,59 @@ class CellSampler:
                 moduli[:, a, b] = moduli[:, b, a] = density(SYMMETRIC_BASIS[a] + SYMMETRIC_BASIS[b]) - single[a] - single[b]
         return moduli
 
-    def relative_gradients(self, vectors: np.ndarray) -> dict[tuple, np.ndarray]:
-        """H_j = ∇V_j F_1⁻¹ and its ξ-derivatives at every sample, (3, 3, m, n_samples) (row, column, basis
-        vector, sample) for each index tuple of ``strain_indices``: one evaluation per basis vector V_j."""
+    def relative_gradients(self, vectors: np.ndarray) -> np.ndarray:
+        """H_j = ∇V_j F_1⁻¹ and its ξ-derivatives at every sample, (count, 3, 3, m, n_samples) (index tuple of
+        ``strain_indices``, row, column, basis vector, sample): one evaluation per basis vector V_j."""
         count = len(self.strain_indices)
         values = np.empty((count, 3, 3, vectors.shape[1], self.n_samples))
         for j in range(vectors.shape[1]):
             fx.set_owned_values(self.direction, vectors[:, j])
             values[:, :, :, j] = (self.evaluate(self.gradients, 9 * count).reshape(self.n_samples, count, 3, 3)
                                   .transpose(1, 2, 3, 0))
-        return dict(zip(self.strain_indices, values))
+        return values
 
-    def whitened_strain_coefficients(self, vectors: np.ndarray,
-                                     transform: "Whitening") -> dict[tuple, tuple[np.ndarray, np.ndarray]]:
+    def whitened_strain_coefficients(self, vectors: np.ndarray, transform: "Whitening",
+                                     compiled: bool | None = None) -> dict[tuple, tuple[np.ndarray, np.ndarray]]:
         """(ẽ, q̃) = (Rᵀ e, Rᵀ q) of E(V η) = e η + ½ q η η and of each of its ξ-derivatives (by the index
         tuples of ``strain_indices``): shapes (m, 6, n_samples) and (n_pairs, 6, n_samples), R from
-        :func:`whitening`, q for the pairs j ≤ k of :func:`pair_index` (:func:`strain_coefficients`)."""
-        gradients = self.relative_gradients(vectors)
-        return {indices: tuple(whiten(part, transform) for part in strain_coefficients(gradients, indices))
+        :func:`whitening`, q for the pairs j ≤ k of :func:`pair_index` (:func:`strain_coefficients`). q̃ by the
+        compiled kernel (``pair_kernel``) where numba is installed (``compiled`` None), else, or with
+        ``compiled=False``, by numpy."""
+        stacked = self.relative_gradients(vectors)
+        gradients = dict(zip(self.strain_indices, stacked))
+        if not (pair_kernel.available() if compiled is None else compiled):
+            return {indices: tuple(whiten(part, transform) for part in strain_coefficients(gradients, indices))
+                    for indices in self.strain_indices}
+        return {indices: (whiten(symmetric_parts(gradients[indices]), transform),
+                          whitened_pair_products(stacked, self.strain_indices, [(indices, None, 1.0)], transform))
                 for indices in self.strain_indices}
+
+
+def whitened_pair_products(stacked: np.ndarray, strain_indices: list, terms: list,
+                           transform: "Whitening") -> np.ndarray:
+    """Rᵀ Σ_t c_t w_t q_t by the compiled kernel, (n_pairs, 6, n_samples): q_t the q of :func:`strain_coefficients`
+    of the index tuple I_t, Σ_{A ⊔ B = I_t} sym(∂_A H_jᵀ ∂_B H_k), over every term t = (I_t, w_t, c_t) of ``terms``
+    (w_t a weight per sample or None for 1, c_t a number), formed and whitened in one pass over the samples.
+    ``stacked`` (count, 3, 3, m, n_samples) holds ∂_J H for the index tuples J of ``strain_indices``."""
+    position = {key: number for number, key in enumerate(strain_indices)}
+    splits, coefficients, weights = [], [], []
+    for indices, weight, coefficient in terms:
+        row = -1 if weight is None else len(weights)
+        if weight is not None:
+            weights.append(weight)
+        for left, right in leibniz_terms(indices, 2):
+            splits.append((position[left], position[right], row))
+            coefficients.append(coefficient)
+    used = sorted({number for left, right, _ in splits for number in (left, right)})
+    local = {number: place for place, number in enumerate(used)}
+    table = np.array([[local[left], local[right], row] for left, right, row in splits], dtype=np.int64)
+    m, n_samples = stacked.shape[3:]
+    out = np.empty((m * (m + 1) // 2, 6, n_samples))
+    pair_kernel.whitened_pair_products(stacked, np.array(used, dtype=np.int64), table,
+                                       np.array(coefficients, dtype=float),
+                                       np.array(weights, dtype=float).reshape(len(weights), n_samples),
+                                       *transform.kernel_arguments(), out)
+    return out
 
 
 def strain_coefficients(gradients: dict[tuple, np.ndarray], indices: tuple) -> tuple[np.ndarray, np.ndarray]:
@@ -254,6 +290,15 @@ class Whitening:
         else:
             self.factors = (np.sqrt(weight) * mask)[:, None, None] * np.linalg.cholesky(moduli)   # R_s
 
+    def kernel_arguments(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(R̂ᵀ, scale, an empty (6, 6, 0)) when shared, else (zeros, ones, factors[b, a, s] = (R_sᵀ)_ba): the
+        whitening as ``pair_kernel.whitened_pair_products`` takes it."""
+        if self.shared:
+            return self.factor, np.ascontiguousarray(self.scale, dtype=float), np.empty((6, 6, 0))
+        if not hasattr(self, "_transposed"):
+            self._transposed = np.ascontiguousarray(self.factors.transpose(2, 1, 0))
+        return np.zeros((6, 6)), np.ones(self.factors.shape[0]), self._transposed
+
     def apply(self, factor: np.ndarray) -> np.ndarray:
         """R_sᵀ x at every sample of a (count, 6, n_samples) array x, the same shape."""
         if self.shared:
@@ -308,25 +353,44 @@ def force_tensors(p2, p3, p4):
     return p2, 1.5 * p3_sym, 0.5 * p4_sym
 
 
-def internal_force_taylor(sampler: CellSampler, vectors: np.ndarray, n_parameters: int,
-                          order: int, comm: MPI.Comm, samples: np.ndarray | None = None):
+def internal_force_taylor(sampler: CellSampler, vectors: np.ndarray, n_parameters: int, order: int, comm: MPI.Comm,
+                          samples: np.ndarray | None = None, compiled: bool | None = None):
     """Taylor coefficients in Δξ of (K1, K2, K3): lists [constant, first (p, ...), second (p, p, ...)].
 
     Π = ½ Σ_c w_c E_c:ℂ_c:E_c; its ξ-derivatives follow Leibniz' rule over the three factors
     (w, E, E). The weight enters as w_I / w_0 on the left factor of strains whitened with w_0.
     ``samples`` (bool, one per sample) restricts the sums to those samples (the measure dx of a region):
-    the other samples' whitened strains are zero.
+    the other samples' whitened strains are zero. Where numba is installed (``compiled`` None) or ``compiled``,
+    the weighted sum of one right factor's left terms is formed by the compiled pair products with the weights
+    (:func:`whitened_pair_products`); otherwise by numpy from ``sampler.whitened_strain_coefficients``.
     """
     m = vectors.shape[1]
     base_weight = sampler.weights(sampler.weight[0])
     transform = whitening(base_weight, sampler.elasticity(), samples)
     p = n_parameters if order >= 1 else 0
-    whitened, weight_ratio = {}, {}
+    whitened, weight_ratio, stacked = {}, {}, []
+    fused = pair_kernel.available() if compiled is None else compiled
 
     def strain(indices):
-        if not whitened:               # E and all its ξ-derivatives from one evaluation per basis vector
-            whitened.update(sampler.whitened_strain_coefficients(vectors, transform))
-        return whitened[tuple(sorted(indices))]
+        key = tuple(sorted(indices))
+        if fused and key not in whitened:
+            whitened[key] = fused_strain([((), key)])
+        elif not whitened:             # E and all its ξ-derivatives from one evaluation per basis vector
+            whitened.update(sampler.whitened_strain_coefficients(vectors, transform, compiled=False))
+        return whitened[key]
+
+    def fused_strain(terms):
+        """Σ_t w_t (ẽ, q̃) of the terms (weight indices, strain indices), repeated terms counted."""
+        if not stacked:                # H and all its ξ-derivatives from one evaluation per basis vector
+            stacked.append(sampler.relative_gradients(vectors))
+        counted = collections.Counter(terms)
+        linear = sum(whiten(symmetric_parts(stacked[0][sampler.strain_indices.index(left)]), transform)
+                     * (count * weight(weights) if weights else float(count))
+                     for (weights, left), count in counted.items())
+        quadratic = whitened_pair_products(stacked[0], sampler.strain_indices, [
+            (left, weight(weights) if weights else None, float(count)) for (weights, left), count in counted.items()],
+            transform)
+        return linear, quadratic
 
     def weight(indices):
         if indices not in weight_ratio:
@@ -344,6 +408,10 @@ def internal_force_taylor(sampler: CellSampler, vectors: np.ndarray, n_parameter
             left_indices, right_indices = sorted((left_indices, right_indices), reverse=True)
             lefts.setdefault(right_indices, []).append((weight_indices, left_indices))
         for right_indices, terms in lefts.items():
+            if fused:
+                for total, part in zip(totals, energy_tensors(fused_strain(terms), strain(right_indices), m)):
+                    total += part
+                continue
             terms.sort(key=lambda term: not term[0])          # the weighted terms first: they make the sum's arrays
             combined = None
             for weight_indices, left_indices in terms:
