@@ -3,8 +3,9 @@
 Messages go through the logger ``aquarom``: warnings (each distinct one once) on stderr by
 default; :func:`set_log_level` shows more (``"info"``: solver set-up, timings) or less.
 
-Importing the package sets two environment defaults (a value the user set is kept) so that a run
-writes nothing outside its output and the caches; see :func:`_third_party_files_in_place`.
+Importing the package sets environment defaults (a value the user set is kept) so that a run
+writes nothing outside its output and the caches, and nothing but its own output on stdout; see
+:func:`_third_party_files_in_place`.
 """
 from __future__ import annotations
 
@@ -83,7 +84,7 @@ set_log_level("warning")
 
 def _third_party_files_in_place() -> None:
     """Environment defaults, set before the libraries load, that keep their files out of the user's
-    home and the temporary folder:
+    home and the temporary folder, and their bytes out of stdout:
 
     - ``OMPI_MCA_ess_singleton_isolated=1``: a process not started by mpirun runs as an isolated
       Open MPI singleton, without the daemon whose session folder ($TMPDIR/ompi.<host>.<uid>/pid.<pid>)
@@ -92,6 +93,9 @@ def _third_party_files_in_place() -> None:
     - ``MPLCONFIGDIR``: matplotlib creates its configuration folder ($XDG_CONFIG_HOME/matplotlib,
       default ~/.config/matplotlib) when it is missing; then it is pointed to matplotlib's cache
       folder ($XDG_CACHE_HOME/matplotlib), where matplotlib keeps its font list in any case.
+    - ``NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING=1``: in a process started by mpirun, numba's coloured
+      error messages start colorama, whose exit hook writes the ANSI reset ESC[0m to stdout after the
+      process's last line (a rank that ran a compiled kernel); read at numba's import.
     """
     os.environ.setdefault("OMPI_MCA_ess_singleton_isolated", "1")
     if "MPLCONFIGDIR" not in os.environ:
@@ -99,6 +103,7 @@ def _third_party_files_in_place() -> None:
         if not config.is_dir():
             os.environ["MPLCONFIGDIR"] = str(Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
                                              / "matplotlib")
+    os.environ.setdefault("NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING", "1")
 
 
 _third_party_files_in_place()
