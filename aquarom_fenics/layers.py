@@ -13,7 +13,7 @@ layer of its longest listed name (``fem.dolfinx_adapter`` before ``fem``); ``""`
 from __future__ import annotations
 
 LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
-    ("base", ("", "errors", "files", "layers")),
+    ("base", ("", "errors", "files", "layers", "machine_code")),
     ("parallel", ("parallel",)),
     ("forms", ("forms", "scenes", "meshes")),
     ("shape catalogue", ("geometry.shapes", "geometry.shape_registry")),

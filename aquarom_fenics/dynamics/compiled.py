@@ -1,23 +1,8 @@
-"""numba for the compiled reduced kernel: its one ``jit`` decorator (cached on disk beside the modules), and whether
-numba is there (Debian's python3-numba; without it the batched solves use numpy)."""
+"""The compiled reduced kernel's modules and their numba cache; its ``jit`` decorator and ``available`` are those
+of :mod:`aquarom_fenics.machine_code` (one for every compiled kernel)."""
 from __future__ import annotations
 
-try:
-    import numba
-except ImportError:          # the numpy engine serves; ``available()`` says which
-    numba = None
-
-
-def jit(function):
-    """numba.njit with the kernel's options, cached on disk beside its module (identity without numba)."""
-    if numba is None:
-        return function
-    return numba.njit(cache=True, nogil=True, error_model="numpy")(function)
-
-
-def available() -> bool:
-    """Whether numba can be imported."""
-    return numba is not None
+from aquarom_fenics.machine_code import available, jit  # noqa: F401  (the kernel modules import them from here)
 
 
 KERNEL_MODULES = ("compiled", "kernel_pack", "kernel_terms", "kernel_thrust", "reduced_kernel")

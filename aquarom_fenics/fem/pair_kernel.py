@@ -15,27 +15,12 @@ from __future__ import annotations
 
 import numpy as np
 
-try:
-    import numba
-except ImportError:          # the numpy path serves; ``available()`` says which
-    numba = None
+from aquarom_fenics.machine_code import available, jit as _jit  # noqa: F401  (available: cellwise asks here)
 
 _HALF_ROOT = 1.0 / np.sqrt(2.0)
 BLOCK = 128
 """Samples per block: the block's gradient rows (a few hundred kB) stay in the second-level cache, its
 accumulators (6 × BLOCK) in the first."""
-
-
-def _jit(function):
-    """numba.njit cached on disk beside this module (identity without numba)."""
-    if numba is None:
-        return function
-    return numba.njit(cache=True, nogil=True, error_model="numpy")(function)
-
-
-def available() -> bool:
-    """Whether numba can be imported."""
-    return numba is not None
 
 
 @_jit
