@@ -15,7 +15,7 @@ Writes results/validation/atlas.json (and results/bench/atlas_sweep.json: the sw
 and where the workers' time went: builds and batched solves, wall and thread CPU, each worker's first build
 apart; `--sweep-only`, as `make bench` runs it, skips the FOM check and writes only that).
 
-    .venv/bin/python scripts/validate_atlas.py            # 1.6-3.3 min of sweep at s = 0.8 on 2 shared cores,
+    .venv/bin/python scripts/validate_atlas.py            # 1-1.5 min of sweep at s = 0.7 on 2 cores,
                                                           # then 25 FOM runs (through the FOM cache)
 """
 from __future__ import annotations

@@ -45,8 +45,8 @@ def test_the_cover_cuts_the_box_in_cells_of_half_width_within_the_validity_radiu
     assert np.allclose(grid.center((0, 3, 5)), [-0.375, 0.375, 0.125])
     half = atlas.cover(so1_like(), scale=0.5)
     assert half.counts.tolist() == [8, 8, 12] and np.all(half.half_width <= 0.5 * half.radius + 1e-15)
-    shipped = atlas.cover(so1_like())                      # s = RADIUS_SCALE = 0.8: h = 0.1, 0.1, 0.01875
-    assert shipped.counts.tolist() == [5, 5, 8] and shipped.box_cells() == 200
+    shipped = atlas.cover(so1_like())                      # s = RADIUS_SCALE = 0.7: h = 1/12, 1/12, 1/60
+    assert shipped.counts.tolist() == [6, 6, 9] and shipped.box_cells() == 324
     assert np.all(shipped.half_width <= atlas.RADIUS_SCALE * shipped.radius + 1e-15)
 
 
