@@ -408,8 +408,10 @@ def internal_force_taylor(sampler: CellSampler, vectors: np.ndarray, n_parameter
             left_indices, right_indices = sorted((left_indices, right_indices), reverse=True)
             lefts.setdefault(right_indices, []).append((weight_indices, left_indices))
         for right_indices, terms in lefts.items():
-            if fused:
-                for total, part in zip(totals, energy_tensors(fused_strain(terms), strain(right_indices), m)):
+            if fused:              # one unweighted term: the strain itself (cached; E against E by the rank-k update)
+                single = len(terms) == 1 and not terms[0][0]
+                left = strain(terms[0][1]) if single else fused_strain(terms)
+                for total, part in zip(totals, energy_tensors(left, strain(right_indices), m)):
                     total += part
                 continue
             terms.sort(key=lambda term: not term[0])          # the weighted terms first: they make the sum's arrays
