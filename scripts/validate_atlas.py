@@ -185,6 +185,9 @@ def main() -> int:
                         help="the atlas sweep only (results/bench/atlas_sweep.json), no FOM check")
     parser.add_argument("--bench", type=Path, default=REPOSITORY / "results" / "bench" / "atlas_sweep.json")
     args = parser.parse_args()
+    for option, least in (("samples", 1), ("workers", 1), ("random", 0), ("farthest", 0), ("corners", 0)):
+        if getattr(args, option) < least:
+            parser.error(f"--{option} {getattr(args, option)}: a count, at least {least}")
     for variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[variable] = "1"
     from aquarom_fenics.io.persistence import write_json_atomic

@@ -53,3 +53,13 @@ def test_the_time_split_counts_builds_made_here_and_each_workers_first_apart():
     assert split["later_build_mean_s"] == pytest.approx(0.7) and split["later_build_cpu_mean_s"] == pytest.approx(0.3)
     assert split["solve_wall_s"] == pytest.approx(6.0) and split["solve_cpu_s"] == pytest.approx(3.0)
     assert split["solve_cpu_per_design_s"] == pytest.approx(3e-3)
+
+
+@pytest.mark.parametrize("option, value", [("--corners", "-1"), ("--samples", "0"), ("--workers", "0")])
+def test_a_count_out_of_range_is_refused_before_any_run(option, value, monkeypatch, capsys):
+    monkeypatch.setattr("sys.argv", ["validate_atlas.py", option, value])
+    with pytest.raises(SystemExit) as stop:
+        script.main()
+    assert stop.value.code == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1].endswith(f"{option} {value}: a count, at least "
+                                                                     f"{0 if option == '--corners' else 1}")
