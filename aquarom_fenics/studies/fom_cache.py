@@ -36,7 +36,7 @@ from aquarom_fenics.io.paths import cache_root
 from aquarom_fenics.io import persistence      # write_json_atomic looked up at each store (a full disk can be simulated)
 from aquarom_fenics.io.persistence import entry_key, get_or_compute, require_cache_writable, store
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.studies.fish_cache import shared_fish
+from aquarom_fenics.geometry.fish_cache import shared_fish
 
 log = logging.getLogger("aquarom")
 
@@ -117,7 +117,7 @@ def answer_of(result) -> FomAnswer:
 
 def run_fom(scene: Scene, design: dict[str, float], fish: Fish | None, progress: bool) -> FomAnswer:
     """One FOM run at the design (the scene's amplitude), as an answer; the fish of the scene from
-    :func:`~aquarom_fenics.studies.fish_cache.shared_fish` when none is given."""
+    :func:`~aquarom_fenics.geometry.fish_cache.shared_fish` when none is given."""
     require_cache_writable("fom")
     return answer_of(simulate_fom(scene, design, fish=fish or shared_fish(scene), progress=progress))
 

@@ -29,7 +29,7 @@ from aquarom_fenics.errors import InputError
 from aquarom_fenics.files import read_text_file
 from aquarom_fenics.parallel import run_all, worker_name
 from aquarom_fenics.io.scene import Scene
-from aquarom_fenics.studies.fish_cache import shared_fish
+from aquarom_fenics.geometry.fish_cache import shared_fish
 from aquarom_fenics.studies.sweep_designs import (  # noqa: F401 — the design sources, also imported from here
     MAX_DESIGN_FILE_BYTES, MAX_DESIGNS, csv_designs, driven, grid_designs, latin_hypercube, variable_names)
 

@@ -200,7 +200,7 @@ def tail_tip(scale):
 def test_fields_equal_on_the_probe_box_but_not_on_the_mesh_hash_apart(registry, degree):
     """Three times larger behind the probe box: another hash, FOM hash and fish (so no cache entry
     of the first definition answers for the second)."""
-    from aquarom_fenics.studies.fish_cache import fish_key
+    from aquarom_fenics.geometry.fish_cache import fish_key
 
     small, large = tail_tip(1.0), tail_tip(3.0)
     np.testing.assert_array_equal(small[0](probe_points()), large[0](probe_points()))

@@ -8,7 +8,7 @@ import pytest
 from aquarom_fenics.errors import SolverError
 from aquarom_fenics.io.persistence import store, write_json_atomic
 from aquarom_fenics.studies import fom_cache
-from aquarom_fenics.studies.fish_cache import shared_fish
+from aquarom_fenics.geometry.fish_cache import shared_fish
 from aquarom_fenics.studies.sweep import SweepTask, cached_designs, evaluate
 
 

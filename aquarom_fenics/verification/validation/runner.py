@@ -19,7 +19,7 @@ from aquarom_fenics.parallel import DaskCluster, LocalProcesses, run_all
 from aquarom_fenics.io.persistence import get_or_compute, read_intact, write_json_atomic
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.studies.estimate import case_seconds
-from aquarom_fenics.studies.fish_cache import shared_fish
+from aquarom_fenics.geometry.fish_cache import shared_fish
 from aquarom_fenics.verification.validation.cases import CACHED_STATUSES, Case, describe, read_record
 from aquarom_fenics.verification.validation.compute import compute_fom, compute_mesh, compute_mpi, compute_reduced
 
@@ -152,7 +152,7 @@ class Runner:
 
     def fish(self, scene: Scene):
         """load_fish, shared by cases with the same mesh, regions and shape set (and with a sweep's
-        designs in the same process: :func:`aquarom_fenics.studies.fish_cache.shared_fish`)."""
+        designs in the same process: :func:`aquarom_fenics.geometry.fish_cache.shared_fish`)."""
         return shared_fish(scene)
 
     def warm_up(self, scene: Scene, parametric: bool | None) -> None:
