@@ -150,7 +150,8 @@ def run_optimize(args, scene, xi) -> int:
     if scene.cooptimization.enabled:
         weight = DEFAULT_WEIGHT if args.weight is None else args.weight
         weights = CostWeights(weight, 1.0 - weight, scene.cooptimization.energy_weight)
-    with shutting_down(open_work_pool(args, scene, scene.optimizer.starts, default_workers=1)) as pool:
+    with shutting_down(open_work_pool(args, scene, max(scene.optimizer.starts, scene.optimizer.screen),
+                                       default_workers=1)) as pool:
         out = claim_output(args, args.out or Path("results") / "optimize" / scene.name, resume=args.resume,
                            resume_file=checkpoint_pattern(scene))
         result, check = run_optimization(scene, out, resume=args.resume, weights=weights, pool=pool,

@@ -299,7 +299,10 @@ def _section_from_dict(cls, table: dict, where: str, section: str):
         if problem:
             raise InputError(f"{where}: [{section}] {key} = {value!r} {problem}")
         values[key] = value
-    return cls(**values)
+    settings = cls(**values)
+    if section == "optimizer" and settings.screen_problem():     # across keys: the screen chooses the starts
+        raise InputError(f"{where}: {settings.screen_problem()}")
+    return settings
 
 
 def _coerce(value, default, where, variable_length=False):

@@ -246,6 +246,10 @@ class ReductionSection:
     validity_change: float = _spec(0.0, lambda v: None if 0 <= v <= 1 else "must be in [0, 1] (0: off)", "> 0 caps each PROM's validity radius at the built design: r_k ≤ this / s_k, s_k = the largest relative ξ_k-derivative ‖∂T/∂ξ_k‖/‖T‖ of its internal force and mass tensors T, so that to first order no tensor changes by more than this fraction across the radius (docs/theory/basis.md, \"The validity radius at thin designs\"); 0: off, the radius of validity_fraction or the shape's own", legacy=0.0)
 
 
+MAX_SCREEN = 100_000
+"""Most designs of a multi-start screen (``[optimizer] screen``), as the most designs of one sweep."""
+
+
 @dataclass(frozen=True)
 class OptimizerSection:
     method: str = _spec("paper", _one_of("paper", "trust-region"), "optimisation algorithm")
@@ -262,9 +266,21 @@ class OptimizerSection:
     active_tolerance: float = _spec(1e-2, _positive, "a bound or linear constraint is active when its slack is below this fraction of its range")
     starts: int = _spec(1, _positive, "optimisations from the start point and starts - 1 Latin-hypercube feasible points")
     seed: int = _spec(0, _non_negative, "seed of the Latin-hypercube starts")
+    screen: int = _spec(0, lambda v: None if 0 <= v <= MAX_SCREEN else f"must be 0 (off) or a number of designs in [starts, {MAX_SCREEN}]", "0: off; N > 0: the starts are the `starts` designs of least cost among N (the start point and N - 1 Latin-hypercube feasible designs), each design's cost from the PROM of the atlas cell holding it (built on demand through the PROM cache, one batched reduced run per cell; docs/user/sweep.rst); at least starts", legacy=0)
     tail_screen: bool = _spec(False, None, "refuse designs whose tail region the thrust destabilises: the FOM linearised at the PROM's last-stroke states (a FOM linearisation and a dense eigenvalue problem per screened state at each PROM build, shared by the ranks under mpirun)")
     tail_growth_limit: float = _spec(100.0, _positive, "tail screen: largest growth rate Re λ of the tail region's modes accepted [1/s]")
     tail_region_radius: float = _spec(0.015, _positive, "tail screen: the region is the free nodes within this distance of the tail station (its rest position) [m]")
+
+    @property
+    def multistart(self) -> bool:
+        """Whether ``optimize`` runs the multi-start (in ``start_<k>/`` folders): starts > 1, or a screen."""
+        return self.starts > 1 or self.screen > 0
+
+    def screen_problem(self) -> str | None:
+        """Why ``screen`` does not go with ``starts`` (a screen chooses the starts among its designs), or None."""
+        if 0 < self.screen < self.starts:
+            return f"[optimizer] screen = {self.screen} is below starts = {self.starts}: 0 (off) or at least starts"
+        return None
 
 
 @dataclass(frozen=True)

@@ -19,8 +19,8 @@ from aquarom_fenics.errors import InputError, Interrupted, SolverError
 from aquarom_fenics.parallel import worker_threads
 from aquarom_fenics.geometry.fish import Fish, load_fish
 from aquarom_fenics.optimization.history import Checkpoint, design_columns, history_columns
-from aquarom_fenics.optimization.optimize import (DEFAULT_MAX_TIME, OptimizationResult, optimization_space, optimize,
-                                                  start_points)
+from aquarom_fenics.optimization.optimize import DEFAULT_MAX_TIME, OptimizationResult, optimization_space, optimize
+from aquarom_fenics.optimization.screen import multistart_starts
 from aquarom_fenics.optimization.prom_builder import PromBuilder
 from aquarom_fenics.io.outputs import holds_file
 from aquarom_fenics.io.run_record import check_run_record, write_run_record
@@ -88,7 +88,7 @@ def fom_check(scene: Scene, fish: Fish, result: OptimizationResult,
 
 def checkpoint_pattern(scene: Scene) -> str:
     """Where an optimisation's output folder keeps its checkpoint: at the top, or one per multi-start run."""
-    return "checkpoint.json" if scene.optimizer.starts == 1 else "start_*/checkpoint.json"
+    return "start_*/checkpoint.json" if scene.optimizer.multistart else "checkpoint.json"
 
 
 def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights: CostWeights | None = None,
@@ -96,11 +96,11 @@ def run_optimization(scene: Scene, out_dir: Path, resume: bool = False, weights:
                      start: np.ndarray | None = None, pool=None) -> tuple[OptimizationResult, FomCheck]:
     """Optimise, check with the FOM and write history.csv, summary.json, plots, renders, XDMF.
 
-    From ``start`` when given; otherwise ``[optimizer] starts`` > 1 runs :func:`run_multistart`
+    From ``start`` when given; otherwise ``[optimizer] starts`` > 1 or a screen runs :func:`run_multistart`
     (its starts on ``pool`` when given). A checkpoint to resume from is validated before anything
     is written; Ctrl-C leaves the history, a valid checkpoint and a summary.json with the stop reason.
     """
-    if start is None and scene.optimizer.starts > 1:
+    if start is None and scene.optimizer.multistart:
         return run_multistart(scene, out_dir, resume, weights, fish, render, max_time, pool=pool)
     out_dir = Path(out_dir)
     is_writer = MPI.COMM_WORLD.rank == 0
@@ -163,8 +163,8 @@ def optimization_record(scene: Scene, weights: CostWeights | None, start: np.nda
 def run_multistart(scene: Scene, out_dir: Path, resume: bool = False, weights: CostWeights | None = None,
                    fish: Fish | None = None, render: bool = True,
                    max_time: float = DEFAULT_MAX_TIME, pool=None) -> tuple[OptimizationResult, FomCheck]:
-    """One optimisation per start of :func:`start_points` (in ``start_<k>/``, sharing the PROM
-    cache), each FOM-checked; summary.json lists every local optimum and is the summary of the
+    """One optimisation per start of ``multistart_starts`` (in ``start_<k>/``, sharing the PROM
+    cache; with ``[optimizer] screen`` the starts of least cost among the screened), each FOM-checked; summary.json lists every local optimum and is the summary of the
     best FOM-verified one (the best PROM distance when no FOM check finished).
 
     ``pool``: a backend of :mod:`aquarom_fenics.parallel` running one start per task; None runs
@@ -174,7 +174,8 @@ def run_multistart(scene: Scene, out_dir: Path, resume: bool = False, weights: C
     fish = fish or load_fish(scene)
     space = optimization_space(scene, fish)
     settings = scene.optimizer
-    starts = start_points(space, settings.starts, settings.seed, PromBuilder(scene, fish, space).meshes)
+    starts, screened = multistart_starts(scene, space, weights or CostWeights(), PromBuilder(scene, fish, space).meshes,
+                                         pool)
     if pool is None:
         with worker_threads():
             runs = [start_run(scene, out_dir, resume, weights, max_time, (k, z), fish) for k, z in enumerate(starts)]
@@ -196,7 +197,7 @@ def run_multistart(scene: Scene, out_dir: Path, resume: bool = False, weights: C
                        {"starts": settings.starts, "seed": settings.seed, "best_start": best + 1,
                         "distinct_optima": _distinct_optima(space, [r.optimum for r, _ in runs],
                                                             settings.active_tolerance),
-                        "local_optima": optima})
+                        "local_optima": optima} | ({"screen": screened} if screened else {}))
     _write_figures(out_dir, scene, fish, result, render)
     return result, check
 
