@@ -21,7 +21,8 @@ Two algorithms over the same cost and design space (``cost.py``):
 Both stop by first-order optimality (``cost.first_order``: KKT residual over the active set,
 relative to |L|, below ``optimality_tolerance``) at a design where a PROM was built; step size and
 ``max_iterations`` are safeguards. ``starts`` > 1 repeats the run from Latin-hypercube feasible
-starts (:func:`start_points`), all sharing the PROM cache.
+starts (:func:`start_points`), all sharing the PROM cache; with ``screen`` the starts are the designs of
+least cost among that many, each answered by the PROM atlas (:mod:`~aquarom_fenics.optimization.screen`).
 
 The state after every iteration goes to an atomic checkpoint; a resumed run continues from it to
 the same result (PROM builds are deterministic).

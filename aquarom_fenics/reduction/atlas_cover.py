@@ -1,5 +1,6 @@
 """The PROM atlas's cover of a design box and the PROM at a centre: below the optimisers,
-used by ``sweep --model prom`` (:mod:`~aquarom_fenics.studies.atlas`).
+used by ``sweep --model prom`` (:mod:`~aquarom_fenics.studies.atlas`) and the multi-start screen
+(:mod:`~aquarom_fenics.optimization.screen`).
 
 One PROM answers only inside its validity radius r (SPEC §8). The atlas covers the scene's box
 [lower, upper] with a grid of cells, each the box around its centre c of half-width h_k per shape,

@@ -2,7 +2,7 @@
 
 The cover of the box by cells of half-width h ≤ s r (r the validity radius, s = :data:`RADIUS_SCALE`) and
 the PROM at a cell's centre (:func:`center_prom`, through the PROM cache) are
-:mod:`~aquarom_fenics.reduction.atlas_cover`'s, below the optimisers (which may use them too); a design's cell's centre holds it within h_k ≤ r_k, so that
+:mod:`~aquarom_fenics.reduction.atlas_cover`'s, below the optimisers, whose multi-start screen uses them too (:mod:`~aquarom_fenics.optimization.screen`); a design's cell's centre holds it within h_k ≤ r_k, so that
 centre's PROM answers it (a PROM whose radius ``[reduction] validity_change``
 caps below h refuses the designs beyond it, as a row). Only the centres whose cells hold designs are
 built, each through the PROM cache (a second sweep reuses them), one task per centre on the sweep's

@@ -69,12 +69,16 @@ def test_the_starts_are_the_screened_designs_of_least_cost(tmp_path, monkeypatch
     np.testing.assert_array_equal(again.costs, screened.costs)
 
 
-def test_a_multistart_starts_from_the_screens_choice(tmp_path, monkeypatch):
+@pytest.mark.parametrize("starts", [1, 2])
+def test_a_multistart_starts_from_the_screens_choice(starts, tmp_path, monkeypatch):
     """The study driver with a screen: its starts are the screen's (an analytic cost stands in for the PROMs and
-    the optimiser's runs are recorded, not run), and summary.json's multistart names the screen."""
+    the optimiser's runs are recorded, not run), and summary.json's multistart names the screen; one start
+    with a screen is a multi-start of one."""
     from aquarom_fenics.studies import study
 
-    scene = scene_from_dict(tomllib.loads(SCENE.replace("screen = 6", "screen = 9")), source="<test>")
+    text = SCENE.replace("screen = 6", "screen = 9").replace("starts = 2", f"starts = {starts}")
+    scene = scene_from_dict(tomllib.loads(text), source="<test>")
+    assert study.checkpoint_pattern(scene) == "start_*/checkpoint.json"
     fish = load_fish(scene)
     space = optimization_space(scene, fish)
 
@@ -89,8 +93,8 @@ def test_a_multistart_starts_from_the_screens_choice(tmp_path, monkeypatch):
     monkeypatch.setattr(study, "_write_figures", lambda *args: None)
     study.run_optimization(scene, tmp_path, fish=fish, render=False)
     designs = np.array(start_points(space, 9, 0, PromBuilder(scene, fish, space).meshes))
-    best = np.argsort(analytic(None, scene, space, designs, None))[:2]
-    assert [k for k, _ in started] == [0, 1]
+    best = np.argsort(analytic(None, scene, space, designs, None))[:starts]
+    assert [k for k, _ in started] == list(range(starts))
     np.testing.assert_array_equal(np.array([z for _, z in started]), designs[best])
     summary = json.loads((tmp_path / "summary.json").read_text())
     chosen = summary["multistart"]["screen"]["chosen"]
@@ -126,7 +130,7 @@ def test_a_bad_screen_is_refused_in_one_line(table, message, tmp_path, capsys):
         Scene.load("so1").replace("optimizer", **table)
     path = tmp_path / "bad.toml"
     path.write_text("[optimizer]\n" + "".join(f"{key} = {json.dumps(value)}\n" for key, value in table.items()))
-    assert main(["optimize", str(path), "--out", str(tmp_path / "out")]) != 0
+    assert main(["optimize", str(path), "--out", str(tmp_path / "out")]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and "screen" in lines[0] and "Traceback" not in lines[0], lines
 
