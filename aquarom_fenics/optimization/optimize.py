@@ -22,7 +22,8 @@ Both stop by first-order optimality (``cost.first_order``: KKT residual over the
 relative to |L|, below ``optimality_tolerance``) at a design where a PROM was built; step size and
 ``max_iterations`` are safeguards. ``starts`` > 1 repeats the run from Latin-hypercube feasible
 starts (:func:`start_points`), all sharing the PROM cache; with ``screen`` the starts are the designs of
-least cost among that many, each answered by the PROM atlas (:mod:`~aquarom_fenics.optimization.screen`).
+least cost among that many, each answered by the PROM atlas (:mod:`~aquarom_fenics.optimization.screen`). With
+``atlas`` (paper method) every PROM is the atlas's at the centre of the cell holding the iterate (``PromBuilder``).
 
 The state after every iteration goes to an atomic checkpoint; a resumed run continues from it to
 the same result (PROM builds are deterministic).

@@ -1,4 +1,5 @@
-"""PROMs centred on designs for the optimisers: built or taken from the cache, checked for a stable gait."""
+"""PROMs centred on designs for the optimisers: built or taken from the cache, checked for a stable gait; with
+``[optimizer] atlas`` the PROMs of the atlas's cell centres (:mod:`~aquarom_fenics.reduction.atlas_cover`)."""
 from __future__ import annotations
 
 import logging
@@ -11,6 +12,7 @@ from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.fish import Fish
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.optimization.cost import DesignSpace, Evaluation, amplitude_of, cost_value, evaluate, scene_at
+from aquarom_fenics.reduction.atlas_cover import center_id, center_prom, cover
 from aquarom_fenics.reduction.cache import cached_prom
 from aquarom_fenics.reduction.prom import ReducedModel
 from aquarom_fenics.reduction.reductor import build_prom
@@ -73,6 +75,8 @@ class PromBuilder:
         self._basis_source: ReducedModel | None = None
 
     def build(self, z: np.ndarray) -> ReducedModel:
+        if self.scene.optimizer.atlas:
+            return self._atlas_build(z)
         started = time.perf_counter()
         center = z[: self.space.n_shapes]
         source = self._basis_source_near(center)
@@ -104,6 +108,27 @@ class PromBuilder:
         self._refuse_unstable(prom, z)
         return prom
 
+    def _atlas_build(self, z: np.ndarray) -> ReducedModel:
+        """``[optimizer] atlas``: the PROM at the centre c of the atlas cell holding the shapes of z
+        (``atlas_cover.center_prom``, through the PROM cache; |ξ - c|_k ≤ h_k ≤ 0.7 r_k), checked for a
+        stable gait at z."""
+        started = time.perf_counter()
+        grid = cover(self.scene)
+        cell = grid.cells(z[None, : self.space.n_shapes])[0]
+        prom, built = center_prom(self.scene, dict(zip(grid.names, grid.center(cell).tolist())), self.fish)
+        elapsed = time.perf_counter() - started
+        self.build_time += elapsed
+        self.builds += 1
+        self.reused += not built
+        self.last_size = prom.size
+        record = {"build": self.builds, "design": self.space.as_dict(z), "from_cache": not built, "basis_from": None,
+                  "radius_fraction": None, "atlas_cell": center_id(cell), "time": elapsed}
+        self.records.append(record)
+        log.info("PROM %d for %s: the atlas centre %s's, %s; %.2f s", self.builds, record["design"], center_id(cell),
+                 "from the cache" if not built else "built", elapsed)
+        self._refuse_unstable(prom, z)
+        return prom
+
     def _radius_fraction(self, xi: np.ndarray, other: np.ndarray) -> float:
         """max_k |ξ_k - ξ'_k| / r_k, r the scene's validity radius (a parameter with r_k = 0, fixed by
         equal bounds, counts 0 where ξ_k = ξ'_k, else infinity)."""
@@ -129,7 +154,12 @@ class PromBuilder:
         return np.asarray(prom.validity_radius, dtype=float)
 
     def trusts(self, prom: ReducedModel | None, z: np.ndarray) -> bool:
-        """Whether z is inside the validity radius of ``prom`` (every |ξ - ξ_c|_k ≤ r_k)."""
+        """Whether z is inside the validity radius of ``prom`` (every |ξ - ξ_c|_k ≤ r_k); with
+        ``[optimizer] atlas``, whether z is in the atlas cell of ``prom``'s centre."""
+        if prom is not None and self.scene.optimizer.atlas:
+            grid = cover(self.scene)
+            cells = grid.cells(np.vstack([z[: self.space.n_shapes], prom.xi_center]))
+            return bool(np.array_equal(cells[0], cells[1]))
         return prom is not None and bool(np.all(np.abs(z[: self.space.n_shapes] - prom.xi_center)
                                                 <= prom.validity_radius))
 

@@ -118,12 +118,13 @@ BUILT_HERE = [0]
 """PROMs this process built for the atlas (the first also sets up the FOM the later builds move: ``kept_model``)."""
 
 
-def center_prom(scene: Scene, center: dict):
-    """The PROM at ``center`` from the PROM cache (built there if missing) and whether it was built here."""
+def center_prom(scene: Scene, center: dict, fish=None):
+    """The PROM at ``center`` from the PROM cache (built there if missing) and whether it was built here;
+    ``fish`` the scene's (:func:`shared_fish` by default)."""
     from aquarom_fenics.reduction.cache import cached_prom
     from aquarom_fenics.reduction.reductor import build_prom
 
-    fish = shared_fish(scene)
+    fish = fish or shared_fish(scene)
     vector = fish.parameter_vector(center)
     built = []
 
