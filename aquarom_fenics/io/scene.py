@@ -303,8 +303,8 @@ def _section_from_dict(cls, table: dict, where: str, section: str):
             raise InputError(f"{where}: [{section}] {key} = {value!r} {problem}")
         values[key] = value
     settings = cls(**values)
-    if section == "optimizer" and settings.screen_problem():     # across keys: the screen chooses the starts
-        raise InputError(f"{where}: {settings.screen_problem()}")
+    if section == "optimizer" and settings.key_conflict():     # keys that do not go together
+        raise InputError(f"{where}: {settings.key_conflict()}")
     return settings
 
 

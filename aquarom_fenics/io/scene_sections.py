@@ -277,7 +277,7 @@ class OptimizerSection:
         """Whether ``optimize`` runs the multi-start (in ``start_<k>/`` folders): starts > 1, or a screen."""
         return self.starts > 1 or self.screen > 0
 
-    def screen_problem(self) -> str | None:
+    def key_conflict(self) -> str | None:
         """Why keys of the section do not go together, or None: ``screen`` below ``starts`` (a screen chooses
         the starts among its designs), ``atlas`` with the trust region (whose trust box is centred on its
         iterate, not on an atlas centre)."""
