@@ -317,7 +317,7 @@ def run_check(args, scene, xi) -> int:
 
     fish = load_fish(scene)
     if args.prom is not None:
-        prom = ReducedModel.load(args.prom, scene_hash=scene.hash)
+        prom = ReducedModel.load(args.prom, prom_hash=scene.prom_hash)
     else:
         prom = build_prom(scene, xi_center={s.name: s.start for s in scene.shapes}, fish=fish)
     say(f"PROM of {scene.name} ({args.prom or 'built'}): m = {prom.size}, p = {prom.n_parameters}, "

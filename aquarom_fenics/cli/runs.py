@@ -63,7 +63,7 @@ def reduced_model(scene, xi: dict, model: str, prom_file: Path | None):
     from aquarom_fenics.reduction.reductor import build_prom
 
     if prom_file is not None and model == "prom":
-        prom = ReducedModel.load(prom_file, scene_hash=scene.hash)
+        prom = ReducedModel.load(prom_file, prom_hash=scene.prom_hash)
         with build_command_on_refusal(scene, xi):
             prom.delta(np.array([xi.get(name, prom.design_point.get(name, 0.0)) for name in prom.shape_names]))
         return prom

@@ -34,6 +34,8 @@ SCENES_DIR = shipped_scenes()
 
 FOM_SECTIONS = ("mesh", "material", "regions", "actuation", "fluid", "solver")
 """The sections a FOM run reads (with the shape names): ``Scene.fom_hash`` keys the FOM cache."""
+PROM_SECTIONS = (*FOM_SECTIONS, "reduction")
+"""The sections a PROM build reads (with the shapes but their starts): ``Scene.prom_hash`` keys the PROM cache."""
 
 
 @dataclass(frozen=True)
@@ -136,11 +138,22 @@ class Scene:
     def fom_hash(self) -> str:
         """The hash of what a FOM run at a given design reads: mesh (and file), material, regions,
         actuation, fluid, solver and the shape names; not the bounds, reduction, optimiser or output."""
+        return self._digest(self._selected(FOM_SECTIONS) | {"shapes": [shape.name for shape in self.shapes]})
+
+    @property
+    def prom_hash(self) -> str:
+        """The hash of what a PROM build reads: the FOM's sections, [reduction] (its "auto" values resolved:
+        the stroke amplitude holds what it reads of [cooptimization]), the muscles, the gait and the shapes'
+        names, bounds and radii; not the name, description, shape starts, constraints, [optimizer],
+        [cooptimization] or [output], so that scenes differing only there share their PROMs."""
+        shapes = [{key: value for key, value in dataclasses.asdict(shape).items() if key != "start"}
+                  for shape in self.shapes]
+        return self._digest(self._selected(PROM_SECTIONS, "gait") | {"shapes": shapes})
+
+    def _selected(self, sections: tuple[str, ...], *optional: str) -> dict[str, Any]:
+        """The hashed values of ``sections``, and of the muscles and ``optional`` parts when the scene has them."""
         data = self._hashed_dict()
-        selected = {section: data[section] for section in FOM_SECTIONS}
-        if "muscles" in data:
-            selected["muscles"] = data["muscles"]
-        return self._digest(selected | {"shapes": [shape.name for shape in self.shapes]})
+        return {key: data[key] for key in (*sections, "muscles", *optional) if key in data}
 
     def _hashed_dict(self) -> dict[str, Any]:
         data = self.to_dict()

@@ -1,7 +1,9 @@
 """The PROM cache, and the listing and clearing of every cache (PROMs, FOM checks, meshes).
 
-A PROM entry's name is the hash of everything it depends on (scene values and mesh content
-through the scene hash, the building point, the model kind, the software versions); storing,
+A PROM entry's name is the hash of everything it depends on (the scene values a build reads and
+the mesh content through ``Scene.prom_hash``, the building point, the model kind, the software
+versions): scenes that differ only in what no build reads (``[optimizer]``, ``[output]``, the shape
+starts, ...) share their PROMs, and an entry built from other values is a miss, rebuilt; storing,
 checksums, locks and rebuilding damaged entries are :func:`persistence.get_or_compute`'s.
 Compiled forms are cached by FFCx itself (by form signature) in its own cache folder.
 """
@@ -29,9 +31,9 @@ def cached_prom(scene: Scene, xi_center: np.ndarray, build, parametric: bool = T
     """
     from aquarom_fenics.reduction.prom import ReducedModel
 
-    key = entry_key("prom", scene.hash, np.asarray(xi_center, dtype=float), parametric)
+    key = entry_key("prom", scene.prom_hash, np.asarray(xi_center, dtype=float), parametric)
     if basis_center is not None:
-        key = entry_key("prom", scene.hash, np.asarray(xi_center, dtype=float), parametric,
+        key = entry_key("prom", scene.prom_hash, np.asarray(xi_center, dtype=float), parametric,
                         "basis", np.asarray(basis_center, dtype=float))
 
     def checked_build():
@@ -40,7 +42,7 @@ def cached_prom(scene: Scene, xi_center: np.ndarray, build, parametric: bool = T
 
     return get_or_compute(cache_root() / "prom" / f"{key}.npz", checked_build,
                           save=lambda model, path: model.save(path),
-                          load=lambda path: ReducedModel.load(path, scene_hash=scene.hash),
+                          load=lambda path: ReducedModel.load(path, prom_hash=scene.prom_hash),
                           comm=comm, label="PROM cache")
 
 

@@ -23,10 +23,11 @@ from aquarom_fenics.physics.inertia import InertiaTensors
 from aquarom_fenics.physics.muscle import MuscleTensors
 from aquarom_fenics.physics.thrust_reduced import ThrustTensors
 
-FORMAT_VERSION = 4
+FORMAT_VERSION = 5
 """2: the tensors grouped per force term (elastic, muscle, inertia, drag, thrust, observation);
 3: the thrust's kinematic rows (stations) and the drag's reference-velocity row;
-4: the tail's x row and the mass moment in y (tail x and centre-of-mass y observed)."""
+4: the tail's x row and the mass moment in y (tail x and centre-of-mass y observed);
+5: the hash of what the build read (``Scene.prom_hash``), which identifies the PROM's scene."""
 MAX_PROM_FILE_BYTES = 16 * 1024 ** 3
 """Largest PROM file read [bytes]."""
 ZIP_MAGIC = b"PK\x03\x04"       # first bytes of a .npz (zip) archive
@@ -45,7 +46,8 @@ class Observation:
 class ReducedModel:
     """All a reduced simulation needs; arrays are plain numpy, identical on every rank."""
 
-    scene_hash: str
+    scene_hash: str                      # the scene it was built with (``Scene.hash``)
+    prom_hash: str                       # what its build read of that scene (``Scene.prom_hash``)
     software_version: str
     shape_names: list[str]               # the PROM's parameters (none for a plain ROM)
     design_point: dict                   # the scene's shape parameters at the building point
@@ -102,7 +104,7 @@ class ReducedModel:
     # ------------------------------------------------------------------ file format
     def save(self, path: Path) -> None:
         """One .npz file: arrays under dotted names ("elastic.linear.constant") plus a JSON header with
-        the format version, scene hash, software version, labels, scalars and timings."""
+        the format version, scene and PROM hashes, software version, labels, scalars and timings."""
         arrays, header = {}, {"format_version": FORMAT_VERSION}
         _flatten(self, "", arrays, header)
         arrays["header"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
@@ -111,8 +113,10 @@ class ReducedModel:
         write_npz_atomic(path, arrays)     # unique temporary name, atomic replace: concurrent writers never collide
 
     @classmethod
-    def load(cls, path: Path, scene_hash: str | None = None) -> "ReducedModel":
-        """Read a PROM file; refuses another scene's, another format's or another version's file, naming the difference."""
+    def load(cls, path: Path, scene_hash: str | None = None, prom_hash: str | None = None) -> "ReducedModel":
+        """Read a PROM file; refuses another format's or another version's file, and with ``prom_hash``
+        (``Scene.prom_hash``) one built from other values than a PROM reads of the scene (with ``scene_hash``,
+        ``Scene.hash``, one built from another scene file or other values anywhere in it), naming the difference."""
         from aquarom_fenics import __version__
 
         from aquarom_fenics.io.readback import require_regular_file
@@ -131,19 +135,23 @@ class ReducedModel:
             raise InputError(f"PROM file {path}: not found (build one with `aquarom build SCENE`)") from None
         except Exception as error:  # zip, JSON and key errors of a damaged file
             raise InputError(f"PROM file {path}: unreadable ({type(error).__name__}: {error})") from None
-        problem = _header_problem(header)
-        if problem:
-            raise InputError(f"PROM file {path}: damaged header ({problem}); rebuild it with `aquarom build SCENE`")
-        if header.get("format_version") != FORMAT_VERSION:
+        if isinstance(header, dict) and header.get("format_version") != FORMAT_VERSION:
             raise InputError(f"PROM file {path}: format version {header.get('format_version')} (aquarom_fenics "
                              f"{header.get('software_version')}), this version reads format {FORMAT_VERSION}; "
                              "rebuild it with `aquarom build SCENE`")
+        problem = _header_problem(header)
+        if problem:
+            raise InputError(f"PROM file {path}: damaged header ({problem}); rebuild it with `aquarom build SCENE`")
         if header.get("software_version") != __version__:
             raise InputError(f"PROM file {path}: written by aquarom_fenics {header.get('software_version')}, "
                              f"this is {__version__}; rebuild it with `aquarom build SCENE`")
         if scene_hash is not None and header["scene_hash"] != scene_hash:
             raise InputError(f"PROM file {path}: built for scene hash {header['scene_hash']}, the scene's hash is "
                              f"{scene_hash} (a different scene or changed values); rebuild it")
+        if prom_hash is not None and header["prom_hash"] != prom_hash:
+            raise InputError(f"PROM file {path}: built for other scene values (PROM hash {header['prom_hash']}, this "
+                             f"scene's {prom_hash}: the mesh, material, regions, muscles, actuation, fluid, solver, "
+                             "reduction, shapes or gait differ); rebuild it with `aquarom build SCENE`")
         try:
             model = _unflatten(cls, "", arrays, header)
         except (KeyError, TypeError, ValueError) as missing:
@@ -165,8 +173,9 @@ def _header_problem(header) -> str:
     the wrong type), or an empty string."""
     if not isinstance(header, dict):
         return f"a JSON object is needed, got {type(header).__name__}"
-    if not isinstance(header.get("scene_hash"), str):
-        return f"scene_hash must be a string, got {header.get('scene_hash')!r:.40}"
+    for key in ("scene_hash", "prom_hash"):
+        if not isinstance(header.get(key), str):
+            return f"{key} must be a string, got {header.get(key)!r:.40}"
     for key in HEADER_TEXT_LISTS:
         value = header.get(key)
         if not isinstance(value, list) or not all(isinstance(name, str) for name in value):

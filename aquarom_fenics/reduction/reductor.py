@@ -102,7 +102,7 @@ def _reduced_model(scene: Scene, fish: Fish, fom: FullOrderModel, xi_center: np.
                  timings["fom_setup"], timings["basis_total"], timings["internal_force_tensors"],
                  timings["other_tensors"])
     prom = ReducedModel(
-        scene_hash=scene.hash, software_version=__version__, shape_names=list(fish.shape_names[:p]),
+        scene_hash=scene.hash, prom_hash=scene.prom_hash, software_version=__version__, shape_names=list(fish.shape_names[:p]),
         design_point=dict(zip(fish.shape_names, map(float, xi_center))),
         xi_center=xi_center[:p], validity_radius=validity_radii(scene, elastic, inertia, p), labels=basis.labels,
         basis=np.stack([fom.nodal_displacement(vectors[:, j]) for j in range(m)], axis=-1), dropped=basis.dropped,

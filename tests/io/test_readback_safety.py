@@ -166,6 +166,7 @@ def without(key):
     (drop_y_thin, None, "shape_names"),
     (lambda header: [header], None, "header"),
     (without("scene_hash"), None, "scene_hash"),
+    (without("prom_hash"), None, "prom_hash"),
     (without("labels"), None, "labels"),
     (None, "basis", "basis"),
     (None, "elastic.cubic.first", "elastic.cubic.first"),

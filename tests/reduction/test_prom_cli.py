@@ -66,7 +66,7 @@ def test_prom_file_of_another_scene_is_refused(built, tmp_path, capsys):
     other = write_scene(tmp_path, stiffness=5e4, name="other.toml")
     assert main(["simulate", str(other), "--model", "prom", "--prom", str(prom_file)]) == 2
     message = capsys.readouterr().err.strip()
-    assert len(message.splitlines()) == 1 and "scene hash" in message
+    assert len(message.splitlines()) == 1 and "PROM hash" in message
 
 
 def test_prom_file_of_another_version_is_refused(built, tmp_path, capsys):

@@ -47,7 +47,7 @@ def test_prom_from_another_mesh_fails_the_tensor_check(tmp_path, capsys):
     build_prom(scene.replace("mesh", level=2)).save(prom_file)
     with np.load(prom_file) as data:
         arrays = {key: data[key] for key in data.files}
-    header = json.loads(arrays["header"].tobytes().decode()) | {"scene_hash": scene.hash}
+    header = json.loads(arrays["header"].tobytes().decode()) | {"prom_hash": scene.prom_hash}
     arrays["header"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
     np.savez(prom_file, **arrays)
     assert main(["check", str(scene_file), "--prom", str(prom_file)]) == 1
