@@ -35,7 +35,8 @@ SCENES_DIR = shipped_scenes()
 FOM_SECTIONS = ("mesh", "material", "regions", "actuation", "fluid", "solver")
 """The sections a FOM run reads (with the shape names): ``Scene.fom_hash`` keys the FOM cache."""
 PROM_SECTIONS = (*FOM_SECTIONS, "reduction")
-"""The sections a PROM build reads (with the shapes but their starts): ``Scene.prom_hash`` keys the PROM cache."""
+"""The sections a PROM build reads (with the muscles, the gait and the shapes but their starts):
+``Scene.prom_hash`` keys the PROM cache."""
 
 
 @dataclass(frozen=True)
