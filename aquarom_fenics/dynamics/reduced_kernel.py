@@ -308,17 +308,23 @@ def integrate_all(scalars, settings, units, distance_mask, amplitude_mask, share
 LOCKSTEP_TAIL = 6
 """Designs that fill a block of the lockstep kernel (``lockstep_kernel``) only this far or more are integrated in
 one padded block; fewer, one by one (a block of 8 lanes costs about six designs integrated alone)."""
+LOCKSTEP_LARGEST = 13
+"""The largest reduced size m integrated in lockstep: a block's elastic tangent holds m² × (1 + m + m(m+1)/2)
+coefficients per lane (m = 24: 15 MB a block, out of the caches), and at m = 24 the lockstep kernel was slower
+than one design at a time (docs/devlog.md)."""
 
 
 def integrate_packed(packed: Packed, lockstep: bool = True):
     """(distance (B,), tail amplitude (B,), failed (B,) bool, distance gradient (B, columns) or None).
 
-    With ``lockstep`` the designs run in blocks of ``LANES`` (``lockstep_kernel``), a last block of fewer than
-    ``LOCKSTEP_TAIL`` designs one by one; without, every design alone. The two agree to rounding."""
+    With ``lockstep`` (and m ≤ ``LOCKSTEP_LARGEST``) the designs run in blocks of ``LANES`` (``lockstep_kernel``),
+    a last block of fewer than ``LOCKSTEP_TAIL`` designs one by one; without, every design alone. The two agree to
+    rounding."""
     results = np.zeros((packed.batch, 3))
     gradients = np.zeros((packed.batch, packed.columns))
     tail = packed.batch % LANES if packed.batch % LANES < LOCKSTEP_TAIL else 0
-    in_blocks = packed.batch - tail if lockstep else 0
+    size = packed.arguments[6][2].shape[1]                   # m of the per-design mass matrices (B, m, m)
+    in_blocks = packed.batch - tail if lockstep and size <= LOCKSTEP_LARGEST else 0
     if in_blocks:
         results[:in_blocks], gradients[:in_blocks] = integrate_lockstep(part(packed.arguments, slice(0, in_blocks)),
                                                                         in_blocks, packed.columns)
