@@ -310,7 +310,7 @@ LOCKSTEP_TAIL = 6
 one padded block; fewer, one by one (a block of 8 lanes costs about six designs integrated alone)."""
 LOCKSTEP_LARGEST = 13
 """The largest reduced size m integrated in lockstep: a block's elastic tangent holds m² × (1 + m + m(m+1)/2)
-coefficients per lane (m = 24: 15 MB a block, out of the caches), and at m = 24 the lockstep kernel was slower
+coefficients per lane (m = 24: 12 MB a block, out of the caches), and at m = 24 the lockstep kernel was slower
 than one design at a time (docs/devlog.md)."""
 
 
