@@ -5,7 +5,8 @@ from __future__ import annotations
 from aquarom_fenics.machine_code import available, jit  # noqa: F401  (the kernel modules import them from here)
 
 
-KERNEL_MODULES = ("compiled", "kernel_pack", "kernel_terms", "kernel_thrust", "reduced_kernel")
+KERNEL_MODULES = ("compiled", "kernel_pack", "kernel_terms", "kernel_thrust", "reduced_kernel", "lane_values",
+                  "kernel_lanes", "kernel_lanes_thrust", "lockstep_kernel")
 """The modules of the compiled reduced kernel (``aquarom_fenics/dynamics``)."""
 
 

@@ -11,9 +11,11 @@ half-segments in ``kernel_thrust``. The tests compare the kernel with ``simulate
 thrust variant.
 
 A design whose step fails (no convergence, a non-finite residual, a singular matrix) is reported failed; the
-caller integrates it alone with the step control (as the numpy batch does). Compiled once per machine into
-numba's cache beside these modules (``python -m aquarom_fenics.dynamics.reduced_kernel``, which ``make setup``
-runs): about half a minute.
+caller integrates it alone with the step control (as the numpy batch does). A batch of several designs runs in
+blocks of eight designs advanced through each step together (``lockstep_kernel``: the same Newton sequence per
+design; a last block of fewer than ``LOCKSTEP_TAIL`` designs one by one). Compiled once per machine into numba's
+cache beside these modules (``python -m aquarom_fenics.dynamics.reduced_kernel``, which ``make setup`` runs):
+about a minute and a half.
 """
 from __future__ import annotations
 
@@ -26,6 +28,7 @@ from aquarom_fenics.dynamics.kernel_pack import Packed, pack, synthetic
 from aquarom_fenics.dynamics.kernel_terms import (between, derivative_at, design_elastic, lu_factor, lu_solve,
                                                   residual_at, tangents_at)
 from aquarom_fenics.dynamics.kernel_thrust import banded_tangents, banded_times, half_blocks
+from aquarom_fenics.dynamics.lockstep_kernel import LANES, integrate_lockstep, part
 
 __all__ = ["available", "integrate_all", "integrate_packed", "transition_packed", "pack", "Packed", "synthetic", "warm_up", "OK", "FAILED"]
 
@@ -302,11 +305,32 @@ def integrate_all(scalars, settings, units, distance_mask, amplitude_mask, share
             transition_from, results[b], gradients[b], transitions[b])
 
 
-def integrate_packed(packed: Packed):
-    """(distance (B,), tail amplitude (B,), failed (B,) bool, distance gradient (B, columns) or None)."""
+LOCKSTEP_TAIL = 6
+"""Designs that fill a block of the lockstep kernel (``lockstep_kernel``) only this far or more are integrated in
+one padded block; fewer, one by one (a block of 8 lanes costs about six designs integrated alone)."""
+LOCKSTEP_LARGEST = 13
+"""The largest reduced size m integrated in lockstep: a block's elastic tangent holds m² × (1 + m + m(m+1)/2)
+coefficients per lane (m = 24: 12 MB a block, out of the caches), and at m = 24 the lockstep kernel was slower
+than one design at a time (docs/devlog.md)."""
+
+
+def integrate_packed(packed: Packed, lockstep: bool = True):
+    """(distance (B,), tail amplitude (B,), failed (B,) bool, distance gradient (B, columns) or None).
+
+    With ``lockstep`` (and m ≤ ``LOCKSTEP_LARGEST``) the designs run in blocks of ``LANES`` (``lockstep_kernel``),
+    a last block of fewer than ``LOCKSTEP_TAIL`` designs one by one; without, every design alone. The two agree to
+    rounding."""
     results = np.zeros((packed.batch, 3))
     gradients = np.zeros((packed.batch, packed.columns))
-    integrate_all(*packed.arguments, results, gradients, np.zeros((packed.batch, 0, 0, 0)))
+    tail = packed.batch % LANES if packed.batch % LANES < LOCKSTEP_TAIL else 0
+    size = packed.arguments[6][2].shape[1]                   # m of the per-design mass matrices (B, m, m)
+    in_blocks = packed.batch - tail if lockstep and size <= LOCKSTEP_LARGEST else 0
+    if in_blocks:
+        results[:in_blocks], gradients[:in_blocks] = integrate_lockstep(part(packed.arguments, slice(0, in_blocks)),
+                                                                        in_blocks, packed.columns)
+    if in_blocks < packed.batch:
+        alone = slice(in_blocks, packed.batch)
+        integrate_all(*part(packed.arguments, alone), results[alone], gradients[alone], np.zeros((0, 0, 0, 0)))
     failed = results[:, 2] != OK
     distance, amplitude = results[:, 0].copy(), results[:, 1].copy()
     distance[failed] = amplitude[failed] = np.nan
@@ -324,11 +348,14 @@ def transition_packed(packed: Packed, m: int):
 
 
 def warm_up() -> None:
-    """Compile (or load from numba's cache) the kernel's one signature on a small synthetic batch; a cache
-    compiled from other kernel sources is removed first (``compiled.refresh_stale_cache``)."""
+    """Compile (or load from numba's cache) the kernel's one signature and the lockstep kernel's on a small
+    synthetic batch; a cache compiled from other kernel sources is removed first (``compiled.refresh_stale_cache``)."""
     refresh_stale_cache()
-    distance, _, failed, _ = integrate_packed(synthetic())
-    if failed.any() or not np.isfinite(distance).all():
+    packed = synthetic()
+    distance, _, failed, _ = integrate_packed(packed, lockstep=False)
+    results, _ = integrate_lockstep(packed.arguments, packed.batch, packed.columns)      # a padded block
+    if (failed.any() or not np.isfinite(distance).all() or results[0, 2] != OK
+            or abs(results[0, 0] - distance[0]) > 1e-12 * abs(distance[0])):
         raise RuntimeError("the compiled reduced kernel failed on its synthetic batch")
 
 
