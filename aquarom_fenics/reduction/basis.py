@@ -103,16 +103,28 @@ def clamped_stiffness(fom: FullOrderModel) -> PETSc.Mat:
 
 
 def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int,
-                    factors: PETSc.KSP | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    factors: PETSc.KSP | None = None, initial: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The ``count`` lowest modes (owned dofs, columns) and their frequencies ω/2π [Hz], from
     (K - σ M)⁻¹ M x = x/(ω² - σ) at σ = 0. ``factors``, a direct solver of ``stiffness``, lends its
-    factorisation of K to the shift-invert and keeps it for the caller's own solves."""
+    factorisation of K to the shift-invert and keeps it for the caller's own solves. ``initial``
+    (owned dofs, columns): a start of the Krylov space, the modes of a nearby design; the modes
+    converge to the same tolerance from it, in a space of ``count + 3`` vectors instead of
+    ``2 count + 6`` (4 shift-invert solves for one mode instead of 8)."""
     mass = fom.mass_matrix.copy()
     mass.zeroRowsColumns(fom.global_dofs(fom.clamped_dofs), diag=0.0)
     solver = SLEPc.EPS().create(fom.comm)
     solver.setOperators(stiffness, mass)
     solver.setProblemType(SLEPc.EPS.ProblemType.GHEP)
-    solver.setDimensions(count, 2 * count + 6)     # a Krylov space of 8 for one mode: one restart, 8 solves
+    warm = initial is not None and initial.shape == (fom.n_owned_dofs, count)
+    # without a start, a Krylov space of 8 for one mode: one restart, 8 solves
+    solver.setDimensions(count, count + 3 if warm else 2 * count + 6)
+    starts = []
+    if warm:
+        for column in initial.T:
+            start = stiffness.createVecRight()
+            start.array[:] = column
+            starts.append(start)
+        solver.setInitialSpace(starts)
     solver.setWhichEigenpairs(SLEPc.EPS.Which.TARGET_MAGNITUDE)
     solver.setTarget(0.0)
     spectral = solver.getST()
@@ -134,13 +146,16 @@ def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int,
     modes, frequencies = [], []
     for index in range(count):
         eigenvalue = solver.getEigenpair(index, vector).real
-        modes.append(vector.array.copy())
+        mode = vector.array.copy()
+        if warm and fom.comm.allreduce(float(mode @ initial[:, index])) < 0:
+            mode = -mode        # the start's sign (each mode's sign is arbitrary): a mode moves continuously with ξ
+        modes.append(mode)
         frequencies.append(np.sqrt(max(eigenvalue, 0.0)) / (2 * np.pi))
     if factors is not None:     # the EPS would reset a KSP it still holds, factors included, when destroyed
         placeholder = PETSc.KSP().create(fom.comm)
         spectral.setKSP(placeholder)
         placeholder.destroy()
-    for petsc_object in (solver, vector, mass):
+    for petsc_object in (solver, vector, mass, *starts):
         petsc_object.destroy()      # frees the factorisation and copies (not freed with the Python objects)
     return np.column_stack(modes), np.array(frequencies)
 
@@ -150,8 +165,11 @@ def basis_modes(fom: FullOrderModel, stiffness: PETSc.Mat, solver: PETSc.KSP) ->
     "auto" the lowest that hold the gait's muscle groups in the swimming plane (reduction/mode_count.py)."""
     count = scene_vibration_modes(fom.scene)
     if count is not None:
-        return vibration_modes(fom, stiffness, count, factors=solver)
-    modes, frequencies = vibration_modes(fom, stiffness, candidate_count(muscle_groups(fom.scene)), factors=solver)
+        return KEPT_FACTORS.kept_modes(vibration_modes(fom, stiffness, count, factors=solver,
+                                                       initial=KEPT_FACTORS.modes))
+    modes, frequencies = KEPT_FACTORS.kept_modes(
+        vibration_modes(fom, stiffness, candidate_count(muscle_groups(fom.scene)), factors=solver,
+                        initial=KEPT_FACTORS.modes))
     products = np.column_stack([fom.matvec(fom.mass_matrix, modes[:, i]) for i in range(modes.shape[1])])
     count = choose_modes(fom.scene, modes, frequencies, lateral_shares(modes, products, fom.comm))
     return modes[:, :count], frequencies[:count]
@@ -212,7 +230,8 @@ class KeptFactors:
     hence the pattern: each build refills the kept matrix and refactorises numerically. The pattern
     is that of the dof map: the same cell-to-dof lists and ownership on the same communicator give
     the same matrix pattern. One factorisation is kept (a build's own memory); ``lock`` serialises
-    the builds of threads that share the process.
+    the builds of threads that share the process. The vibration modes last computed with the
+    factorisation are kept too (``modes``): the next build's eigen-solve starts from them.
     """
 
     def __init__(self):
@@ -220,6 +239,12 @@ class KeptFactors:
         self.key = None
         self.matrix: PETSc.Mat | None = None
         self.solver: PETSc.KSP | None = None
+        self.modes: np.ndarray | None = None
+
+    def kept_modes(self, result: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """``result`` (modes, frequencies) of an eigen-solve with the kept factors, its modes kept."""
+        self.modes = result[0].copy()
+        return result
 
     @staticmethod
     def pattern_key(fom: FullOrderModel) -> tuple:
@@ -259,7 +284,7 @@ class KeptFactors:
             for petsc_object in (self.solver, self.matrix):
                 if petsc_object is not None:
                     petsc_object.destroy()
-            self.key = self.matrix = self.solver = None
+            self.key = self.matrix = self.solver = self.modes = None
 
 
 KEPT_FACTORS = KeptFactors()
