@@ -108,7 +108,11 @@ class Fish:
         The rules used (degrees 1, 2, 6) are symmetric under permutations of the vertices, so these
         are the FOM's points whatever vertex order dolfinx keeps per cell.
         """
-        return integration_points(self.mesh, self.degree)
+        key = ("integration_points", self.degree)
+        if key not in self.derived:       # the nominal mesh's: one set per fish (each design check reads them)
+            self.derived[key] = integration_points(self.mesh, self.degree)
+            self.derived[key].flags.writeable = False
+        return self.derived[key]
 
     def design(self, xi) -> np.ndarray:
         """Checked nodal positions x_0 + U ξ of the design.

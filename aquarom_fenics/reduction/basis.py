@@ -106,17 +106,15 @@ def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int,
                     factors: PETSc.KSP | None = None, initial: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The ``count`` lowest modes (owned dofs, columns) and their frequencies ω/2π [Hz], from
     (K - σ M)⁻¹ M x = x/(ω² - σ) at σ = 0. ``factors``, a direct solver of ``stiffness``, lends its
-    factorisation of K to the shift-invert and keeps it for the caller's own solves. ``initial``
-    (owned dofs, columns): a start of the Krylov space, the modes of a nearby design; the modes
-    converge to the same tolerance from it, in a space of ``count + 3`` vectors instead of
-    ``2 count + 6`` (4 shift-invert solves for one mode instead of 8)."""
+    factorisation of K to the shift-invert and keeps it for the caller's own solves. ``initial``: the
+    modes of a nearby design, the start of a Krylov space of count + 3 instead of 2 count + 6 (the
+    same tolerance; one mode: 4 shift-invert solves instead of 8)."""
     mass = fom.mass_matrix.copy()
     mass.zeroRowsColumns(fom.global_dofs(fom.clamped_dofs), diag=0.0)
     solver = SLEPc.EPS().create(fom.comm)
     solver.setOperators(stiffness, mass)
     solver.setProblemType(SLEPc.EPS.ProblemType.GHEP)
     warm = initial is not None and initial.shape == (fom.n_owned_dofs, count)
-    # without a start, a Krylov space of 8 for one mode: one restart, 8 solves
     solver.setDimensions(count, count + 3 if warm else 2 * count + 6)
     starts = []
     if warm:
@@ -164,12 +162,11 @@ def basis_modes(fom: FullOrderModel, stiffness: PETSc.Mat, solver: PETSc.KSP) ->
     """The basis's vibration modes and frequencies [Hz]: ``[reduction] vibration_modes`` of them, or for
     "auto" the lowest that hold the gait's muscle groups in the swimming plane (reduction/mode_count.py)."""
     count = scene_vibration_modes(fom.scene)
+    wanted = count if count is not None else candidate_count(muscle_groups(fom.scene))
+    modes, frequencies = vibration_modes(fom, stiffness, wanted, factors=solver, initial=KEPT_FACTORS.modes)
+    KEPT_FACTORS.modes = modes.copy()          # the next build's eigen-solve starts from them
     if count is not None:
-        return KEPT_FACTORS.kept_modes(vibration_modes(fom, stiffness, count, factors=solver,
-                                                       initial=KEPT_FACTORS.modes))
-    modes, frequencies = KEPT_FACTORS.kept_modes(
-        vibration_modes(fom, stiffness, candidate_count(muscle_groups(fom.scene)), factors=solver,
-                        initial=KEPT_FACTORS.modes))
+        return modes, frequencies
     products = np.column_stack([fom.matvec(fom.mass_matrix, modes[:, i]) for i in range(modes.shape[1])])
     count = choose_modes(fom.scene, modes, frequencies, lateral_shares(modes, products, fom.comm))
     return modes[:, :count], frequencies[:count]
@@ -240,11 +237,6 @@ class KeptFactors:
         self.matrix: PETSc.Mat | None = None
         self.solver: PETSc.KSP | None = None
         self.modes: np.ndarray | None = None
-
-    def kept_modes(self, result: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        """``result`` (modes, frequencies) of an eigen-solve with the kept factors, its modes kept."""
-        self.modes = result[0].copy()
-        return result
 
     @staticmethod
     def pattern_key(fom: FullOrderModel) -> tuple:

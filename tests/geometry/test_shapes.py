@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.geometry.design_check import check_design
+from aquarom_fenics.geometry.design_check import check_design, determinant_3x3
 from aquarom_fenics.geometry.shapes import CATALOG, design_points, shape_displacement, shape_matrix, shape_names
 
 L, W, H = 0.20, 0.04, 0.10
@@ -308,3 +308,8 @@ def test_fields_interpolate_into_a_dolfinx_vector_space():
         displacement.interpolate(lambda X: np.stack(field(X[0], X[1], X[2], BOX)))
         np.testing.assert_allclose(displacement.x.array.reshape(-1, 3), shape_displacement(name, nodes, BOX),
                                    rtol=1e-12, atol=1e-15)
+
+
+def test_the_design_check_determinant_equals_numpy_s():
+    matrices = np.eye(3) + 0.4 * np.random.default_rng(3).standard_normal((500, 3, 3))
+    np.testing.assert_allclose(determinant_3x3(matrices), np.linalg.det(matrices), rtol=1e-12, atol=1e-14)
