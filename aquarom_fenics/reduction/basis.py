@@ -103,26 +103,16 @@ def clamped_stiffness(fom: FullOrderModel) -> PETSc.Mat:
 
 
 def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int,
-                    factors: PETSc.KSP | None = None, initial: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    factors: PETSc.KSP | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The ``count`` lowest modes (owned dofs, columns) and their frequencies ω/2π [Hz], from
     (K - σ M)⁻¹ M x = x/(ω² - σ) at σ = 0. ``factors``, a direct solver of ``stiffness``, lends its
-    factorisation of K to the shift-invert and keeps it for the caller's own solves. ``initial``: the
-    modes of a nearby design, the start of a Krylov space of count + 3 instead of 2 count + 6 (the
-    same tolerance; one mode: 4 shift-invert solves instead of 8)."""
+    factorisation of K to the shift-invert and keeps it for the caller's own solves."""
     mass = fom.mass_matrix.copy()
     mass.zeroRowsColumns(fom.global_dofs(fom.clamped_dofs), diag=0.0)
     solver = SLEPc.EPS().create(fom.comm)
     solver.setOperators(stiffness, mass)
     solver.setProblemType(SLEPc.EPS.ProblemType.GHEP)
-    warm = initial is not None and initial.shape == (fom.n_owned_dofs, count)
-    solver.setDimensions(count, count + 3 if warm else 2 * count + 6)
-    starts = []
-    if warm:
-        for column in initial.T:
-            start = stiffness.createVecRight()
-            start.array[:] = column
-            starts.append(start)
-        solver.setInitialSpace(starts)
+    solver.setDimensions(count, 2 * count + 6)     # a Krylov space of 8 for one mode: one restart, 8 solves
     solver.setWhichEigenpairs(SLEPc.EPS.Which.TARGET_MAGNITUDE)
     solver.setTarget(0.0)
     spectral = solver.getST()
@@ -144,16 +134,13 @@ def vibration_modes(fom: FullOrderModel, stiffness: PETSc.Mat, count: int,
     modes, frequencies = [], []
     for index in range(count):
         eigenvalue = solver.getEigenpair(index, vector).real
-        mode = vector.array.copy()
-        if warm and fom.comm.allreduce(float(mode @ initial[:, index])) < 0:
-            mode = -mode        # the start's sign (each mode's sign is arbitrary): a mode moves continuously with ξ
-        modes.append(mode)
+        modes.append(vector.array.copy())
         frequencies.append(np.sqrt(max(eigenvalue, 0.0)) / (2 * np.pi))
     if factors is not None:     # the EPS would reset a KSP it still holds, factors included, when destroyed
         placeholder = PETSc.KSP().create(fom.comm)
         spectral.setKSP(placeholder)
         placeholder.destroy()
-    for petsc_object in (solver, vector, mass, *starts):
+    for petsc_object in (solver, vector, mass):
         petsc_object.destroy()      # frees the factorisation and copies (not freed with the Python objects)
     return np.column_stack(modes), np.array(frequencies)
 
@@ -162,11 +149,9 @@ def basis_modes(fom: FullOrderModel, stiffness: PETSc.Mat, solver: PETSc.KSP) ->
     """The basis's vibration modes and frequencies [Hz]: ``[reduction] vibration_modes`` of them, or for
     "auto" the lowest that hold the gait's muscle groups in the swimming plane (reduction/mode_count.py)."""
     count = scene_vibration_modes(fom.scene)
-    wanted = count if count is not None else candidate_count(muscle_groups(fom.scene))
-    modes, frequencies = vibration_modes(fom, stiffness, wanted, factors=solver, initial=KEPT_FACTORS.modes)
-    KEPT_FACTORS.modes = modes.copy()          # the next build's eigen-solve starts from them
     if count is not None:
-        return modes, frequencies
+        return vibration_modes(fom, stiffness, count, factors=solver)
+    modes, frequencies = vibration_modes(fom, stiffness, candidate_count(muscle_groups(fom.scene)), factors=solver)
     products = np.column_stack([fom.matvec(fom.mass_matrix, modes[:, i]) for i in range(modes.shape[1])])
     count = choose_modes(fom.scene, modes, frequencies, lateral_shares(modes, products, fom.comm))
     return modes[:, :count], frequencies[:count]
@@ -227,8 +212,7 @@ class KeptFactors:
     hence the pattern: each build refills the kept matrix and refactorises numerically. The pattern
     is that of the dof map: the same cell-to-dof lists and ownership on the same communicator give
     the same matrix pattern. One factorisation is kept (a build's own memory); ``lock`` serialises
-    the builds of threads that share the process. The vibration modes last computed with the
-    factorisation are kept too (``modes``): the next build's eigen-solve starts from them.
+    the builds of threads that share the process.
     """
 
     def __init__(self):
@@ -236,7 +220,6 @@ class KeptFactors:
         self.key = None
         self.matrix: PETSc.Mat | None = None
         self.solver: PETSc.KSP | None = None
-        self.modes: np.ndarray | None = None
 
     @staticmethod
     def pattern_key(fom: FullOrderModel) -> tuple:
@@ -276,7 +259,7 @@ class KeptFactors:
             for petsc_object in (self.solver, self.matrix):
                 if petsc_object is not None:
                     petsc_object.destroy()
-            self.key = self.matrix = self.solver = self.modes = None
+            self.key = self.matrix = self.solver = None
 
 
 KEPT_FACTORS = KeptFactors()
