@@ -82,9 +82,17 @@ def check_exact_design(points: np.ndarray, cells: np.ndarray, gradient_at, sampl
     n_cells, n_points = sample_points.shape[:2]
     gradient = gradient_at(sample_points.reshape(-1, 3))
     with np.errstate(invalid="ignore"):
-        determinant = np.linalg.det(np.eye(3) + gradient).reshape(n_cells, n_points)
+        determinant = determinant_3x3(np.eye(3) + gradient).reshape(n_cells, n_points)
     determinant = np.where(np.isfinite(determinant), determinant, -np.inf)
     return check_volume_ratios(determinant.min(axis=1), points, cells, xi_by_name, label, regions)
+
+
+def determinant_3x3(a: np.ndarray) -> np.ndarray:
+    """det a of (n, 3, 3) matrices by the cofactors of the first row (a few times faster than
+    ``np.linalg.det``'s LU per matrix; equal to rounding)."""
+    return (a[:, 0, 0] * (a[:, 1, 1] * a[:, 2, 2] - a[:, 1, 2] * a[:, 2, 1])
+            - a[:, 0, 1] * (a[:, 1, 0] * a[:, 2, 2] - a[:, 1, 2] * a[:, 2, 0])
+            + a[:, 0, 2] * (a[:, 1, 0] * a[:, 2, 1] - a[:, 1, 1] * a[:, 2, 0]))
 
 
 def check_volume_ratios(volume_ratio: np.ndarray, points: np.ndarray, cells: np.ndarray,

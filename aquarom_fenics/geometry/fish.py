@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import logging
+import threading
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -22,7 +23,7 @@ from aquarom_fenics.geometry.mesh_files import read_mesh
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.geometry.design_check import check_exact_design
 from aquarom_fenics.geometry.shape_registry import use_mesh_points
-from aquarom_fenics.geometry.shapes import design_points, reference_to_cells, shape_gradients, shape_matrix
+from aquarom_fenics.geometry.shapes import REGISTERED, design_points, reference_to_cells, shape_gradients, shape_matrix
 from aquarom_fenics.geometry.tags import FishBox, FishTags, is_tagged, tag_fish
 
 
@@ -30,6 +31,9 @@ log = logging.getLogger("aquarom")
 
 _WARNED: set[str] = set()
 """Design-check warnings already logged in this process (an optimiser meets a design many times)."""
+CHECKED_DESIGNS = 16
+"""Designs whose design-check verdict (None, a warning, or the refusal) a fish keeps (``Fish.design``)."""
+_CHECKED_LOCK = threading.Lock()
 
 MASS_QUADRATURE_DEGREE = {1: 2, 2: 6}
 """Per element degree k: the lowest rule degree ≥ 2k (exact for φ_i·φ_j) whose default rule has
@@ -108,7 +112,11 @@ class Fish:
         The rules used (degrees 1, 2, 6) are symmetric under permutations of the vertices, so these
         are the FOM's points whatever vertex order dolfinx keeps per cell.
         """
-        return integration_points(self.mesh, self.degree)
+        key = ("integration_points", self.degree)
+        if key not in self.derived:       # the nominal mesh's: one set per fish (each design check reads them)
+            self.derived[key] = integration_points(self.mesh, self.degree)
+            self.derived[key].flags.writeable = False
+        return self.derived[key]
 
     def design(self, xi) -> np.ndarray:
         """Checked nodal positions x_0 + U ξ of the design.
@@ -119,11 +127,27 @@ class Fish:
         """
         xi = self.parameter_vector(xi)
         moved = design_points(self.nodes.points, self.shape_matrix, xi)
-        warning = check_exact_design(self.mesh.points, self.mesh.cells, lambda points: self.shape_gradient(xi, points),
-                                     self.integration_points(), dict(zip(self.shape_names, xi)), regions=self.tags)
-        if warning and warning not in _WARNED:
-            _WARNED.add(warning)
-            log.warning("%s", warning)
+        # the last designs' verdicts are kept: an optimiser checks a design, then builds there (a new check)
+        key = (xi.tobytes(), tuple(REGISTERED.get(name, (None,))[0] for name in self.shape_names))
+        with _CHECKED_LOCK:
+            checked = self.derived.setdefault("checked_designs", {})
+            verdict = checked.get(key, False)
+        if verdict is False:
+            try:
+                verdict = check_exact_design(self.mesh.points, self.mesh.cells,
+                                             lambda points: self.shape_gradient(xi, points), self.integration_points(),
+                                             dict(zip(self.shape_names, xi)), regions=self.tags)
+            except InputError as refused:
+                verdict = refused
+            with _CHECKED_LOCK:
+                checked[key] = verdict
+                while len(checked) > CHECKED_DESIGNS:
+                    checked.pop(next(iter(checked)))
+        if isinstance(verdict, InputError):
+            raise InputError(str(verdict))
+        if verdict and verdict not in _WARNED:
+            _WARNED.add(verdict)
+            log.warning("%s", verdict)
         return moved
 
 

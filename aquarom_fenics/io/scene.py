@@ -133,7 +133,16 @@ class Scene:
         """SHA-256 (16 hex digits) of the resolved scene and of the mesh file's content, or of the
         block's meshing recipe ``meshes/block.toml`` (a key added later is left out at the value
         scenes computed with before it: :func:`legacy_values`)."""
-        return self._digest(self._hashed_dict())
+        return self._digest_text(self._hashed_text())
+
+    def _hashed_text(self) -> str:
+        """The JSON text of :meth:`_hashed_dict`, made once per scene (a frozen value: a builder asks for
+        the hash a few times per PROM build, and ``asdict`` is most of its cost)."""
+        text = self.__dict__.get("_hashed_text_memo")
+        if text is None:
+            text = json.dumps(self._hashed_dict(), sort_keys=True, default=str)
+            object.__setattr__(self, "_hashed_text_memo", text)
+        return text
 
     @property
     def fom_hash(self) -> str:
@@ -171,9 +180,13 @@ class Scene:
         return data
 
     def _digest(self, data: dict) -> str:
+        return self._digest_text(json.dumps(data, sort_keys=True, default=str))
+
+    def _digest_text(self, text: str) -> str:
+        """SHA-256 (16 hex digits) of ``text`` with the registered shape fields and the mesh's content."""
         from aquarom_fenics.geometry.shape_registry import registered_fingerprint
 
-        digest = hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode())
+        digest = hashlib.sha256(text.encode())
         digest.update(registered_fingerprint(self.shape_names, self).encode())  # a registered field on this mesh
         if self.mesh_file is None:
             digest.update((shipped_meshes() / "block.toml").read_bytes())  # the block's meshing recipe

@@ -51,7 +51,7 @@ def trust_region(scene, space, builder, weights, history, checkpoint, state, saf
         radius = state["radius"]
         candidate, predicted_cost = _surrogate_step(builder, prom, space, weights, center,
                                                     radius * trust_box(half_widths, builder.validity_radius(prom),
-                                                                       space.n_shapes), cuts)
+                                                                       space.n_shapes), cuts, current)
         candidate = safeguard.finite(candidate, state["iteration"] + 1)
         step = candidate - center
         iteration = state["iteration"] + 1
@@ -59,6 +59,7 @@ def trust_region(scene, space, builder, weights, history, checkpoint, state, saf
                 or current.cost - predicted_cost <= settings.cost_tolerance * abs(current.cost)):
             reason = "no predicted improvement inside the trust radius (stalled before optimality)"
             break
+        proposed = candidate
         candidate, candidate_prom = _meshable_candidate(builder, center, candidate, settings.step_tolerance)
         if candidate_prom is None:
             # refused right at the centre: the half-space step·(z - z_c) ≤ 0 is cut from the surrogate problem
@@ -70,7 +71,9 @@ def trust_region(scene, space, builder, weights, history, checkpoint, state, saf
             checkpoint.save(state, history, builder)
             continue
         step = candidate - center
-        predicted = current.cost - _surrogate_cost(builder, prom, weights, candidate)
+        # the surrogate's L at the candidate: the step's own value unless the design check shortened it
+        predicted = current.cost - (predicted_cost if candidate is proposed
+                                    else _surrogate_cost(builder, prom, weights, candidate))
         trial = builder.evaluate(candidate_prom, candidate, weights)
         actual = _actual_reduction(builder, prom, candidate_prom, current, trial, weights)
         ratio = actual / predicted if predicted > 0 else -np.inf
@@ -184,10 +187,13 @@ def _within_cuts(z, center, cuts) -> bool:
     return all(cut @ (z - center) <= 1e-12 for cut in cuts)
 
 
-def _surrogate_step(builder, prom, space, weights, center, radius, cuts=()) -> tuple[np.ndarray, float]:
+def _surrogate_step(builder, prom, space, weights, center, radius, cuts=(), at_center=None) -> tuple[np.ndarray, float]:
     """Minimise the surrogate cost (PROM at its centre, simulated at z) inside bounds, constraints,
-    radius and the cuts c·(z - z_c) ≤ 0 of directions the design check refused."""
+    radius and the cuts c·(z - z_c) ≤ 0 of directions the design check refused. ``at_center``: the
+    surrogate's evaluation at the centre when known (where SLSQP starts)."""
     cache = {}
+    if at_center is not None and np.array_equal(at_center.z, center):
+        cache[tuple(np.asarray(center, dtype=float))] = at_center
 
     lower = np.maximum(space.lower, center - radius)
     upper = np.minimum(space.upper, center + radius)

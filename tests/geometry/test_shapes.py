@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.geometry.design_check import check_design
+from aquarom_fenics.geometry.design_check import check_design, determinant_3x3
 from aquarom_fenics.geometry.shapes import CATALOG, design_points, shape_displacement, shape_matrix, shape_names
 
 L, W, H = 0.20, 0.04, 0.10
@@ -308,3 +308,36 @@ def test_fields_interpolate_into_a_dolfinx_vector_space():
         displacement.interpolate(lambda X: np.stack(field(X[0], X[1], X[2], BOX)))
         np.testing.assert_allclose(displacement.x.array.reshape(-1, 3), shape_displacement(name, nodes, BOX),
                                    rtol=1e-12, atol=1e-15)
+
+
+def test_the_design_check_determinant_equals_numpy_s():
+    matrices = np.eye(3) + 0.4 * np.random.default_rng(3).standard_normal((500, 3, 3))
+    np.testing.assert_allclose(determinant_3x3(matrices), np.linalg.det(matrices), rtol=1e-12, atol=1e-14)
+
+
+def test_a_fish_keeps_its_last_design_checks(monkeypatch):
+    """An optimiser checks a design and then builds there: the second check is the kept verdict, a
+    refusal included; beyond CHECKED_DESIGNS other designs the first is checked again."""
+    from aquarom_fenics.geometry import fish as fish_module
+    from aquarom_fenics.geometry.fish import CHECKED_DESIGNS, load_fish
+    from aquarom_fenics.io.scene import Scene
+
+    fish = load_fish(Scene.load("so1"))
+    checks = []
+    original = fish_module.check_exact_design
+    monkeypatch.setattr(fish_module, "check_exact_design", lambda *args, **kwargs: checks.append(1) or original(*args, **kwargs))
+    design = np.array([-0.21, 0.33, 0.05])
+    first = fish.design(design)
+    np.testing.assert_array_equal(fish.design(design.copy()), first)
+    assert len(checks) == 1
+    inverting = np.array([0.0, 0.0, 1.2])          # y_thin beyond 1 flattens the body
+    messages = []
+    for _ in range(2):
+        with pytest.raises(InputError) as refused:
+            fish.design(inverting)
+        messages.append(str(refused.value))
+    assert len(checks) == 2 and messages[0] == messages[1] and "inverts or flattens" in messages[0]
+    for k in range(CHECKED_DESIGNS):
+        fish.design(np.array([0.0, 0.0, 0.001 * (k + 1)]))
+    fish.design(design)
+    assert len(checks) == 3 + CHECKED_DESIGNS

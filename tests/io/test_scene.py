@@ -261,6 +261,9 @@ def test_hash_is_stable_and_ignores_formatting(tmp_path):
     assert first.hash == first.hash == again.hash
     assert other.hash == first.hash
     assert Scene.load("so1").hash == Scene.load("so1").hash
+    so1 = Scene.load("so1")
+    hashed = so1.hash      # made once per scene: a changed copy is hashed anew
+    assert so1.replace("optimizer", method="trust-region").hash != hashed == so1.hash
 
 
 def test_hash_follows_the_order_of_the_shapes(tmp_path):
@@ -374,10 +377,12 @@ def test_bad_region_names_and_head_ends_are_one_line(table, message):
 def test_hash_follows_the_content_of_the_mesh_file(tmp_path):
     mesh = write_box_inp(tmp_path / "box.inp")
     path = write_scene(tmp_path, '[mesh]\nfile = "box.inp"\n')
-    before = Scene.load(path).hash
+    scene = Scene.load(path)
+    before = scene.hash
     assert Scene.load(path).hash == before
     write_box_inp(mesh, counts=(11, 3, 3))
     assert Scene.load(path).hash != before
+    assert scene.hash != before         # the file is read at every hash, not kept with the scene
 
 
 def test_one_scene_in_two_folders_has_one_hash(tmp_path):

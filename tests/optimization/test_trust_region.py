@@ -76,3 +76,31 @@ def test_the_trust_box_is_capped_by_the_centre_prom_radius():
     prom = SimpleNamespace(validity_radius=np.array([0.0186, 0.125]))
     box = trust_box(np.array([0.125, 0.125, 0.35]), PromBuilder.validity_radius(prom), 2)
     assert np.allclose(box, [0.0186, 0.125, 0.35])
+
+
+class CountingBuilder(BasisOffsetBuilder):
+    """``BasisOffsetBuilder`` that records every simulation: (PROM, design) and whether with gradient."""
+
+    def __init__(self, *args):
+        super().__init__(*args)
+        self.runs = []
+
+    def evaluate(self, prom, z, weights):
+        self.runs.append((tuple(prom[0]), tuple(prom[1]), tuple(np.asarray(z, dtype=float))))
+        return super().evaluate(prom, z, weights)
+
+    def cost(self, prom, z, weights):
+        self.runs.append((tuple(prom[0]), tuple(prom[1]), tuple(np.asarray(z, dtype=float))))
+        return BasisOffsetBuilder.evaluate(self, prom, z, weights).cost
+
+
+def test_each_prom_is_simulated_once_per_design(scene):
+    """The centre's evaluation starts the surrogate step and the step's own L at the candidate is
+    the predicted one: no PROM is simulated twice at one design (before, every iteration ran the
+    centre's PROM at the centre and at the candidate again)."""
+    fish = load_fish(scene)
+    space = optimize_module.optimization_space(scene, fish)
+    builder = CountingBuilder(scene, fish, space)
+    result = optimize(scene, fish=fish, builder=builder)
+    assert result.converged and result.iterations >= 2
+    assert len(builder.runs) == len(set(builder.runs)), [run for run in builder.runs if builder.runs.count(run) > 1]
