@@ -23,7 +23,7 @@ a whole stroke), and no later than the data's last time allows within the scene'
 def parse_fit(items: list[str] | None, scene) -> tuple[list[str], np.ndarray, np.ndarray]:
     """--fit KEY[=LO:HI] … → (keys, start values, bounds (q, 2)), each refusal one line."""
     from aquarom_fenics.calibration.parameters import TIME_OFFSET, check_fit, check_keys, scene_value
-    from aquarom_fenics.io.scene import parse_number
+    from aquarom_fenics.io.command_values import parse_number
 
     if not items:
         raise InputError("--fit is required: a scene key to fit, e.g. --fit material.young_modulus "
@@ -59,7 +59,7 @@ def parse_fit(items: list[str] | None, scene) -> tuple[list[str], np.ndarray, np
 
 def offset_bounds(item: str, interval: str, scene) -> tuple[float, float]:
     """--fit time_offset[=LO:HI] → (LO, HI) [s], LO ≤ 0 ≤ HI (the fit starts at 0); default ± a quarter period."""
-    from aquarom_fenics.io.scene import parse_number
+    from aquarom_fenics.io.command_values import parse_number
 
     if not interval:
         half = OFFSET_PERIODS / scene.actuation.frequency

@@ -102,7 +102,7 @@ def print_plan(args, scene) -> int:
 
 def design_values(args, scene) -> dict[str, float]:
     """The --xi values (none where the command has no --xi), checked against the scene's shapes."""
-    from aquarom_fenics.io.scene import parse_xi_assignments
+    from aquarom_fenics.io.command_values import parse_xi_assignments
 
     return parse_xi_assignments(getattr(args, "xi", None), scene)
 

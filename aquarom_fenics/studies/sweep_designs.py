@@ -14,7 +14,8 @@ import numpy as np
 
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.files import read_text_file
-from aquarom_fenics.io.scene import Scene, parse_number
+from aquarom_fenics.io.command_values import parse_number
+from aquarom_fenics.io.scene import Scene
 
 MAX_DESIGNS = 100_000
 """Most designs of one sweep (a grid's product or --samples), checked before any is made."""

@@ -21,9 +21,9 @@ from aquarom_fenics.io.scene import (
     RegionsSection,
     Scene,
     SolverSection,
-    parse_xi_assignments,
     scene_from_dict,
 )
+from aquarom_fenics.io.command_values import parse_xi_assignments
 
 COARSE = "[mesh]\nlevel = 1\n"
 
