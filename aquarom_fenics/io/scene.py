@@ -160,8 +160,9 @@ class Scene:
         return self._digest(self._selected(PROM_SECTIONS, "gait") | {"shapes": shapes})
 
     def _selected(self, sections: tuple[str, ...], *optional: str) -> dict[str, Any]:
-        """The hashed values of ``sections``, and of the muscles and ``optional`` parts when the scene has them."""
-        data = self._hashed_dict()
+        """The hashed values of ``sections``, and of the muscles and ``optional`` parts when the scene has them
+        (read back from the scene's hashed text, made once)."""
+        data = json.loads(self._hashed_text())
         return {key: data[key] for key in (*sections, "muscles", *optional) if key in data}
 
     def _hashed_dict(self) -> dict[str, Any]:
