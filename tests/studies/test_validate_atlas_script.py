@@ -35,6 +35,20 @@ def test_the_corners_are_those_of_the_cells_that_erred_most_each_answered_by_its
     assert len({tuple(xi) for xi in xis}) == 16
 
 
+def test_every_corner_of_every_cell_is_answered_by_its_own_cell_and_compared_at_its_grid_vertex():
+    grid = atlas.cover(so1_like())
+    cells, corners, vertices = script.every_cell_corner(grid)
+    counts = [int(n) for n in grid.counts]
+    assert len(cells) == np.prod(counts) and len(corners) == 8 * len(cells)
+    assert len(vertices) == np.prod([n + 1 for n in counts])                  # shared by the cells meeting there
+    for (vertex, design), cell in zip(corners, np.repeat(np.array(cells), 8, axis=0)):
+        xi = np.array([design[name] for name in grid.names])
+        assert tuple(grid.cells(xi[None])[0]) == tuple(cell)                  # the corner's own cell answers it
+        assert np.allclose(xi, vertices[vertex], rtol=0, atol=1e-9) and not np.array_equal(xi, vertices[vertex])
+    box = np.array(list(vertices.values()))
+    assert np.allclose(box.min(axis=0), grid.lower) and np.allclose(box.max(axis=0), grid.upper)
+
+
 def test_the_time_split_counts_builds_made_here_and_each_workers_first_apart():
     centres = [{"status": "built", "build_time_s": 2.0, "build_cpu_s": 1.0, "builds_in_worker": 1, "worker": "a",
                 "solve_time_s": 1.0, "solve_cpu_s": 0.5},
