@@ -143,7 +143,7 @@ def times_lanes(matrix, right, out):
 @_jit
 def thrust_force_lanes(eu, ev, ea, points, transposed, own_node, other_node, length, inverse_length, rest_tangent,
                        weights, tail_weight, lagrangian, state, kinematics, force, out):
-    """out (m, LANES) += Wᵀ f_thrust per lane (``kernel_thrust.thrust_force``); state (H, 10, LANES) kept for
+    """out (m, LANES) += Wᵀ f_thrust per lane (``kernel_thrust.thrust_force``); state (10, H, LANES) kept for
     the blocks; kinematics (3, 2 n_points, LANES) and force (2 n_points, LANES) are work arrays."""
     times_lanes(points, eu, kinematics[0])
     times_lanes(points, ev, kinematics[1])
@@ -160,16 +160,16 @@ def thrust_force_lanes(eu, ev, ea, points, transposed, own_node, other_node, len
         vx, vy = load3(kinematics, 1, o), load3(kinematics, 1, o + 1)
         ax, ay = load3(kinematics, 2, o), load3(kinematics, 2, o + 1)
         w, ell = load(weights, h), load(length, h)
-        store3(state, h, 0, tx)
-        store3(state, h, 1, ty)
-        store3(state, h, 2, nx)
-        store3(state, h, 3, ny)
-        store3(state, h, 4, ndx)
-        store3(state, h, 5, ndy)
-        store3(state, h, 6, vx)
-        store3(state, h, 7, vy)
-        store3(state, h, 8, ax)
-        store3(state, h, 9, ay)
+        store3(state, 0, h, tx)
+        store3(state, 1, h, ty)
+        store3(state, 2, h, nx)
+        store3(state, 3, h, ny)
+        store3(state, 4, h, ndx)
+        store3(state, 5, h, ndy)
+        store3(state, 6, h, vx)
+        store3(state, 7, h, vy)
+        store3(state, 8, h, ax)
+        store3(state, 9, h, ay)
         v_n = add(mul(vx, nx), mul(vy, ny))
         along = add(add(add(mul(ax, nx), mul(ay, ny)), mul(vx, ndx)), mul(vy, ndy))
         spine_x = mul(neg(ell), add(mul(along, nx), mul(v_n, ndx)))
@@ -185,9 +185,9 @@ def thrust_force_lanes(eu, ev, ea, points, transposed, own_node, other_node, len
             add_to(force, o + 1, mul(w, spine_y))
     o = 2 * own_node[0]
     for l in range(LANES):
-        v_n = state[0, 6, l] * state[0, 2, l] + state[0, 7, l] * state[0, 3, l]
+        v_n = state[6, 0, l] * state[2, 0, l] + state[7, 0, l] * state[3, 0, l]
         force[o, l] += tail_weight[l] * 0.5 * v_n * v_n * state[0, 0, l]
-        force[o + 1, l] += tail_weight[l] * 0.5 * v_n * v_n * state[0, 1, l]
+        force[o + 1, l] += tail_weight[l] * 0.5 * v_n * v_n * state[1, 0, l]
     projected = np.dot(transposed, force)
     for k in range(out.shape[0]):
         for l in range(LANES):

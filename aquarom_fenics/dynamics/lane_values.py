@@ -27,6 +27,13 @@ def store3(array, i, j, a):
 
 
 @_jit
+def store(array, i, a):
+    """array[i, :] = a."""
+    array[i, 0], array[i, 1], array[i, 2], array[i, 3] = a[0], a[1], a[2], a[3]
+    array[i, 4], array[i, 5], array[i, 6], array[i, 7] = a[4], a[5], a[6], a[7]
+
+
+@_jit
 def add_to(array, i, a):
     """array[i, :] += a."""
     array[i, 0] += a[0]
@@ -58,3 +65,8 @@ def mul(a, b):
 def neg(a):
     return (-a[0], -a[1], -a[2], -a[3], -a[4], -a[5], -a[6], -a[7])
 
+
+
+@_jit
+def div(a, b):
+    return (a[0] / b[0], a[1] / b[1], a[2] / b[2], a[3] / b[3], a[4] / b[4], a[5] / b[5], a[6] / b[6], a[7] / b[7])

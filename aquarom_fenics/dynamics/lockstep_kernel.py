@@ -22,8 +22,8 @@ import numpy as np
 from aquarom_fenics.dynamics.compiled import jit as _jit
 from aquarom_fenics.dynamics.kernel_lanes import (LANES, between_lanes, derivative_lanes, elastic_lanes,
                                                   residual_lanes, tangents_lanes)
-from aquarom_fenics.dynamics.kernel_lanes_thrust import (banded_tangents_lanes, force_gradients_lanes,
-                                                         half_blocks_lanes, newton_matrix_lanes)
+from aquarom_fenics.dynamics.kernel_lanes_thrust import (LAGRANGIAN_ENTRIES, banded_tangents_lanes,
+                                                         force_gradients_lanes, half_blocks_lanes, newton_matrix_lanes)
 from aquarom_fenics.dynamics.kernel_terms import lu_factor, lu_solve
 
 OK, FAILED = 0, 1
@@ -64,7 +64,8 @@ def integrate_block(  # noqa: PLR0913, PLR0915 (the block's arrays; one routine 
     elastic_force, elastic_tangent = np.empty((m, n_mono, LANES)), np.empty((m * m, n_t, LANES))
     elastic_lanes(weights, force_coefficients, tangent_coefficients, m, elastic_force, elastic_tangent)
     mono, tangent_mono = np.empty((n_mono, LANES)), np.empty((n_t, LANES))
-    state = np.zeros((halves, 10, LANES))
+    state = np.zeros((10, halves, LANES))
+    entries = np.zeros((LAGRANGIAN_ENTRIES, halves * LANES))
     n_points = rows.shape[0]
     points = rows.reshape((2 * n_points, m))
     transposed = np.ascontiguousarray(points.T)
@@ -149,7 +150,7 @@ def integrate_block(  # noqa: PLR0913, PLR0915 (the block's arrays; one routine 
                                drag_direction, drag_row, stiffness, damping_t, mass_t)
                 if has_thrust:
                     half_blocks_lanes(state, length, thrust_weights, tail_weight, lagrangian, own_node, other_node,
-                                      k_banded, c_banded, m_banded)
+                                      k_banded, c_banded, m_banded, entries)
                 newton_matrix_lanes(k_u, k_v, k_a, stiffness, damping_t, mass_t, has_thrust, k_banded, c_banded,
                                     m_banded, s_banded, points, transposed, work, matrix)
                 for l in range(LANES):
@@ -177,7 +178,7 @@ def integrate_block(  # noqa: PLR0913, PLR0915 (the block's arrays; one routine 
                            drag_direction, drag_row, stiffness, damping_t, mass_t)
             if has_thrust:
                 half_blocks_lanes(state, length, thrust_weights, tail_weight, lagrangian, own_node, other_node,
-                                  k_banded, c_banded, m_banded)
+                                  k_banded, c_banded, m_banded, entries)
                 if sensitivities and parameter_terms:
                     force_gradients_lanes(state, length, lagrangian, thrust_weight_gradient, tail_weight_gradient,
                                           own_node, other_node, thrust_forces)
