@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from aquarom_fenics.dynamics.compiled import jit as _jit
-from aquarom_fenics.dynamics.lane_values import add, add_to, load, load3, mul, neg, store3, sub
+from aquarom_fenics.dynamics.lane_values import add, add_to, load, load3, mul, neg, splat, store3, sub
 
 LANES = 8
 """Designs advanced together (a compile-time constant of the loops over the lanes; ``contract_first`` and
@@ -263,10 +263,11 @@ def tangents_lanes(ev, activations, tangent_mono, elastic_tangent, mass, damping
         for k in range(m):
             for l in range(LANES):
                 speed[l] += drag_row[k] * ev[k, l]
+        twice = mul(splat(2.0), load(speed.reshape((1, LANES)), 0))
         for i in range(m):
+            direction = mul(twice, load(drag_direction, i))
             for k in range(m):
-                for l in range(LANES):
-                    damping_out[i, k, l] -= 2.0 * speed[l] * drag_direction[i, l] * drag_row[k]
+                store3(damping_out, i, k, sub(load3(damping_out, i, k), mul(direction, splat(drag_row[k]))))
 
 
 @_jit
@@ -311,3 +312,23 @@ def derivative_lanes(parameter_terms, eu, ev, ea, activations, units, mono, coef
         for i in range(m):
             for l in range(LANES):
                 out[i, c, l] = total[i, l]
+
+
+@_jit
+def sensitivity_terms_lanes(k_a, alpha_f, alpha_m, rhs, stiffness, damping, mass, combination, predicted, previous,
+                            previous_acceleration, out):
+    """out (m, c, LANES) = -∂r/∂ξ - C_t V + k_a M_t X̃₀ - α_f K_t X₀ - α_m M_t X₂ per lane: the sensitivity step's
+    right-hand side without the thrust (V = ``combination``, X̃₀ the predicted sensitivities, X₀ and X₂ the last
+    step's); each entry's eight lanes on tuples (``lane_values``)."""
+    m, columns = out.shape[0], out.shape[1]
+    k_a_lanes, alpha_f_lanes, alpha_m_lanes = splat(k_a), splat(alpha_f), splat(alpha_m)
+    for i in range(m):
+        for c in range(columns):
+            total = neg(load3(rhs, i, c))
+            for k in range(m):
+                inertia = load3(mass, i, k)
+                total = add(total, sub(sub(add(mul(neg(load3(damping, i, k)), load3(combination, k, c)),
+                                               mul(mul(k_a_lanes, inertia), load3(predicted, k, c))),
+                                           mul(mul(alpha_f_lanes, load3(stiffness, i, k)), load3(previous, k, c))),
+                                       mul(mul(alpha_m_lanes, inertia), load3(previous_acceleration, k, c))))
+            store3(out, i, c, total)

@@ -70,3 +70,9 @@ def neg(a):
 @_jit
 def div(a, b):
     return (a[0] / b[0], a[1] / b[1], a[2] / b[2], a[3] / b[3], a[4] / b[4], a[5] / b[5], a[6] / b[6], a[7] / b[7])
+
+
+@_jit
+def splat(x):
+    """The eight lanes of one number."""
+    return (x, x, x, x, x, x, x, x)

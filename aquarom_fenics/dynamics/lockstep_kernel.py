@@ -21,7 +21,7 @@ import numpy as np
 
 from aquarom_fenics.dynamics.compiled import jit as _jit
 from aquarom_fenics.dynamics.kernel_lanes import (LANES, between_lanes, derivative_lanes, elastic_lanes,
-                                                  residual_lanes, tangents_lanes)
+                                                  residual_lanes, sensitivity_terms_lanes, tangents_lanes)
 from aquarom_fenics.dynamics.kernel_lanes_thrust import (LAGRANGIAN_ENTRIES, banded_tangents_lanes,
                                                          force_gradients_lanes, half_blocks_lanes, newton_matrix_lanes)
 from aquarom_fenics.dynamics.kernel_terms import lu_factor, lu_solve
@@ -194,16 +194,8 @@ def integrate_block(  # noqa: PLR0913, PLR0915 (the block's arrays; one routine 
                         sens_new[0, i, c, l], sens_new[1, i, c, l] = u_p, v_p
                         v_between = v_p if alpha_f == 0.0 else (1.0 - alpha_f) * v_p + alpha_f * sens[1, i, c, l]
                         combination[i, c, l] = v_between - k_v * u_p
-            for i in range(m):
-                for c in range(columns):
-                    for l in range(LANES):
-                        thrust_rhs[i, c, l] = -rhs[i, c, l]
-                    for k in range(m):
-                        for l in range(LANES):
-                            thrust_rhs[i, c, l] += (-damping_t[i, k, l] * combination[k, c, l]
-                                                    + k_a * mass_t[i, k, l] * sens_new[0, k, c, l]
-                                                    - alpha_f * stiffness[i, k, l] * sens[0, k, c, l]
-                                                    - alpha_m * mass_t[i, k, l] * sens[2, k, c, l])
+            sensitivity_terms_lanes(k_a, alpha_f, alpha_m, rhs, stiffness, damping_t, mass_t, combination, sens_new[0],
+                                    sens[0], sens[2], thrust_rhs)
             if has_thrust:
                 for i in range(m):
                     for c in range(columns):
