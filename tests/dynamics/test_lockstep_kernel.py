@@ -82,3 +82,29 @@ def test_the_lockstep_kernel_has_one_compiled_signature_for_a_real_batch_and_the
     scene = coarse_scene(shapes=SO1_SHAPES, solver={"duration": 0.1})
     simulate_batch(prom, scene, spread(prom, LANES), sensitivities=True, engine="compiled")
     assert len(lockstep_kernel.integrate_blocks.signatures) == 1
+
+
+@pytest.mark.parametrize("fluid", [
+    {"spine_force": "lagrangian", "spine_rule": "rear"},
+    {"spine_force": "lagrangian", "spine_rule": "trapezoid", "drag": False},
+], ids=["lagrangian-rear", "lagrangian-trapezoid-no-drag"])
+def test_a_block_with_the_lagrangian_spine_force_agrees_with_single_runs(fluid, monkeypatch):
+    """The Lagrangian force's extra blocks (the other point's stiffness and damping) in lockstep: a full block of
+    designs with two shape parameters, one of which moves the tail's rest stations."""
+    blocks = []
+    integrate = reduced_kernel.integrate_lockstep
+
+    def counted(arguments, batch, columns):
+        blocks.append(batch)
+        return integrate(arguments, batch, columns)
+
+    monkeypatch.setattr(reduced_kernel, "integrate_lockstep", counted)
+    shapes = {"xz_concave_tail": {"bounds": [-0.01, 0.2]}, "y_thin": {"bounds": [-0.15, 0.15]}}
+    scene = coarse_scene(shapes=shapes, solver={"duration": 0.3}, fluid=fluid)
+    prom = build_prom(scene, fish=load_fish(scene))
+    xis = spread(prom, LANES, seed=5)
+    amplitudes = scene.actuation.amplitude * np.linspace(0.8, 1.2, LANES)
+    batch = simulate_batch(prom, scene, xis, sensitivities=True, amplitudes=amplitudes, amplitude_sensitivity=True,
+                           engine="compiled")
+    assert blocks == [LANES]
+    assert_batch_matches_single_runs(prom, scene, xis, amplitudes, batch)
