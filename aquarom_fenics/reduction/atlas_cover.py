@@ -27,7 +27,7 @@ from aquarom_fenics.io.scene import Scene
 
 RADIUS_SCALE = 0.7
 """s: the atlas's cell half-width ÷ the scene's validity radius, at most (scripts/validate_atlas.py: the PROM
-against the FOM on SO1's box, largest distance error 1.43 % at s = 0.7 and 2.92 % at the corners checked;
+against the FOM on SO1's box, largest distance error 1.43 % at s = 0.7 and 2.93 % at the corners of every cell;
 3.51 % at a corner at s = 0.8, 3.38 % at s = 0.9, 3.19 % at s = 1; the limit 3 %)."""
 
 
