@@ -28,6 +28,20 @@ def prom():
     return build_prom(scene, fish=load_fish(scene))
 
 
+@pytest.fixture
+def blocks(monkeypatch) -> list[int]:
+    """The batch size of every call of the lockstep kernel in the test (``reduced_kernel.integrate_lockstep``)."""
+    sizes = []
+    integrate = reduced_kernel.integrate_lockstep
+
+    def counted(arguments, batch, columns):
+        sizes.append(batch)
+        return integrate(arguments, batch, columns)
+
+    monkeypatch.setattr(reduced_kernel, "integrate_lockstep", counted)
+    return sizes
+
+
 def spread(prom, count: int, seed: int = 3) -> np.ndarray:
     rng = np.random.default_rng(seed)
     return prom.xi_center + prom.validity_radius * rng.uniform(-1.0, 1.0, (count, prom.n_parameters))
@@ -57,18 +71,10 @@ def test_the_lockstep_kernel_equals_the_per_design_kernel_lane_by_lane(prom):
         assert max_relative_error(gradients[b], gradient[b]) < 1e-12
 
 
-def test_a_batch_in_lockstep_agrees_with_single_runs(monkeypatch):
+def test_a_batch_in_lockstep_agrees_with_single_runs(blocks):
     """Nine designs through ``simulate_batch``: eight in one block, the ninth alone (``LOCKSTEP_TAIL``)."""
     scene = coarse_scene(shapes=SO1_SHAPES, solver={"duration": 0.4})
     prom = build_prom(scene, fish=load_fish(scene))
-    blocks = []
-    integrate = reduced_kernel.integrate_lockstep
-
-    def counted(arguments, batch, columns):
-        blocks.append(batch)
-        return integrate(arguments, batch, columns)
-
-    monkeypatch.setattr(reduced_kernel, "integrate_lockstep", counted)
     xis = spread(prom, LANES + 1)
     amplitudes = scene.actuation.amplitude * np.linspace(0.8, 1.2, LANES + 1)
     batch = simulate_batch(prom, scene, xis, sensitivities=True, amplitudes=amplitudes, amplitude_sensitivity=True,
@@ -88,17 +94,9 @@ def test_the_lockstep_kernel_has_one_compiled_signature_for_a_real_batch_and_the
     {"spine_force": "lagrangian", "spine_rule": "rear"},
     {"spine_force": "lagrangian", "spine_rule": "trapezoid", "drag": False},
 ], ids=["lagrangian-rear", "lagrangian-trapezoid-no-drag"])
-def test_a_block_with_the_lagrangian_spine_force_agrees_with_single_runs(fluid, monkeypatch):
+def test_a_block_with_the_lagrangian_spine_force_agrees_with_single_runs(fluid, blocks):
     """The Lagrangian force's extra blocks (the other point's stiffness and damping) in lockstep: a full block of
     designs with two shape parameters, one of which moves the tail's rest stations."""
-    blocks = []
-    integrate = reduced_kernel.integrate_lockstep
-
-    def counted(arguments, batch, columns):
-        blocks.append(batch)
-        return integrate(arguments, batch, columns)
-
-    monkeypatch.setattr(reduced_kernel, "integrate_lockstep", counted)
     shapes = {"xz_concave_tail": {"bounds": [-0.01, 0.2]}, "y_thin": {"bounds": [-0.15, 0.15]}}
     scene = coarse_scene(shapes=shapes, solver={"duration": 0.3}, fluid=fluid)
     prom = build_prom(scene, fish=load_fish(scene))
