@@ -96,6 +96,24 @@ def test_time_limit_stops_a_hang():
         with_time_limit(0.2, lambda: time.sleep(5))
 
 
+def test_time_limit_reached_inside_a_finaliser_still_stops_the_case():
+    """An alarm that comes while a ``__del__`` runs raises there, where Python only reports it: the limit is
+    raised again by the next alarm, not lost (the case would otherwise run to its end)."""
+    class SlowFinaliser:
+        def __del__(self):
+            time.sleep(0.3)                  # the 0.1 s alarm comes in here
+
+    def case():
+        SlowFinaliser()
+        time.sleep(2.0)
+        return "ran to the end"
+
+    started = time.perf_counter()
+    with pytest.raises(CaseTimeLimit):
+        with_time_limit(0.1, case)
+    assert time.perf_counter() - started < 1.0
+
+
 def test_case_over_its_time_limit_is_reported_not_cached(tmp_path):
     runner = Runner(tmp_path, time_limit=1e-3, stream=open("/dev/null", "w"))
     case = fom_case("too slow", stress_scene("alpha-0"))

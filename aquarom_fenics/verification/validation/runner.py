@@ -249,22 +249,33 @@ def compute_in_parallel(runner: Runner, cases: list[Case], jobs: int, pool=None)
     return len(order)
 
 
+RAISE_AGAIN = 0.1
+"""Seconds between the alarms after a case's time limit, until the case has unwound."""
+
+
 def with_time_limit(seconds: float, function):
     """``function()`` under a SIGALRM time limit (raises CaseTimeLimit).
 
     Signals reach the main thread only: in another thread (a Dask worker runs its tasks in a
-    thread pool) ``function()`` runs without the limit.
+    thread pool) ``function()`` runs without the limit. Once the limit is reached the alarm comes
+    again every :data:`RAISE_AGAIN` seconds until ``function()`` has unwound: a CaseTimeLimit raised
+    where it cannot propagate (a ``__del__`` or a finaliser running at that moment, a C++ call that
+    catches every exception) is not lost. The first statement of the ``finally`` (a store, where no
+    signal handler can run) ends the raising, so no alarm escapes the call.
     """
     if threading.current_thread() is not threading.main_thread():
         return function()
+    running = [True]
 
     def on_alarm(signum, frame):
-        raise CaseTimeLimit(f"time limit of {seconds:g} s")
+        if running[0]:
+            raise CaseTimeLimit(f"time limit of {seconds:g} s")
 
     previous = signal.signal(signal.SIGALRM, on_alarm)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
+    signal.setitimer(signal.ITIMER_REAL, seconds, RAISE_AGAIN)
     try:
         return function()
     finally:
+        running[0] = False
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, previous)
