@@ -294,9 +294,6 @@ def scene_from_dict(data: dict[str, Any], source: str = "<dict>", base_dir: str 
     scene = Scene(name=name, description=description, source=source, base_dir=base_dir, muscles=muscles,
                   shapes=shapes, constraints=constraints, gait=gait, cluster=cluster, **sections)
     check_gait_bounds(scene)
-    if scene.optimizer.atlas and scene.reduction.validity_change > 0:
-        raise InputError(f"{where}: [optimizer] atlas = true needs [reduction] validity_change = 0 (a radius capped "
-                         "below the atlas cell's half-width would refuse designs of the cell)")
     warn_abrupt_start(scene)
     return scene
 

@@ -12,7 +12,8 @@ from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.fish import Fish
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.optimization.cost import DesignSpace, Evaluation, amplitude_of, cost_value, evaluate, scene_at
-from aquarom_fenics.reduction.atlas_cover import center_id, center_prom, cover
+from aquarom_fenics.reduction.atlas_cover import cover
+from aquarom_fenics.reduction.atlas_refine import Refiner, holds, leaf_record
 from aquarom_fenics.reduction.cache import cached_prom
 from aquarom_fenics.reduction.prom import ReducedModel
 from aquarom_fenics.reduction.reductor import build_prom
@@ -73,10 +74,13 @@ class PromBuilder:
         self.basis_center: np.ndarray | None = None
         self.records: list[dict] = []        # per build: design, cache hit, basis source, time
         self._basis_source: ReducedModel | None = None
+        self._atlas: Refiner | None = None   # [optimizer] atlas: the refined cells met, their PROMs' radii
 
     def build(self, z: np.ndarray) -> ReducedModel:
         if self.scene.optimizer.atlas:
-            return self._atlas_build(z)
+            prom = self._atlas_build(z)
+            if prom is not None:
+                return prom
         started = time.perf_counter()
         center = z[: self.space.n_shapes]
         source = self._basis_source_near(center)
@@ -108,26 +112,47 @@ class PromBuilder:
         self._refuse_unstable(prom, z)
         return prom
 
-    def _atlas_build(self, z: np.ndarray) -> ReducedModel:
-        """``[optimizer] atlas``: the PROM at the centre c of the atlas cell holding the shapes of z
-        (``atlas_cover.center_prom``, through the PROM cache; |ξ - c|_k ≤ h_k ≤ 0.7 r_k), checked for a
-        stable gait at z."""
+    def _atlas_build(self, z: np.ndarray) -> ReducedModel | None:
+        """``[optimizer] atlas``: the PROM at the centre c of the atlas leaf holding the shapes of z
+        (``atlas_refine.Refiner``: the regular cell, bisected where a capped radius needs it; every PROM through
+        the PROM cache; |ξ - c|_k ≤ h_k ≤ s R_k), checked for a stable gait at z. None when the leaf is at the
+        depth limit and its PROM's radius R does not hold z: the caller builds at z."""
         started = time.perf_counter()
-        grid = cover(self.scene)
-        cell = grid.cells(z[None, : self.space.n_shapes])[0]
-        prom, built = center_prom(self.scene, dict(zip(grid.names, grid.center(cell).tolist())), self.fish)
+        refiner = self._refiner()
+        known = set(refiner.met)
+        leaf = refiner.leaf(z[: self.space.n_shapes])
+        if leaf.at_limit and not self._within(leaf.radius, refiner.grid, leaf, z):
+            log.warning("atlas cell %s is at the depth limit (%d bisections) and its PROM's radius %s does not hold "
+                        "%s: a PROM is built at the design", leaf.node.id, refiner.max_depth,
+                        np.round(leaf.radius, 5).tolist(), self.space.as_dict(z))
+            return None
+        prom = refiner.prom(leaf.node)
+        built_here = sum(met["built"] for node, met in refiner.met.items() if node not in known)
         elapsed = time.perf_counter() - started
         self.build_time += elapsed
         self.builds += 1
-        self.reused += not built
+        self.reused += not built_here
         self.last_size = prom.size
-        record = {"build": self.builds, "design": self.space.as_dict(z), "from_cache": not built, "basis_from": None,
-                  "radius_fraction": None, "atlas_cell": center_id(cell), "time": elapsed}
+        record = {"build": self.builds, "design": self.space.as_dict(z), "from_cache": not built_here,
+                  "basis_from": None, "radius_fraction": None, "atlas_cell": leaf.node.id, "time": elapsed}
+        if leaf.path or leaf.at_limit:
+            record.update(atlas_refined=leaf_record(refiner.grid, leaf), atlas_builds=int(built_here))
         self.records.append(record)
-        log.info("PROM %d for %s: the atlas centre %s's, %s; %.2f s", self.builds, record["design"], center_id(cell),
-                 "from the cache" if not built else "built", elapsed)
+        log.info("PROM %d for %s: the atlas centre %s's, %s%s; %.2f s", self.builds, record["design"], leaf.node.id,
+                 f"{built_here} built on the way" if built_here else "from the cache",
+                 " (at the depth limit)" if leaf.at_limit else "", elapsed)
         self._refuse_unstable(prom, z)
         return prom
+
+    def _refiner(self) -> Refiner:
+        if self._atlas is None:
+            self._atlas = Refiner(self.scene, cover(self.scene), self.fish)
+        return self._atlas
+
+    def _within(self, radius, grid, leaf, z) -> bool:
+        """|ξ - c|_k ≤ R_k of z from the leaf's centre."""
+        gap = np.abs(z[: self.space.n_shapes] - leaf.node.center(grid))
+        return bool(np.all(gap <= np.asarray(radius) * (1 + 1e-12)))
 
     def _radius_fraction(self, xi: np.ndarray, other: np.ndarray) -> float:
         """max_k |ξ_k - ξ'_k| / r_k, r the scene's validity radius (a parameter with r_k = 0, fixed by
@@ -155,11 +180,14 @@ class PromBuilder:
 
     def trusts(self, prom: ReducedModel | None, z: np.ndarray) -> bool:
         """Whether z is inside the validity radius of ``prom`` (every |ξ - ξ_c|_k ≤ r_k); with
-        ``[optimizer] atlas``, whether z is in the atlas cell of ``prom``'s centre."""
+        ``[optimizer] atlas``, whether z is in the atlas leaf whose centre is ``prom``'s (and, at the depth
+        limit, within its radius); a PROM built at a design beyond such a leaf's radius is judged by its radius."""
         if prom is not None and self.scene.optimizer.atlas:
-            grid = cover(self.scene)
-            cells = grid.cells(np.vstack([z[: self.space.n_shapes], prom.xi_center]))
-            return bool(np.array_equal(cells[0], cells[1]))
+            refiner = self._refiner()
+            leaf = refiner.leaf(np.asarray(prom.xi_center, dtype=float))
+            if np.allclose(leaf.node.center(refiner.grid), prom.xi_center, rtol=0, atol=1e-12):
+                return holds(refiner.grid, leaf.node, z[: self.space.n_shapes]) and (
+                    not leaf.at_limit or self._within(prom.validity_radius, refiner.grid, leaf, z))
         return prom is not None and bool(np.all(np.abs(z[: self.space.n_shapes] - prom.xi_center)
                                                 <= prom.validity_radius))
 

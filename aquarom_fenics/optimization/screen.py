@@ -33,7 +33,8 @@ from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.optimization.cost import (CostWeights, DesignSpace, cost_value, counts_power, scene_at,
                                               weighted_cost)
 from aquarom_fenics.optimization.optimize import start_points
-from aquarom_fenics.reduction.atlas_cover import assign, center_id, center_prom, cover
+from aquarom_fenics.reduction.atlas_cover import assign, center_prom, cover
+from aquarom_fenics.reduction.atlas_refine import Refiner, RefusedNode
 
 log = logging.getLogger("aquarom")
 
@@ -86,22 +87,34 @@ def screen_tasks(scene: Scene, space: DesignSpace, weights: CostWeights, designs
 
 
 def screen_center(task: ScreenTask) -> dict:
-    """The costs of a cell's designs from its centre's PROM, and the centre's record (a worker's task)."""
-    started = time.perf_counter()
+    """The costs of a cell's designs from the PROMs of the atlas leaves holding them (the cell itself unless a
+    capped radius splits it: ``atlas_refine``), and a record per node met (a worker's task). A design at a leaf
+    of the depth limit beyond its PROM's radius, or whose way meets a node without a PROM, costs +∞."""
     grid = cover(task.scene)
-    center = dict(zip(grid.names, grid.center(task.cell).tolist()))
-    record = {"id": center_id(task.cell), "center": center, "designs": len(task.positions)}
-    try:
-        prom, built = center_prom(task.scene, center)
-    except InputError as refused:
-        elapsed = time.perf_counter() - started
-        record.update(status=f"refused: {refused}", build_time_s=elapsed, solve_time_s=0.0)
-        return {"costs": [np.inf] * len(task.positions), "record": record}
-    built_at = time.perf_counter()
-    costs = batch_costs(prom, task.scene, task.space, task.designs, task.weights)
-    record.update(status="built" if built else "from the cache", build_time_s=built_at - started,
-                  solve_time_s=time.perf_counter() - built_at)
-    return {"costs": costs.tolist(), "record": record}
+    refiner = Refiner(task.scene, grid, prom_at=lambda center: center_prom(task.scene, center))
+    costs, leaves = np.full(len(task.positions), np.inf), {}
+    for k, z in enumerate(task.designs):
+        try:
+            leaf = refiner.leaf(z[: task.space.n_shapes], task.cell)
+        except RefusedNode:
+            continue
+        gap = np.abs(z[: task.space.n_shapes] - leaf.node.center(grid))
+        if not leaf.at_limit or np.all(gap <= leaf.radius * (1 + 1e-12)):
+            leaves.setdefault(leaf.node, []).append(k)
+    solved = {}
+    for node, members in leaves.items():
+        try:
+            prom = refiner.prom(node)
+        except RefusedNode:
+            continue
+        started = time.perf_counter()
+        costs[members] = batch_costs(prom, task.scene, task.space, task.designs[members], task.weights)
+        solved[node] = {"designs": len(members), "solve_time_s": time.perf_counter() - started}
+    records = {node: {"id": node.id, "center": refiner.center_dict(node), "designs": 0,
+                      "status": f"refused: {met['refused']}" if "refused" in met else
+                      "built" if met["built"] else "from the cache", "build_time_s": met["time_s"],
+                      "solve_time_s": 0.0} | solved.get(node, {}) for node, met in refiner.met.items()}
+    return {"costs": costs.tolist(), "records": list(records.values())}
 
 
 def batch_costs(prom, scene: Scene, space: DesignSpace, designs: np.ndarray, weights: CostWeights) -> np.ndarray:
@@ -146,7 +159,7 @@ def screen(scene: Scene, space: DesignSpace, weights: CostWeights, meshes, pool=
         if error is not None:
             raise error
         costs[list(task.positions)] = answer["costs"]
-        centres.append(answer["record"])
+        centres.extend(answer["records"])
     chosen = np.argsort(costs, kind="stable")[: settings.starts]
     outcome = Screen(designs, costs, chosen, centres, time.perf_counter() - started)
     report = outcome.report(space)

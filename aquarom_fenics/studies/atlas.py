@@ -44,6 +44,7 @@ from aquarom_fenics.parallel import worker_name
 from aquarom_fenics.geometry.fish_cache import shared_fish
 from aquarom_fenics.reduction.atlas_cover import (BUILT_HERE, RADIUS_SCALE, Cover, assign, cell_of,  # noqa: F401
                                                    center_id, center_prom, cover)
+from aquarom_fenics.reduction.atlas_refine import MAX_DEPTH, Refiner, RefusedNode, node_of
 from aquarom_fenics.studies.sweep_designs import driven
 
 CENTER_ROWS = 512
@@ -84,39 +85,68 @@ def center_tasks(scene: Scene, numbered: list[tuple[int, dict]], scale: float = 
 
 
 def evaluate_center(task: CenterTask) -> dict:
-    """The rows of a centre's designs and the centre's record (build or cache, time, PROM radius).
+    """The rows of a base cell's designs and the records of the atlas nodes that answered them or were split
+    on the way (``atlas_refine.Refiner``: a cell is bisected where its PROM's capped radius needs it; an uncapped
+    scene's cell is its own leaf, one record).
 
-    The designs inside the PROM's validity radius are integrated at once (``simulate_batch``; a design whose
-    steps fail there is integrated alone, with step cutting); the others are refused rows, as are all when
-    the PROM cannot be built at the centre. The task's wall time is shared among its rows. The record times
-    the build (or cache read) and the solve, wall [s] and the worker thread's CPU [s], and names the worker
-    and how many atlas PROMs it had built by then (``builds_in_worker`` 1: its first, which sets up its FOM)."""
+    Each leaf's designs inside its PROM's validity radius are integrated at once (``simulate_batch``; a design
+    whose steps fail there is integrated alone, with step cutting); the others are refused rows, as are all
+    whose way down meets a node where no PROM can be built. The task's wall time is shared among its rows. A
+    record times the build (or cache read) and the solve, wall [s] and the worker thread's CPU [s], and names
+    the worker and how many atlas PROMs it had built by then (``builds_in_worker`` 1: its first, which sets up
+    its FOM)."""
     from aquarom_fenics.dynamics.batched import simulate_batch
     from aquarom_fenics.reduction.prom import ReducedModel
 
-    started, cpu = time.perf_counter(), time.thread_time()
-    scene, name = task.scene, center_id(task.cell)
+    started = time.perf_counter()
+    scene, grid = task.scene, cover(task.scene, task.scale)
+    refiner = Refiner(scene, grid)
     rows = [{"design": index, **design, "status": "completed", "distance_m": None, "tail_amplitude_m": None,
-             "cached": False, "reason": "", "prom_center": name} for index, design in task.designs]
-    record = {"id": name, "cell": list(task.cell), "center": task.center, "status": "built"}
-    try:
-        prom, built = center_prom(scene, task.center)
-    except InputError as refused:
-        prom, record["status"] = None, f"refused: {refused}"
-        for row in rows:
-            row.update(status="refused", reason=f"no PROM at its centre {name}: {refused}")
-    built_at, built_cpu = time.perf_counter(), time.thread_time()
-    record.update(build_time_s=built_at - started, build_cpu_s=built_cpu - cpu, worker=worker_name(),
-                  builds_in_worker=BUILT_HERE[0])
-    if prom is not None:
-        record.update(status="built" if built else "from the cache", size=prom.size,
-                      prom_radius=dict(zip(prom.shape_names, prom.validity_radius.tolist())))
-        _answer(prom, scene, rows, task.designs, simulate_batch, ReducedModel.refuse_outside_radius)
-    record.update(solve_time_s=time.perf_counter() - built_at, solve_cpu_s=time.thread_time() - built_cpu)
+             "cached": False, "reason": "", "prom_center": center_id(task.cell)} for index, design in task.designs]
+    leaves: dict = {}
+    for k, (_, design) in enumerate(task.designs):
+        try:
+            leaf = refiner.leaf(np.array([design[name] for name in grid.names], dtype=float), task.cell)
+            leaves.setdefault(leaf.node, (leaf, []))[1].append(k)
+        except RefusedNode as refused:
+            rows[k].update(status="refused", prom_center=refused.node.id,
+                           reason=f"no PROM at its centre {refused.node.id}: {refused}")
+    solves, answered = {}, {}
+    for node, (leaf, members) in leaves.items():
+        for k in members:
+            rows[k]["prom_center"] = node.id
+        try:
+            prom = refiner.prom(node)
+        except RefusedNode as refused:
+            for k in members:
+                rows[k].update(status="refused", reason=f"no PROM at its centre {node.id}: {refused}")
+            continue
+        solve_at, solve_cpu = time.perf_counter(), time.thread_time()
+        _answer(prom, scene, [rows[k] for k in members], tuple(task.designs[k] for k in members), simulate_batch,
+                ReducedModel.refuse_outside_radius)
+        answered[node] = {"size": prom.size, "prom_radius": dict(zip(prom.shape_names, prom.validity_radius.tolist())),
+                          **({"at_depth_limit": True} if leaf.at_limit else {})}
+        solves[node] = {"solve_time_s": time.perf_counter() - solve_at, "solve_cpu_s": time.thread_time() - solve_cpu}
+    records = [_node_record(grid, node, met, refiner.radii.get(node)) | answered.get(node, {})
+               | solves.get(node, {"solve_time_s": 0.0, "solve_cpu_s": 0.0}) for node, met in refiner.met.items()]
     share = (time.perf_counter() - started) / len(rows)
     for row in rows:
         row.update(wall_time_s=share, worker=worker_name())
-    return {"rows": rows, "record": record}
+    return {"rows": rows, "records": records}
+
+
+def _node_record(grid: Cover, node, met: dict, radius=None) -> dict:
+    """A node's record: its cell, centre, build (or cache read) status and time, split shapes (and its PROM's
+    radius, which split it) if split."""
+    status = f"refused: {met['refused']}" if "refused" in met else "built" if met["built"] else "from the cache"
+    record = {"id": node.id, "cell": list(node.index), "center": dict(zip(grid.names, node.center(grid).tolist())),
+              "status": status, "build_time_s": met["time_s"], "build_cpu_s": met["cpu_s"], "worker": worker_name(),
+              "builds_in_worker": met.get("builds_in_worker", BUILT_HERE[0])}
+    if any(node.levels):
+        record["levels"] = list(node.levels)
+    if "split" in met:
+        record.update(split=met["split"], prom_radius=dict(zip(grid.names, np.asarray(radius).tolist())))
+    return record
 
 
 def _answer(prom, scene: Scene, rows: list[dict], designs: tuple, simulate_batch, refuse_outside) -> None:
@@ -180,12 +210,14 @@ def atlas_report(scene: Scene, grid: Cover, records: dict[str, dict], rows: list
         if row.get("prom_center"):
             designs[row["prom_center"]] = designs.get(row["prom_center"], 0) + 1
     centres = []
-    for name, count in sorted(designs.items(), key=lambda item: cell_of(item[0], grid)):
-        cell = cell_of(name, grid)
-        record = records.get(name) or {"id": name, "cell": cell, "status": "unrecorded (a run stopped before it)",
-                                       "center": dict(zip(grid.names, grid.center(cell).tolist()))}
+    for name, count in sorted(designs.items(), key=lambda item: _order(node_of(item[0], grid))):
+        node = node_of(name, grid)
+        record = records.get(name) or {"id": name, "cell": list(node.index), "status": "unrecorded (a run stopped "
+                                       "before it)", "center": dict(zip(grid.names, node.center(grid).tolist()))}
         centres.append(record | {"designs": count})
-    statuses = [record["status"] for record in centres]
+    split = sorted((record for name, record in records.items() if "split" in record and name not in designs),
+                   key=lambda record: _order(node_of(record["id"], grid)))
+    statuses = [record["status"] for record in centres + split]
     names = list(grid.names)
     return {"scene": scene.name, "scene_hash": scene.hash, "shape_names": names, "radius_scale": grid.scale,
             "validity_radius": dict(zip(names, grid.radius.tolist())),
@@ -193,12 +225,19 @@ def atlas_report(scene: Scene, grid: Cover, records: dict[str, dict], rows: list
             "cells_per_shape": dict(zip(names, grid.counts.tolist())),
             "box": {name: [lo, hi] for name, lo, hi in zip(names, grid.lower.tolist(), grid.upper.tolist())},
             "cells_in_box": grid.box_cells(), "centres": centres,
+            "refinement": {"max_depth": MAX_DEPTH, "split_centres": split,
+                           "at_depth_limit": [record["id"] for record in centres if record.get("at_depth_limit")]},
             "totals": {"centres": len(centres), "built": statuses.count("built"),
                        "from_the_cache": statuses.count("from the cache"),
-                       "build_time_s": _total(centres, "build_time_s", built_only=True),
-                       "build_cpu_s": _total(centres, "build_cpu_s", built_only=True),
+                       "build_time_s": _total(centres + split, "build_time_s", built_only=True),
+                       "build_cpu_s": _total(centres + split, "build_cpu_s", built_only=True),
                        "solve_time_s": _total(centres, "solve_time_s"), "solve_cpu_s": _total(centres, "solve_cpu_s"),
                        "designs": sum(designs.values())}}
+
+
+def _order(node) -> tuple:
+    """Centres in atlas.json: by base cell, then refinement, then index."""
+    return node.base_cell(), node.levels, node.index
 
 
 def _total(centres: list[dict], key: str, built_only: bool = False) -> float:

@@ -102,9 +102,8 @@ def reduced_model(scene: Scene, design: dict, model: str):
     fish = shared_fish(scene)
     shapes = {name: design[name] for name in scene.shape_names}
     if model == "prom":
-        grid = atlas.cover(scene)
-        cell = grid.cells(np.array([design[name] for name in grid.names]))[0]
-        prom, _ = atlas.center_prom(scene, dict(zip(grid.names, grid.center(cell).tolist())))
+        refiner = atlas.Refiner(scene, atlas.cover(scene))
+        prom = refiner.prom(refiner.leaf(np.array([design[name] for name in scene.shape_names], dtype=float)).node)
         ReducedModel.refuse_outside_radius(prom.shape_names, fish.parameter_vector(shapes), prom.xi_center,
                                            prom.validity_radius)
         return prom
@@ -322,7 +321,8 @@ class _AtlasFile:
                 "status": f"error: {type(error).__name__}: {error}".splitlines()[0]})
             return [(number, design, _error_row(number, design, error) | {"prom_center": name})
                     for number, design in item.designs]
-        self.records[name] = self.atlas.merged_record(self.records.get(name), answer["record"])
+        for record in answer["records"]:
+            self.records[record["id"]] = self.atlas.merged_record(self.records.get(record["id"]), record)
         return [(number, design, row) for (number, design), row in zip(item.designs, answer["rows"])]
 
     def write(self, rows) -> None:

@@ -67,8 +67,6 @@ def test_with_the_atlas_a_prom_is_trusted_in_its_cell_only():
 @pytest.mark.parametrize("table, message", [
     ({"optimizer": {"atlas": True, "method": "trust-region"}},
      r"\[optimizer\] atlas = true needs method = \"paper\" \(method = \"trust-region\"\)"),
-    ({"optimizer": {"atlas": True}, "reduction": {"validity_change": 0.1}},
-     r"\[optimizer\] atlas = true needs \[reduction\] validity_change = 0"),
     ({"optimizer": {"atlas": 1}}, r"\[optimizer\] atlas must be true or false, got 1"),
 ])
 def test_an_atlas_that_cannot_serve_is_refused_in_one_line(table, message):

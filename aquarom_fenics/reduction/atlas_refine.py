@@ -1,0 +1,199 @@
+"""The atlas's cells refined where a PROM's capped radius is smaller than its cell.
+
+With ``[reduction] validity_change`` = c > 0 a PROM's radius is capped at its centre, R_k ≤ c / s_k
+(``reductor.validity_radii``), known only once the PROM is built. A cell of the regular cover
+(:mod:`~aquarom_fenics.reduction.atlas_cover`, half-width h_k ≤ s r_k) whose PROM has
+
+    s R_k < h_k   in some shapes k   (s = the atlas's radius scale, the rule of the regular cells)
+
+is bisected in those shapes, and the child holding the design is built and judged the same way. A node is
+the base cell's grid refined L_k times in shape k: its indices j_k on the grid of half-width h_k / 2^{L_k},
+
+    c_k = lower_k + (2 j_k + 1) h_k / 2^{L_k},   child: L_k + 1, j_k ← 2 j_k + [ξ_k ≥ c_k]   (split shapes).
+
+A node that needs no split is a leaf: every design in it is within h ≤ s R ≤ R of its centre, so its PROM
+answers every design of the cell, as a regular cell's does. A shape is bisected at most :data:`MAX_DEPTH`
+times: a node that would split only shapes at that depth is a leaf *at the depth limit*; its PROM answers a
+design only within its own radius R (``ReducedModel.refuse_outside_radius``), and callers report such leaves.
+On a scene whose radii are not capped (R = r ≥ h / s) every base cell is a leaf: the regular atlas, its
+cells, names and cache entries, unchanged.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from aquarom_fenics.errors import InputError
+from aquarom_fenics.reduction.atlas_cover import BUILT_HERE, Cover, cell_of, center_id, center_prom
+
+MAX_DEPTH = 6
+"""Most bisections of a base cell per shape (a half-width of h / 64): on the CO scene the capped radius falls to
+0.0044 at the corner (relative ξ-derivatives up to 8, validity_change 0.035), s R = 0.0031, reached after 5."""
+
+
+@dataclass(frozen=True)
+class Node:
+    """A cell of the refined atlas: per shape its bisections L_k and index j_k on that level's grid."""
+
+    index: tuple
+    levels: tuple
+
+    @property
+    def id(self) -> str:
+        """The base cell's name for an unrefined cell (``atlas_cover.center_id``), else "j_0_j_1…@L_0_L_1…"."""
+        if not any(self.levels):
+            return center_id(self.index)
+        return center_id(self.index) + "@" + "_".join(str(int(level)) for level in self.levels)
+
+    def half_width(self, grid: Cover) -> np.ndarray:
+        return grid.half_width / 2.0 ** np.asarray(self.levels)
+
+    def center(self, grid: Cover) -> np.ndarray:
+        return grid.lower + (2 * np.asarray(self.index) + 1) * self.half_width(grid)
+
+    def base_cell(self) -> tuple:
+        """The regular cover's cell holding this node: j_k // 2^{L_k}."""
+        return tuple(int(j) >> int(level) for j, level in zip(self.index, self.levels))
+
+
+def node_of(name: str, grid: Cover) -> Node:
+    """The node of a name (:attr:`Node.id`) on ``grid``."""
+    cell, _, levels = name.partition("@")
+    index = tuple(cell_of(cell, grid))
+    return Node(index, tuple(int(level) for level in levels.split("_")) if levels else (0,) * len(index))
+
+
+def base_node(cell) -> Node:
+    cell = tuple(int(i) for i in cell)
+    return Node(cell, (0,) * len(cell))
+
+
+def holds(grid: Cover, node: Node, xi: np.ndarray) -> bool:
+    """Whether design ξ is in ``node``'s cell: its index on the node's grid (clipped to the base cell, as the
+    regular cover clips to the box) equals the node's."""
+    return descendant_index(grid, node.base_cell(), np.asarray(node.levels), np.atleast_1d(xi)) == node.index
+
+
+def descendant_index(grid: Cover, cell: tuple, levels: np.ndarray, xi: np.ndarray) -> tuple:
+    """Index of ξ on the grid of ``levels`` bisections: ⌊(ξ - lower) / (2 h / 2^L)⌋, within the base cell
+    that holds ξ (``Cover.cells``) and equal to ``cell`` only if that cell is ``cell``."""
+    own = grid.cells(xi[None, :])[0]
+    if tuple(int(i) for i in own) != tuple(cell):
+        return ()
+    width = 2 * grid.half_width / 2.0 ** levels
+    raw = np.floor(np.divide(xi - grid.lower, width, out=np.zeros_like(xi), where=width > 0)).astype(int)
+    first = np.asarray(cell) * 2 ** levels
+    return tuple(int(j) for j in np.clip(raw, first, first + 2 ** levels - 1))
+
+
+def splits(radius: np.ndarray, half_width: np.ndarray, scale: float) -> np.ndarray:
+    """The shapes where the cell is wider than the atlas's radius s R of its PROM: h_k > s R_k."""
+    radius = np.asarray(radius, dtype=float)
+    return (half_width > 0) & (half_width > scale * radius * (1 + 1e-12))
+
+
+def child(grid: Cover, node: Node, split: np.ndarray, xi: np.ndarray) -> Node:
+    """The half of ``node`` holding ξ in every split shape (ξ_k ≥ c_k: the upper half)."""
+    center = node.center(grid)
+    index = np.asarray(node.index) * np.where(split, 2, 1) + (split & (xi >= center))
+    return Node(tuple(int(j) for j in index), tuple(int(level) for level in np.asarray(node.levels) + split))
+
+
+class RefusedNode(InputError):
+    """No PROM at a node's centre (the design check refuses its mesh, for one): ``node`` names it."""
+
+    def __init__(self, node: Node, message: str):
+        super().__init__(message)
+        self.node = node
+
+
+@dataclass
+class Leaf:
+    """The node answering a design, its PROM's radius R, the nodes split on the way and whether the depth
+    limit stopped its refinement (``at_limit``: its PROM answers only within R)."""
+
+    node: Node
+    radius: np.ndarray
+    path: list
+    at_limit: bool
+
+
+class Refiner:
+    """Finds the leaf of designs, building (or reading from the PROM cache) the PROM of every node on the way.
+
+    ``prom_at(center_dict)`` → (PROM, built): :func:`~aquarom_fenics.reduction.atlas_cover.center_prom` by
+    default; the radius of every node met is kept (``radii``, by node), and ``met`` records each node's first
+    visit: its id, whether it was built, its split, its time. Without capped radii no PROM is needed to find a
+    leaf (the base cell)."""
+
+    def __init__(self, scene, grid: Cover, fish=None, prom_at=None, max_depth: int = MAX_DEPTH):
+        self.scene, self.grid, self.fish, self.max_depth = scene, grid, fish, max_depth
+        self.prom_at = prom_at or (lambda center: center_prom(scene, center, fish))
+        self.radii: dict[Node, np.ndarray] = {}
+        self.refused: dict[Node, str] = {}
+        self.met: dict[Node, dict] = {}
+        self.last = None            # (node, PROM) of the last node built or read
+
+    def center_dict(self, node: Node) -> dict:
+        return dict(zip(self.grid.names, node.center(self.grid).tolist()))
+
+    @property
+    def capped(self) -> bool:
+        """Whether PROM radii are capped at their centres (``[reduction] validity_change`` > 0); if not, R = r."""
+        return self.scene.reduction.validity_change > 0
+
+    def radius(self, node: Node) -> np.ndarray:
+        """R of the PROM at the node's centre: the scene's r when radii are not capped (no build: every base cell
+        is a leaf, h ≤ s r), else the built (or cached) PROM's, kept once met."""
+        if not self.capped:
+            return self.grid.radius
+        if node not in self.radii:
+            self.radii[node] = np.asarray(self.prom(node).validity_radius, dtype=float)
+        return self.radii[node]
+
+    def prom(self, node: Node):
+        """The PROM at the node's centre: the one met last, or built or read from the PROM cache (its first
+        visit recorded in ``met``: built or not, wall and thread CPU time [s], the worker's atlas builds by then);
+        :class:`RefusedNode` where it cannot be built."""
+        if node in self.refused:
+            raise RefusedNode(node, self.refused[node])
+        if self.last is not None and self.last[0] == node:
+            return self.last[1]
+        started, cpu = time.perf_counter(), time.thread_time()
+        try:
+            prom, built = self.prom_at(self.center_dict(node))
+        except InputError as refused:
+            self.refused[node] = str(refused)
+            self.met.setdefault(node, {"id": node.id, "built": False, "refused": str(refused),
+                                       "time_s": time.perf_counter() - started, "cpu_s": time.thread_time() - cpu})
+            raise RefusedNode(node, str(refused)) from None
+        self.last = (node, prom)
+        self.met.setdefault(node, {"id": node.id, "built": bool(built), "time_s": time.perf_counter() - started,
+                                   "cpu_s": time.thread_time() - cpu, "builds_in_worker": BUILT_HERE[0]})
+        return prom
+
+    def leaf(self, xi: np.ndarray, cell=None) -> Leaf:
+        """Descend from ξ's base cell (or ``cell``) to the leaf holding ξ; :class:`RefusedNode` where a node's PROM
+        cannot be built."""
+        xi = np.asarray(xi, dtype=float)
+        node = base_node(self.grid.cells(xi[None, :])[0] if cell is None else cell)
+        path = []
+        while True:
+            radius = self.radius(node)
+            need = splits(radius, node.half_width(self.grid), self.grid.scale)
+            allowed = need & (np.asarray(node.levels) < self.max_depth)
+            if not allowed.any():
+                return Leaf(node, radius, path, bool(need.any()))
+            self.met[node]["split"] = [name for name, k in zip(self.grid.names, allowed) if k]
+            path.append(node)
+            node = child(self.grid, node, allowed, xi)
+
+
+def leaf_record(grid: Cover, leaf: Leaf) -> dict:
+    """What atlas.json and the optimiser's build records say of a leaf: its levels, half-width, its PROM's
+    radius R and s R, and the depth limit."""
+    return {"levels": list(leaf.node.levels), "half_width": dict(zip(grid.names, leaf.node.half_width(grid).tolist())),
+            "prom_radius": dict(zip(grid.names, leaf.radius.tolist())), "at_depth_limit": leaf.at_limit,
+            "split_on_the_way": [node.id for node in leaf.path]}

@@ -1,0 +1,82 @@
+"""The atlas refined where a capped radius is smaller than its cell (``reduction/atlas_refine.py``), on a fake
+PROM whose capped radius R is a known function of its centre: the cells split only where s R < h, in the shapes
+where it is, every design's leaf holds it within s R of its centre, the depth bound holds and is reported, and a
+scene without capped radii keeps the regular cells without a build."""
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from aquarom_fenics.reduction.atlas_cover import Cover, center_id
+from aquarom_fenics.reduction.atlas_refine import MAX_DEPTH, Refiner, holds, node_of
+
+S = 0.7
+GRID = Cover(("a", "b"), np.zeros(2), np.ones(2), np.array([0.25, 0.25]), np.array([2, 2]),
+             np.array([0.25, 0.25]) / S, S)
+"""2 × 2 cells of half-width 0.25 over [0, 1]², cut from r = 0.25 / s."""
+
+
+def capped(change=0.03):
+    return SimpleNamespace(reduction=SimpleNamespace(validity_change=change))
+
+
+def fake_prom_at(radius, calls):
+    """prom_at(centre) → (a PROM whose validity radius is radius(ξ_c), built), counting the calls by centre."""
+    def prom_at(center):
+        xi = np.array([center["a"], center["b"]])
+        calls.append(tuple(xi))
+        return SimpleNamespace(validity_radius=np.asarray(radius(xi), dtype=float), xi_center=xi), True
+    return prom_at
+
+
+def thin_near_a1(xi):
+    """R_a falls towards a = 1 (a thin design); R_b = r_b everywhere (never below the cell)."""
+    return [0.25 / S * (1.0 - 0.6 * xi[0]) ** 2, 0.25 / S]
+
+
+def test_a_cell_splits_only_in_the_shape_where_the_capped_radius_is_below_it():
+    calls = []
+    refiner = Refiner(capped(), GRID, prom_at=fake_prom_at(thin_near_a1, calls))
+    near = refiner.leaf(np.array([0.1, 0.6]))               # centre a = 0.25: s R_a = 0.25 (1 - 0.15)² < 0.25
+    assert near.node.levels == (1, 0) and not near.at_limit and [n.id for n in near.path] == ["0_1"]
+    assert near.node.id == "0_1@1_0" and near.node.center(GRID) == pytest.approx([0.125, 0.75])
+    far = refiner.leaf(np.array([0.95, 0.1]))
+    assert far.node.levels[1] == 0 and far.node.levels[0] >= 3         # thinner: more bisections, in a only
+    assert refiner.met[far.path[0]]["split"] == ["a"]
+    for leaf in (near, far):
+        assert np.all(leaf.node.half_width(GRID) <= S * leaf.radius * (1 + 1e-12))
+    assert len(calls) == len(set(calls)) == len(refiner.met)          # each node's PROM built once
+
+
+def test_every_design_is_held_by_its_leaf_within_s_times_its_capped_radius():
+    rng = np.random.default_rng(3)
+    refiner = Refiner(capped(), GRID, prom_at=fake_prom_at(thin_near_a1, []))
+    for xi in rng.uniform(0, 1, size=(200, 2)):
+        leaf = refiner.leaf(xi)
+        center, h = leaf.node.center(GRID), leaf.node.half_width(GRID)
+        assert holds(GRID, leaf.node, xi) and np.all(np.abs(xi - center) <= h * (1 + 1e-12))
+        assert not leaf.at_limit and np.all(h <= S * leaf.radius * (1 + 1e-12))
+        assert np.all(np.abs(xi - center) <= leaf.radius)         # so its PROM's own radius holds it
+        assert node_of(leaf.node.id, GRID) == leaf.node
+        for parent in leaf.path:                                      # every node on the way was too wide
+            assert np.any(parent.half_width(GRID) > S * refiner.radii[parent])
+
+
+def test_the_depth_bound_holds_and_a_leaf_at_it_is_reported():
+    calls = []
+    refiner = Refiner(capped(), GRID, prom_at=fake_prom_at(lambda xi: [1e-6, 1e-6], calls), max_depth=3)
+    leaf = refiner.leaf(np.array([0.3, 0.9]))
+    assert leaf.at_limit and leaf.node.levels == (3, 3) and len(leaf.path) == 3 and len(calls) == 4
+    assert holds(GRID, leaf.node, np.array([0.3, 0.9]))
+    assert MAX_DEPTH == Refiner(capped(), GRID, prom_at=fake_prom_at(thin_near_a1, [])).max_depth
+
+
+def test_without_capped_radii_the_cells_are_the_regular_covers_and_need_no_build():
+    calls = []
+    refiner = Refiner(capped(0.0), GRID, prom_at=fake_prom_at(lambda xi: [1e-6, 1e-6], calls))
+    for xi, cell in (([0.1, 0.6], (0, 1)), ([0.75, 0.2], (1, 0)), ([1.0, 1.0], (1, 1))):
+        leaf = refiner.leaf(np.array(xi))
+        assert leaf.node.id == center_id(cell) and leaf.node.levels == (0, 0) and not leaf.path
+        assert holds(GRID, leaf.node, np.array(xi)) and not holds(GRID, leaf.node, np.array([0.5, 0.5]) + 0.26 *
+                                                                  (np.array(cell) * 2 - 1) * -1)
+    assert calls == []                                                  # radii from the scene: nothing built
