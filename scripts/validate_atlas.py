@@ -189,17 +189,29 @@ def time_split(atlas: dict) -> dict:
 
 def checked_designs(scene, rows: list[dict], random: int, farthest: int, seed: int) -> list[tuple[str, dict]]:
     """(why, row) of ``random`` completed rows drawn with ``seed`` and the ``farthest`` completed rows
-    farthest from their centre (max_k |ξ_k - c_k| / h_k), none twice."""
+    farthest from the centre of the cell that answered them (max_k |ξ_k - c_k| / h_k, :func:`leaf_reach`), none
+    twice."""
     from aquarom_fenics.studies.atlas import cover
 
     grid = cover(scene)
     completed = [row for row in rows if row["status"] == "completed"]
-    xis = np.array([[row[name] for name in grid.names] for row in completed])
-    reach = np.array([grid.scaled_distance(xi, grid.cells(xi)[0])[0] for xi in xis])
+    reach = np.array([leaf_reach(grid, row) for row in completed])
     drawn = np.random.default_rng(seed).choice(len(completed), size=random, replace=False).tolist()
     far = [k for k in np.argsort(-reach, kind="stable").tolist() if k not in drawn][:farthest]
     return [("random", completed[k] | {"reach": float(reach[k])}) for k in drawn] + \
            [("farthest", completed[k] | {"reach": float(reach[k])}) for k in far]
+
+
+def leaf_reach(grid, row: dict) -> float:
+    """max_k |ξ_k - c_k| / h_k of a row from the centre of the atlas cell that answered it (``prom_center``: a
+    regular cell, or a refined one where a capped radius split it; 1 on the cell's faces)."""
+    from aquarom_fenics.reduction.atlas_refine import node_of
+
+    node = node_of(row["prom_center"], grid)
+    xi = np.array([row[name] for name in grid.names])
+    half = node.half_width(grid)
+    return float(np.max(np.divide(np.abs(xi - node.center(grid)), half, out=np.zeros_like(half), where=half > 0),
+                        initial=0.0))
 
 
 def fom_check(scene, checked: list[tuple[str, dict]], workers: int, folder: Path) -> list[dict]:

@@ -125,9 +125,15 @@ def atlas_line(out: Path) -> tuple[str, dict] | None:
     path = out / ATLAS_FILE
     if not path.is_file():
         return None
-    totals = json.loads(path.read_text())["totals"]
+    report = json.loads(path.read_text())
+    totals, refined = report["totals"], report.get("refinement", {})
+    split, limit = len(refined.get("split_centres", [])), refined.get("at_depth_limit", [])
     return (f"PROM atlas: {totals['centres']} centre(s) used, {totals['built']} built "
-            f"({totals['build_time_s']:.1f} s of builds), {totals['from_the_cache']} from the PROM cache"), totals
+            f"({totals['build_time_s']:.1f} s of builds), {totals['from_the_cache']} from the PROM cache"
+            + (f"; {split} cell(s) bisected for their capped radius" if split else "")
+            + (f"; {len(limit)} cell(s) at the depth limit ({refined['max_depth']} bisections), whose PROMs answer "
+               f"only within their radius: {', '.join(limit[:5])}{' …' if len(limit) > 5 else ''}" if limit else "")), \
+        totals | ({"bisected": split, "at_depth_limit": len(limit)} if split or limit else {})
 
 
 def describe_backend(pool, cluster) -> str:
@@ -188,6 +194,12 @@ def dry_run(args, scene, designs, source, kept, cluster, workers) -> int:
         centres = len(assign(cover(scene), todo))
         say(f"  PROM atlas: {centres} centre(s) to build or take from the PROM cache "
             f"({cover(scene).box_cells()} cells in the box)")
+        if scene.reduction.validity_change > 0:
+            from aquarom_fenics.reduction.atlas_refine import MAX_DEPTH
+
+            say(f"  refinement: [reduction] validity_change caps each PROM's radius at its centre: a cell whose "
+                f"capped radius is below it is bisected, up to {MAX_DEPTH} times per shape, each half built "
+                "(known only as the PROMs are built: not in the estimate)")
     seconds = estimate(scene, missing, args.model, 1 if cluster.distributed else workers, centres)
     say(f"  estimate: ~{seconds:.0f} s" + (" on one worker (divided by the number of the cluster's workers)"
                                           if cluster.distributed else ""))

@@ -10,7 +10,7 @@ each the cost the optimisers minimise,
 
 with d (and P̄) from the PROM of the atlas centre whose cell holds the shapes of z
 (:mod:`~aquarom_fenics.reduction.atlas_cover`: cells of half-width h ≤ s r, inside which the PROM stayed
-within 3 % of the FOM in distance). The designs of one centre are integrated together (one
+within 3 % of the FOM in distance; bisected where a capped radius needs it, ``atlas_refine``). The designs of one centre are integrated together (one
 ``simulate_batch`` without sensitivities; one run per design with effort "power", whose P̄ needs the single
 run's trajectory), one task per centre on the multi-start's pool; the centres' PROMs come from the PROM
 cache, shared with ``sweep --model prom`` on the same scene. The ``starts`` designs of least L (on a tie the

@@ -14,6 +14,8 @@ centre is the one nearest to ξ in the radius-scaled norm max_k |ξ_k - c_k| / h
 h_k ≤ r_k of it, so the centre's PROM answers ξ. A centre's PROM is built through the PROM cache
 (:func:`center_prom`), keyed by the scene and the centre: every user of the atlas on one scene shares it.
 How s is set (the PROM within 3 % of the FOM inside a cell) is told in :mod:`~aquarom_fenics.studies.atlas`.
+Where ``[reduction] validity_change`` caps a PROM's radius below its cell, the cell is bisected
+(:mod:`~aquarom_fenics.reduction.atlas_refine`); without the cap the cells are these.
 """
 from __future__ import annotations
 
