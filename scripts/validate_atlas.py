@@ -82,7 +82,7 @@ def atlas_sweep(scene, designs, workers: int, folder: Path) -> dict:
 def corner_designs(grid, results: list[dict], cells: int) -> list[dict]:
     """The 2^p corners c ± (1 - 1e-9) h of the ``cells`` cells whose checked designs erred most (distinct
     centres, by |relative error|), pulled inside by 1e-9 h so that the cell's own PROM answers them."""
-    from aquarom_fenics.studies.atlas import cell_of
+    from aquarom_fenics.reduction.atlas_refine import node_of
 
     worst = []
     for entry in sorted(results, key=lambda entry: -abs(entry.get("relative_error", 0.0))):
@@ -90,23 +90,22 @@ def corner_designs(grid, results: list[dict], cells: int) -> list[dict]:
             worst.append(entry["prom_center"])
     corners = []
     for name in worst[:cells]:
-        center = grid.center(cell_of(name, grid))
+        node = node_of(name, grid)                  # a regular cell, or one bisected for a capped radius
+        center, half = node.center(grid), node.half_width(grid)
         for signs in itertools.product((-1.0, 1.0), repeat=len(grid.names)):
-            corners.append(dict(zip(grid.names, (center + (1 - 1e-9) * np.array(signs) * grid.half_width).tolist())))
+            corners.append(dict(zip(grid.names, (center + (1 - 1e-9) * np.array(signs) * half).tolist())))
     return corners
 
 
 def corner_check(scene, results: list[dict], cells: int, workers: int, folder: Path) -> list[dict]:
     """The FOM against the atlas at the corners of :func:`corner_designs` (every shape at its largest offset at
     once), the atlas's answers from its PROM cache in ``folder``."""
-    from aquarom_fenics.studies.atlas import cell_of, cover
+    from aquarom_fenics.studies.atlas import cover
 
     grid = cover(scene)
     with atlas_cache(folder):
         rows = prom_sweep(scene, corner_designs(grid, results, cells), workers, folder / "corners")
-    checked = [("corner", row | {"reach": float(grid.scaled_distance(np.array([[row[n] for n in grid.names]]),
-                                                                     cell_of(row["prom_center"], grid))[0])})
-               for row in rows if row["status"] == "completed"]
+    checked = [("corner", row | {"reach": leaf_reach(grid, row)}) for row in rows if row["status"] == "completed"]
     return fom_check(scene, checked, workers, folder)
 
 
@@ -170,9 +169,10 @@ def cover_record(atlas: dict) -> dict:
 
 def time_split(atlas: dict) -> dict:
     """Where the sweep's worker time went, from atlas.json's centre records: builds (wall and thread CPU [s],
-    the first of each worker apart: it sets up the FOM the later builds move) and batched solves."""
+    the first of each worker apart: it sets up the FOM the later builds move; with capped radii the cells bisected
+    on the way included) and batched solves."""
     centres = atlas["centres"]
-    built = [c for c in centres if c["status"] == "built"]
+    built = [c for c in centres + atlas.get("refinement", {}).get("split_centres", []) if c["status"] == "built"]
     first = [c["build_time_s"] for c in built if c.get("builds_in_worker") == 1]
     later = [c["build_time_s"] for c in built if c.get("builds_in_worker", 0) > 1]
     designs = max(atlas["totals"]["designs"], 1)
@@ -289,7 +289,7 @@ def main() -> int:
         counts = summary(sweep["rows"])["counts"]
         totals = sweep["atlas"]["totals"]
         split = time_split(sweep["atlas"])
-        print(f"atlas sweep: {len(designs)} designs, {counts}, {totals['centres']} centres built "
+        print(f"atlas sweep: {len(designs)} designs, {counts}, {totals['centres']} centres used, {totals['built']} PROMs built "
               f"({totals['build_time_s']:.1f} s of builds), {sweep['wall_time']:.1f} s; worker time: builds "
               f"{split['build_wall_s']:.1f} s (CPU {split['build_cpu_s']:.1f} s; first per worker "
               f"{', '.join(f'{t:.2f}' for t in split['first_build_per_worker_s'])} s, others "
