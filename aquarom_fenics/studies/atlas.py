@@ -101,7 +101,7 @@ def evaluate_center(task: CenterTask) -> dict:
 
     started = time.perf_counter()
     scene, grid = task.scene, cover(task.scene, task.scale)
-    refiner = Refiner(scene, grid)
+    refiner = Refiner(scene, grid, max_depth=MAX_DEPTH)
     rows = [{"design": index, **design, "status": "completed", "distance_m": None, "tail_amplitude_m": None,
              "cached": False, "reason": "", "prom_center": center_id(task.cell)} for index, design in task.designs]
     leaves: dict = {}
