@@ -289,7 +289,8 @@ def main() -> int:
         counts = summary(sweep["rows"])["counts"]
         totals = sweep["atlas"]["totals"]
         split = time_split(sweep["atlas"])
-        print(f"atlas sweep: {len(designs)} designs, {counts}, {totals['centres']} centres used, {totals['built']} PROMs built "
+        print(f"atlas sweep: {len(designs)} designs, {counts}, {totals['centres']} centres used, "
+              f"{totals['built']} PROMs built "
               f"({totals['build_time_s']:.1f} s of builds), {sweep['wall_time']:.1f} s; worker time: builds "
               f"{split['build_wall_s']:.1f} s (CPU {split['build_cpu_s']:.1f} s; first per worker "
               f"{', '.join(f'{t:.2f}' for t in split['first_build_per_worker_s'])} s, others "

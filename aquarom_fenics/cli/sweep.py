@@ -131,8 +131,9 @@ def atlas_line(out: Path) -> tuple[str, dict] | None:
     return (f"PROM atlas: {totals['centres']} centre(s) used, {totals['built']} built "
             f"({totals['build_time_s']:.1f} s of builds), {totals['from_the_cache']} from the PROM cache"
             + (f"; {split} cell(s) bisected for their capped radius" if split else "")
-            + (f"; {len(limit)} cell(s) at the depth limit ({refined['max_depth']} bisections), whose PROMs answer "
-               f"only within their radius: {', '.join(limit[:5])}{' …' if len(limit) > 5 else ''}" if limit else "")), \
+            + (f"; {len(limit)} cell(s) at the depth limit ({refined['max_depth']} bisections), whose PROMs "
+               f"answer only within their radius: {', '.join(limit[:5])}{' …' if len(limit) > 5 else ''}"
+               if limit else "")), \
         totals | ({"bisected": split, "at_depth_limit": len(limit)} if split or limit else {})
 
 

@@ -10,12 +10,13 @@ each the cost the optimisers minimise,
 
 with d (and P̄) from the PROM of the atlas centre whose cell holds the shapes of z
 (:mod:`~aquarom_fenics.reduction.atlas_cover`: cells of half-width h ≤ s r, inside which the PROM stayed
-within 3 % of the FOM in distance; bisected where a capped radius needs it, ``atlas_refine``). The designs of one centre are integrated together (one
-``simulate_batch`` without sensitivities; one run per design with effort "power", whose P̄ needs the single
-run's trajectory), one task per centre on the multi-start's pool; the centres' PROMs come from the PROM
-cache, shared with ``sweep --model prom`` on the same scene. The ``starts`` designs of least L (on a tie the
-one drawn first) start the optimisations. A design whose reduced run stops, or whose centre has no PROM
-(its mesh refused there), ranks last (L = +∞). The constraints need no penalty: a design outside them is
+within 3 % of the FOM in distance; bisected where a capped radius needs it, ``atlas_refine``). The designs of
+one centre are integrated together (one ``simulate_batch`` without sensitivities; one run per design with
+effort "power", whose P̄ needs the single run's trajectory), one task per regular cell on the multi-start's
+pool; the centres' PROMs come from the PROM cache, shared with ``sweep --model prom`` on the same scene. The
+``starts`` designs of least L (on a tie the one drawn first) start the optimisations. A design whose reduced
+run stops, or whose centre has no PROM (its mesh refused there), or which a cell at the depth limit holds
+beyond its PROM's radius, ranks last (L = +∞). The constraints need no penalty: a design outside them is
 never drawn. The stability a PROM build judges (Floquet) is not screened: a start found unstable is
 refused by its first build as an unscreened start would be.
 """
@@ -28,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aquarom_fenics.dynamics.batched import simulate_batch
-from aquarom_fenics.errors import InputError, SolverError
+from aquarom_fenics.errors import SolverError
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.optimization.cost import (CostWeights, DesignSpace, cost_value, counts_power, scene_at,
                                               weighted_cost)

@@ -5,8 +5,8 @@ the PROM at a cell's centre (:func:`center_prom`, through the PROM cache) are
 :mod:`~aquarom_fenics.reduction.atlas_cover`'s, below the optimisers, whose multi-start screen uses them too (:mod:`~aquarom_fenics.optimization.screen`); a design's cell's centre holds it within h_k ≤ r_k, so that
 centre's PROM answers it. Where ``[reduction] validity_change`` caps a PROM's radius R below the cell
 (s R_k < h_k), the cell is bisected until it holds (:mod:`~aquarom_fenics.reduction.atlas_refine`; a cell
-left at the depth limit answers only within R, refusing the others as rows). Only the centres whose cells hold designs are
-built, each through the PROM cache (a second sweep reuses them), one task per centre on the sweep's
+left at the depth limit answers only within R, refusing the others as rows). Only the centres whose cells hold
+designs are built, each through the PROM cache (a second sweep reuses them), one task per centre on the sweep's
 pool, and the designs of a centre are integrated together, one ``simulate_batch`` per centre (split
 in tasks of at most :data:`CENTER_ROWS` designs).
 
