@@ -30,7 +30,8 @@ from aquarom_fenics.reduction.atlas_cover import BUILT_HERE, Cover, cell_of, cen
 
 MAX_DEPTH = 6
 """Most bisections of a base cell per shape (a half-width of h / 64): on the CO scene the capped radius falls to
-0.0044 at the corner (relative ξ-derivatives up to 8, validity_change 0.035), s R = 0.0031, reached after 5."""
+R = 0.0045 in y_ellipse at the corner (validity_change 0.035), s R = 0.0032 ≥ h / 32 = 0.0026: five bisections
+(docs/devlog.md, "the atlas for capped radii")."""
 
 
 @dataclass(frozen=True)
