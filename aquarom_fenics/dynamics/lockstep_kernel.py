@@ -42,7 +42,7 @@ def _factor(matrices, lane, factors, pivots):
 @_jit
 def integrate_block(  # noqa: PLR0913, PLR0915 (the block's arrays; one routine as integrate_design)
         n_steps, h, alpha_m, alpha_f, beta, gamma, tolerance, max_iterations, contraction, per_factorization,
-        floor, units, distance_mask, amplitude_mask,
+        refresh_each_step, floor, units, distance_mask, amplitude_mask,
         pairs, pair_of_triple, triples, force_coefficients, tangent_coefficients, coefficients_t,
         weights, weight_derivatives, mass, damping, mass_gradient, damping_gradient, com_weights, com_gradient,
         amplitude, muscle_constant, muscle_linear, muscle_constant_gradient, muscle_linear_gradient,
@@ -139,7 +139,7 @@ def integrate_block(  # noqa: PLR0913, PLR0915 (the block's arrays; one routine 
                     pending[l] = False                                  # converged
                 else:
                     slow = norm[l] > contraction * previous_norm[l]
-                    worn = with_factors[l] >= per_factorization
+                    worn = with_factors[l] >= per_factorization or (iteration == 0 and refresh_each_step)
                     refresh[l] = not have_factors[l] or slow or worn
                     any_refresh = any_refresh or refresh[l]
                     any_pending = True
@@ -283,7 +283,7 @@ def integrate_blocks(scalars, settings, units, distance_mask, amplitude_mask, sh
                      gradients):
     """Every block in turn (``lane_arguments``' arrays: per design (blocks, …, LANES)); results (blocks, LANES, 3),
     gradients (blocks, LANES, columns)."""
-    n_steps, max_iterations, per_factorization, _ = settings
+    n_steps, max_iterations, per_factorization, _, refresh_each_step = settings
     h, alpha_m, alpha_f, beta, gamma, tolerance, contraction, floor = scalars
     pairs, pair_of_triple, triples, force_coefficients, tangent_coefficients, coefficients_t, rows, own_node, \
         other_node, rest_rows, drag_row, tail_row = shared
@@ -295,7 +295,8 @@ def integrate_blocks(scalars, settings, units, distance_mask, amplitude_mask, sh
     for b in range(results.shape[0]):
         integrate_block(
             n_steps, h, alpha_m, alpha_f, beta, gamma, tolerance, max_iterations, contraction, per_factorization,
-            floor, units[b], distance_mask, amplitude_mask, pairs, pair_of_triple, triples, force_coefficients,
+            refresh_each_step != 0, floor, units[b], distance_mask, amplitude_mask, pairs, pair_of_triple, triples,
+            force_coefficients,
             tangent_coefficients, coefficients_t, weights[b], weight_derivatives[b], mass[b], damping[b],
             mass_gradient[b], damping_gradient[b], com_weights[b], com_gradient[b], amplitudes[b],
             muscle_constant[b], muscle_linear[b], muscle_constant_gradient[b], muscle_linear_gradient[b],

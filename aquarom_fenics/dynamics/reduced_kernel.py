@@ -63,7 +63,7 @@ def newton_matrix_into(k_u, k_v, k_a, stiffness, damping, mass, has_thrust, k_ba
 @_jit
 def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
         n_steps, h, alpha_m, alpha_f, beta, gamma, tolerance, max_iterations, contraction, per_factorization,
-        floor, units, distance_mask, amplitude_mask,
+        refresh_each_step, floor, units, distance_mask, amplitude_mask,
         pairs, pair_of_triple, triples, force_coefficients, tangent_coefficients,
         weights, weight_derivatives, mass, damping, mass_gradient, damping_gradient, com_weights, com_gradient,
         amplitude, muscle_constant, muscle_linear, muscle_constant_gradient, muscle_linear_gradient,
@@ -153,7 +153,7 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
             if iteration == max_iterations:
                 break
             slow = norm > contraction * previous_norm
-            worn = with_factors >= per_factorization
+            worn = with_factors >= per_factorization or (iteration == 0 and refresh_each_step)
             if not have_factors or slow or worn:
                 tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass, damping, muscle_linear,
                             has_drag, drag_direction, drag_row, stiffness, damping_t, mass_t)
@@ -283,7 +283,7 @@ def integrate_all(scalars, settings, units, distance_mask, amplitude_mask, share
     """Every design of the batch in turn (``Packed``'s arrays; ``units`` (B, steps + 1, N): each design's unit
     activations at the steps' evaluation times); results (B, 3), gradients (B, columns); transitions
     (B, 3, m, 3m) if settings' ``transition_from`` > 0 (else unused)."""
-    n_steps, max_iterations, per_factorization, transition_from = settings
+    n_steps, max_iterations, per_factorization, transition_from, refresh_each_step = settings
     h, alpha_m, alpha_f, beta, gamma, tolerance, contraction, floor = scalars
     pairs, pair_of_triple, triples, force_coefficients, tangent_coefficients, rows, own_node, other_node, \
         rest_rows, drag_row, tail_row = shared
@@ -295,7 +295,8 @@ def integrate_all(scalars, settings, units, distance_mask, amplitude_mask, share
     for b in range(results.shape[0]):
         integrate_design(
             n_steps, h, alpha_m, alpha_f, beta, gamma, tolerance, max_iterations, contraction, per_factorization,
-            floor, units[b], distance_mask, amplitude_mask, pairs, pair_of_triple, triples, force_coefficients,
+            refresh_each_step != 0, floor, units[b], distance_mask, amplitude_mask, pairs, pair_of_triple, triples,
+            force_coefficients,
             tangent_coefficients, weights[b], weight_derivatives[b], mass[b], damping[b], mass_gradient[b],
             damping_gradient[b], com_weights[b], com_gradient[b], amplitudes[b], muscle_constant[b],
             muscle_linear[b], muscle_constant_gradient[b], muscle_linear_gradient[b], has_thrust, lagrangian,
