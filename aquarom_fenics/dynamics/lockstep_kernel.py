@@ -9,8 +9,9 @@ direct-differentiation sensitivities. The block evaluates every lane at each ite
 converged keeps its iterate (its evaluation point, hence the state its sensitivity step reads, unchanged) and
 does no update, and the block's step ends when every lane has converged or failed. A lane that fails is
 reported failed (its state reset to rest for the block's remaining steps, its results unused), as the
-per-design kernel reports it; the caller integrates it alone with the step control. LU factors stay per lane
-(``kernel_terms.lu_factor``). A batch that does not fill its last block is padded with copies of its last
+per-design kernel reports it; the caller integrates it alone with the step control. The eight lanes' Newton
+matrices are factorised together without pivoting (``lane_lu``, the per-design kernel's ``kernel_terms.factorize``
+lane by lane); a lane that fails its check is factorised alone with partial pivoting. A batch that does not fill its last block is padded with copies of its last
 design. Transition matrices (``transition_from`` > 0) are integrated per design only.
 """
 from __future__ import annotations
@@ -25,13 +26,15 @@ from aquarom_fenics.dynamics.kernel_lanes import (LANES, between_lanes, derivati
 from aquarom_fenics.dynamics.kernel_lanes_thrust import (LAGRANGIAN_ENTRIES, banded_tangents_lanes,
                                                          force_gradients_lanes, half_blocks_lanes, newton_matrix_lanes)
 from aquarom_fenics.dynamics.kernel_terms import lu_factor, lu_solve
+from aquarom_fenics.dynamics.lane_lu import factor_lanes, solve_lanes
 
 OK, FAILED = 0, 1
 
 
 @_jit
 def _factor(matrices, lane, factors, pivots):
-    """factors[lane] = LU of S (m, m) of one lane of matrices (m, m, LANES); False if singular."""
+    """factors[lane] = LU of S (m, m) of one lane of matrices (m, m, LANES) with partial pivoting (for a lane that
+    ``factor_lanes`` does not accept, as ``kernel_terms.factorize`` falls back); False if singular."""
     m = matrices.shape[0]
     for i in range(m):
         for k in range(m):
@@ -83,8 +86,13 @@ def integrate_block(  # noqa: PLR0913, PLR0915 (the block's arrays; one routine 
     residual = np.zeros((m, LANES))
     norm, scale = np.zeros(LANES), np.zeros(LANES)
     matrix = np.zeros((m, m, LANES))
-    factors, pivots = np.zeros((LANES, m, m)), np.zeros((LANES, m), np.int64)
+    factors, pivots = np.zeros((LANES, m, m)), np.zeros((LANES, m), np.int64)       # pivoted lanes' factors
     exact, exact_pivots = np.zeros((LANES, m, m)), np.zeros((LANES, m), np.int64)
+    lane_factors, exact_lanes, fresh = np.zeros((m, m, LANES)), np.zeros((m, m, LANES)), np.zeros((m, m, LANES))
+    for i in range(m):
+        lane_factors[i, i, :] = 1.0
+    accepted, pivoted = np.zeros(LANES, np.bool_), np.zeros(LANES, np.bool_)
+    update, solved = np.zeros((m, 1, LANES)), np.zeros((m, columns, LANES))
     stiffness, damping_t, mass_t = np.zeros((m, m, LANES)), np.zeros((m, m, LANES)), np.zeros((m, m, LANES))
     activations = np.zeros((n_muscles, LANES))
     sens, sens_new = np.zeros((3, m, columns, LANES)), np.zeros((3, m, columns, LANES))
@@ -92,7 +100,6 @@ def integrate_block(  # noqa: PLR0913, PLR0915 (the block's arrays; one routine 
     stacked = np.zeros((m, 3 * columns, LANES))
     right = np.zeros((2 * n_points, columns, LANES))
     combination = np.zeros((m, columns, LANES))
-    lane_rhs = np.zeros((m, max(columns, 1)))
     status = np.zeros(LANES, np.int64)
     have_factors, pending, refresh = np.zeros(LANES, np.bool_), np.zeros(LANES, np.bool_), np.zeros(LANES, np.bool_)
     with_factors, previous_norm = np.zeros(LANES, np.int64), np.zeros(LANES)
@@ -153,22 +160,30 @@ def integrate_block(  # noqa: PLR0913, PLR0915 (the block's arrays; one routine 
                                       k_banded, c_banded, m_banded, entries)
                 newton_matrix_lanes(k_u, k_v, k_a, stiffness, damping_t, mass_t, has_thrust, k_banded, c_banded,
                                     m_banded, s_banded, points, transposed, work, matrix)
+                factor_lanes(matrix, fresh, accepted)
                 for l in range(LANES):
                     if refresh[l]:
-                        if _factor(matrix, l, factors, pivots):
+                        pivoted[l] = not accepted[l]
+                        if accepted[l]:
+                            for i in range(m):
+                                for k in range(m):
+                                    lane_factors[i, k, l] = fresh[i, k, l]
+                        if accepted[l] or _factor(matrix, l, factors, pivots):
                             have_factors[l] = True
                             with_factors[l] = 0
                         else:
                             status[l], pending[l] = FAILED, False
+            solve_lanes(lane_factors, residual.reshape((m, 1, LANES)), update)
             for l in range(LANES):
                 if pending[l]:
                     with_factors[l] += 1
                     previous_norm[l] = norm[l]
+                    if pivoted[l]:
+                        for i in range(m):
+                            update[i, 0, l] = residual[i, l]
+                        lu_solve(factors[l], pivots[l], update[:, :, l])
                     for i in range(m):
-                        lane_rhs[i, 0] = residual[i, l]
-                    lu_solve(factors[l], pivots[l], lane_rhs[:, :1])
-                    for i in range(m):
-                        u_new[i, l] -= lane_rhs[i, 0]
+                        u_new[i, l] -= update[i, 0, l]
         for i in range(m):
             for l in range(LANES):
                 a_new[i, l] = (u_new[i, l] - u_pred[i, l]) * newton_a
@@ -219,26 +234,25 @@ def integrate_block(  # noqa: PLR0913, PLR0915 (the block's arrays; one routine 
                             thrust_rhs[i, c, l] += projected[i, c * LANES + l]
             newton_matrix_lanes(k_u, k_v, k_a, stiffness, damping_t, mass_t, has_thrust, k_banded, c_banded,
                                 m_banded, s_banded, points, transposed, work, matrix)
+            factor_lanes(matrix, exact_lanes, accepted)
+            solve_lanes(exact_lanes, thrust_rhs, solved)
             for l in range(LANES):
-                if status[l] != OK:
+                if status[l] != OK or accepted[l]:
                     continue
                 if not _factor(matrix, l, exact, exact_pivots):
                     status[l] = FAILED
                     continue
                 for i in range(m):
                     for c in range(columns):
-                        lane_rhs[i, c] = thrust_rhs[i, c, l]
-                lu_solve(exact[l], exact_pivots[l], lane_rhs[:, :columns])
-                for i in range(m):
-                    for c in range(columns):
-                        thrust_rhs[i, c, l] = lane_rhs[i, c]
+                        solved[i, c, l] = thrust_rhs[i, c, l]
+                lu_solve(exact[l], exact_pivots[l], solved[:, :, l])
             for i in range(m):
                 for c in range(columns):
                     for l in range(LANES):
-                        a_c = (thrust_rhs[i, c, l] - sens_new[0, i, c, l]) * newton_a
+                        a_c = (solved[i, c, l] - sens_new[0, i, c, l]) * newton_a
                         sens_new[1, i, c, l] = sens_new[1, i, c, l] + gamma * h * a_c
                         sens_new[2, i, c, l] = a_c
-                        sens_new[0, i, c, l] = thrust_rhs[i, c, l]
+                        sens_new[0, i, c, l] = solved[i, c, l]
             sens[:] = sens_new
         u[:] = u_new
         v[:] = v_new

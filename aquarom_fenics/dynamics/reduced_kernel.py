@@ -25,7 +25,7 @@ import numpy as np
 
 from aquarom_fenics.dynamics.compiled import available, jit as _jit, refresh_stale_cache
 from aquarom_fenics.dynamics.kernel_pack import Packed, pack, synthetic
-from aquarom_fenics.dynamics.kernel_terms import (between, derivative_at, design_elastic, lu_factor, lu_solve,
+from aquarom_fenics.dynamics.kernel_terms import (between, derivative_at, design_elastic, factorize, lu_solve,
                                                   residual_at, tangents_at)
 from aquarom_fenics.dynamics.kernel_thrust import banded_tangents, banded_times, half_blocks
 from aquarom_fenics.dynamics.lockstep_kernel import LANES, integrate_lockstep, part
@@ -102,9 +102,8 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
     u_pred, v_pred = np.zeros(m), np.zeros(m)
     eu, ev, ea = np.zeros(m), np.zeros(m), np.zeros(m)
     residual = np.zeros((m, 1))
-    matrix = np.zeros((m, m))
-    pivots = np.zeros(m, np.int64)
-    exact, exact_pivots = np.zeros((m, m)), np.zeros(m, np.int64)      # S at the converged point
+    matrix, factors, pivots = np.zeros((m, m)), np.zeros((m, m)), np.zeros(m, np.int64)
+    exact, exact_factors, exact_pivots = np.zeros((m, m)), np.zeros((m, m)), np.zeros(m, np.int64)   # S converged
     stiffness, damping_t, mass_t = np.zeros((m, m)), np.zeros((m, m)), np.zeros((m, m))
     activations = np.zeros(n_muscles)
     sens = np.zeros((3, m, columns))
@@ -162,14 +161,14 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
                                 k_banded, c_banded, m_banded)
                 newton_matrix_into(k_u, k_v, k_a, stiffness, damping_t, mass_t, has_thrust, k_banded, c_banded,
                                    m_banded, s_banded, points, transposed, work, matrix)
-                if not lu_factor(matrix, pivots):
+                if not factorize(matrix, factors, pivots):
                     result[2] = FAILED
                     return
                 have_factors = True
                 with_factors = 0
             with_factors += 1
             previous_norm = norm
-            lu_solve(matrix, pivots, residual)
+            lu_solve(factors, pivots, residual)
             for i in range(m):
                 u_new[i] -= residual[i, 0]
         if not converged:
@@ -238,10 +237,10 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
                         thrust_rhs[i, c] += projected[i, c]
             newton_matrix_into(k_u, k_v, k_a, stiffness, damping_t, mass_t, has_thrust, k_banded, c_banded, m_banded,
                                s_banded, points, transposed, work, exact)
-            if not lu_factor(exact, exact_pivots):
+            if not factorize(exact, exact_factors, exact_pivots):
                 result[2] = FAILED
                 return
-            lu_solve(exact, exact_pivots, thrust_rhs)
+            lu_solve(exact_factors, exact_pivots, thrust_rhs)
             for i in range(m):
                 for c in range(columns):
                     a_c = (thrust_rhs[i, c] - sens_new[0, i, c]) * (1.0 / (beta * h * h))
