@@ -73,9 +73,10 @@ class NewtonSettings:
     @classmethod
     def reduced_settings(cls, solver) -> "NewtonSettings":
         """The settings of a reduced solve: ``from_solver``'s with each step's factors refreshed at its predictor.
-        The reduced Newton matrix changes much from step to step (the thrust's tangents): the factors of the step
-        before contracted the first residual by only 0.3-0.8 and were refreshed at the second iteration in 92 % of
-        SO1's steps; at the predictor they contract it by about 1e-2 (docs/devlog.md, "one refresh per step")."""
+        The reduced Newton matrix changes much from one step to the next: the factors of the step before contracted
+        the first residual by only 0.3-0.8 and were refreshed at the second iteration in 92 % of SO1's steps; at the
+        predictor they contract it by about 1e-2 (docs/devlog.md, 2026-12-07, "one Newton refresh per step").
+        The FOM keeps ``from_solver``'s rule."""
         return dataclasses.replace(cls.from_solver(solver), refresh_each_step=True)
 
     def secant_settings(self) -> "NewtonSettings":

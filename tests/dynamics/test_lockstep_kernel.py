@@ -19,8 +19,8 @@ pytestmark = pytest.mark.skipif(not reduced_kernel.available(), reason="numba is
 
 LANES = lockstep_kernel.LANES
 FEW_ITERATIONS = {"duration": 0.4, "max_iterations": 5}
-"""Enough Newton iterations for SO1's designs at up to 1.5 times the amplitude (and 3 times), too few at 4 times
-(3.5 and more fail in the kernel with each step's factors refreshed at the predictor; 3 failed before)."""
+"""Enough Newton iterations for SO1's designs at up to 1.5 times the amplitude, too few at 4 times (with each step's
+factors refreshed at its predictor the kernel's Newton fails from 3.5 times on)."""
 
 
 @pytest.fixture(scope="module")
