@@ -11,8 +11,9 @@ does no update, and the block's step ends when every lane has converged or faile
 reported failed (its state reset to rest for the block's remaining steps, its results unused), as the
 per-design kernel reports it; the caller integrates it alone with the step control. The eight lanes' Newton
 matrices are factorised together without pivoting (``lane_lu``, the per-design kernel's ``kernel_terms.factorize``
-lane by lane); a lane that fails its check is factorised alone with partial pivoting. A batch that does not fill its last block is padded with copies of its last
-design. Transition matrices (``transition_from`` > 0) are integrated per design only.
+lane by lane); a lane that fails its check is factorised alone with partial pivoting. A batch that does not fill
+its last block is padded with copies of its last design. Transition matrices (``transition_from`` > 0) are
+integrated per design only.
 """
 from __future__ import annotations
 
