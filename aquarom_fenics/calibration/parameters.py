@@ -234,7 +234,7 @@ def simulate_parameters(prom: ReducedModel, built: Scene, values: dict[str, floa
         history.append(sensitivity[0].copy())
         rate_history.append(sensitivity[1].copy())
 
-    integrate(system, scheme, n_steps, (zero, zero, zero), NewtonSettings.from_solver(built.solver), record,
+    integrate(system, scheme, n_steps, (zero, zero, zero), NewtonSettings.reduced_settings(built.solver), record,
               on_step=advance if sensitivities and q else None)
     observed = np.array(states) @ rows.T
     derivative = np.einsum("om,nmq->noq", rows, np.array(history)) if sensitivities else None

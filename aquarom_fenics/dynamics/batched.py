@@ -129,7 +129,7 @@ def simulate_batch(prom: ReducedModel, scene: Scene, xis, sensitivities: bool = 
 def _integrate(system: BatchedSystem, scene: Scene, n_steps: int, sensitivities: bool, amplitude_sensitivity: bool):
     """(distance (B,), tail amplitude (B,), failed (B,) bool, distance gradient (B, columns) or None) of the batch."""
     scheme = system.scheme
-    settings = NewtonSettings.from_solver(scene.solver)
+    settings = NewtonSettings.reduced_settings(scene.solver)
     batch, m = system.size, system.prom.size
     h = scheme.time_step
     times = np.arange(n_steps + 1) * h
@@ -214,6 +214,8 @@ class _BatchedNewton:
             point = (point[0],) + tuple(values[going] for values in point[1:])
             slow = residual_norm > settings.contraction_to_refactor * previous_norm[rows]
             worn = with_factors[rows] >= settings.iterations_per_factorization
+            if iteration == 0 and settings.refresh_each_step:
+                worn[:] = True
             refresh = ~self.have_factors[rows] | slow | worn
             if refresh.any():
                 renewed = rows[refresh]

@@ -48,6 +48,9 @@ class NewtonSettings:
 
     secant_updates: Broyden updates of S⁻¹ between factorisations (``BroydenSteps``), for systems
     whose factorisation costs many solves; see ``secant_settings``.
+
+    refresh_each_step: every step's first iteration factorises S at the predictor (the reduced solves,
+    ``reduced_settings``); else the factors of earlier steps serve until a refresh rule asks.
     """
 
     tolerance: float = 1e-6
@@ -59,12 +62,22 @@ class NewtonSettings:
     min_time_step: float | None = None
     line_search_halvings: int = 8
     sufficient_decrease: float = 1e-4
+    refresh_each_step: bool = False
 
     @classmethod
     def from_solver(cls, solver) -> "NewtonSettings":
         """The settings of a scene's [solver] section."""
         return cls(tolerance=solver.tolerance, max_iterations=solver.max_iterations,
                    min_time_step=solver.min_time_step)
+
+    @classmethod
+    def reduced_settings(cls, solver) -> "NewtonSettings":
+        """The settings of a reduced solve: ``from_solver``'s with each step's factors refreshed at its predictor.
+        The reduced Newton matrix changes much from one step to the next: the factors of the step before contracted
+        the first residual by only 0.3-0.8 and were refreshed at the second iteration in 92 % of SO1's steps; at the
+        predictor they contract it by about 1e-2 (docs/devlog.md, 2026-12-07, "one Newton refresh per step").
+        The FOM keeps ``from_solver``'s rule."""
+        return dataclasses.replace(cls.from_solver(solver), refresh_each_step=True)
 
     def secant_settings(self) -> "NewtonSettings":
         """These settings with Broyden updates, factors refreshed after 20 iterations of a step or an
@@ -161,7 +174,8 @@ class _Newton:
             if iteration == settings.max_iterations:
                 raise StepFailure("Newton did not converge", f" in {settings.max_iterations} iterations", history)
             slow = residual_norm > settings.contraction_to_refactor * previous_norm
-            worn = iterations_with_factors >= settings.iterations_per_factorization
+            worn = (iterations_with_factors >= settings.iterations_per_factorization
+                    or (iteration == 0 and settings.refresh_each_step))
             try:
                 if line_search or not self.have_factors or slow or worn:
                     self.have_factors = False

@@ -49,7 +49,7 @@ def pack(system, scene, n_steps: int, sensitivities: bool, amplitude_sensitivity
     from aquarom_fenics.dynamics.trajectory import AMPLITUDE_WINDOW, DISTANCE_WINDOW, window_mask
 
     scheme, prom = system.scheme, system.prom
-    settings = NewtonSettings.from_solver(scene.solver)
+    settings = NewtonSettings.reduced_settings(scene.solver)
     batch, m, p = system.size, prom.size, system.deltas.shape[1]
     h = scheme.time_step
     times = np.arange(n_steps + 1) * h
@@ -86,7 +86,7 @@ def pack(system, scene, n_steps: int, sensitivities: bool, amplitude_sensitivity
     scalars = (float(h), float(scheme.alpha_m), float(scheme.alpha_f), float(scheme.beta), float(scheme.gamma),
                float(settings.tolerance), float(settings.contraction_to_refactor), float(settings.force_floor))
     integers = (int(n_steps), int(settings.max_iterations), int(settings.iterations_per_factorization),
-                int(transition_from))
+                int(transition_from), int(settings.refresh_each_step))
     shared = (_array(elastic.pairs, np.int64), _array(elastic.pair_of_triple, np.int64),
               _array(elastic.triples, np.int64), _array(elastic.force_coefficients),
               _array(elastic.tangent_coefficients), _array(rows), _array(own_node, np.int64),
@@ -132,7 +132,7 @@ def synthetic(m: int = 2, p: int = 1, halves: int = 1, n_steps: int = 2) -> Pack
                   np.tile([1.0, 0.0], (1, halves, 1)), np.full((1, halves), 0.1), np.full(1, 0.1),
                   np.zeros((1, p, halves)), np.zeros((1, p)), np.zeros((1, m)), np.zeros((1, p, m)))
     masks = np.ones(n_steps + 1, np.bool_)
-    arguments = ((1e-2, -0.5, 0.0, 0.5625, 1.0, 1e-8, 0.25, 1e-12), (n_steps, 30, 4, 0),
+    arguments = ((1e-2, -0.5, 0.0, 0.5625, 1.0, 1e-8, 0.25, 1e-12), (n_steps, 30, 4, 0, 1),
                  np.ones((1, n_steps + 1, 1)), masks, masks.copy(), shared, per_design,
                  (True, True, True, False, True, True, True))
     return Packed(arguments, p + 1, 1)

@@ -9,9 +9,11 @@ direct-differentiation sensitivities. The block evaluates every lane at each ite
 converged keeps its iterate (its evaluation point, hence the state its sensitivity step reads, unchanged) and
 does no update, and the block's step ends when every lane has converged or failed. A lane that fails is
 reported failed (its state reset to rest for the block's remaining steps, its results unused), as the
-per-design kernel reports it; the caller integrates it alone with the step control. LU factors stay per lane
-(``kernel_terms.lu_factor``). A batch that does not fill its last block is padded with copies of its last
-design. Transition matrices (``transition_from`` > 0) are integrated per design only.
+per-design kernel reports it; the caller integrates it alone with the step control. The eight lanes' Newton
+matrices are factorised together without pivoting (``lane_lu``, the per-design kernel's ``kernel_terms.factorize``
+lane by lane); a lane that fails its check is factorised alone with partial pivoting. A batch that does not fill
+its last block is padded with copies of its last design. Transition matrices (``transition_from`` > 0) are
+integrated per design only.
 """
 from __future__ import annotations
 
@@ -25,13 +27,15 @@ from aquarom_fenics.dynamics.kernel_lanes import (LANES, between_lanes, derivati
 from aquarom_fenics.dynamics.kernel_lanes_thrust import (LAGRANGIAN_ENTRIES, banded_tangents_lanes,
                                                          force_gradients_lanes, half_blocks_lanes, newton_matrix_lanes)
 from aquarom_fenics.dynamics.kernel_terms import lu_factor, lu_solve
+from aquarom_fenics.dynamics.lane_lu import factor_lanes, solve_lanes
 
 OK, FAILED = 0, 1
 
 
 @_jit
 def _factor(matrices, lane, factors, pivots):
-    """factors[lane] = LU of S (m, m) of one lane of matrices (m, m, LANES); False if singular."""
+    """factors[lane] = LU of S (m, m) of one lane of matrices (m, m, LANES) with partial pivoting (for a lane that
+    ``factor_lanes`` does not accept, as ``kernel_terms.factorize`` falls back); False if singular."""
     m = matrices.shape[0]
     for i in range(m):
         for k in range(m):
@@ -42,7 +46,7 @@ def _factor(matrices, lane, factors, pivots):
 @_jit
 def integrate_block(  # noqa: PLR0913, PLR0915 (the block's arrays; one routine as integrate_design)
         n_steps, h, alpha_m, alpha_f, beta, gamma, tolerance, max_iterations, contraction, per_factorization,
-        floor, units, distance_mask, amplitude_mask,
+        refresh_each_step, floor, units, distance_mask, amplitude_mask,
         pairs, pair_of_triple, triples, force_coefficients, tangent_coefficients, coefficients_t,
         weights, weight_derivatives, mass, damping, mass_gradient, damping_gradient, com_weights, com_gradient,
         amplitude, muscle_constant, muscle_linear, muscle_constant_gradient, muscle_linear_gradient,
@@ -83,8 +87,13 @@ def integrate_block(  # noqa: PLR0913, PLR0915 (the block's arrays; one routine 
     residual = np.zeros((m, LANES))
     norm, scale = np.zeros(LANES), np.zeros(LANES)
     matrix = np.zeros((m, m, LANES))
-    factors, pivots = np.zeros((LANES, m, m)), np.zeros((LANES, m), np.int64)
+    factors, pivots = np.zeros((LANES, m, m)), np.zeros((LANES, m), np.int64)       # pivoted lanes' factors
     exact, exact_pivots = np.zeros((LANES, m, m)), np.zeros((LANES, m), np.int64)
+    lane_factors, exact_lanes, fresh = np.zeros((m, m, LANES)), np.zeros((m, m, LANES)), np.zeros((m, m, LANES))
+    for i in range(m):
+        lane_factors[i, i, :] = 1.0
+    accepted, pivoted = np.zeros(LANES, np.bool_), np.zeros(LANES, np.bool_)
+    update, solved = np.zeros((m, 1, LANES)), np.zeros((m, columns, LANES))
     stiffness, damping_t, mass_t = np.zeros((m, m, LANES)), np.zeros((m, m, LANES)), np.zeros((m, m, LANES))
     activations = np.zeros((n_muscles, LANES))
     sens, sens_new = np.zeros((3, m, columns, LANES)), np.zeros((3, m, columns, LANES))
@@ -92,7 +101,6 @@ def integrate_block(  # noqa: PLR0913, PLR0915 (the block's arrays; one routine 
     stacked = np.zeros((m, 3 * columns, LANES))
     right = np.zeros((2 * n_points, columns, LANES))
     combination = np.zeros((m, columns, LANES))
-    lane_rhs = np.zeros((m, max(columns, 1)))
     status = np.zeros(LANES, np.int64)
     have_factors, pending, refresh = np.zeros(LANES, np.bool_), np.zeros(LANES, np.bool_), np.zeros(LANES, np.bool_)
     with_factors, previous_norm = np.zeros(LANES, np.int64), np.zeros(LANES)
@@ -139,7 +147,7 @@ def integrate_block(  # noqa: PLR0913, PLR0915 (the block's arrays; one routine 
                     pending[l] = False                                  # converged
                 else:
                     slow = norm[l] > contraction * previous_norm[l]
-                    worn = with_factors[l] >= per_factorization
+                    worn = with_factors[l] >= per_factorization or (iteration == 0 and refresh_each_step)
                     refresh[l] = not have_factors[l] or slow or worn
                     any_refresh = any_refresh or refresh[l]
                     any_pending = True
@@ -153,22 +161,30 @@ def integrate_block(  # noqa: PLR0913, PLR0915 (the block's arrays; one routine 
                                       k_banded, c_banded, m_banded, entries)
                 newton_matrix_lanes(k_u, k_v, k_a, stiffness, damping_t, mass_t, has_thrust, k_banded, c_banded,
                                     m_banded, s_banded, points, transposed, work, matrix)
+                factor_lanes(matrix, fresh, accepted)
                 for l in range(LANES):
                     if refresh[l]:
-                        if _factor(matrix, l, factors, pivots):
+                        pivoted[l] = not accepted[l]
+                        if accepted[l]:
+                            for i in range(m):
+                                for k in range(m):
+                                    lane_factors[i, k, l] = fresh[i, k, l]
+                        if accepted[l] or _factor(matrix, l, factors, pivots):
                             have_factors[l] = True
                             with_factors[l] = 0
                         else:
                             status[l], pending[l] = FAILED, False
+            solve_lanes(lane_factors, residual.reshape((m, 1, LANES)), update)
             for l in range(LANES):
                 if pending[l]:
                     with_factors[l] += 1
                     previous_norm[l] = norm[l]
+                    if pivoted[l]:
+                        for i in range(m):
+                            update[i, 0, l] = residual[i, l]
+                        lu_solve(factors[l], pivots[l], update[:, :, l])
                     for i in range(m):
-                        lane_rhs[i, 0] = residual[i, l]
-                    lu_solve(factors[l], pivots[l], lane_rhs[:, :1])
-                    for i in range(m):
-                        u_new[i, l] -= lane_rhs[i, 0]
+                        u_new[i, l] -= update[i, 0, l]
         for i in range(m):
             for l in range(LANES):
                 a_new[i, l] = (u_new[i, l] - u_pred[i, l]) * newton_a
@@ -219,26 +235,25 @@ def integrate_block(  # noqa: PLR0913, PLR0915 (the block's arrays; one routine 
                             thrust_rhs[i, c, l] += projected[i, c * LANES + l]
             newton_matrix_lanes(k_u, k_v, k_a, stiffness, damping_t, mass_t, has_thrust, k_banded, c_banded,
                                 m_banded, s_banded, points, transposed, work, matrix)
+            factor_lanes(matrix, exact_lanes, accepted)
+            solve_lanes(exact_lanes, thrust_rhs, solved)
             for l in range(LANES):
-                if status[l] != OK:
+                if status[l] != OK or accepted[l]:
                     continue
                 if not _factor(matrix, l, exact, exact_pivots):
                     status[l] = FAILED
                     continue
                 for i in range(m):
                     for c in range(columns):
-                        lane_rhs[i, c] = thrust_rhs[i, c, l]
-                lu_solve(exact[l], exact_pivots[l], lane_rhs[:, :columns])
-                for i in range(m):
-                    for c in range(columns):
-                        thrust_rhs[i, c, l] = lane_rhs[i, c]
+                        solved[i, c, l] = thrust_rhs[i, c, l]
+                lu_solve(exact[l], exact_pivots[l], solved[:, :, l])
             for i in range(m):
                 for c in range(columns):
                     for l in range(LANES):
-                        a_c = (thrust_rhs[i, c, l] - sens_new[0, i, c, l]) * newton_a
+                        a_c = (solved[i, c, l] - sens_new[0, i, c, l]) * newton_a
                         sens_new[1, i, c, l] = sens_new[1, i, c, l] + gamma * h * a_c
                         sens_new[2, i, c, l] = a_c
-                        sens_new[0, i, c, l] = thrust_rhs[i, c, l]
+                        sens_new[0, i, c, l] = solved[i, c, l]
             sens[:] = sens_new
         u[:] = u_new
         v[:] = v_new
@@ -283,7 +298,7 @@ def integrate_blocks(scalars, settings, units, distance_mask, amplitude_mask, sh
                      gradients):
     """Every block in turn (``lane_arguments``' arrays: per design (blocks, …, LANES)); results (blocks, LANES, 3),
     gradients (blocks, LANES, columns)."""
-    n_steps, max_iterations, per_factorization, _ = settings
+    n_steps, max_iterations, per_factorization, _, refresh_each_step = settings
     h, alpha_m, alpha_f, beta, gamma, tolerance, contraction, floor = scalars
     pairs, pair_of_triple, triples, force_coefficients, tangent_coefficients, coefficients_t, rows, own_node, \
         other_node, rest_rows, drag_row, tail_row = shared
@@ -295,7 +310,8 @@ def integrate_blocks(scalars, settings, units, distance_mask, amplitude_mask, sh
     for b in range(results.shape[0]):
         integrate_block(
             n_steps, h, alpha_m, alpha_f, beta, gamma, tolerance, max_iterations, contraction, per_factorization,
-            floor, units[b], distance_mask, amplitude_mask, pairs, pair_of_triple, triples, force_coefficients,
+            refresh_each_step != 0, floor, units[b], distance_mask, amplitude_mask, pairs, pair_of_triple, triples,
+            force_coefficients,
             tangent_coefficients, coefficients_t, weights[b], weight_derivatives[b], mass[b], damping[b],
             mass_gradient[b], damping_gradient[b], com_weights[b], com_gradient[b], amplitudes[b],
             muscle_constant[b], muscle_linear[b], muscle_constant_gradient[b], muscle_linear_gradient[b],

@@ -231,7 +231,7 @@ def simulate_reduced(prom: ReducedModel, scene: Scene, xi=None, sensitivities: b
 
     error = None
     try:
-        integrate(system, scheme, n_steps, (zero, zero, zero), NewtonSettings.from_solver(scene.solver), record,
+        integrate(system, scheme, n_steps, (zero, zero, zero), NewtonSettings.reduced_settings(scene.solver), record,
                   explain=lambda: "; ".join(newton_failure_hints(scene)),
                   on_step=advance_sensitivity if columns else None)
     except IntegrationStopped as failure:
@@ -408,7 +408,7 @@ def reduced_stability(prom: ReducedModel, scene: Scene, xi=None, amplitude: floa
     transition = compiled_transition(prom, scene, xi, amplitude, n_steps, window_start) if compiled else None
     try:
         if transition is None:
-            transition = transition_matrix(system, scheme, n_steps, NewtonSettings.from_solver(scene.solver),
+            transition = transition_matrix(system, scheme, n_steps, NewtonSettings.reduced_settings(scene.solver),
                                            window_start)
     except IntegrationStopped as failure:
         return Stability(False, f"unstable: the PROM stops ({failure})")

@@ -25,7 +25,7 @@ import numpy as np
 
 from aquarom_fenics.dynamics.compiled import available, jit as _jit, refresh_stale_cache
 from aquarom_fenics.dynamics.kernel_pack import Packed, pack, synthetic
-from aquarom_fenics.dynamics.kernel_terms import (between, derivative_at, design_elastic, lu_factor, lu_solve,
+from aquarom_fenics.dynamics.kernel_terms import (between, derivative_at, design_elastic, factorize, lu_solve,
                                                   residual_at, tangents_at)
 from aquarom_fenics.dynamics.kernel_thrust import banded_tangents, banded_times, half_blocks
 from aquarom_fenics.dynamics.lockstep_kernel import LANES, integrate_lockstep, part
@@ -63,7 +63,7 @@ def newton_matrix_into(k_u, k_v, k_a, stiffness, damping, mass, has_thrust, k_ba
 @_jit
 def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
         n_steps, h, alpha_m, alpha_f, beta, gamma, tolerance, max_iterations, contraction, per_factorization,
-        floor, units, distance_mask, amplitude_mask,
+        refresh_each_step, floor, units, distance_mask, amplitude_mask,
         pairs, pair_of_triple, triples, force_coefficients, tangent_coefficients,
         weights, weight_derivatives, mass, damping, mass_gradient, damping_gradient, com_weights, com_gradient,
         amplitude, muscle_constant, muscle_linear, muscle_constant_gradient, muscle_linear_gradient,
@@ -102,9 +102,8 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
     u_pred, v_pred = np.zeros(m), np.zeros(m)
     eu, ev, ea = np.zeros(m), np.zeros(m), np.zeros(m)
     residual = np.zeros((m, 1))
-    matrix = np.zeros((m, m))
-    pivots = np.zeros(m, np.int64)
-    exact, exact_pivots = np.zeros((m, m)), np.zeros(m, np.int64)      # S at the converged point
+    matrix, factors, pivots = np.zeros((m, m)), np.zeros((m, m)), np.zeros(m, np.int64)
+    exact, exact_factors, exact_pivots = np.zeros((m, m)), np.zeros((m, m)), np.zeros(m, np.int64)   # S converged
     stiffness, damping_t, mass_t = np.zeros((m, m)), np.zeros((m, m)), np.zeros((m, m))
     activations = np.zeros(n_muscles)
     sens = np.zeros((3, m, columns))
@@ -153,7 +152,7 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
             if iteration == max_iterations:
                 break
             slow = norm > contraction * previous_norm
-            worn = with_factors >= per_factorization
+            worn = with_factors >= per_factorization or (iteration == 0 and refresh_each_step)
             if not have_factors or slow or worn:
                 tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass, damping, muscle_linear,
                             has_drag, drag_direction, drag_row, stiffness, damping_t, mass_t)
@@ -162,14 +161,14 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
                                 k_banded, c_banded, m_banded)
                 newton_matrix_into(k_u, k_v, k_a, stiffness, damping_t, mass_t, has_thrust, k_banded, c_banded,
                                    m_banded, s_banded, points, transposed, work, matrix)
-                if not lu_factor(matrix, pivots):
+                if not factorize(matrix, factors, pivots):
                     result[2] = FAILED
                     return
                 have_factors = True
                 with_factors = 0
             with_factors += 1
             previous_norm = norm
-            lu_solve(matrix, pivots, residual)
+            lu_solve(factors, pivots, residual)
             for i in range(m):
                 u_new[i] -= residual[i, 0]
         if not converged:
@@ -238,10 +237,10 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
                         thrust_rhs[i, c] += projected[i, c]
             newton_matrix_into(k_u, k_v, k_a, stiffness, damping_t, mass_t, has_thrust, k_banded, c_banded, m_banded,
                                s_banded, points, transposed, work, exact)
-            if not lu_factor(exact, exact_pivots):
+            if not factorize(exact, exact_factors, exact_pivots):
                 result[2] = FAILED
                 return
-            lu_solve(exact, exact_pivots, thrust_rhs)
+            lu_solve(exact_factors, exact_pivots, thrust_rhs)
             for i in range(m):
                 for c in range(columns):
                     a_c = (thrust_rhs[i, c] - sens_new[0, i, c]) * (1.0 / (beta * h * h))
@@ -283,7 +282,7 @@ def integrate_all(scalars, settings, units, distance_mask, amplitude_mask, share
     """Every design of the batch in turn (``Packed``'s arrays; ``units`` (B, steps + 1, N): each design's unit
     activations at the steps' evaluation times); results (B, 3), gradients (B, columns); transitions
     (B, 3, m, 3m) if settings' ``transition_from`` > 0 (else unused)."""
-    n_steps, max_iterations, per_factorization, transition_from = settings
+    n_steps, max_iterations, per_factorization, transition_from, refresh_each_step = settings
     h, alpha_m, alpha_f, beta, gamma, tolerance, contraction, floor = scalars
     pairs, pair_of_triple, triples, force_coefficients, tangent_coefficients, rows, own_node, other_node, \
         rest_rows, drag_row, tail_row = shared
@@ -295,7 +294,8 @@ def integrate_all(scalars, settings, units, distance_mask, amplitude_mask, share
     for b in range(results.shape[0]):
         integrate_design(
             n_steps, h, alpha_m, alpha_f, beta, gamma, tolerance, max_iterations, contraction, per_factorization,
-            floor, units[b], distance_mask, amplitude_mask, pairs, pair_of_triple, triples, force_coefficients,
+            refresh_each_step != 0, floor, units[b], distance_mask, amplitude_mask, pairs, pair_of_triple, triples,
+            force_coefficients,
             tangent_coefficients, weights[b], weight_derivatives[b], mass[b], damping[b], mass_gradient[b],
             damping_gradient[b], com_weights[b], com_gradient[b], amplitudes[b], muscle_constant[b],
             muscle_linear[b], muscle_constant_gradient[b], muscle_linear_gradient[b], has_thrust, lagrangian,

@@ -19,7 +19,8 @@ pytestmark = pytest.mark.skipif(not reduced_kernel.available(), reason="numba is
 
 LANES = lockstep_kernel.LANES
 FEW_ITERATIONS = {"duration": 0.4, "max_iterations": 5}
-"""Enough Newton iterations for SO1's designs at up to 1.5 times the amplitude, too few at 3 times."""
+"""Enough Newton iterations for SO1's designs at up to 1.5 times the amplitude, too few at 4 times (with each step's
+factors refreshed at its predictor the kernel's Newton fails from 3.5 times on)."""
 
 
 @pytest.fixture(scope="module")
@@ -49,12 +50,12 @@ def spread(prom, count: int, seed: int = 3) -> np.ndarray:
 
 def test_the_lockstep_kernel_equals_the_per_design_kernel_lane_by_lane(prom):
     """Eleven designs: a full block and a last block of three; amplitudes 0.3-1.5 times the scene's make the
-    lanes' Newton iterations differ from step to step, and the fifth design's 3 times makes its Newton fail."""
+    lanes' Newton iterations differ from step to step, and the fifth design's 4 times makes its Newton fail."""
     scene = coarse_scene(shapes=SO1_SHAPES, solver=FEW_ITERATIONS)
     count = LANES + 3
     xis = spread(prom, count)
     amplitudes = scene.actuation.amplitude * np.linspace(0.3, 1.5, count)
-    amplitudes[4] = 3.0 * scene.actuation.amplitude
+    amplitudes[4] = 4.0 * scene.actuation.amplitude
     iterations = np.array([simulate_reduced(prom, scene, xis[b], amplitude=amplitudes[b]).trajectory
                            .newton_iterations[1:] for b in range(LANES) if b != 4])     # the full block's
 

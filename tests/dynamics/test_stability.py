@@ -26,7 +26,7 @@ def test_the_transition_matrix_is_the_derivative_of_the_discrete_flow(fish, solv
     """Φ = ∂s(T)/∂s(0) against central differences of the whole run in each of the 3m directions of s(0)."""
     scene = coarse_scene(solver={"duration": 0.4, "tolerance": 1e-12, **solver})
     prom = build_prom(scene, fish=fish)
-    scheme, settings = TimeScheme.from_solver(scene.solver), NewtonSettings.from_solver(scene.solver)
+    scheme, settings = TimeScheme.from_solver(scene.solver), NewtonSettings.reduced_settings(scene.solver)
     system = ReducedSystem(prom, scene, prom.xi_center, scheme)
     m, n_steps = prom.size, scene.n_steps
     transition = transition_matrix(system, scheme, n_steps, settings, window_start=0.0)
@@ -51,7 +51,7 @@ def test_the_compiled_transition_matrix_is_the_python_one(fish, material, stable
 
     scene = coarse_scene(material=material, solver={"time_step": 0.01})
     prom = build_prom(scene, fish=fish)
-    scheme, settings = TimeScheme.from_solver(scene.solver), NewtonSettings.from_solver(scene.solver)
+    scheme, settings = TimeScheme.from_solver(scene.solver), NewtonSettings.reduced_settings(scene.solver)
     window_start = last_stroke_start(scene.solver.duration, scene.actuation.frequency)
     compiled = compiled_transition(prom, scene, prom.xi_center, None, scene.n_steps, window_start)
     python = transition_matrix(ReducedSystem(prom, scene, prom.xi_center, scheme), scheme, scene.n_steps, settings,
