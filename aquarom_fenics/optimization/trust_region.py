@@ -115,8 +115,8 @@ SHRINK_RATIO = 0.25
 def resized_radius(radius: float, ratio: float, expand_ratio: float = 0.75, expand_factor: float = 2.0) -> float:
     """The next trust radius (a fraction of the validity box, at most 1): ρ < 1/4: halve; ρ > η₂
     (``expand_ratio``): times ``expand_factor``; otherwise keep. Any 1/4 < η₂ < 1 and factor > 1 is the
-    classical update (never larger after ρ < η₁, never smaller after ρ > η₂, bounded above), so the
-    first-order convergence of the trust region does not depend on them."""
+    classical update (never larger after ρ < η₁, never smaller after ρ > η₂, bounded above), for which the
+    trust region's first-order convergence theory holds (in a run, ``step_tolerance`` may stop it first)."""
     if ratio < SHRINK_RATIO:
         return 0.5 * radius
     if ratio > expand_ratio:
