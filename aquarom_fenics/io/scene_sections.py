@@ -262,6 +262,8 @@ class OptimizerSection:
     cost_tolerance: float = _spec(1e-4, _positive, "stop (stalled before optimality) when the predicted relative cost reduction falls below (trust-region)")
     initial_radius: float = _spec(1.0, lambda v: None if 0 < v <= 1 else "must be in (0, 1]", "trust radius as a fraction of the PROM validity radius (trust-region)")
     accept_ratio: float = _spec(0.1, lambda v: None if 0 <= v < 1 else "must be in [0, 1)", "accept a step when actual/predicted reduction exceeds this")
+    expand_ratio: float = _spec(0.75, lambda v: None if 0.25 < v < 1 else "must be in (0.25, 1)", "trust region: expand the radius after a step whose actual/predicted reduction ρ exceeds this (below 1/4 it is halved)", legacy=0.75)
+    expand_factor: float = _spec(2.0, lambda v: None if 1 < v <= 16 else "must be in (1, 16]", "trust region: the factor the radius grows by after a step with ρ > expand_ratio (at most the validity box)", legacy=2.0)
     optimality_tolerance: float = _spec(1e-2, _positive, "stop when the first-order measure ‖D r‖_∞ / |L| (KKT residual r, D the parameter ranges) falls below")
     active_tolerance: float = _spec(1e-2, _positive, "a bound or linear constraint is active when its slack is below this fraction of its range")
     starts: int = _spec(1, _positive, "optimisations from the start point and starts - 1 Latin-hypercube feasible points")

@@ -86,7 +86,7 @@ def trust_region(scene, space, builder, weights, history, checkpoint, state, saf
         record(history, history_row(space, iteration, candidate, trial.cost, trial.gradient, trial.distance,
                                      "built" if accepted else "rejected", started, radius=radius,
                                      ratio=float(ratio), optimality=trial_measure), on_iteration)
-        radius = _resized_radius(radius, ratio)
+        radius = resized_radius(radius, ratio, settings.expand_ratio, settings.expand_factor)
         if accepted:
             center, prom, current, measure, cuts = candidate, candidate_prom, trial, trial_measure, []
         elif not builder.shares_basis(prom, candidate_prom):
@@ -108,12 +108,19 @@ def trust_box(half_widths: np.ndarray, prom_radius: np.ndarray, n_shapes: int) -
     return box
 
 
-def _resized_radius(radius: float, ratio: float) -> float:
-    """ρ < 1/4: halve; ρ > 3/4: double (at most the validity box); otherwise keep."""
-    if ratio < 0.25:
+SHRINK_RATIO = 0.25
+"""ρ below which the trust radius is halved (η₁ of the radius update; steps are accepted above ``accept_ratio``)."""
+
+
+def resized_radius(radius: float, ratio: float, expand_ratio: float = 0.75, expand_factor: float = 2.0) -> float:
+    """The next trust radius (a fraction of the validity box, at most 1): ρ < 1/4: halve; ρ > η₂
+    (``expand_ratio``): times ``expand_factor``; otherwise keep. Any 1/4 < η₂ < 1 and factor > 1 is the
+    classical update (never larger after ρ < η₁, never smaller after ρ > η₂, bounded above), for which the
+    trust region's first-order convergence theory holds (in a run, ``step_tolerance`` may stop it first)."""
+    if ratio < SHRINK_RATIO:
         return 0.5 * radius
-    if ratio > 0.75:
-        return min(2.0 * radius, 1.0)
+    if ratio > expand_ratio:
+        return min(expand_factor * radius, 1.0)
     return radius
 
 

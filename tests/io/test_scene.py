@@ -307,7 +307,8 @@ def test_a_key_added_later_keeps_the_hash_of_the_scenes_before_it_at_its_legacy_
     for section, key in (("mesh", "axis"), ("mesh", "head_end"), ("regions", "head"), ("regions", "muscles"),
                          ("regions", "muscle_pairs"), ("material", "law"),
                          ("cooptimization", "effort"), ("optimizer", "screen"),
-                         ("optimizer", "atlas")):   # later keys at their legacy values
+                         ("optimizer", "atlas"), ("optimizer", "expand_ratio"),
+                         ("optimizer", "expand_factor")):   # later keys at their legacy values
         del data[section][key]
     for key, legacy in legacy_values(ReductionSection).items():    # the CO scene sets some of them
         if data["reduction"][key] == legacy:
@@ -334,7 +335,8 @@ def test_the_region_axis_and_head_end_keys_keep_the_hashes_of_the_scenes_before_
                          ("reduction", "validity_change"), ("reduction", "stroke_sensitivities"),
                          ("fluid", "thrust_factor"), ("fluid", "drag_factor"),
                          ("cooptimization", "effort"), ("optimizer", "screen"),
-                         ("optimizer", "atlas")):   # later keys at their legacy values
+                         ("optimizer", "atlas"), ("optimizer", "expand_ratio"),
+                         ("optimizer", "expand_factor")):   # later keys at their legacy values
         del data[section][key]
     data["actuation"]["start_ramp"] = 0.0          # "auto" is hashed as the τ it gives: the pair's 0
     data["reduction"]["vibration_modes"] = 1       # "auto" is hashed as the mode count it gives: the pair's 1

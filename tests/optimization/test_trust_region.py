@@ -104,3 +104,72 @@ def test_each_prom_is_simulated_once_per_design(scene):
     result = optimize(scene, fish=fish, builder=builder)
     assert result.converged and result.iterations >= 2
     assert len(builder.runs) == len(set(builder.runs)), [run for run in builder.runs if builder.runs.count(run) > 1]
+
+
+RATIO = 0.6      # the 'PROM' at a centre overstates every slope by 1/RATIO: every step has ρ = RATIO
+
+
+class ConstantRatioBuilder(BasisOffsetBuilder):
+    """'PROM' = its centre c, one basis: L_c(z) = -(0.01 + SLOPES · c + SLOPES · (z - c) / RATIO), exact at c,
+    so a step's actual reduction over the predicted one is RATIO whatever its length."""
+
+    def build(self, z):
+        self.builds += 1
+        return np.array(z, dtype=float), np.zeros(2)
+
+    def evaluate(self, prom, z, weights):
+        z = np.array(z, dtype=float)
+        distance = 0.01 + SLOPES @ prom[0] + SLOPES @ (z - prom[0]) / RATIO
+        return Evaluation(z, -distance, -SLOPES / RATIO, distance, SLOPES / RATIO)
+
+
+def _run_at_constant_ratio(scene, **optimizer):
+    scene = scene.replace("optimizer", initial_radius=0.25, **optimizer)
+    fish = load_fish(scene)
+    space = optimize_module.optimization_space(scene, fish)
+    result = optimize(scene, fish=fish, builder=ConstantRatioBuilder(scene, fish, space))
+    assert result.converged and result.optimum == pytest.approx(space.upper, abs=1e-9), result.stop_reason
+    return [row["radius"] for row in result.history[1:]]
+
+
+def test_the_radius_expands_above_expand_ratio_and_is_kept_below_it(scene):
+    """ρ = 0.6 at every step from a quarter of the validity box, the optimum four validity radii away:
+    kept at 1/4 by the default expand_ratio 3/4 (16 trial steps); with expand_ratio = 1/2 doubled at each
+    step up to the whole box (1/4 + 1/2 + 1 + 1 + 1 + 1/4 of it: 6 steps); with expand_factor = 4 as well,
+    straight from 1/4 to the box (5 steps)."""
+    kept = _run_at_constant_ratio(scene)
+    assert kept == [0.25] * 16
+    doubled = _run_at_constant_ratio(scene, expand_ratio=0.5)
+    assert doubled == [0.25, 0.5, 1.0, 1.0, 1.0, 1.0]
+    quadrupled = _run_at_constant_ratio(scene, expand_ratio=0.5, expand_factor=4.0)
+    assert quadrupled == [0.25, 1.0, 1.0, 1.0, 1.0]
+
+
+def test_the_radius_update():
+    """Halved below ρ = 1/4 whatever expand_ratio, kept between 1/4 and expand_ratio, grown by expand_factor
+    above it, never beyond the validity box."""
+    from aquarom_fenics.optimization.trust_region import resized_radius
+
+    assert resized_radius(0.5, 0.2) == resized_radius(0.5, 0.2, expand_ratio=0.3) == 0.25
+    assert resized_radius(0.25, 0.6) == 0.25
+    assert resized_radius(0.25, 0.6, expand_ratio=0.5) == 0.5
+    assert resized_radius(0.25, 0.6, expand_ratio=0.5, expand_factor=3.0) == 0.75
+    assert resized_radius(0.5, 0.9, expand_factor=4.0) == 1.0
+    assert resized_radius(1.0, -2.0) == 0.5
+
+
+def test_the_radius_keys_are_checked_and_hashed_only_off_their_default():
+    """expand_ratio and expand_factor came after scenes were hashed: at main's rule (3/4, 2) a scene keeps
+    its hash (its checkpoints and caches); other values change it; values outside the rule's range are one
+    clear line."""
+    from aquarom_fenics.errors import InputError
+    from aquarom_fenics.io.scene import Scene
+
+    so3 = Scene.load("so3")
+    assert so3.replace("optimizer", expand_ratio=0.75, expand_factor=2.0).hash == so3.hash
+    assert so3.replace("optimizer", expand_ratio=0.5).hash != so3.hash
+    assert so3.replace("optimizer", expand_factor=4.0).hash != so3.hash
+    with pytest.raises(InputError, match=r"\[optimizer\] expand_ratio = 0.2 must be in \(0.25, 1\)"):
+        so3.replace("optimizer", expand_ratio=0.2)
+    with pytest.raises(InputError, match=r"\[optimizer\] expand_factor = 1.0 must be in \(1, 16\]"):
+        so3.replace("optimizer", expand_factor=1.0)
