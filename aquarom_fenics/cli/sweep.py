@@ -199,7 +199,8 @@ def dry_run(args, scene, designs, source, kept, cluster, workers) -> int:
             from aquarom_fenics.reduction.atlas_refine import MAX_DEPTH
 
             say(f"  refinement: [reduction] validity_change caps each PROM's radius at its centre: a cell whose "
-                f"capped radius is below it is bisected, up to {MAX_DEPTH} times per shape, each half built "
+                f"capped radius is below it is divided at once into the halvings that radius asks for, up to "
+                f"{MAX_DEPTH} per shape, the part holding a design built and judged the same way "
                 "(known only as the PROMs are built: not in the estimate)")
     seconds = estimate(scene, missing, args.model, 1 if cluster.distributed else workers, centres)
     say(f"  estimate: ~{seconds:.0f} s" + (" on one worker (divided by the number of the cluster's workers)"

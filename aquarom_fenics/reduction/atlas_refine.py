@@ -6,17 +6,21 @@ With ``[reduction] validity_change`` = c > 0 a PROM's radius is capped at its ce
 
     s R_k < h_k   in some shapes k   (s = the atlas's radius scale, the rule of the regular cells)
 
-is bisected in those shapes, and the child holding the design is built and judged the same way. A node is
-the base cell's grid refined L_k times in shape k: its indices j_k on the grid of half-width h_k / 2^{L_k},
+is divided at once into the 2^{D_k} parts per shape its own PROM asks for, D_k the smallest number of halvings
+with h_k / 2^{D_k} ≤ s R_k (0 where s R_k ≥ h_k), and the part holding the design is built and judged the same
+way (it may ask for more). The division of a node is a function of its own PROM only, so the cells form a tree:
+a design's leaf does not depend on the order of the queries. A node is the base cell's grid halved L_k times in
+shape k: its indices j_k on the grid of half-width h_k / 2^{L_k},
 
-    c_k = lower_k + (2 j_k + 1) h_k / 2^{L_k},   child: L_k + 1, j_k ← 2 j_k + [ξ_k ≥ c_k]   (split shapes).
+    c_k = lower_k + (2 j_k + 1) h_k / 2^{L_k},   part: L_k + D_k,   j_k ← ⌊(ξ_k - lower_k) 2^{L_k + D_k} / (2 h_k)⌋
 
-A node that needs no split is a leaf: every design in it is within h ≤ s R ≤ R of its centre, so its PROM
-answers every design of the cell, as a regular cell's does. A shape is bisected at most :data:`MAX_DEPTH`
-times: a node that would split only shapes at that depth is a leaf *at the depth limit*; its PROM answers a
-design only within its own radius R (``ReducedModel.refuse_outside_radius``), and callers report such leaves.
-On a scene whose radii are not capped (R = r ≥ h / s) every base cell is a leaf: the regular atlas, its
-cells, names and cache entries, unchanged.
+(clipped to the node's parts j_k 2^{D_k} … (j_k + 1) 2^{D_k} - 1). A node that needs no division is a leaf:
+every design in it is within h ≤ s R ≤ R of its centre, so its PROM answers every design of the cell, as a
+regular cell's does. A shape is halved at most :data:`MAX_DEPTH` times (D_k is cut to reach it at most): a node
+that would divide only shapes at that depth is a leaf *at the depth limit*; its PROM answers a design only
+within its own radius R (``ReducedModel.refuse_outside_radius``), and callers report such leaves. On a scene
+whose radii are not capped (R = r ≥ h / s) every base cell is a leaf: the regular atlas, its cells, names and
+cache entries, unchanged.
 """
 from __future__ import annotations
 
@@ -36,7 +40,7 @@ R = 0.0045 in y_ellipse at the corner (validity_change 0.035), s R = 0.0032 ≥ 
 
 @dataclass(frozen=True)
 class Node:
-    """A cell of the refined atlas: per shape its bisections L_k and index j_k on that level's grid."""
+    """A cell of the refined atlas: per shape its halvings L_k of the base cell and index j_k on that level's grid."""
 
     index: tuple
     levels: tuple
@@ -95,11 +99,32 @@ def splits(radius: np.ndarray, half_width: np.ndarray, scale: float) -> np.ndarr
     return (half_width > 0) & (half_width > scale * radius * (1 + 1e-12))
 
 
-def child(grid: Cover, node: Node, split: np.ndarray, xi: np.ndarray) -> Node:
-    """The half of ``node`` holding ξ in every split shape (ξ_k ≥ c_k: the upper half)."""
-    center = node.center(grid)
-    index = np.asarray(node.index) * np.where(split, 2, 1) + (split & (xi >= center))
-    return Node(tuple(int(j) for j in index), tuple(int(level) for level in np.asarray(node.levels) + split))
+def halvings(radius: np.ndarray, half_width: np.ndarray, scale: float, most: np.ndarray) -> np.ndarray:
+    """Per shape the fewest halvings D_k of the cell with h_k / 2^{D_k} ≤ s R_k (0 where the cell is not wider
+    than s R_k), at most ``most``_k: D_k = ⌈log₂(h_k / (s R_k))⌉, checked against :func:`splits`."""
+    radius, half_width = np.asarray(radius, dtype=float), np.asarray(half_width, dtype=float)
+    wide = splits(radius, half_width, scale)
+    most = np.maximum(np.asarray(most, dtype=int), 0)
+    with np.errstate(divide="ignore"):
+        ratio = np.where(wide, half_width / np.maximum(scale * radius * (1 + 1e-12), 1e-300), 1.0)
+    count = np.where(wide, np.ceil(np.log2(np.minimum(ratio, 2.0 ** 1000))), 0).astype(int)
+    while np.any(fix := wide & (count < most) & splits(radius, half_width / 2.0 ** count, scale)):
+        count = count + fix                                         # log₂ rounded below the boundary
+    while np.any(fix := (count > 1) & ~splits(radius, half_width / 2.0 ** (count - 1), scale)):
+        count = count - fix                                         # or above it
+    return np.minimum(count, most)
+
+
+def part(grid: Cover, node: Node, down: np.ndarray, xi: np.ndarray) -> Node:
+    """The part of ``node`` holding ξ when shape k is halved ``down``_k more times: ξ's index on the grid of
+    L_k + D_k halvings (as :func:`descendant_index` finds it), clipped to the node's parts."""
+    down = np.asarray(down, dtype=int)
+    levels = np.asarray(node.levels) + down
+    width = 2 * grid.half_width / 2.0 ** levels
+    raw = np.floor(np.divide(xi - grid.lower, width, out=np.zeros_like(xi), where=width > 0)).astype(int)
+    first = np.asarray(node.index) * 2 ** down
+    index = np.clip(raw, first, first + 2 ** down - 1)
+    return Node(tuple(int(j) for j in index), tuple(int(level) for level in levels))
 
 
 class RefusedNode(InputError):
@@ -176,20 +201,23 @@ class Refiner:
         return prom
 
     def leaf(self, xi: np.ndarray, cell=None) -> Leaf:
-        """Descend from ξ's base cell (or ``cell``) to the leaf holding ξ; :class:`RefusedNode` where a node's PROM
-        cannot be built."""
+        """Descend from ξ's base cell (or ``cell``) to the leaf holding ξ, each node divided at once as its own
+        PROM asks (:func:`halvings`; ``met``'s ``split`` and ``halvings`` record it); :class:`RefusedNode` where a
+        node's PROM cannot be built."""
         xi = np.asarray(xi, dtype=float)
         node = base_node(self.grid.cells(xi[None, :])[0] if cell is None else cell)
         path = []
         while True:
             radius = self.radius(node)
             need = splits(radius, node.half_width(self.grid), self.grid.scale)
-            allowed = need & (np.asarray(node.levels) < self.max_depth)
-            if not allowed.any():
+            down = halvings(radius, node.half_width(self.grid), self.grid.scale,
+                            self.max_depth - np.asarray(node.levels))
+            if not down.any():
                 return Leaf(node, radius, path, bool(need.any()))
-            self.met[node]["split"] = [name for name, k in zip(self.grid.names, allowed) if k]
+            self.met[node]["split"] = [name for name, d in zip(self.grid.names, down) if d]
+            self.met[node]["halvings"] = {name: int(d) for name, d in zip(self.grid.names, down) if d}
             path.append(node)
-            node = child(self.grid, node, allowed, xi)
+            node = part(self.grid, node, down, xi)
 
 
 def leaf_record(grid: Cover, leaf: Leaf) -> dict:

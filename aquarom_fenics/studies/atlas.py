@@ -137,8 +137,8 @@ def evaluate_center(task: CenterTask) -> dict:
 
 
 def _node_record(grid: Cover, node, met: dict, radius=None) -> dict:
-    """A node's record: its cell, centre, build (or cache read) status and time, split shapes (and its PROM's
-    radius, which split it) if split."""
+    """A node's record: its cell, centre, build (or cache read) status and time, split shapes, the halvings of
+    each (and its PROM's radius, which split it) if split."""
     status = f"refused: {met['refused']}" if "refused" in met else "built" if met["built"] else "from the cache"
     record = {"id": node.id, "cell": list(node.index), "center": dict(zip(grid.names, node.center(grid).tolist())),
               "status": status, "build_time_s": met["time_s"], "build_cpu_s": met["cpu_s"], "worker": worker_name(),
@@ -146,7 +146,8 @@ def _node_record(grid: Cover, node, met: dict, radius=None) -> dict:
     if any(node.levels):
         record["levels"] = list(node.levels)
     if "split" in met:
-        record.update(split=met["split"], prom_radius=dict(zip(grid.names, np.asarray(radius).tolist())))
+        record.update(split=met["split"], halvings=met.get("halvings", {}),
+                      prom_radius=dict(zip(grid.names, np.asarray(radius).tolist())))
     return record
 
 

@@ -1,14 +1,16 @@
 """The atlas refined where a capped radius is smaller than its cell (``reduction/atlas_refine.py``), on a fake
 PROM whose capped radius R is a known function of its centre: the cells split only where s R < h, in the shapes
-where it is, every design's leaf holds it within s R of its centre, the depth bound holds and is reported, and a
-scene without capped radii keeps the regular cells without a build."""
+where it is, into as many halvings at once as the node's own R asks for (one build on the way, not one per
+halving), every design's leaf holds it within s R of its centre whatever the order of the queries (the cells are
+a tree), the depth bound holds and is reported, and a scene without capped radii keeps the regular cells without
+a build."""
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from aquarom_fenics.reduction.atlas_cover import Cover, center_id
-from aquarom_fenics.reduction.atlas_refine import MAX_DEPTH, Refiner, holds, node_of
+from aquarom_fenics.reduction.atlas_refine import MAX_DEPTH, Refiner, halvings, holds, node_of
 
 S = 0.7
 GRID = Cover(("a", "b"), np.zeros(2), np.ones(2), np.array([0.25, 0.25]), np.array([2, 2]),
@@ -66,7 +68,7 @@ def test_the_depth_bound_holds_and_a_leaf_at_it_is_reported():
     calls = []
     refiner = Refiner(capped(), GRID, prom_at=fake_prom_at(lambda xi: [1e-6, 1e-6], calls), max_depth=3)
     leaf = refiner.leaf(np.array([0.3, 0.9]))
-    assert leaf.at_limit and leaf.node.levels == (3, 3) and len(leaf.path) == 3 and len(calls) == 4
+    assert leaf.at_limit and leaf.node.levels == (3, 3) and len(leaf.path) == 1 and len(calls) == 2  # one jump
     assert holds(GRID, leaf.node, np.array([0.3, 0.9]))
     assert MAX_DEPTH == Refiner(capped(), GRID, prom_at=fake_prom_at(thin_near_a1, [])).max_depth
 
@@ -80,3 +82,44 @@ def test_without_capped_radii_the_cells_are_the_regular_covers_and_need_no_build
         assert holds(GRID, leaf.node, np.array(xi)) and not holds(GRID, leaf.node, np.array([0.5, 0.5]) + 0.26 *
                                                                   (np.array(cell) * 2 - 1) * -1)
     assert calls == []                                                  # radii from the scene: nothing built
+
+
+def test_a_radius_asking_for_three_halvings_gets_one_build_on_the_way_not_three():
+    calls = []
+    eighth = [0.25 / 8 / S, 0.25 / S]                                  # s R_a = h / 8: three halvings in a
+    refiner = Refiner(capped(), GRID, prom_at=fake_prom_at(lambda xi: eighth, calls))
+    leaf = refiner.leaf(np.array([0.3, 0.9]))
+    assert leaf.node.levels == (3, 0) and [n.id for n in leaf.path] == ["0_1"] and len(calls) == 2
+    assert leaf.node.id == "4_1@3_0" and holds(GRID, leaf.node, np.array([0.3, 0.9]))
+    assert leaf.node.center(GRID) == pytest.approx([0.28125, 0.75]) and not leaf.at_limit
+    assert refiner.met[leaf.path[0]]["halvings"] == {"a": 3} and refiner.met[leaf.path[0]]["split"] == ["a"]
+    h, most = np.array([0.25, 0.25]), np.array([6, 6])
+    assert list(halvings([0.25 / 8 / S * (1 - 1e-9), 1.0], h, S, most)) == [4, 0]   # just below h / 8: four
+    assert list(halvings([0.25 / 8 / S * (1 + 1e-9), 0.25 / S], h, S, most)) == [3, 0]
+    assert list(halvings([0.0, 0.25 / 2 / S], h, S, np.array([6, 1]))) == [6, 1]      # bounded by the depth left
+
+
+def thinner_and_thinner(xi):
+    """R_a falls steeply towards a = 1, R_b towards b = 0: a part may ask for more halvings than its parent."""
+    return [0.25 / S * (1.2 - xi[0]) ** 2, 0.25 / S * (0.2 + xi[1])]
+
+
+def test_a_designs_leaf_does_not_depend_on_the_order_of_the_queries():
+    designs = np.random.default_rng(5).uniform(0, 1, size=(150, 2))
+    first = Refiner(capped(), GRID, prom_at=fake_prom_at(thinner_and_thinner, []))
+    leaves = [first.leaf(xi) for xi in designs]
+    assert any(len(leaf.path) >= 2 for leaf in leaves)                 # a part that asked for more
+    assert max(leaf.node.levels[0] for leaf in leaves) >= 4
+    for order in (designs[::-1], np.random.default_rng(6).permutation(designs)):
+        other = Refiner(capped(), GRID, prom_at=fake_prom_at(thinner_and_thinner, []))
+        found = {tuple(xi): other.leaf(xi).node for xi in order}
+        assert [found[tuple(xi)] for xi in designs] == [leaf.node for leaf in leaves]
+    nodes = {leaf.node for leaf in leaves}
+    for xi, leaf in zip(designs, leaves):                              # the leaves do not overlap: one holds ξ
+        assert [node for node in nodes if holds(GRID, node, xi)] == [leaf.node]
+        assert np.all(leaf.node.half_width(GRID) <= S * leaf.radius * (1 + 1e-12)) and not leaf.at_limit
+        assert node_of(leaf.node.id, GRID) == leaf.node
+        for parent, below in zip(leaf.path, leaf.path[1:] + [leaf.node]):  # each jump the parent's own R asked
+            down = np.asarray(below.levels) - np.asarray(parent.levels)
+            assert list(down) == list(halvings(first.radii[parent], parent.half_width(GRID), S,
+                                               MAX_DEPTH - np.asarray(parent.levels)))
