@@ -121,7 +121,7 @@ class PromBuilder:
         refiner = self._refiner()
         known = set(refiner.met)
         leaf = refiner.leaf(z[: self.space.n_shapes])
-        if leaf.at_limit and not self._within(leaf.radius, refiner.grid, leaf, z):
+        if not leaf.answers(refiner.grid, z[: self.space.n_shapes]):
             log.warning("atlas cell %s is at the depth limit (%d bisections) and its PROM's radius %s does not hold "
                         "%s: a PROM is built at the design", leaf.node.id, refiner.max_depth,
                         np.round(leaf.radius, 5).tolist(), self.space.as_dict(z))
@@ -148,11 +148,6 @@ class PromBuilder:
         if self._atlas is None:
             self._atlas = Refiner(self.scene, cover(self.scene), self.fish)
         return self._atlas
-
-    def _within(self, radius, grid, leaf, z) -> bool:
-        """|ξ - c|_k ≤ R_k of z from the leaf's centre."""
-        gap = np.abs(z[: self.space.n_shapes] - leaf.node.center(grid))
-        return bool(np.all(gap <= np.asarray(radius) * (1 + 1e-12)))
 
     def _radius_fraction(self, xi: np.ndarray, other: np.ndarray) -> float:
         """max_k |ξ_k - ξ'_k| / r_k, r the scene's validity radius (a parameter with r_k = 0, fixed by
@@ -186,8 +181,8 @@ class PromBuilder:
             refiner = self._refiner()
             leaf = refiner.leaf(np.asarray(prom.xi_center, dtype=float))
             if np.allclose(leaf.node.center(refiner.grid), prom.xi_center, rtol=0, atol=1e-12):
-                return holds(refiner.grid, leaf.node, z[: self.space.n_shapes]) and (
-                    not leaf.at_limit or self._within(prom.validity_radius, refiner.grid, leaf, z))
+                xi = z[: self.space.n_shapes]
+                return holds(refiner.grid, leaf.node, xi) and leaf.answers(refiner.grid, xi)
         return prom is not None and bool(np.all(np.abs(z[: self.space.n_shapes] - prom.xi_center)
                                                 <= prom.validity_radius))
 

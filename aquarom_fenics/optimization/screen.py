@@ -35,7 +35,7 @@ from aquarom_fenics.optimization.cost import (CostWeights, DesignSpace, cost_val
                                               weighted_cost)
 from aquarom_fenics.optimization.optimize import start_points
 from aquarom_fenics.reduction.atlas_cover import assign, center_prom, cover
-from aquarom_fenics.reduction.atlas_refine import Refiner, RefusedNode
+from aquarom_fenics.reduction.atlas_refine import Refiner, RefusedNode, met_status
 
 log = logging.getLogger("aquarom")
 
@@ -99,8 +99,7 @@ def screen_center(task: ScreenTask) -> dict:
             leaf = refiner.leaf(z[: task.space.n_shapes], task.cell)
         except RefusedNode:
             continue
-        gap = np.abs(z[: task.space.n_shapes] - leaf.node.center(grid))
-        if not leaf.at_limit or np.all(gap <= leaf.radius * (1 + 1e-12)):
+        if leaf.answers(grid, z[: task.space.n_shapes]):
             leaves.setdefault(leaf.node, []).append(k)
     solved = {}
     for node, members in leaves.items():
@@ -112,8 +111,7 @@ def screen_center(task: ScreenTask) -> dict:
         costs[members] = batch_costs(prom, task.scene, task.space, task.designs[members], task.weights)
         solved[node] = {"designs": len(members), "solve_time_s": time.perf_counter() - started}
     records = {node: {"id": node.id, "center": refiner.center_dict(node), "designs": 0,
-                      "status": f"refused: {met['refused']}" if "refused" in met else
-                      "built" if met["built"] else "from the cache", "build_time_s": met["time_s"],
+                      "status": met_status(met), "build_time_s": met["time_s"],
                       "solve_time_s": 0.0} | solved.get(node, {}) for node, met in refiner.met.items()}
     return {"costs": costs.tolist(), "records": list(records.values())}
 

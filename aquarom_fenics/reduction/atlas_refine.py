@@ -87,10 +87,16 @@ def descendant_index(grid: Cover, cell: tuple, levels: np.ndarray, xi: np.ndarra
     own = grid.cells(xi[None, :])[0]
     if tuple(int(i) for i in own) != tuple(cell):
         return ()
+    return index_within(grid, levels, xi, cell, levels)
+
+
+def index_within(grid: Cover, levels: np.ndarray, xi: np.ndarray, index: tuple, down: np.ndarray) -> tuple:
+    """Index of ξ on the grid of ``levels`` halvings, ⌊(ξ - lower) / (2 h / 2^L)⌋, clipped to the 2^D parts
+    (D = ``down``) of the cell ``index`` of the grid D halvings coarser: j_k 2^{D_k} … (j_k + 1) 2^{D_k} - 1."""
     width = 2 * grid.half_width / 2.0 ** levels
     raw = np.floor(np.divide(xi - grid.lower, width, out=np.zeros_like(xi), where=width > 0)).astype(int)
-    first = np.asarray(cell) * 2 ** levels
-    return tuple(int(j) for j in np.clip(raw, first, first + 2 ** levels - 1))
+    first = np.asarray(index) * 2 ** down
+    return tuple(int(j) for j in np.clip(raw, first, first + 2 ** down - 1))
 
 
 def splits(radius: np.ndarray, half_width: np.ndarray, scale: float) -> np.ndarray:
@@ -117,14 +123,10 @@ def halvings(radius: np.ndarray, half_width: np.ndarray, scale: float, most: np.
 
 def part(grid: Cover, node: Node, down: np.ndarray, xi: np.ndarray) -> Node:
     """The part of ``node`` holding ξ when shape k is halved ``down``_k more times: ξ's index on the grid of
-    L_k + D_k halvings (as :func:`descendant_index` finds it), clipped to the node's parts."""
+    L_k + D_k halvings, clipped to the node's parts (:func:`index_within`)."""
     down = np.asarray(down, dtype=int)
     levels = np.asarray(node.levels) + down
-    width = 2 * grid.half_width / 2.0 ** levels
-    raw = np.floor(np.divide(xi - grid.lower, width, out=np.zeros_like(xi), where=width > 0)).astype(int)
-    first = np.asarray(node.index) * 2 ** down
-    index = np.clip(raw, first, first + 2 ** down - 1)
-    return Node(tuple(int(j) for j in index), tuple(int(level) for level in levels))
+    return Node(index_within(grid, levels, xi, node.index, down), tuple(int(level) for level in levels))
 
 
 class RefusedNode(InputError):
@@ -144,6 +146,19 @@ class Leaf:
     radius: np.ndarray
     path: list
     at_limit: bool
+
+    def answers(self, grid: Cover, xi: np.ndarray) -> bool:
+        """Whether the leaf's PROM answers ξ of its cell: always (h ≤ s R), unless the leaf is at the depth limit;
+        then only within its radius, |ξ_k - c_k| ≤ R_k."""
+        if not self.at_limit:
+            return True
+        gap = np.abs(np.asarray(xi, dtype=float) - self.node.center(grid))
+        return bool(np.all(gap <= self.radius * (1 + 1e-12)))
+
+
+def met_status(met: dict) -> str:
+    """A node's status from its ``Refiner.met`` record: "refused: …", "built" or "from the cache"."""
+    return f"refused: {met['refused']}" if "refused" in met else "built" if met["built"] else "from the cache"
 
 
 class Refiner:

@@ -45,7 +45,7 @@ from aquarom_fenics.parallel import worker_name
 from aquarom_fenics.geometry.fish_cache import shared_fish
 from aquarom_fenics.reduction.atlas_cover import (BUILT_HERE, RADIUS_SCALE, Cover, assign, cell_of,  # noqa: F401
                                                    center_id, center_prom, cover)
-from aquarom_fenics.reduction.atlas_refine import MAX_DEPTH, Refiner, RefusedNode, node_of
+from aquarom_fenics.reduction.atlas_refine import MAX_DEPTH, Refiner, RefusedNode, met_status, node_of
 from aquarom_fenics.studies.sweep_designs import driven
 
 CENTER_ROWS = 512
@@ -139,10 +139,9 @@ def evaluate_center(task: CenterTask) -> dict:
 def _node_record(grid: Cover, node, met: dict, radius=None) -> dict:
     """A node's record: its cell, centre, build (or cache read) status and time, split shapes, the halvings of
     each (and its PROM's radius, which split it) if split."""
-    status = f"refused: {met['refused']}" if "refused" in met else "built" if met["built"] else "from the cache"
     record = {"id": node.id, "cell": list(node.index), "center": dict(zip(grid.names, node.center(grid).tolist())),
-              "status": status, "build_time_s": met["time_s"], "build_cpu_s": met["cpu_s"], "worker": worker_name(),
-              "builds_in_worker": met.get("builds_in_worker", BUILT_HERE[0])}
+              "status": met_status(met), "build_time_s": met["time_s"], "build_cpu_s": met["cpu_s"],
+              "worker": worker_name(), "builds_in_worker": met.get("builds_in_worker", BUILT_HERE[0])}
     if any(node.levels):
         record["levels"] = list(node.levels)
     if "split" in met:
