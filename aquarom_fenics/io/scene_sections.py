@@ -269,7 +269,7 @@ class OptimizerSection:
     starts: int = _spec(1, _positive, "optimisations from the start point and starts - 1 Latin-hypercube feasible points")
     seed: int = _spec(0, _non_negative, "seed of the Latin-hypercube starts")
     screen: int = _spec(0, lambda v: None if 0 <= v <= MAX_SCREEN else f"must be 0 (off) or a number of designs in [starts, {MAX_SCREEN}]", "multi-start screen: 0 off; N ≥ starts: the starts are the `starts` designs of least cost L among N (the start point and N - 1 seeded Latin-hypercube feasible designs), L from the PROM of the atlas cell holding each (as `sweep --model prom`: built on demand through the PROM cache, one batched reduced run per cell; docs/theory/optimisers.md)", legacy=0)
-    atlas: bool = _spec(False, None, "paper method: each PROM build at an iterate takes the PROM at the centre of the atlas cell holding it (`sweep --model prom`'s cells, bisected where [reduction] validity_change caps a PROM's radius below its cell, through the PROM cache, keyed by what a build reads: a warm atlas of the scene, whatever its [optimizer], leaves only reduced solves), evaluated at the iterate; a new one when the iterate leaves the cell; false: PROMs built at the iterates (docs/theory/optimisers.md)", legacy=False)
+    atlas: bool = _spec(False, None, "each PROM build at a design takes the PROM at the centre of the atlas cell holding it (`sweep --model prom`'s cells, bisected where [reduction] validity_change caps a PROM's radius below its cell, through the PROM cache, keyed by what a build reads: a warm atlas of the scene, whatever its [optimizer], leaves only reduced solves), evaluated at the design; paper method: a new one when the iterate leaves the cell; trust region: the surrogate's box also inside its PROM's validity radius, the candidate's PROM its cell's; false: PROMs built at the designs (docs/theory/optimisers.md)", legacy=False)
     tail_screen: bool = _spec(False, None, "refuse designs whose tail region the thrust destabilises: the FOM linearised at the PROM's last-stroke states (a FOM linearisation and a dense eigenvalue problem per screened state at each PROM build, shared by the ranks under mpirun)")
     tail_growth_limit: float = _spec(100.0, _positive, "tail screen: largest growth rate Re λ of the tail region's modes accepted [1/s]")
     tail_region_radius: float = _spec(0.015, _positive, "tail screen: the region is the free nodes within this distance of the tail station (its rest position) [m]")
@@ -281,12 +281,9 @@ class OptimizerSection:
 
     def key_conflict(self) -> str | None:
         """Why keys of the section do not go together, or None: ``screen`` below ``starts`` (a screen chooses
-        the starts among its designs), ``atlas`` with the trust region (whose trust box is centred on its
-        iterate, not on an atlas centre)."""
+        the starts among its designs)."""
         if 0 < self.screen < self.starts:
             return f"[optimizer] screen = {self.screen} is below starts = {self.starts}: 0 (off) or at least starts"
-        if self.atlas and self.method != "paper":
-            return f"[optimizer] atlas = true needs method = \"paper\" (method = \"{self.method}\")"
         return None
 
 

@@ -5,6 +5,11 @@ fraction of the PROM validity box); a PROM built at the candidate gives the actu
 ρ = actual / predicted accepts or rejects the step and resizes the radius. A candidate the design
 check refuses is pulled back along its step (bisection); a direction refused right at the centre
 becomes a cut of the surrogate problem.
+
+With ``[optimizer] atlas`` the PROM "at" a design is the atlas's at the centre of the leaf holding it
+(``PromBuilder.build``): the surrogate is the centre leaf's PROM, its box the trust box around the iterate
+intersected with that PROM's validity box (its centre ± its radius), so that every candidate is a design the
+surrogate answers; the function minimised is the atlas's answer, each design's leaf PROM at the design.
 """
 from __future__ import annotations
 
@@ -51,7 +56,8 @@ def trust_region(scene, space, builder, weights, history, checkpoint, state, saf
         radius = state["radius"]
         candidate, predicted_cost = _surrogate_step(builder, prom, space, weights, center,
                                                     radius * trust_box(half_widths, builder.validity_radius(prom),
-                                                                       space.n_shapes), cuts, current)
+                                                                       space.n_shapes), cuts, current,
+                                                    answered=_answered_box(builder, prom))
         candidate = safeguard.finite(candidate, state["iteration"] + 1)
         step = candidate - center
         iteration = state["iteration"] + 1
@@ -76,20 +82,20 @@ def trust_region(scene, space, builder, weights, history, checkpoint, state, saf
                                     else _surrogate_cost(builder, prom, weights, candidate))
         trial = builder.evaluate(candidate_prom, candidate, weights)
         actual = _actual_reduction(builder, prom, candidate_prom, current, trial, weights)
-        ratio = actual / predicted if predicted > 0 else -np.inf
+        ratio = actual[0] / predicted if predicted > 0 else -np.inf
         accepted = ratio > settings.accept_ratio
         trial_measure = first_order_at(scene, space, trial).measure
         log.info("trust region %d: radius %.3g, step %.3g, predicted reduction %.3e, actual %.3e (%s), ρ = %.3g, "
-                 "first-order measure %.3g at the candidate", iteration, radius, np.abs(step).max(), predicted, actual,
-                 "one basis" if builder.shares_basis(prom, candidate_prom) else "a new basis: the candidate's PROM "
-                 "at both designs", ratio, trial_measure)
+                 "first-order measure %.3g at the candidate", iteration, radius, np.abs(step).max(), predicted,
+                 actual[0], actual[1], ratio, trial_measure)
         record(history, history_row(space, iteration, candidate, trial.cost, trial.gradient, trial.distance,
                                      "built" if accepted else "rejected", started, radius=radius,
                                      ratio=float(ratio), optimality=trial_measure), on_iteration)
         radius = resized_radius(radius, ratio, settings.expand_ratio, settings.expand_factor)
         if accepted:
             center, prom, current, measure, cuts = candidate, candidate_prom, trial, trial_measure, []
-        elif not builder.shares_basis(prom, candidate_prom):
+        elif not builder.shares_basis(prom, candidate_prom) and not scene.optimizer.atlas:
+            # (with the atlas the centre's PROM is its leaf's whatever was built since: nothing to recentre)
             prom, current, measure = _recentred(scene, space, builder, weights, prom, current, measure)
         state.update(center=center.tolist(), radius=radius, iteration=iteration, cuts=[cut.tolist() for cut in cuts])
         checkpoint.save(state, history, builder)
@@ -162,21 +168,39 @@ def _recentred(scene, space, builder: PromBuilder, weights, prom, current, measu
     return rebuilt, evaluation, measure
 
 
-def _actual_reduction(builder: PromBuilder, prom, trial_prom, current, trial, weights) -> float:
-    """L(z_c) - L(z) measured on one basis: L_c(z_c) - L_z(z) when the centre's PROM and the
-    candidate's share their basis, else L_z(z_c) - L_z(z), the candidate's PROM at both designs.
+def _actual_reduction(builder: PromBuilder, prom, trial_prom, current, trial, weights) -> tuple[float, str]:
+    """L(z_c) - L(z) measured on one model where there is one, and how it was measured:
 
-    A PROM on another basis carries another projection error: its L is offset from the centre's by
-    an amount no step makes (3 % of L on SO2 at the upper bounds, for a step of 0.002), which the
-    ratio test would read as the step's gain or loss."""
+    - one basis (the centre's PROM and the candidate's share it, or, with the atlas, are one PROM): L_c(z_c) -
+      L_z(z). With ``[optimizer] atlas`` a candidate in the centre's leaf has the centre's PROM, the model
+      itself: the actual reduction is the predicted one (ρ = 1), rightly, for the function minimised is the
+      atlas's answer L_leaf(z)(z), which is that PROM on the leaf;
+    - another basis: L_z(z_c) - L_z(z), the candidate's PROM at both designs. A PROM on another basis carries
+      another projection error: its L is offset from the centre's by an amount no step makes (3 % of L on SO2
+      at the upper bounds, for a step of 0.002), which the ratio test would read as the step's gain or loss;
+    - another basis whose PROM does not answer the centre (z_c beyond its validity radius, which the PROM
+      refuses; with the atlas, a centre far from the candidate's leaf centre): L_c(z_c) - L_z(z), each design
+      on a PROM that answers it. That is the predicted reduction less the surrogate's own error at the
+      candidate, L_z(z) - L_c(z), both PROMs answering z (the surrogate's box is inside its PROM's radius):
+      the classical ratio of the function's reduction (the atlas's answer at each design) to the model's."""
     if builder.shares_basis(prom, trial_prom):
-        return current.cost - trial.cost
+        return current.cost - trial.cost, "one basis"
     try:
-        return builder.cost(trial_prom, current.z, weights) - trial.cost
+        return builder.cost(trial_prom, current.z, weights) - trial.cost, "another basis: the candidate's PROM at both"
     except (InputError, SolverError) as failed:
-        log.warning("trust region: the candidate's PROM cannot be simulated at the centre (%s); the actual reduction "
-                    "compares the two PROMs", failed)
-        return current.cost - trial.cost
+        log.info("trust region: the candidate's PROM does not answer the centre (%s); the actual reduction compares "
+                 "the centre's PROM at the centre with the candidate's at the candidate", failed)
+        return current.cost - trial.cost, "another basis that does not answer the centre: each design on its own PROM"
+
+
+def _answered_box(builder: PromBuilder, prom):
+    """With ``[optimizer] atlas``: (lower, upper) of the shapes the centre's PROM answers, ξ_c ± R (R its validity
+    radius, capped where ``[reduction] validity_change`` caps it); its centre is the atlas leaf's, off the
+    iterate. None without the atlas: the PROM is centred on the iterate and the trust box inside R already."""
+    if not builder.scene.optimizer.atlas:
+        return None
+    centre, radius = np.asarray(prom.xi_center, dtype=float), builder.validity_radius(prom)
+    return centre - radius, centre + radius
 
 
 def _surrogate_cost(builder: PromBuilder, prom, weights, z) -> float:
@@ -194,16 +218,22 @@ def _within_cuts(z, center, cuts) -> bool:
     return all(cut @ (z - center) <= 1e-12 for cut in cuts)
 
 
-def _surrogate_step(builder, prom, space, weights, center, radius, cuts=(), at_center=None) -> tuple[np.ndarray, float]:
+def _surrogate_step(builder, prom, space, weights, center, radius, cuts=(), at_center=None,
+                    answered=None) -> tuple[np.ndarray, float]:
     """Minimise the surrogate cost (PROM at its centre, simulated at z) inside bounds, constraints,
     radius and the cuts c·(z - z_c) ≤ 0 of directions the design check refused. ``at_center``: the
-    surrogate's evaluation at the centre when known (where SLSQP starts)."""
+    surrogate's evaluation at the centre when known (where SLSQP starts). ``answered``: (lower, upper)
+    of the shapes the PROM answers, which the box z_c ± radius is intersected with (the atlas)."""
     cache = {}
     if at_center is not None and np.array_equal(at_center.z, center):
         cache[tuple(np.asarray(center, dtype=float))] = at_center
 
     lower = np.maximum(space.lower, center - radius)
     upper = np.minimum(space.upper, center + radius)
+    if answered is not None:      # the centre is answered: kept in the box whatever the rounding
+        shapes = slice(0, space.n_shapes)
+        lower[shapes] = np.minimum(np.maximum(lower[shapes], answered[0]), center[shapes])
+        upper[shapes] = np.maximum(np.minimum(upper[shapes], answered[1]), center[shapes])
 
     def surrogate(z):
         z = np.clip(np.asarray(z, dtype=float), lower, upper)
