@@ -75,8 +75,10 @@ def test_at_the_depth_limit_a_design_beyond_the_leafs_radius_gets_its_own_prom(c
     assert builder.trusts(own, z) and builder.trusts(own, z + [0.0, 0.9 * own.validity_radius[1]])
 
 
-def test_an_optimisation_on_the_capped_atlas_takes_only_leaf_proms(capped):
+@pytest.mark.parametrize("method", ["paper", "trust-region"])
+def test_an_optimisation_on_the_capped_atlas_takes_only_leaf_proms(capped, method):
     scene, fish, _ = capped
+    scene = scene.replace("optimizer", method=method)
     result = optimize(scene, write_checkpoint=False)
     grid = cover(scene)
     assert result.build_records
@@ -86,7 +88,8 @@ def test_an_optimisation_on_the_capped_atlas_takes_only_leaf_proms(capped):
         design = np.array([record["design"][name] for name in grid.names])
         assert np.all(np.abs(design - node.center(grid)) <= node.half_width(grid) * (1 + 1e-12))
     z = result.optimum
-    last = node_of(result.build_records[-1]["atlas_cell"], grid)
+    last = node_of(next(record["atlas_cell"] for record in reversed(result.build_records)
+                        if np.array_equal([record["design"][name] for name in grid.names], z)), grid)
     prom, built = center_prom(scene, dict(zip(grid.names, last.center(grid).tolist())))
     assert not built and np.all(np.abs(z - prom.xi_center) <= prom.validity_radius)
     space = optimization_space(scene, fish)

@@ -56,6 +56,8 @@ def test_the_trust_region_takes_every_prom_from_the_atlas_and_steps_inside_its_s
         assert np.allclose(candidate, design, rtol=0, atol=1e-15)
         surrogate = leaf_prom(accepted)
         assert np.all(np.abs(candidate - surrogate.xi_center) <= surrogate.validity_radius * (1 + 1e-12))
+        if np.array_equal(leaf_prom(candidate).xi_center, surrogate.xi_center):
+            assert row["ratio"] == pytest.approx(1.0, rel=1e-12)                # the model is that PROM
         if row["prom"] == "built":
             accepted = candidate
     first = np.array([rows[1]["xi_z_tail"], rows[1]["xi_y_thin"]])
