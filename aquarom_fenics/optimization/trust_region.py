@@ -187,10 +187,14 @@ def _actual_reduction(builder: PromBuilder, prom, trial_prom, current, trial, we
         return current.cost - trial.cost, "one basis"
     try:
         return builder.cost(trial_prom, current.z, weights) - trial.cost, "another basis: the candidate's PROM at both"
-    except (InputError, SolverError) as failed:
+    except InputError as refused:
         log.info("trust region: the candidate's PROM does not answer the centre (%s); the actual reduction compares "
-                 "the centre's PROM at the centre with the candidate's at the candidate", failed)
+                 "the centre's PROM at the centre with the candidate's at the candidate", refused)
         return current.cost - trial.cost, "another basis that does not answer the centre: each design on its own PROM"
+    except SolverError as failed:
+        log.warning("trust region: the candidate's PROM cannot be simulated at the centre (%s); the actual reduction "
+                    "compares the two PROMs", failed)
+        return current.cost - trial.cost, "another basis that stops at the centre: each design on its own PROM"
 
 
 def _answered_box(builder: PromBuilder, prom):
