@@ -1,6 +1,7 @@
 """A PROM atlas: the design box covered by PROM centres, built where designs fall, for ``sweep --model prom``.
 
-The cover of the box by cells of half-width h ≤ s r (r the validity radius, s = :data:`RADIUS_SCALE`) and
+The cover of the box by cells of half-width h ≤ s r (r the validity radius, s the scene's ``[reduction]
+atlas_scale``, default :data:`RADIUS_SCALE`) and
 the PROM at a cell's centre (:func:`center_prom`, through the PROM cache) are
 :mod:`~aquarom_fenics.reduction.atlas_cover`'s, below the optimisers, whose multi-start screen uses them too (:mod:`~aquarom_fenics.optimization.screen`); a design's cell's centre holds it within h_k ≤ r_k, so that
 centre's PROM answers it. Where ``[reduction] validity_change`` caps a PROM's radius R below the cell
@@ -63,7 +64,7 @@ class CenterTask:
     cell: tuple
     designs: tuple
     scene: Scene
-    scale: float = RADIUS_SCALE
+    scale: float | None = None          # the atlas's s; None: the scene's [reduction] atlas_scale
 
     @property
     def index(self) -> int:
@@ -75,7 +76,7 @@ class CenterTask:
         return dict(zip(grid.names, grid.center(self.cell).tolist()))
 
 
-def center_tasks(scene: Scene, numbered: list[tuple[int, dict]], scale: float = RADIUS_SCALE) -> list[CenterTask]:
+def center_tasks(scene: Scene, numbered: list[tuple[int, dict]], scale: float | None = None) -> list[CenterTask]:
     """The tasks of a sweep's (number, design) pairs: per centre, chunks of at most :data:`CENTER_ROWS`."""
     groups = assign(cover(scene, scale), [design for _, design in numbered])
     tasks = []
