@@ -27,7 +27,10 @@ On SO1: at s = 1 (4 × 4 × 6 cells, h = r) the largest error was 3.19 %; at s =
 3.38 % at a cell's corner; at s = 0.8 (5 × 5 × 8 cells: h = 0.8 r for the heights, 0.75 r for the thickness)
 2.15 %, but 3.51 % at a cell's corner with a third seed; at s = 0.7 (6 × 6 × 9 cells: h = 2/3 r) 1.43 %, and at
 most 2.93 % at the 2,592 corners of all 324 cells (docs/devlog.md, "2026-12-06: the atlas at its targets" and
-"issue 51, the second round merged").
+"issue 51, the second round merged"). That holds on SO1's box (and CO's), not on every box: on SO3's (eight
+shapes) at s = 0.7 the PROM errs +22.8 % at ξ = 0, a corner of its cell, and up to +31 % at that cell's corners;
+the corner errors fall a little faster than s², within 3 % at s = 0.2 (``validate_atlas.py --start-corners``; docs/devlog.md,
+"the atlas's cells on scenes with many shapes"). A scene sets its s in ``[reduction] atlas_scale``.
 """
 from __future__ import annotations
 
