@@ -7,10 +7,15 @@
    designs of the sweep drawn with --check-seed and at the --farthest designs farthest from their
    centre relative to the cell's half-width (the atlas's radius); per design the relative distance error
    (d_PROM - d_FOM) / |d_FOM|, and the largest, against the limit 3 % (the atlas's radius is set so that
-   it holds: aquarom_fenics.studies.atlas.RADIUS_SCALE).
+   it holds: the scene's [reduction] atlas_scale, default aquarom_fenics.studies.atlas.RADIUS_SCALE = 0.7,
+   which holds on SO1, not on SO3: there 0.2).
 3. With --corners K, apart from that check: the FOM at the 2^p corners of the K cells whose checked designs
    erred most (every shape at its cell's half-width from the centre at once).
-4. With --every-corner instead of 1-3: every cell of the box at its 2^p corners, each cell's PROM against the
+4. With --start-corners K instead of 1-3: the start design (the scene's shape starts) and K seeded random
+   corners (--check-seed) of the start's cell and of one other seeded random cell of the box, each answered by
+   its cell's PROM, against the FOM (a quick check of a scene with many shapes, whose cells have too many
+   corners to visit all: SO3's have 2^8).
+5. With --every-corner instead of 1-3: every cell of the box at its 2^p corners, each cell's PROM against the
    FOM at the grid's vertices (a vertex is the corner of up to 2^p cells: one FOM run each), written to
    results/validation/atlas_corners.json.
 
@@ -20,6 +25,10 @@ apart; `--sweep-only`, as `make bench` runs it, skips the FOM check and writes o
 
     .venv/bin/python scripts/validate_atlas.py            # 1-1.5 min of sweep at s = 0.7 on 2 cores,
                                                           # then 25 FOM runs (through the FOM cache)
+    .venv/bin/python scripts/validate_atlas.py --scene so3 --start-corners 6 --atlas-scale 0.5
+                                                          # 13 FOM runs, 2 PROM builds
+
+--atlas-scale s checks the scene with ``[reduction] atlas_scale`` = s (default: the scene's own).
 """
 from __future__ import annotations
 
@@ -161,6 +170,48 @@ def every_corner(scene, workers: int, folder: Path) -> dict:
             "designs": results, "cell_of": {name: cell_of(name, grid) for name in cell_errors if name}}
 
 
+def start_corner_designs(scene, grid, count: int, seed: int) -> list[tuple[str, dict]]:
+    """(why, design) of the start design and ``count`` random corners c ± (1 - 1e-9) h (signs drawn with ``seed``,
+    pulled inside so that the cell's own PROM answers them) of the start's cell and of one other random cell."""
+    rng = np.random.default_rng(seed)
+    start = np.array([shape.start for shape in scene.shapes], dtype=float)
+    home = grid.cells(start[None, :])[0]
+    other = home
+    while grid.box_cells() > 1 and np.array_equal(other, home):
+        other = rng.integers(0, grid.counts)
+    designs = [("start", dict(zip(grid.names, start.tolist())))]
+    for why, cell in (("start cell corner", home), ("other cell corner", other)):
+        center = grid.center(cell)
+        for _ in range(count):
+            signs = rng.choice((-1.0, 1.0), size=len(grid.names))
+            designs.append((why, dict(zip(grid.names, (center + (1 - 1e-9) * signs * grid.half_width).tolist()))))
+    return designs
+
+
+def start_corners(scene, count: int, seed: int, workers: int, folder: Path) -> dict:
+    """The atlas (its cells' PROMs, built in ``folder``'s empty PROM cache) against the FOM at
+    :func:`start_corner_designs`."""
+    from aquarom_fenics.studies.atlas import cover
+
+    grid = cover(scene)
+    designs = start_corner_designs(scene, grid, count, seed)
+    with atlas_cache(folder):
+        rows = prom_sweep(scene, [design for _, design in designs], workers, folder / "start-corners")
+        atlas = json.loads((folder / "start-corners" / "atlas.json").read_text())
+    checked = [(why, row | {"reach": leaf_reach(grid, row)}) for (why, _), row in zip(designs, rows)
+               if row["status"] == "completed"]
+    results = fom_check(scene, checked, workers, folder) if checked else []
+    errors = [abs(entry["relative_error"]) for entry in results if "relative_error" in entry]
+    worst = max(results, key=lambda entry: abs(entry.get("relative_error", np.inf)), default={})
+    return {"atlas_scale": grid.scale, "cells_per_shape": dict(zip(grid.names, grid.counts.tolist())),
+            "cells_in_box": grid.box_cells(), "half_width": dict(zip(grid.names, grid.half_width.tolist())),
+            "designs_checked": len(designs), "prom_answered": len(checked), "fom_completed": len(errors),
+            "builds": atlas["totals"]["built"], "build_time_s": atlas["totals"]["build_time_s"],
+            "largest_relative_error": worst.get("relative_error"), "largest_at": worst.get("design"),
+            "largest_why": worst.get("why"), "limit": LIMIT,
+            "within_limit": bool(errors) and len(errors) == len(designs) and max(errors) <= LIMIT, "designs": results}
+
+
 def cover_record(atlas: dict) -> dict:
     """The atlas's radii: the scale s, the validity radius r, the cells' half-width h ≤ s r, cells per shape."""
     return {key: atlas[key] for key in ("radius_scale", "validity_radius", "cell_half_width", "cells_per_shape",
@@ -249,17 +300,24 @@ def main() -> int:
     parser.add_argument("--every-corner", action="store_true",
                         help="instead: every cell's PROM at its 2^p corners against the FOM at the grid's vertices "
                              "(results/validation/atlas_corners.json; SO1: 324 builds, 490 FOM runs)")
+    parser.add_argument("--start-corners", type=int, default=0,
+                        help="instead: the start design and this many random corners (--check-seed) of the start's "
+                             "cell and of one other cell against the FOM (results/validation/atlas_start_corners.json)")
+    parser.add_argument("--atlas-scale", type=float, default=None,
+                        help="the scene's [reduction] atlas_scale s for this check (default: the scene's)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "validation" / "atlas.json")
     parser.add_argument("--sweep-only", action="store_true",
                         help="the atlas sweep only (results/bench/atlas_sweep.json), no FOM check")
     parser.add_argument("--bench", type=Path, default=REPOSITORY / "results" / "bench" / "atlas_sweep.json")
     args = parser.parse_args()
-    for option, least in (("samples", 1), ("workers", 1), ("random", 0), ("farthest", 0), ("corners", 0)):
+    for option, least in (("samples", 1), ("workers", 1), ("random", 0), ("farthest", 0), ("corners", 0),
+                          ("start_corners", 0)):
         if getattr(args, option) < least:
             parser.error(f"--{option} {getattr(args, option)}: a count, at least {least}")
     for variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[variable] = "1"
+    from aquarom_fenics.errors import InputError
     from aquarom_fenics.io.persistence import write_json_atomic
     from aquarom_fenics.io.scene import Scene
     from aquarom_fenics.io.versions import software_versions
@@ -267,6 +325,28 @@ def main() -> int:
     from aquarom_fenics.verification.validation.suite import machine
 
     scene = Scene.load(args.scene).replace("output", plots=False)
+    if args.atlas_scale is not None:
+        try:
+            scene = scene.replace("reduction", atlas_scale=args.atlas_scale)
+        except InputError as error:
+            parser.error(f"--atlas-scale: {error}")
+    if args.start_corners:
+        out = args.out.with_name("atlas_start_corners.json") if args.out.name == "atlas.json" else args.out
+        load_before = os.getloadavg()
+        started = time.perf_counter()
+        with tempfile.TemporaryDirectory(prefix="validate-atlas-") as scratch:
+            report = start_corners(scene, args.start_corners, args.check_seed, args.workers, Path(scratch))
+        report = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "machine": machine(), "versions": software_versions(),
+                  "scene": args.scene, "check_seed": args.check_seed, "workers": args.workers,
+                  "wall_time_s": time.perf_counter() - started, "load_average_before": load_before,
+                  "load_average_after": os.getloadavg()} | report
+        write_json_atomic(out, report)
+        largest = report["largest_relative_error"]
+        print(f"start corners at s = {report['atlas_scale']:g}: {report['fom_completed']} of {report['designs_checked']} "
+              f"designs compared, {report['builds']} PROMs built, largest relative distance error "
+              f"{100 * (largest if largest is not None else np.nan):+.2f} % ({report['largest_why']}), "
+              f"{report['wall_time_s']:.0f} s; wrote {out}")
+        return 0 if report["within_limit"] else 1
     if args.every_corner:
         out = args.out.with_name("atlas_corners.json") if args.out.name == "atlas.json" else args.out
         load_before = os.getloadavg()

@@ -232,6 +232,10 @@ class SolverSection:
     newton_coupling: str = _spec("lumped", _one_of("lumped", "krylov"), "FOM with stations: the Newton matrix holds the sparse part and a lumped added mass; 'lumped' solves with its factors (modified Newton), 'krylov' solves the exact coupled system by GMRES preconditioned by them")
 
 
+ATLAS_SCALE = 0.7
+"""The default of ``[reduction] atlas_scale`` (``atlas_cover.RADIUS_SCALE``)."""
+
+
 @dataclass(frozen=True)
 class ReductionSection:
     basis: str = _spec("default", _one_of("default", "paper"), "'paper' drops the actuation modes ψ, θ_ψ")
@@ -244,6 +248,7 @@ class ReductionSection:
     drop_tolerance: float = _spec(1e-8, _positive, "basis vectors whose remaining mass-norm is below this are dropped")
     validity_fraction: float = _spec(0.25, _positive, "PROM validity radius of a parameter as a fraction of its largest |bound| (a shape's own `radius` overrides it)")
     validity_change: float = _spec(0.0, lambda v: None if 0 <= v <= 1 else "must be in [0, 1] (0: off)", "> 0 caps each PROM's validity radius at the built design: r_k ≤ this / s_k, s_k = the largest relative ξ_k-derivative ‖∂T/∂ξ_k‖/‖T‖ of its internal force and mass tensors T, so that to first order no tensor changes by more than this fraction across the radius (docs/theory/basis.md, \"The validity radius at thin designs\"); 0: off, the radius of validity_fraction or the shape's own", legacy=0.0)
+    atlas_scale: float = _spec(ATLAS_SCALE, lambda v: None if 0 < v <= 1 else "must be in (0, 1] (a fraction of the validity radius)", "s: the PROM atlas's cells (`sweep --model prom`, the multi-start screen, [optimizer] atlas) have half-width h_k ≤ s r_k, r_k the validity radius (capped radii: h_k ≤ s R_k); smaller s, smaller cells and more PROM builds. The default 0.7 keeps the PROM within 3 % of the FOM at every cell's corners on SO1's box, not on SO3's (+22.8 % at ξ = 0; 0.2 holds there): check a scene with scripts/validate_atlas.py --start-corners (docs/user/sweep.rst)", legacy=ATLAS_SCALE)
 
 
 MAX_SCREEN = 100_000

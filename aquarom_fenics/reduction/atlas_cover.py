@@ -8,12 +8,13 @@ One PROM answers only inside its validity radius r (SPEC §8). The atlas covers 
     n_k = ⌈(upper_k - lower_k) / (2 s r_k)⌉ cells,   h_k = (upper_k - lower_k) / (2 n_k) ≤ s r_k,
     c_k = lower_k + (2 i_k + 1) h_k,   i_k = ⌊(ξ_k - lower_k) / (2 h_k)⌋,
 
-with s = :data:`RADIUS_SCALE`. A design ξ belongs to the cell i above (clipped to the box's cells when ξ
+with s the scene's ``[reduction] atlas_scale`` (default :data:`RADIUS_SCALE`). A design ξ belongs to the cell i above (clipped to the box's cells when ξ
 is in the box; a design beyond the box falls in a cell of the grid continued outside it): that cell's
 centre is the one nearest to ξ in the radius-scaled norm max_k |ξ_k - c_k| / h_k, and it holds ξ within
 h_k ≤ r_k of it, so the centre's PROM answers ξ. A centre's PROM is built through the PROM cache
 (:func:`center_prom`), keyed by the scene and the centre: every user of the atlas on one scene shares it.
-How s is set (the PROM within 3 % of the FOM inside a cell) is told in :mod:`~aquarom_fenics.studies.atlas`.
+How s is set (the PROM within 3 % of the FOM inside a cell) is told in :mod:`~aquarom_fenics.studies.atlas`:
+the default holds on SO1's box, not on every scene's (SO3's), so a scene sets its own.
 Where ``[reduction] validity_change`` caps a PROM's radius below its cell, the cell is bisected
 (:mod:`~aquarom_fenics.reduction.atlas_refine`); without the cap the cells are these.
 """
@@ -26,11 +27,13 @@ import numpy as np
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.fish_cache import shared_fish
 from aquarom_fenics.io.scene import Scene
+from aquarom_fenics.io.scene_sections import ATLAS_SCALE
 
-RADIUS_SCALE = 0.7
-"""s: the atlas's cell half-width ÷ the scene's validity radius, at most (scripts/validate_atlas.py: the PROM
-against the FOM on SO1's box, largest distance error 1.43 % at s = 0.7 and 2.93 % at the corners of every cell;
-3.51 % at a corner at s = 0.8, 3.38 % at s = 0.9, 3.19 % at s = 1; the limit 3 %)."""
+RADIUS_SCALE = ATLAS_SCALE
+"""The default s of ``[reduction] atlas_scale``: the atlas's cell half-width ÷ the scene's validity radius, at most
+(scripts/validate_atlas.py: the PROM against the FOM on SO1's box, largest distance error 1.43 % at s = 0.7 and
+2.93 % at the corners of every cell; 3.51 % at a corner at s = 0.8, 3.38 % at s = 0.9, 3.19 % at s = 1; the limit
+3 %). It does not hold on every box: on SO3's the PROM errs +22.8 % at a cell's corner at s = 0.7."""
 
 
 # ---------------------------------------------------------------------- the cover
@@ -71,8 +74,10 @@ class Cover:
         return int(np.prod(self.counts))
 
 
-def cover(scene: Scene, scale: float = RADIUS_SCALE) -> Cover:
-    """The atlas's grid over the scene's bounds, cells of half-width at most ``scale`` × the validity radius."""
+def cover(scene: Scene, scale: float | None = None) -> Cover:
+    """The atlas's grid over the scene's bounds, cells of half-width at most s × the validity radius, s = ``scale``
+    or, by default, the scene's ``[reduction] atlas_scale``."""
+    scale = scene.reduction.atlas_scale if scale is None else scale
     if not scene.shapes and not scene.gait:
         raise InputError(f"scene {scene.source} has no [shapes]: there is no design box to cover")
     if not 0 < scale <= 1:

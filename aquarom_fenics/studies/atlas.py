@@ -1,6 +1,7 @@
 """A PROM atlas: the design box covered by PROM centres, built where designs fall, for ``sweep --model prom``.
 
-The cover of the box by cells of half-width h ≤ s r (r the validity radius, s = :data:`RADIUS_SCALE`) and
+The cover of the box by cells of half-width h ≤ s r (r the validity radius, s the scene's ``[reduction]
+atlas_scale``, default :data:`RADIUS_SCALE`) and
 the PROM at a cell's centre (:func:`center_prom`, through the PROM cache) are
 :mod:`~aquarom_fenics.reduction.atlas_cover`'s, below the optimisers, whose multi-start screen uses them too (:mod:`~aquarom_fenics.optimization.screen`); a design's cell's centre holds it within h_k ≤ r_k, so that
 centre's PROM answers it. Where ``[reduction] validity_change`` caps a PROM's radius R below the cell
@@ -26,7 +27,10 @@ On SO1: at s = 1 (4 × 4 × 6 cells, h = r) the largest error was 3.19 %; at s =
 3.38 % at a cell's corner; at s = 0.8 (5 × 5 × 8 cells: h = 0.8 r for the heights, 0.75 r for the thickness)
 2.15 %, but 3.51 % at a cell's corner with a third seed; at s = 0.7 (6 × 6 × 9 cells: h = 2/3 r) 1.43 %, and at
 most 2.93 % at the 2,592 corners of all 324 cells (docs/devlog.md, "2026-12-06: the atlas at its targets" and
-"issue 51, the second round merged").
+"issue 51, the second round merged"). That holds on SO1's box (and CO's), not on every box: on SO3's (eight
+shapes) at s = 0.7 the PROM errs +22.8 % at ξ = 0, a corner of its cell, and up to +31 % at that cell's corners;
+the corner errors fall a little faster than s², within 3 % at s = 0.2 (``validate_atlas.py --start-corners``; docs/devlog.md,
+"the atlas's cells on scenes with many shapes"). A scene sets its s in ``[reduction] atlas_scale``.
 """
 from __future__ import annotations
 
@@ -63,7 +67,7 @@ class CenterTask:
     cell: tuple
     designs: tuple
     scene: Scene
-    scale: float = RADIUS_SCALE
+    scale: float | None = None          # the atlas's s; None: the scene's [reduction] atlas_scale
 
     @property
     def index(self) -> int:
@@ -75,7 +79,7 @@ class CenterTask:
         return dict(zip(grid.names, grid.center(self.cell).tolist()))
 
 
-def center_tasks(scene: Scene, numbered: list[tuple[int, dict]], scale: float = RADIUS_SCALE) -> list[CenterTask]:
+def center_tasks(scene: Scene, numbered: list[tuple[int, dict]], scale: float | None = None) -> list[CenterTask]:
     """The tasks of a sweep's (number, design) pairs: per centre, chunks of at most :data:`CENTER_ROWS`."""
     groups = assign(cover(scene, scale), [design for _, design in numbered])
     tasks = []

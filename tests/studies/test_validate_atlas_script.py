@@ -77,3 +77,29 @@ def test_a_count_out_of_range_is_refused_before_any_run(option, value, monkeypat
     assert stop.value.code == 2
     assert capsys.readouterr().err.strip().splitlines()[-1].endswith(f"{option} {value}: a count, at least "
                                                                      f"{0 if option == '--corners' else 1}")
+
+
+def test_the_start_corners_are_the_start_and_seeded_corners_of_its_cell_and_of_one_other():
+    scene = so1_like().replace("reduction", atlas_scale=0.5)
+    grid = atlas.cover(scene)
+    designs = script.start_corner_designs(scene, grid, 4, seed=3)
+    assert [why for why, _ in designs] == ["start"] + ["start cell corner"] * 4 + ["other cell corner"] * 4
+    xis = np.array([[design[name] for name in grid.names] for _, design in designs])
+    assert np.array_equal(xis[0], [0.0, 0.0, 0.0])
+    cells = [tuple(cell) for cell in grid.cells(xis)]
+    assert cells[0] == (4, 4, 6) and set(cells[1:5]) == {(4, 4, 6)}          # ξ = 0: the lower corner of 4_4_6
+    assert len(set(cells[5:])) == 1 and cells[5] != cells[0]                  # one other cell
+    for xi, cell in zip(xis[1:], cells[1:]):
+        offset = np.abs(xi - grid.center(cell)) / grid.half_width
+        assert np.allclose(offset, 1, rtol=0, atol=2e-9) and np.all(offset < 1)      # a corner, inside its cell
+    assert designs == script.start_corner_designs(scene, grid, 4, seed=3)                # seeded
+    assert designs != script.start_corner_designs(scene, grid, 4, seed=4)
+
+
+def test_a_bad_atlas_scale_is_refused_before_any_run(monkeypatch, capsys):
+    monkeypatch.setattr("sys.argv", ["validate_atlas.py", "--atlas-scale", "1.5", "--start-corners", "2"])
+    with pytest.raises(SystemExit) as stop:
+        script.main()
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "--atlas-scale" in err and "atlas_scale = 1.5 must be in (0, 1]" in err
