@@ -98,3 +98,14 @@ def test_every_corner_of_a_capped_scene_walks_the_leaves_that_answered_the_desig
     assert len(shared) == 4 and len({entry["fom_distance_m"] for entry in shared}) == 2
     with pytest.raises(ValueError, match="needs the designs"):
         script.every_corner(scene, 1, tmp_path / "again")
+
+
+def test_every_corner_of_a_scene_without_capped_radii_walks_every_regular_cell(tmp_path, monkeypatch):
+    monkeypatch.setenv("AQUAROM_CACHE", str(tmp_path / "cache"))
+    table = tomllib.loads(CAPPED.replace("validity_change = 0.09", "validity_change = 0.0")
+                          .replace("bounds = [-0.3, 0.3]", "bounds = [-0.05, 0.05]"))
+    scene = scene_from_dict(table, source="<test>")                  # one regular cell, no design needed
+    report = script.every_corner(scene, 1, tmp_path / "check")
+    assert report["walked"] == "every cell of the box" and report["cell_of"] == {"0_0": [0, 0]}
+    assert (report["cells"], report["corners"], report["vertices"], report["answered_by_own_cell"]) == (1, 4, 4, 4)
+    assert report["compared"] == 4
