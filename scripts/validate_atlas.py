@@ -17,7 +17,9 @@
    corners to visit all: SO3's have 2^8).
 5. With --every-corner instead of 1-3: every cell of the box at its 2^p corners, each cell's PROM against the
    FOM at the grid's vertices (a vertex is the corner of up to 2^p cells: one FOM run each), written to
-   results/validation/atlas_corners.json.
+   results/validation/atlas_corners.json. On a scene with capped radii ([reduction] validity_change > 0, whose
+   cells are divided as their PROMs ask) the cells walked are the leaves that answered the atlas sweep of
+   --samples designs (--seed): the cells whose PROMs answered designs.
 
 Writes results/validation/atlas.json (and results/bench/atlas_sweep.json: the sweep's time, builds and radii,
 and where the workers' time went: builds and batched solves, wall and thread CPU, each worker's first build
@@ -121,37 +123,70 @@ def corner_check(scene, results: list[dict], cells: int, workers: int, folder: P
 def every_cell_corner(grid) -> tuple[list, list, dict]:
     """(the box's cells, (vertex, corner design) of each cell's 2^p corners c ± (1 - 1e-9) h, {vertex: ξ}): the
     grid vertex j (per shape 0 … n_k) is ξ_k = lower_k + 2 j_k h_k, the corner of up to 2^p cells."""
+    from aquarom_fenics.reduction.atlas_refine import base_node
+
     cells = list(itertools.product(*(range(int(n)) for n in grid.counts)))
+    corners, vertices = leaf_corners(grid, [base_node(cell) for cell in cells])
+    return cells, [(vertex, design) for vertex, design, _ in corners], vertices
+
+
+def leaf_corners(grid, nodes: list) -> tuple[list, dict]:
+    """((vertex, corner design, node) of each node's 2^p corners c ± (1 - 1e-9) h, {vertex: ξ}) for atlas cells
+    regular or refined (``atlas_refine.Node``). A vertex is an integer point of the grid of the most halvings D_k
+    among the nodes, ξ_k = lower_k + 2 v_k h_k / 2^{D_k}: a node's corner is v_k = (j_k + (1 ± 1) / 2) 2^{D_k - L_k},
+    shared by the cells meeting there whatever their levels (D = 0: the regular grid's vertices)."""
+    depth = np.max([node.levels for node in nodes], axis=0) if nodes else np.zeros(len(grid.names), dtype=int)
     corners, vertices = [], {}
-    for cell in cells:
-        center = grid.center(np.array(cell))
+    for node in nodes:
+        center, half = node.center(grid), node.half_width(grid)
+        scale = 2 ** (depth - np.asarray(node.levels))
         for signs in itertools.product((-1.0, 1.0), repeat=len(grid.names)):
-            vertex = tuple(int(i + (s + 1) / 2) for i, s in zip(cell, signs))
-            vertices.setdefault(vertex, grid.lower + 2.0 * np.array(vertex) * grid.half_width)
-            corners.append((vertex, dict(zip(grid.names, (center + (1 - 1e-9) * np.array(signs)
-                                                         * grid.half_width).tolist()))))
-    return cells, corners, vertices
+            vertex = tuple(int((j + (s + 1) // 2) * k) for j, s, k in zip(node.index, map(int, signs), scale))
+            vertices.setdefault(vertex, grid.lower + 2.0 * np.array(vertex) * grid.half_width / 2.0 ** depth)
+            corners.append((vertex, dict(zip(grid.names, (center + (1 - 1e-9) * np.array(signs) * half).tolist())),
+                            node))
+    return corners, vertices
 
 
-def every_corner(scene, workers: int, folder: Path) -> dict:
+def used_leaves(grid, rows: list[dict]) -> list:
+    """The atlas cells (leaves, on a scene with capped radii) that answered the completed ``rows``, in the order
+    of atlas.json (base cell, levels, index)."""
+    from aquarom_fenics.reduction.atlas_refine import node_of
+
+    names = {row["prom_center"] for row in rows if row["status"] == "completed"}
+    return sorted((node_of(name, grid) for name in names), key=lambda node: (node.base_cell(), node.levels,
+                                                                                 node.index))
+
+
+def every_corner(scene, workers: int, folder: Path, designs: list[dict] | None = None) -> dict:
     """Each cell's PROM at its 2^p corners c ± (1 - 1e-9) h (pulled inside, so that the cell's own PROM answers)
-    against the FOM at the grid vertex c ± h (one FOM run per vertex, shared by the cells meeting there; the
-    1e-9 h between the two moves the distance far below the 3 % tested)."""
-    from aquarom_fenics.studies.atlas import cell_of, cover
+    against the FOM at the vertex c ± h (one FOM run per vertex, shared by the cells meeting there; the 1e-9 h
+    between the two moves the distance far below the 3 % tested). The cells: every regular cell of the box, or,
+    on a scene with capped radii (``[reduction] validity_change`` > 0), whose cells are refined as PROMs are
+    built, the leaves that answered an atlas sweep of ``designs`` (built first, in the same PROM cache)."""
+    from aquarom_fenics.reduction.atlas_refine import base_node
+    from aquarom_fenics.studies.atlas import cover
 
     grid = cover(scene)
-    cells, corners, vertices = every_cell_corner(grid)
+    capped = scene.reduction.validity_change > 0
     with atlas_cache(folder):
-        rows = prom_sweep(scene, [design for _, design in corners], workers, folder / "every-corner")
+        if capped:
+            if not designs:
+                raise ValueError("a scene with capped radii needs the designs whose leaves are walked")
+            nodes = used_leaves(grid, prom_sweep(scene, designs, workers, folder / "leaves"))
+        else:
+            nodes = [base_node(cell) for cell in itertools.product(*(range(int(n)) for n in grid.counts))]
+        corners, vertices = leaf_corners(grid, nodes)
+        rows = prom_sweep(scene, [design for _, design, _ in corners], workers, folder / "every-corner")
     keys = list(vertices)
     checked = [("vertex", dict(zip(grid.names, vertices[key].tolist())) | {"prom_center": "", "reach": 1.0,
                                                                             "distance_m": np.nan, "design": k})
                for k, key in enumerate(keys)]
     fom = {key: entry for key, entry in zip(keys, fom_check(scene, checked, workers, folder))}
     results = []
-    for (vertex, design), row in zip(corners, rows):
+    for (vertex, design, node), row in zip(corners, rows):
         reference = fom[vertex]
-        entry = {"design": design, "vertex": list(vertex), "prom_center": row.get("prom_center"),
+        entry = {"design": design, "vertex": list(vertex), "cell": node.id, "prom_center": row.get("prom_center"),
                  "prom_status": row["status"], "prom_distance_m": row.get("distance_m"),
                  "fom_status": reference["fom_status"], "fom_distance_m": reference["fom_distance_m"]}
         if row["status"] == "completed" and reference["fom_status"] == "completed":
@@ -161,13 +196,16 @@ def every_corner(scene, workers: int, folder: Path) -> dict:
     worst = max(results, key=lambda entry: abs(entry.get("relative_error", np.inf)))
     cell_errors = {}
     for entry in results:
-        cell_errors.setdefault(entry["prom_center"], []).append(abs(entry.get("relative_error", np.inf)))
-    return {"cells": len(cells), "corners": len(corners), "vertices": len(keys), "compared": len(errors),
+        cell_errors.setdefault(entry["cell"], []).append(abs(entry.get("relative_error", np.inf)))
+    return {"walked": f"the leaves that answered {len(designs)} designs" if capped else "every cell of the box",
+            "cells": len(nodes), "corners": len(corners), "vertices": len(keys), "compared": len(errors),
+            "answered_by_own_cell": sum(entry["prom_center"] == entry["cell"] for entry in results),
             "largest_relative_error": worst.get("relative_error"), "largest_at": worst["design"],
-            "largest_cell": worst["prom_center"], "above_limit": sum(error > LIMIT for error in errors),
-            "limit": LIMIT, "within_limit": len(errors) == len(results) and max(errors) <= LIMIT,
+            "largest_cell": worst["cell"], "above_limit": sum(error > LIMIT for error in errors),
+            "limit": LIMIT, "within_limit": bool(errors) and len(errors) == len(results) and max(errors) <= LIMIT
+            and all(entry["prom_center"] == entry["cell"] for entry in results),
             "cells_above_limit": sorted(name for name, errs in cell_errors.items() if max(errs) > LIMIT),
-            "designs": results, "cell_of": {name: cell_of(name, grid) for name in cell_errors if name}}
+            "designs": results, "cell_of": {node.id: list(node.index) for node in nodes}}
 
 
 def start_corner_designs(scene, grid, count: int, seed: int) -> list[tuple[str, dict]]:
@@ -299,7 +337,8 @@ def main() -> int:
                              "checked (default 0; reported apart from the check)")
     parser.add_argument("--every-corner", action="store_true",
                         help="instead: every cell's PROM at its 2^p corners against the FOM at the grid's vertices "
-                             "(results/validation/atlas_corners.json; SO1: 324 builds, 490 FOM runs)")
+                             "(results/validation/atlas_corners.json; SO1: 324 builds, 490 FOM runs); with capped "
+                             "radii the leaves that answered the sweep of --samples designs")
     parser.add_argument("--start-corners", type=int, default=0,
                         help="instead: the start design and this many random corners (--check-seed) of the start's "
                              "cell and of one other cell against the FOM (results/validation/atlas_start_corners.json)")
@@ -352,14 +391,17 @@ def main() -> int:
         load_before = os.getloadavg()
         started = time.perf_counter()
         with tempfile.TemporaryDirectory(prefix="validate-atlas-") as scratch:
-            report = every_corner(scene, args.workers, Path(scratch))
+            report = every_corner(scene, args.workers, Path(scratch), latin_hypercube(scene, args.samples, args.seed)
+                                  if scene.reduction.validity_change > 0 else None)
         report = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "machine": machine(), "versions": software_versions(),
                   "scene": args.scene, "workers": args.workers, "wall_time_s": time.perf_counter() - started,
                   "load_average_before": load_before, "load_average_after": os.getloadavg()} | report
         write_json_atomic(out, report)
-        print(f"every corner: {report['compared']} of {report['corners']} corners of {report['cells']} cells "
+        print(f"every corner ({report['walked']}): {report['compared']} of {report['corners']} corners of "
+              f"{report['cells']} cells, {report['answered_by_own_cell']} answered by their own cell "
               f"({report['vertices']} FOM vertices), largest relative distance error "
-              f"{100 * report['largest_relative_error']:+.2f} % at {report['largest_at']} ({report['largest_cell']}), "
+              f"{100 * (report['largest_relative_error'] if report['largest_relative_error'] is not None else np.nan):+.2f} "
+              f"% at {report['largest_at']} ({report['largest_cell']}), "
               f"{report['above_limit']} above {100 * LIMIT:g} %; wrote {out}")
         return 0 if report["within_limit"] else 1
     designs = latin_hypercube(scene, args.samples, args.seed)

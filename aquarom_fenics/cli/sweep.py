@@ -188,7 +188,7 @@ def dry_run(args, scene, designs, source, kept, cluster, workers) -> int:
     where = cluster.describe() if cluster.distributed else (f"{workers} local worker process(es)" if workers > 1
                                                             else "this process (one worker)")
     say(f"  runs on: {where}")
-    centres = 0
+    centres, most = 0, None
     if args.model == "prom":
         from aquarom_fenics.studies.atlas import assign, cover
 
@@ -196,13 +196,28 @@ def dry_run(args, scene, designs, source, kept, cluster, workers) -> int:
         say(f"  PROM atlas: {centres} centre(s) to build or take from the PROM cache "
             f"({cover(scene).box_cells()} cells in the box)")
         if scene.reduction.validity_change > 0:
-            from aquarom_fenics.reduction.atlas_refine import MAX_DEPTH
-
-            say(f"  refinement: [reduction] validity_change caps each PROM's radius at its centre: a cell whose "
-                f"capped radius is below it is divided at once into the halvings that radius asks for, up to "
-                f"{MAX_DEPTH} per shape, the part holding a design built and judged the same way "
-                "(known only as the PROMs are built: not in the estimate)")
+            centres, most = division_line(scene, todo)
     seconds = estimate(scene, missing, args.model, 1 if cluster.distributed else workers, centres)
-    say(f"  estimate: ~{seconds:.0f} s" + (" on one worker (divided by the number of the cluster's workers)"
-                                          if cluster.distributed else ""))
+    bound = (f" for the {centres} build(s) at least; at most ~"
+             f"{estimate(scene, missing, args.model, 1 if cluster.distributed else workers, most):.0f} s"
+             if most is not None else "")
+    say(f"  estimate: ~{seconds:.0f} s" + bound + (" on one worker (divided by the number of the cluster's workers)"
+                                                   if cluster.distributed else ""))
     return 0
+
+
+def division_line(scene, designs: list[dict]) -> tuple[int, int]:
+    """Say what the capped atlas's divisions will build for ``designs`` as far as the PROM cache tells
+    (``studies.atlas_plan``: the ways down through its PROMs, read, none built); (builds at least, at most)."""
+    from aquarom_fenics.reduction.atlas_refine import MAX_DEPTH
+    from aquarom_fenics.studies.atlas_plan import division_plan
+
+    plan = division_plan(scene, designs)
+    say(f"  refinement: [reduction] validity_change caps each PROM's radius at its centre: a cell whose capped "
+        f"radius is below it is divided at once into the halvings that radius asks for, up to {MAX_DEPTH} per "
+        f"shape. Through the PROM cache ({plan.read} PROM(s) read, none built): {plan.answered_from_cache} of "
+        f"{plan.designs} designs reach a cached leaf ({plan.leaves_in_cache} leaves); the others stop at "
+        f"{plan.to_build} cell(s) not in the cache: {plan.to_build} to {plan.at_most} PROM builds (each of those "
+        "cells, and at most one per halving left below it for each of its designs)"
+        + (f"; {plan.refused} design(s) meet a cell with no PROM" if plan.refused else ""))
+    return plan.to_build, plan.at_most

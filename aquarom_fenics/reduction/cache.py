@@ -68,3 +68,21 @@ def clear(kinds: list[str]) -> list[Path]:
             shutil.rmtree(folder)
             removed.append(folder)
     return removed
+
+
+def stored_prom(scene: Scene, xi_center: np.ndarray, parametric: bool = True):
+    """The PROM of ``scene`` at ``xi_center`` if the cache holds an intact entry of it (the key of
+    :func:`cached_prom` without a basis centre), else None: nothing is built, stored or removed (a dry run's
+    look-up)."""
+    from aquarom_fenics.errors import InputError
+    from aquarom_fenics.io.persistence import read_intact
+    from aquarom_fenics.reduction.prom import ReducedModel
+
+    key = entry_key("prom", scene.prom_hash, np.asarray(xi_center, dtype=float), parametric)
+    path = cache_root() / "prom" / f"{key}.npz"
+    if not path.exists():
+        return None
+    try:
+        return read_intact(path, lambda entry: ReducedModel.load(entry, prom_hash=scene.prom_hash))
+    except (InputError, ValueError):
+        return None

@@ -22,7 +22,8 @@ The atlas's radius is h: inside it the PROM is to stay within 3 % of the FOM in 
 SPEC §8's 5 %. It is set by s, the scale of the validity radius, checked by ``scripts/validate_atlas.py``
 (results/validation/atlas.json): the FOM at 20 random designs of a 20,000-design atlas sweep of SO1's box and
 at the 5 designs farthest from their centres (on the cells' faces, where the Taylor terms in Δξ are largest),
-with ``--corners`` at the corners of the cells that erred most, with ``--every-corner`` at every cell's corners.
+with ``--corners`` at the corners of the cells that erred most, with ``--every-corner`` at every cell's corners
+(with capped radii: every corner of the leaves that answered the sweep's designs).
 On SO1: at s = 1 (4 × 4 × 6 cells, h = r) the largest error was 3.19 %; at s = 0.9 (5 × 5 × 7 cells) 2.22 %, but
 3.38 % at a cell's corner; at s = 0.8 (5 × 5 × 8 cells: h = 0.8 r for the heights, 0.75 r for the thickness)
 2.15 %, but 3.51 % at a cell's corner with a third seed; at s = 0.7 (6 × 6 × 9 cells: h = 2/3 r) 1.43 %, and at
