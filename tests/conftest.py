@@ -102,6 +102,25 @@ def make_scene():
     return coarse_scene
 
 
+def capped_block_scene(name: str, scale: float = 0.7) -> str:
+    """The TOML of the capped atlas's test scene: the block on level 1, a 0.2 s swim, two shapes of radius
+    0.05 / s (regular cells of half-width 0.05: 6 × 1 at the atlas scale s) and ``[reduction] validity_change``
+    0.09, which caps the PROMs' radii below some cells (tests/studies/test_atlas_capped.py tells which)."""
+    radius = 0.05 / scale
+    return f"""
+name = "{name}"
+[mesh]
+level = 1
+[solver]
+duration = 0.2
+[reduction]
+validity_change = 0.09
+[shapes]
+z_tail = {{ bounds = [-0.3, 0.3], radius = {radius!r} }}
+y_thin = {{ bounds = [0.0, 0.1], radius = {radius!r} }}
+"""
+
+
 @pytest.fixture
 def no_single_reduced_runs(monkeypatch):
     """Make any ``simulate_reduced`` call of the batched path fail: a sweep's designs must be integrated together."""

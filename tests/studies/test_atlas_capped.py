@@ -7,6 +7,7 @@ import tomllib
 import numpy as np
 import pytest
 
+from conftest import capped_block_scene
 from aquarom_fenics.cli.sweep import atlas_line
 from aquarom_fenics.dynamics.reduced_dynamics import simulate_reduced
 from aquarom_fenics.io.scene import scene_from_dict
@@ -16,18 +17,7 @@ from aquarom_fenics.reduction.atlas_refine import node_of
 from aquarom_fenics.studies import sweep
 
 S = RADIUS_SCALE
-SCENE = f"""
-name = "atlas-capped-test"
-[mesh]
-level = 1
-[solver]
-duration = 0.2
-[reduction]
-validity_change = 0.09
-[shapes]
-z_tail = {{ bounds = [-0.3, 0.3], radius = {0.05 / S!r} }}
-y_thin = {{ bounds = [0.0, 0.1], radius = {0.05 / S!r} }}
-"""
+SCENE = capped_block_scene("atlas-capped-test", S)
 """Regular cells of half-width 0.05 in both shapes (6 × 1). The block's relative ξ-derivatives are about 0.55-0.6
 (z_tail) and 1.24-1.5 (y_thin), so the capped radii are about 0.15 and 0.065: s R ≈ 0.1 holds the cell in z_tail,
 s R ≈ 0.045 does not in y_thin, whose cells are bisected once (half-width 0.025)."""

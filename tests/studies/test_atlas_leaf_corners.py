@@ -10,6 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from conftest import capped_block_scene
 from aquarom_fenics.io.scene import scene_from_dict
 from aquarom_fenics.reduction.atlas_cover import Cover
 from aquarom_fenics.reduction.atlas_refine import Refiner, holds
@@ -66,18 +67,7 @@ def test_the_regular_cells_vertices_are_the_grids_when_no_cell_is_divided():
         (i, j): (0.5 * i, 0.5 * j) for i in range(3) for j in range(2)}
 
 
-CAPPED = """
-name = "atlas-leaf-corners-test"
-[mesh]
-level = 1
-[solver]
-duration = 0.2
-[reduction]
-validity_change = 0.09
-[shapes]
-z_tail = {{ bounds = [-0.3, 0.3], radius = {r!r} }}
-y_thin = {{ bounds = [0.0, 0.1], radius = {r!r} }}
-""".format(r=0.05 / S)
+CAPPED = capped_block_scene("atlas-leaf-corners-test", S)
 """test_atlas_capped.py's scene: cells of half-width 0.05, bisected once in y_thin by the capped radius."""
 
 

@@ -7,6 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from conftest import capped_block_scene
 from aquarom_fenics.cli import main
 from aquarom_fenics.io.scene import scene_from_dict
 from aquarom_fenics.parallel import InProcess
@@ -16,18 +17,7 @@ from aquarom_fenics.studies import sweep
 from aquarom_fenics.studies.atlas_plan import division_plan
 
 S = RADIUS_SCALE
-SCENE = f"""
-name = "atlas-plan-test"
-[mesh]
-level = 1
-[solver]
-duration = 0.2
-[reduction]
-validity_change = 0.09
-[shapes]
-z_tail = {{ bounds = [-0.3, 0.3], radius = {0.05 / S!r} }}
-y_thin = {{ bounds = [0.0, 0.1], radius = {0.05 / S!r} }}
-"""
+SCENE = capped_block_scene("atlas-plan-test", S)
 """Regular cells of half-width 0.05 (6 × 1); test_atlas_capped.py's scene."""
 DESIGNS = [{"z_tail": -0.27, "y_thin": 0.01}, {"z_tail": -0.27, "y_thin": 0.04}, {"z_tail": -0.27, "y_thin": 0.09},
            {"z_tail": 0.27, "y_thin": 0.09}]
