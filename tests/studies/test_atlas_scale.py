@@ -79,11 +79,13 @@ def test_the_bisection_of_capped_radii_uses_the_scenes_scale(scale, leaf_half_wi
     assert np.all(half <= scale * 0.04 * (1 + 1e-12)) and np.any(2 * half > scale * 0.04)
 
 
-CHECKED_SCALES = {"so1": 0.7, "so4": 0.7, "co": 0.7, "so2": 0.2, "so3": 0.2, "so5": 0.2, "so6": 0.2, "so7": 0.2,
+CHECKED_SCALES = {"so1": 0.7, "so4": 0.7, "co": 0.7, "so2": 0.2, "so3": 0.15, "so5": 0.2, "so6": 0.15, "so7": 0.2,
                   "so8": 0.2, "so9": 0.2}
 """The atlas's s each shipped study sets: 0.7 where the PROM stayed within 3 % of the FOM at the cells' corners
-(SO1, CO; SO4 is SO1 on level 4), 0.2 where 0.7 erred +21 to +47 % and 0.2 held (SO2, SO3, SO7-SO9; SO5 and SO6 are
-SO2 and SO3 on level 4): docs/devlog.md, "the atlas's cells on scenes with many shapes"."""
+(SO1, CO; SO4 is SO1 on level 4); 0.15 on SO3, within 3 % around its start and its optimum; 0.2 on SO2 and
+SO7-SO9, where 0.7 erred +21 to +47 % around the start and 0.2 held there but not around the optimum (+4.5 to +13.1 %)
+(SO5 and SO6 are SO2 and SO3 on level 4): docs/devlog.md, "the atlas's cells on scenes with many shapes" and "the
+shipped studies' atlas scale"."""
 
 
 @pytest.mark.parametrize("name", sorted(CHECKED_SCALES))
