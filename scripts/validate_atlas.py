@@ -162,13 +162,13 @@ def every_corner(scene, workers: int, folder: Path, designs: list[dict] | None =
     """Each cell's PROM at its 2^p corners c ± (1 - 1e-9) h (pulled inside, so that the cell's own PROM answers)
     against the FOM at the vertex c ± h (one FOM run per vertex, shared by the cells meeting there; the 1e-9 h
     between the two moves the distance far below the 3 % tested). The cells: every regular cell of the box, or,
-    on a scene with capped radii (``[reduction] validity_change`` > 0), whose cells are refined as PROMs are
+    on a scene with capped radii (``[reduction] validity_change`` or ``atlas_change`` > 0), whose cells are refined as PROMs are
     built, the leaves that answered an atlas sweep of ``designs`` (built first, in the same PROM cache)."""
-    from aquarom_fenics.reduction.atlas_refine import base_node
+    from aquarom_fenics.reduction.atlas_refine import base_node, divides
     from aquarom_fenics.studies.atlas import cover
 
     grid = cover(scene)
-    capped = scene.reduction.validity_change > 0
+    capped = divides(scene)
     with atlas_cache(folder):
         if capped:
             if not designs:
@@ -361,6 +361,7 @@ def main() -> int:
     from aquarom_fenics.io.scene import Scene
     from aquarom_fenics.io.versions import software_versions
     from aquarom_fenics.studies.sweep import latin_hypercube, summary
+    from aquarom_fenics.reduction.atlas_refine import divides
     from aquarom_fenics.verification.validation.suite import machine
 
     scene = Scene.load(args.scene).replace("output", plots=False)
@@ -392,7 +393,7 @@ def main() -> int:
         started = time.perf_counter()
         with tempfile.TemporaryDirectory(prefix="validate-atlas-") as scratch:
             report = every_corner(scene, args.workers, Path(scratch), latin_hypercube(scene, args.samples, args.seed)
-                                  if scene.reduction.validity_change > 0 else None)
+                                  if divides(scene) else None)
         report = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "machine": machine(), "versions": software_versions(),
                   "scene": args.scene, "workers": args.workers, "wall_time_s": time.perf_counter() - started,
                   "load_average_before": load_before, "load_average_after": os.getloadavg()} | report

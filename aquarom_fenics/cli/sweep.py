@@ -190,12 +190,13 @@ def dry_run(args, scene, designs, source, kept, cluster, workers) -> int:
     say(f"  runs on: {where}")
     centres, most = 0, None
     if args.model == "prom":
+        from aquarom_fenics.reduction.atlas_refine import divides
         from aquarom_fenics.studies.atlas import assign, cover
 
         centres = len(assign(cover(scene), todo))
         say(f"  PROM atlas: {centres} centre(s) to build or take from the PROM cache "
             f"({cover(scene).box_cells()} cells in the box)")
-        if scene.reduction.validity_change > 0:
+        if divides(scene):
             centres, most = division_line(scene, todo)
     seconds = estimate(scene, missing, args.model, 1 if cluster.distributed else workers, centres)
     bound = (f" for the {centres} build(s) at least; at most ~"

@@ -182,8 +182,9 @@ class Refiner:
 
     @property
     def capped(self) -> bool:
-        """Whether PROM radii are capped at their centres (``[reduction] validity_change`` > 0); if not, R = r."""
-        return self.scene.reduction.validity_change > 0
+        """Whether PROM radii are capped at their centres (``[reduction] validity_change`` or ``atlas_change``
+        > 0); if not, R = r."""
+        return divides(self.scene)
 
     def radius(self, node: Node) -> np.ndarray:
         """R of the PROM at the node's centre: the scene's r when radii are not capped (no build: every base cell
@@ -191,7 +192,7 @@ class Refiner:
         if not self.capped:
             return self.grid.radius
         if node not in self.radii:
-            self.radii[node] = np.asarray(self.prom(node).validity_radius, dtype=float)
+            self.radii[node] = atlas_radius(self.scene, self.prom(node))
         return self.radii[node]
 
     def prom(self, node: Node):
@@ -233,6 +234,28 @@ class Refiner:
             self.met[node]["halvings"] = {name: int(d) for name, d in zip(self.grid.names, down) if d}
             path.append(node)
             node = part(self.grid, node, down, xi)
+
+
+def divides(scene) -> bool:
+    """Whether the atlas's cells are divided where their PROMs' radii are capped: ``[reduction] validity_change``
+    or ``atlas_change`` > 0."""
+    return scene.reduction.validity_change > 0 or scene.reduction.atlas_change > 0
+
+
+def atlas_radius(scene, prom) -> np.ndarray:
+    """R of a PROM in the atlas: its validity radius (capped by ``[reduction] validity_change``), and with
+    ``[reduction] atlas_change`` = c_a > 0 also R_k ≤ c_a / s_k, s_k its tensors' largest relative ξ_k-derivative
+    (``reductor.validity_radii``'s rule): the atlas's cells divided where the tensors change fast, the PROM's own
+    radius, which the optimisers use, unchanged."""
+    from aquarom_fenics.reduction.reductor import validity_radii
+
+    radius = np.asarray(prom.validity_radius, dtype=float)
+    change = scene.reduction.atlas_change
+    if change <= 0:
+        return radius
+    p = radius.size
+    capped = validity_radii(scene.replace("reduction", validity_change=change), prom.elastic, prom.inertia, p)
+    return np.minimum(radius, capped)
 
 
 def leaf_record(grid: Cover, leaf: Leaf) -> dict:

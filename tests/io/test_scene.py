@@ -333,7 +333,7 @@ def test_the_region_axis_and_head_end_keys_keep_the_hashes_of_the_scenes_before_
     for section, key in (("mesh", "axis"), ("mesh", "head_end"), ("regions", "head"), ("regions", "muscles"),
                          ("regions", "muscle_pairs"), ("material", "law"), ("reduction", "stroke_amplitude"),
                          ("reduction", "validity_change"), ("reduction", "stroke_sensitivities"),
-                         ("reduction", "atlas_scale"),
+                         ("reduction", "atlas_scale"), ("reduction", "atlas_change"),
                          ("fluid", "thrust_factor"), ("fluid", "drag_factor"),
                          ("cooptimization", "effort"), ("optimizer", "screen"),
                          ("optimizer", "atlas"), ("optimizer", "expand_ratio"),

@@ -34,7 +34,7 @@ def thin_near_a1(center):
 
 
 def test_the_leaves_corners_are_inside_their_own_leaf_and_share_the_vertices_where_leaves_meet():
-    refiner = Refiner(SimpleNamespace(reduction=SimpleNamespace(validity_change=0.03)), GRID, prom_at=thin_near_a1)
+    refiner = Refiner(SimpleNamespace(reduction=SimpleNamespace(validity_change=0.03, atlas_change=0.0)), GRID, prom_at=thin_near_a1)
     xis = np.random.default_rng(5).uniform(0, 1, size=(60, 2))
     rows = [{"status": "completed", "prom_center": refiner.leaf(xi).node.id} for xi in xis]
     rows.append({"status": "refused", "prom_center": "1_1"})                  # not a leaf that answered

@@ -19,7 +19,7 @@ GRID = Cover(("a", "b"), np.zeros(2), np.ones(2), np.array([0.25, 0.25]), np.arr
 
 
 def capped(change=0.03):
-    return SimpleNamespace(reduction=SimpleNamespace(validity_change=change))
+    return SimpleNamespace(reduction=SimpleNamespace(validity_change=change, atlas_change=0.0))
 
 
 def fake_prom_at(radius, calls):
@@ -123,3 +123,33 @@ def test_a_designs_leaf_does_not_depend_on_the_order_of_the_queries():
             down = np.asarray(below.levels) - np.asarray(parent.levels)
             assert list(down) == list(halvings(first.radii[parent], parent.half_width(GRID), S,
                                                MAX_DEPTH - np.asarray(parent.levels)))
+
+
+def tensor(constant, first):
+    """A Taylor tensor T(ξ) = T0 + Σ_k ξ_k T1[k] (constant T0, first T1 (p, ...))."""
+    return SimpleNamespace(constant=np.asarray(constant, dtype=float), first=np.asarray(first, dtype=float))
+
+
+def test_atlas_change_caps_the_atlas_radius_by_the_tensors_rate_and_leaves_the_proms_own():
+    """R = min(r, c_a / s_k), s_k = max_T ‖∂T/∂ξ_k‖ / ‖T‖ over the internal-force and mass tensors: a PROM whose
+    stiffness changes at the relative rate 2 in shape a and 0.1 in b, and whose mass changes at 4 in b, gets
+    R_a = 0.05 / 2, R_b = min(0.3, 0.05 / 4) with c_a = 0.05; its own validity radius (the optimisers') is not
+    touched, and c_a = 0 leaves R at that radius, without a refinement."""
+    from aquarom_fenics.io.scene import scene_from_dict
+    from aquarom_fenics.reduction.atlas_refine import atlas_radius, divides
+
+    eye = np.eye(2)
+    elastic = SimpleNamespace(linear=tensor(eye, [2.0 * eye, 0.1 * eye]), quadratic=tensor(np.zeros((2, 2, 2)), np.zeros((2, 2, 2, 2))),
+                              cubic=tensor(np.zeros((2, 2, 2, 2)), np.zeros((2, 2, 2, 2, 2))))
+    inertia = SimpleNamespace(mass=tensor(eye, [0.0 * eye, 4.0 * eye]))
+    own = np.array([0.2, 0.3])
+    prom = SimpleNamespace(validity_radius=own.copy(), elastic=elastic, inertia=inertia)
+    data = {"mesh": {"level": 1}, "reduction": {"atlas_change": 0.05},
+            "shapes": {"z_tail": {"bounds": [-0.5, 0.5]}, "y_thin": {"bounds": [-0.15, 0.15]}}}
+    scene = scene_from_dict(data, source="<test>")
+    assert divides(scene) and scene.reduction.validity_change == 0
+    assert atlas_radius(scene, prom) == pytest.approx([0.05 / 2.0, 0.05 / 4.0])
+    assert np.array_equal(prom.validity_radius, own)
+    off = scene.replace("reduction", atlas_change=0.0)
+    assert not divides(off) and np.array_equal(atlas_radius(off, prom), own)
+    assert off.prom_hash == scene.prom_hash and off.hash != scene.hash
