@@ -8,7 +8,7 @@
    centre relative to the cell's half-width (the atlas's radius); per design the relative distance error
    (d_PROM - d_FOM) / |d_FOM|, and the largest, against the limit 3 % (the atlas's radius is set so that
    it holds: the scene's [reduction] atlas_scale, default aquarom_fenics.studies.atlas.RADIUS_SCALE = 0.7,
-   which holds on SO1, not on SO3: there 0.2).
+   which holds on SO1, not on every scene: docs/user/sweep.rst, "Check s").
 3. With --corners K, apart from that check: the FOM at the 2^p corners of the K cells whose checked designs
    erred most (every shape at its cell's half-width from the centre at once).
 4. With --start-corners K instead of 1-3: the start design (the scene's shape starts) and K seeded random
@@ -17,9 +17,9 @@
    corners to visit all: SO3's have 2^8).
 5. With --every-corner instead of 1-3: every cell of the box at its 2^p corners, each cell's PROM against the
    FOM at the grid's vertices (a vertex is the corner of up to 2^p cells: one FOM run each), written to
-   results/validation/atlas_corners.json. On a scene with capped radii ([reduction] validity_change > 0, whose
-   cells are divided as their PROMs ask) the cells walked are the leaves that answered the atlas sweep of
-   --samples designs (--seed): the cells whose PROMs answered designs.
+   results/validation/atlas_corners.json. On a scene with capped radii ([reduction] validity_change or
+   atlas_change > 0, whose cells are divided as their PROMs ask) the cells walked are the leaves that answered
+   the atlas sweep of --samples designs (--seed): the cells whose PROMs answered designs.
 
 Writes results/validation/atlas.json (and results/bench/atlas_sweep.json: the sweep's time, builds and radii,
 and where the workers' time went: builds and batched solves, wall and thread CPU, each worker's first build
@@ -123,11 +123,16 @@ def corner_check(scene, results: list[dict], cells: int, workers: int, folder: P
 def every_cell_corner(grid) -> tuple[list, list, dict]:
     """(the box's cells, (vertex, corner design) of each cell's 2^p corners c ± (1 - 1e-9) h, {vertex: ξ}): the
     grid vertex j (per shape 0 … n_k) is ξ_k = lower_k + 2 j_k h_k, the corner of up to 2^p cells."""
+    nodes = regular_cells(grid)
+    corners, vertices = leaf_corners(grid, nodes)
+    return [node.index for node in nodes], [(vertex, design) for vertex, design, _ in corners], vertices
+
+
+def regular_cells(grid) -> list:
+    """Every regular cell of the box, as atlas nodes (``atlas_refine.base_node``)."""
     from aquarom_fenics.reduction.atlas_refine import base_node
 
-    cells = list(itertools.product(*(range(int(n)) for n in grid.counts)))
-    corners, vertices = leaf_corners(grid, [base_node(cell) for cell in cells])
-    return cells, [(vertex, design) for vertex, design, _ in corners], vertices
+    return [base_node(cell) for cell in itertools.product(*(range(int(n)) for n in grid.counts))]
 
 
 def leaf_corners(grid, nodes: list) -> tuple[list, dict]:
@@ -164,7 +169,7 @@ def every_corner(scene, workers: int, folder: Path, designs: list[dict] | None =
     between the two moves the distance far below the 3 % tested). The cells: every regular cell of the box, or,
     on a scene with capped radii (``[reduction] validity_change`` or ``atlas_change`` > 0), whose cells are refined as PROMs are
     built, the leaves that answered an atlas sweep of ``designs`` (built first, in the same PROM cache)."""
-    from aquarom_fenics.reduction.atlas_refine import base_node, divides
+    from aquarom_fenics.reduction.atlas_refine import divides
     from aquarom_fenics.studies.atlas import cover
 
     grid = cover(scene)
@@ -175,7 +180,7 @@ def every_corner(scene, workers: int, folder: Path, designs: list[dict] | None =
                 raise ValueError("a scene with capped radii needs the designs whose leaves are walked")
             nodes = used_leaves(grid, prom_sweep(scene, designs, workers, folder / "leaves"))
         else:
-            nodes = [base_node(cell) for cell in itertools.product(*(range(int(n)) for n in grid.counts))]
+            nodes = regular_cells(grid)
         corners, vertices = leaf_corners(grid, nodes)
         rows = prom_sweep(scene, [design for _, design, _ in corners], workers, folder / "every-corner")
     keys = list(vertices)

@@ -253,9 +253,7 @@ def atlas_radius(scene, prom) -> np.ndarray:
     change = scene.reduction.atlas_change
     if change <= 0:
         return radius
-    p = radius.size
-    capped = validity_radii(scene.replace("reduction", validity_change=change), prom.elastic, prom.inertia, p)
-    return np.minimum(radius, capped)
+    return np.minimum(radius, validity_radii(scene, prom.elastic, prom.inertia, radius.size, change=change))
 
 
 def leaf_record(grid: Cover, leaf: Leaf) -> dict:

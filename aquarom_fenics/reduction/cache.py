@@ -31,19 +31,22 @@ def cached_prom(scene: Scene, xi_center: np.ndarray, build, parametric: bool = T
     """
     from aquarom_fenics.reduction.prom import ReducedModel
 
-    key = entry_key("prom", scene.prom_hash, np.asarray(xi_center, dtype=float), parametric)
-    if basis_center is not None:
-        key = entry_key("prom", scene.prom_hash, np.asarray(xi_center, dtype=float), parametric,
-                        "basis", np.asarray(basis_center, dtype=float))
-
     def checked_build():
         require_cache_writable("prom")
         return build()
 
-    return get_or_compute(cache_root() / "prom" / f"{key}.npz", checked_build,
+    return get_or_compute(prom_entry(scene, xi_center, parametric, basis_center), checked_build,
                           save=lambda model, path: model.save(path),
                           load=lambda path: ReducedModel.load(path, prom_hash=scene.prom_hash),
                           comm=comm, label="PROM cache")
+
+
+def prom_entry(scene: Scene, xi_center: np.ndarray, parametric: bool = True,
+               basis_center: np.ndarray | None = None) -> Path:
+    """The cache file of the PROM of ``scene`` at ``xi_center`` (on the basis built at ``basis_center``)."""
+    extra = () if basis_center is None else ("basis", np.asarray(basis_center, dtype=float))
+    key = entry_key("prom", scene.prom_hash, np.asarray(xi_center, dtype=float), parametric, *extra)
+    return cache_root() / "prom" / f"{key}.npz"
 
 
 def listing() -> list[tuple[str, Path, int, int]]:
@@ -78,8 +81,7 @@ def stored_prom(scene: Scene, xi_center: np.ndarray, parametric: bool = True):
     from aquarom_fenics.io.persistence import read_intact
     from aquarom_fenics.reduction.prom import ReducedModel
 
-    key = entry_key("prom", scene.prom_hash, np.asarray(xi_center, dtype=float), parametric)
-    path = cache_root() / "prom" / f"{key}.npz"
+    path = prom_entry(scene, xi_center, parametric)
     if not path.exists():
         return None
     try:

@@ -125,9 +125,10 @@ def material_law_warning(scene: Scene) -> str | None:
             "(aquarom compare)")
 
 
-def validity_radii(scene: Scene, elastic, inertia, p: int) -> np.ndarray:
+def validity_radii(scene: Scene, elastic, inertia, p: int, change: float | None = None) -> np.ndarray:
     """The PROM's validity radius per parameter [1]: the scene's r_k (``validity_fraction`` or the shape's
-    own ``radius``), with ``[reduction] validity_change`` = c > 0 capped at the design it is built on,
+    own ``radius``), with c = ``change`` (default ``[reduction] validity_change``) > 0 capped at the design it
+    is built on,
 
         r_k ≤ c / s_k,   s_k = max_T ‖∂T/∂ξ_k‖_F / ‖T‖_F,   T ∈ {K1, K2, K3 of f_int,r; M_r},
 
@@ -136,7 +137,7 @@ def validity_radii(scene: Scene, elastic, inertia, p: int) -> np.ndarray:
     like powers of its local thickness and s_k, with the error of the Taylor in ξ, grows (CO scene:
     s_k ≤ 1.1 at ξ = 0, up to 8 at the corner, where det F_1 falls to 0.10 at the tail's edges)."""
     radius = np.array(scene.validity_radii()[:p], dtype=float)
-    change = scene.reduction.validity_change
+    change = scene.reduction.validity_change if change is None else change
     if change <= 0 or p == 0:
         return radius
     rates = np.zeros(p)
@@ -148,7 +149,7 @@ def validity_radii(scene: Scene, elastic, inertia, p: int) -> np.ndarray:
     capped = np.minimum(radius, np.divide(change, rates, out=np.full(p, np.inf), where=rates > 0))
     if np.any(capped < radius):
         log.info("PROM: validity radius %s, capped where the tensors change fast (relative ξ-derivatives %s, "
-                 "[reduction] validity_change = %g)", np.round(capped, 4).tolist(), np.round(rates, 2).tolist(), change)
+                 "change = %g)", np.round(capped, 4).tolist(), np.round(rates, 2).tolist(), change)
     return capped
 
 
