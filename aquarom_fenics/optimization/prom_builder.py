@@ -74,16 +74,20 @@ class PromBuilder:
         self.basis_center: np.ndarray | None = None
         self.records: list[dict] = []        # per build: design, cache hit, basis source, time
         self._basis_source: ReducedModel | None = None
+        self._own_basis: list[ReducedModel] = []     # the PROMs built here on a basis built at their centre
         self._atlas: Refiner | None = None   # [optimizer] atlas: the refined cells met, their PROMs' radii
 
-    def build(self, z: np.ndarray) -> ReducedModel:
+    def build(self, z: np.ndarray, own_basis: bool = False) -> ReducedModel:
+        """The PROM at z: on the basis of the last PROM whose basis was built if that PROM's centre is within
+        ``BASIS_REUSE_FRACTION`` of the validity radius, else (or with ``own_basis``) on a basis built at z,
+        which the next PROMs then reuse."""
         if self.scene.optimizer.atlas:
             prom = self._atlas_build(z)
             if prom is not None:
                 return prom
         started = time.perf_counter()
         center = z[: self.space.n_shapes]
-        source = self._basis_source_near(center)
+        source = None if own_basis else self._basis_source_near(center)
         built = []
 
         def build_here():
@@ -94,6 +98,7 @@ class PromBuilder:
                            basis_center=None if source is None else source.xi_center)
         if source is None:
             self._basis_source, self.basis_center = prom, center.copy()
+            self._own_basis.append(prom)
         elapsed = time.perf_counter() - started
         self.build_time += elapsed
         self.builds += 1
@@ -185,6 +190,12 @@ class PromBuilder:
                 return holds(refiner.grid, leaf.node, xi) and leaf.answers(refiner.grid, xi)
         return prom is not None and bool(np.all(np.abs(z[: self.space.n_shapes] - prom.xi_center)
                                                 <= prom.validity_radius))
+
+    def on_own_basis(self, prom: ReducedModel) -> bool:
+        """Whether ``prom``'s basis was built at its own centre (the atlas's PROMs all are), not reused from
+        another PROM's: a reused basis misses the shape change between the two centres, so the PROM's
+        slopes carry a projection error that its own basis does not."""
+        return bool(self.scene.optimizer.atlas) or any(prom is own for own in self._own_basis)
 
     @staticmethod
     def shares_basis(prom: ReducedModel, other: ReducedModel) -> bool:

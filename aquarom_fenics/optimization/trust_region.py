@@ -4,7 +4,9 @@ SciPy's SLSQP solves the surrogate problem with bounds and linear constraints in
 fraction of the PROM validity box); a PROM built at the candidate gives the actual reduction, and
 ρ = actual / predicted accepts or rejects the step and resizes the radius. A candidate the design
 check refuses is pulled back along its step (bisection); a direction refused right at the centre
-becomes a cut of the surrogate problem.
+becomes a cut of the surrogate problem. A run that stalls away from a first-order point (its radius or its
+step below the step tolerance) on a PROM whose basis is reused from another centre rebuilds that PROM on its
+own basis and starts the radius again (``_on_own_basis``); on its own basis the stall stops the run.
 
 With ``[optimizer] atlas`` the PROM "at" a design is the atlas's at the centre of the leaf holding it
 (``PromBuilder.build``): the surrogate is the centre leaf's PROM, its box the trust box around the iterate
@@ -64,7 +66,13 @@ def trust_region(scene, space, builder, weights, history, checkpoint, state, saf
         if (np.abs(step).max() < settings.step_tolerance
                 or current.cost - predicted_cost <= settings.cost_tolerance * abs(current.cost)):
             reason = "no predicted improvement inside the trust radius (stalled before optimality)"
-            break
+            restarted = _on_own_basis(scene, space, builder, weights, prom, current, measure)
+            if restarted is None:
+                break
+            prom, current, measure = restarted
+            state.update(radius=settings.initial_radius)
+            checkpoint.save(state, history, builder)
+            continue
         proposed = candidate
         candidate, candidate_prom = _meshable_candidate(builder, center, candidate, settings.step_tolerance)
         if candidate_prom is None:
@@ -100,8 +108,13 @@ def trust_region(scene, space, builder, weights, history, checkpoint, state, saf
         state.update(center=center.tolist(), radius=radius, iteration=iteration, cuts=[cut.tolist() for cut in cuts])
         checkpoint.save(state, history, builder)
         if measure > settings.optimality_tolerance and np.all(radius * half_widths < settings.step_tolerance):
-            reason = f"trust radius {radius:.2e} of the validity box below the step tolerance"
-            break
+            restarted = _on_own_basis(scene, space, builder, weights, prom, current, measure)
+            if restarted is None:
+                reason = f"trust radius {radius:.2e} of the validity box below the step tolerance"
+                break
+            prom, current, measure = restarted
+            state.update(radius=settings.initial_radius)
+            checkpoint.save(state, history, builder)
     return center, current, reason
 
 
@@ -166,6 +179,34 @@ def _recentred(scene, space, builder: PromBuilder, weights, prom, current, measu
     log.info("trust region: step rejected on another basis; the centre's PROM rebuilt on the builder's basis "
              "(first-order measure %.3g there)", measure)
     return rebuilt, evaluation, measure
+
+
+def _on_own_basis(scene, space, builder: PromBuilder, weights, prom, current, measure):
+    """(PROM, evaluation, first-order measure) of the centre rebuilt on a basis built at the centre, when the
+    run stalls away from a first-order point (its trust radius or its step below the step tolerance) on a PROM
+    whose basis is reused from another centre; None when that PROM is on its own basis already or the build is
+    refused (the stall stands).
+
+    The rejected steps then said that the model's slopes are wrong there, not that the centre is a first-order
+    point: a basis reused from a centre up to half a validity radius away misses the shape change between the
+    two, and its projection error moves the PROM's gradient (SO2: the radius fell to the step tolerance at a
+    first-order measure of 0.012). Shrinking the radius cannot cure a model error that does not vanish with the
+    step, so the model is improved instead (the model-improvement step of derivative-free trust regions) and the
+    radius starts again. Bounded: on its own basis the centre's next stall stops the run, and a new centre
+    takes an accepted iteration."""
+    if builder.on_own_basis(prom):
+        return None
+    try:
+        rebuilt = builder.build(current.z, own_basis=True)
+        evaluation = builder.evaluate(rebuilt, current.z, weights)
+    except (InputError, SolverError) as refused:
+        log.warning("trust region: the centre's PROM kept on its reused basis (a build on its own is refused: %s)",
+                    refused)
+        return None
+    rebuilt_measure = first_order_at(scene, space, evaluation).measure
+    log.info("trust region: stalled on a reused basis at first-order measure %.3g; the centre's PROM rebuilt on its "
+             "own basis (measure %.3g there), the radius reset", measure, rebuilt_measure)
+    return rebuilt, evaluation, rebuilt_measure
 
 
 def _actual_reduction(builder: PromBuilder, prom, trial_prom, current, trial, weights) -> tuple[float, str]:

@@ -173,3 +173,74 @@ def test_the_radius_keys_are_checked_and_hashed_only_off_their_default():
         so3.replace("optimizer", expand_ratio=0.2)
     with pytest.raises(InputError, match=r"\[optimizer\] expand_factor = 1.0 must be in \(1, 16\]"):
         so3.replace("optimizer", expand_factor=1.0)
+
+
+WRONG_SLOPES = np.array([0.0, -0.03])     # a reused basis's d-slopes: y_thin's sign wrong, z_tail's lost
+
+
+class ReusedBasisErrorBuilder(BasisOffsetBuilder):
+    """'PROM' = (centre c, basis centre b): exact on its own basis (b = c), d = 0.01 + SLOPES · z; on a basis
+    reused from another centre exact at c only, its slopes WRONG_SLOPES, so that every step it predicts from
+    a reused-basis centre loses (ρ < 0) however short."""
+
+    def build(self, z, own_basis=False):
+        self.builds += 1
+        z = np.array(z, dtype=float)
+        if (own_basis or self.basis_center is None
+                or np.any(np.abs(z - self.basis_center) > BASIS_REUSE_FRACTION * self.radius)):
+            self.basis_center = z.copy()
+        return z, self.basis_center.copy()
+
+    def on_own_basis(self, prom):
+        return bool(np.array_equal(prom[0], prom[1]))
+
+    def evaluate(self, prom, z, weights):
+        z, center = np.array(z, dtype=float), prom[0]
+        slopes = SLOPES if self.on_own_basis(prom) else WRONG_SLOPES
+        distance = 0.01 + SLOPES @ center + slopes @ (z - center)
+        return Evaluation(z, -distance, -slopes.copy(), distance, slopes.copy())
+
+
+def test_a_radius_that_shrinks_on_a_reused_basis_rebuilds_the_centre_on_its_own(scene):
+    """SO2's trust region stopped on its radius at a first-order measure of 0.012: every step from a centre
+    whose PROM reused another centre's basis was rejected, for the projection error of the reused basis moved
+    its slopes, and a shorter step does not cure that. The centre's PROM is rebuilt on its own basis and the
+    radius starts again; the run ends at the first-order point (the upper corner), where a stop on the radius
+    alone ended at the first reused-basis centre."""
+    scene = scene.replace("optimizer", initial_radius=0.25, max_iterations=200)
+    fish = load_fish(scene)
+    space = optimize_module.optimization_space(scene, fish)
+    result = optimize(scene, fish=fish, builder=ReusedBasisErrorBuilder(scene, fish, space))
+    assert result.converged, (result.stop_reason, result.optimality.measure, result.optimum)
+    assert result.optimum == pytest.approx(space.upper, abs=1e-9)
+    assert sum(row["prom"] == "rejected" for row in result.history) > 0      # the reused bases did stall it
+
+
+def test_a_stall_on_a_prom_on_its_own_basis_stops_the_run(scene):
+    """The same slopes with every PROM claimed on its own basis: nothing to rebuild, the run stops at the first
+    stall (the first centre whose slopes are wrong) as before, and no PROM is asked for on its own basis."""
+
+    class OwnBasisClaimed(ReusedBasisErrorBuilder):
+        own_basis_builds = 0
+
+        def build(self, z, own_basis=False):
+            self.own_basis_builds += own_basis
+            return super().build(z, own_basis)
+
+        def on_own_basis(self, prom):
+            return True
+
+        def evaluate(self, prom, z, weights):
+            z, center = np.array(z, dtype=float), prom[0]
+            slopes = SLOPES if ReusedBasisErrorBuilder.on_own_basis(self, prom) else WRONG_SLOPES
+            distance = 0.01 + SLOPES @ center + slopes @ (z - center)
+            return Evaluation(z, -distance, -slopes.copy(), distance, slopes.copy())
+
+    scene = scene.replace("optimizer", initial_radius=0.25, max_iterations=200)
+    fish = load_fish(scene)
+    space = optimize_module.optimization_space(scene, fish)
+    builder = OwnBasisClaimed(scene, fish, space)
+    result = optimize(scene, fish=fish, builder=builder)
+    assert not result.converged and "stalled before optimality" in result.stop_reason, result.stop_reason
+    assert result.optimum == pytest.approx([0.0125, 0.00625], abs=1e-12)
+    assert builder.own_basis_builds == 0
