@@ -192,8 +192,9 @@ def _on_own_basis(scene, space, builder: PromBuilder, weights, prom, current, me
     two, and its projection error moves the PROM's gradient (SO2: the radius fell to the step tolerance at a
     first-order measure of 0.012). Shrinking the radius cannot cure a model error that does not vanish with the
     step, so the model is improved instead (the model-improvement step of derivative-free trust regions) and the
-    radius starts again. Bounded: on its own basis the centre's next stall stops the run, and a new centre
-    takes an accepted iteration."""
+    radius starts again. Bounded: the rebuild leaves the centre's PROM on its own basis, so the next stall stops
+    the run unless a trial iteration moved the centre or its basis in between, and ``max_iterations`` bounds
+    those."""
     if builder.on_own_basis(prom):
         return None
     try:
