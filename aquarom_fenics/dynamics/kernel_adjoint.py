@@ -50,64 +50,54 @@ def lu_solve_transposed(factors, pivots, rhs):
 
 
 @_jit
-def banded_transposed_times(banded, right, out):
-    """out (2 n_points,) = Jᵀ y of the block-tridiagonal J (``kernel_thrust.scatter``'s storage): block (a, b)ᵀ
-    applied to point a's two rows, added to point b's."""
-    n_points = banded.shape[0]
+def banded_transposed_times(stiffness, damping, mass, right, out):
+    """out (2 n_points, 3) = [K_Jᵀ y, C_Jᵀ y, M_Jᵀ y] of the points' block-tridiagonal stiffness and damping and
+    block-diagonal added mass (``kernel_thrust.scatter``'s storage) in one pass: block (a, b)ᵀ applied to point
+    a's two rows of y, added to point b's."""
+    n_points = stiffness.shape[0]
     out[:] = 0.0
     for a in range(n_points):
         x, y = right[2 * a], right[2 * a + 1]
         for b in range(max(a - 1, 0), min(a + 2, n_points)):
             d = b - a + 1
-            out[2 * b] += banded[a, d, 0, 0] * x + banded[a, d, 1, 0] * y
-            out[2 * b + 1] += banded[a, d, 0, 1] * x + banded[a, d, 1, 1] * y
-
-
-@_jit
-def full_transposed(dense, banded, has_thrust, points, transposed, lam, moved, out):
-    """out = (A_t - Wᵀ A_J W)ᵀ λ of one full tangent: the dense part's transpose, and Wᵀ A_Jᵀ (W λ) with ``moved`` = W λ;
-    returns A_Jᵀ W λ (the thrust's point vector, zero-sized without thrust)."""
-    m = lam.size
-    for k in range(m):
-        total = 0.0
-        for i in range(m):
-            total += dense[i, k] * lam[i]
-        out[k] = total
-    point_vector = np.zeros(moved.size)
-    if has_thrust:
-        banded_transposed_times(banded, moved, point_vector)
-        back = np.dot(transposed, point_vector)
-        for k in range(m):
-            out[k] -= back[k]
-    return point_vector
+            out[2 * b, 0] += stiffness[a, d, 0, 0] * x + stiffness[a, d, 1, 0] * y
+            out[2 * b + 1, 0] += stiffness[a, d, 0, 1] * x + stiffness[a, d, 1, 1] * y
+            out[2 * b, 1] += damping[a, d, 0, 0] * x + damping[a, d, 1, 0] * y
+            out[2 * b + 1, 1] += damping[a, d, 0, 1] * x + damping[a, d, 1, 1] * y
+        out[2 * a, 2] += mass[a, 1, 0, 0] * x + mass[a, 1, 1, 0] * y
+        out[2 * a + 1, 2] += mass[a, 1, 0, 1] * x + mass[a, 1, 1, 1] * y
 
 
 @_jit
 def reverse_step(h, alpha_m, alpha_f, beta, gamma, k_v, k_a, factors, pivots, stiffness, damping, mass, k_banded,
-                 c_banded, m_banded, has_thrust, points, transposed, hat, lam, moved):
+                 c_banded, m_banded, has_thrust, points, transposed, hat, lam, moved, point_vectors):
     """One step of the transposed sensitivity recursion (module docstring): hat (3, m) = ŝ_{n+1} in, ŝ_n out (the
-    window's seed not added); λ = S⁻ᵀ x̂ and ``moved`` = W λ out; returns K_Jᵀ W λ (the moving rest stations' part)."""
+    window's seed not added); λ = S⁻ᵀ x̂ and ``moved`` = W λ out, ``point_vectors`` (2 n_points, 3) = [K_Jᵀ, C_Jᵀ,
+    M_Jᵀ] W λ (its first column the moving rest stations' part). The full tangents' transposes Kᵀλ = K_tᵀλ -
+    Wᵀ K_Jᵀ W λ (and C, M): the dense parts in one loop, the thrust's in one banded pass and one BLAS product."""
     m = lam.size
     inverse = 1.0 / (beta * h * h)
-    u_hat = np.empty(m)
     for i in range(m):
         a_hat = hat[2, i] + gamma * h * hat[1, i]
         lam[i] = hat[0, i] + a_hat * inverse
-        u_hat[i] = -a_hat * inverse
+        hat[2, i] = -a_hat * inverse                       # û_p's first part, kept in ŝ₂'s place
     lu_solve_transposed(factors, pivots, lam)
+    products = np.zeros((m, 3))
     if has_thrust:
         moved[:] = np.dot(points, lam)
-    k_t, c_t, m_t = np.empty(m), np.empty(m), np.empty(m)
-    stiff_points = full_transposed(stiffness, k_banded, has_thrust, points, transposed, lam, moved, k_t)
-    full_transposed(damping, c_banded, has_thrust, points, transposed, lam, moved, c_t)
-    full_transposed(mass, m_banded, has_thrust, points, transposed, lam, moved, m_t)
-    for i in range(m):
-        u_p = u_hat[i] + k_a * m_t[i] + k_v * c_t[i]
-        v_p = hat[1, i] - (1.0 - alpha_f) * c_t[i]
-        hat[0, i] = -alpha_f * k_t[i] + u_p
-        hat[1, i] = -alpha_f * c_t[i] + h * u_p + v_p
-        hat[2, i] = -alpha_m * m_t[i] + h * h * (0.5 - beta) * u_p + h * (1.0 - gamma) * v_p
-    return stiff_points
+        banded_transposed_times(k_banded, c_banded, m_banded, moved, point_vectors)
+        products = -np.dot(transposed, point_vectors)
+    for k in range(m):
+        k_t, c_t, m_t = products[k, 0], products[k, 1], products[k, 2]
+        for i in range(m):
+            k_t += stiffness[i, k] * lam[i]
+            c_t += damping[i, k] * lam[i]
+            m_t += mass[i, k] * lam[i]
+        u_p = hat[2, k] + k_a * m_t + k_v * c_t
+        v_p = hat[1, k] - (1.0 - alpha_f) * c_t
+        hat[0, k] = -alpha_f * k_t + u_p
+        hat[1, k] = -alpha_f * c_t + h * u_p + v_p
+        hat[2, k] = -alpha_m * m_t + h * h * (0.5 - beta) * u_p + h * (1.0 - gamma) * v_p
 
 
 @_jit
@@ -214,6 +204,7 @@ def reverse_sweep(n_steps, h, alpha_m, alpha_f, beta, gamma, k_v, k_a, distance_
     hat = np.zeros((3, m))
     lams = np.zeros((n_steps + 1, m))
     moved = np.zeros(points.shape[0])
+    point_vectors = np.zeros((points.shape[0], 3))
     per_half = np.zeros(own_node.size + 1)
     rest_sum = np.zeros(points.shape[0])
     amplitude = 0.0
@@ -221,15 +212,14 @@ def reverse_sweep(n_steps, h, alpha_m, alpha_f, beta, gamma, k_v, k_a, distance_
         if distance_mask[step]:
             for i in range(m):
                 hat[0, i] += com_weights[i]
-        stiff_points = reverse_step(h, alpha_m, alpha_f, beta, gamma, k_v, k_a, factors[step], pivots[step],
-                                    tangents[step, 0], tangents[step, 1], tangents[step, 2], banded[step, 0],
-                                    banded[step, 1], banded[step, 2], has_thrust, points, transposed, hat, lams[step],
-                                    moved)
+        reverse_step(h, alpha_m, alpha_f, beta, gamma, k_v, k_a, factors[step], pivots[step], tangents[step, 0],
+                     tangents[step, 1], tangents[step, 2], banded[step, 0], banded[step, 1], banded[step, 2], has_thrust,
+                     points, transposed, hat, lams[step], moved, point_vectors)
         if has_thrust and parameters:
             thrust_contraction(states[step], length, lagrangian, own_node, other_node, moved, per_half)
             if moving_rest:
                 for row in range(rest_sum.size):
-                    rest_sum[row] += stiff_points[row]
+                    rest_sum[row] += point_vectors[row, 0]
         if amplitude_sensitivity:
             amplitude += amplitude_contraction(lams[step], units[step], muscle_constant, muscle_linear,
                                                evaluations[step, 0])

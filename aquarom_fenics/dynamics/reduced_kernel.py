@@ -146,11 +146,11 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
     have_factors = False
     backward = adjoint and columns > 0 and not transition
     stored = n_steps + 1 if backward else 1
-    history_factors, history_pivots = np.zeros((stored, m, m)), np.zeros((stored, m), np.int64)
-    history_tangents = np.zeros((stored, 3, m, m))                 # K_t, C_t, M_t at each converged point
-    history_banded = np.zeros((stored, 3, n_points, 3, 2, 2))      # the thrust's K_J, C_J, M_J
-    history_state = np.zeros((stored, halves, 10))
-    evaluations = np.zeros((stored, 3, m))                        # (η, η̇, η̈) at the evaluation point
+    history_factors, history_pivots = np.empty((stored, m, m)), np.empty((stored, m), np.int64)   # steps 1 … N
+    history_tangents = np.empty((stored, 3, m, m))                # K_t, C_t, M_t at each converged point
+    history_banded = np.empty((stored, 3, n_points, 3, 2, 2))      # the thrust's K_J, C_J, M_J
+    history_state = np.empty((stored, halves, 10))
+    evaluations = np.zeros((stored, 3, m))                        # (η, η̇, η̈) at the evaluation point; row 0 zero
     history_mono = np.zeros((stored, n_mono))
     history_activations = np.zeros((stored, n_muscles))
     distance_sum, distance_count, amplitude_max = 0.0, 0, 0.0

@@ -107,6 +107,12 @@ def test_the_transposed_solve_and_banded_product_against_numpy():
     for a in range(n_points):
         for b in range(max(a - 1, 0), min(a + 2, n_points)):
             dense[2 * a:2 * a + 2, 2 * b:2 * b + 2] = banded[a, b - a + 1]
-    right, out = rng.standard_normal(2 * n_points), np.zeros(2 * n_points)
-    kernel_adjoint.banded_transposed_times(banded, right, out)
-    np.testing.assert_allclose(out, dense.T @ right, rtol=1e-12)
+    diagonal = np.zeros_like(banded)
+    diagonal[:, 1] = banded[:, 1]                                         # the added mass: block-diagonal
+    right, out = rng.standard_normal(2 * n_points), np.zeros((2 * n_points, 3))
+    kernel_adjoint.banded_transposed_times(banded, 2.0 * banded, diagonal, right, out)
+    block_diagonal = np.zeros_like(dense)
+    for a in range(n_points):
+        block_diagonal[2 * a:2 * a + 2, 2 * a:2 * a + 2] = banded[a, 1]
+    np.testing.assert_allclose(out, np.column_stack([dense.T @ right, 2.0 * dense.T @ right,
+                                                     block_diagonal.T @ right]), rtol=1e-12)
