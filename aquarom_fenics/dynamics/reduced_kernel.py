@@ -8,7 +8,9 @@ design's arrays: the generalized-α modified Newton of ``integrator._Newton`` (t
 ``reduced_dynamics.propagate_sensitivity``, on the terms that :class:`~.batched_system.BatchedSystem` prepares
 per design (``kernel_pack.pack`` reads them): the terms in ``kernel_terms``, the thrust's segment law on
 half-segments in ``kernel_thrust``. The tests compare the kernel with ``simulate_reduced`` to 1e-12 on every
-thrust variant.
+thrust variant. A design integrated alone takes the distance's gradient from the discrete adjoint of that
+sensitivity step (``kernel_adjoint``: one reverse sweep over the stored steps, one transposed solve per step
+whatever the number of parameters) unless ``integrate_packed(adjoint=False)`` asks for the forward columns.
 
 A design whose step fails (no convergence, a non-finite residual, a singular matrix) is reported failed; the
 caller integrates it alone with the step control (as the numpy batch does). A batch of several designs runs in
