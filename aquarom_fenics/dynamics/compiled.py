@@ -6,7 +6,7 @@ from aquarom_fenics.machine_code import available, jit  # noqa: F401  (the kerne
 
 
 KERNEL_MODULES = ("compiled", "kernel_pack", "kernel_terms", "kernel_thrust", "reduced_kernel", "lane_values",
-                  "kernel_lanes", "kernel_lanes_thrust", "lane_lu", "lockstep_kernel")
+                  "kernel_lanes", "kernel_lanes_thrust", "lane_lu", "lockstep_kernel", "kernel_adjoint")
 """The modules of the compiled reduced kernel (``aquarom_fenics/dynamics``)."""
 
 

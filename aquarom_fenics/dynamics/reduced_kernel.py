@@ -8,7 +8,9 @@ design's arrays: the generalized-α modified Newton of ``integrator._Newton`` (t
 ``reduced_dynamics.propagate_sensitivity``, on the terms that :class:`~.batched_system.BatchedSystem` prepares
 per design (``kernel_pack.pack`` reads them): the terms in ``kernel_terms``, the thrust's segment law on
 half-segments in ``kernel_thrust``. The tests compare the kernel with ``simulate_reduced`` to 1e-12 on every
-thrust variant.
+thrust variant. A design integrated alone takes the distance's gradient from the discrete adjoint of that
+sensitivity step (``kernel_adjoint``: one reverse sweep over the stored steps, one transposed solve per step
+whatever the number of parameters) unless ``integrate_packed(adjoint=False)`` asks for the forward columns.
 
 A design whose step fails (no convergence, a non-finite residual, a singular matrix) is reported failed; the
 caller integrates it alone with the step control (as the numpy batch does). A batch of several designs runs in
@@ -24,6 +26,7 @@ import math
 import numpy as np
 
 from aquarom_fenics.dynamics.compiled import available, jit as _jit, refresh_stale_cache
+from aquarom_fenics.dynamics.kernel_adjoint import reverse_sweep
 from aquarom_fenics.dynamics.kernel_pack import Packed, pack, synthetic
 from aquarom_fenics.dynamics.kernel_terms import (between, derivative_at, design_elastic, factorize, lu_solve,
                                                   residual_at, tangents_at)
@@ -61,6 +64,31 @@ def newton_matrix_into(k_u, k_v, k_a, stiffness, damping, mass, has_thrust, k_ba
 
 
 @_jit
+def record_step(step, eu, ev, ea, activations, tangent_mono, pairs, elastic_tangent, mass, damping, muscle_linear,
+                has_drag, drag_direction, drag_row, has_thrust, state, length, thrust_weights, tail_weight, lagrangian,
+                own_node, other_node, k_u, k_v, k_a, points, transposed, work, s_banded, exact, mono, tangents,
+                banded, factors, pivots, states, evaluations, monos, activation_history):
+    """What the adjoint's reverse sweep reads of a converged step, stored at ``step``: the tangents K_t, C_t, M_t and
+    the thrust's K_J, C_J, M_J at the evaluation point, the LU of the exact S = k_u K + k_v C + k_a M (pivots[step, 0]
+    = -1 when singular), the half-segments' state, (η, η̇, η̈), the monomials and the activations."""
+    tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass, damping, muscle_linear, has_drag,
+                drag_direction, drag_row, tangents[step, 0], tangents[step, 1], tangents[step, 2])
+    if has_thrust:
+        half_blocks(state, length, thrust_weights, tail_weight, lagrangian, own_node, other_node, banded[step, 0],
+                    banded[step, 1], banded[step, 2])
+    newton_matrix_into(k_u, k_v, k_a, tangents[step, 0], tangents[step, 1], tangents[step, 2], has_thrust,
+                       banded[step, 0], banded[step, 1], banded[step, 2], s_banded, points, transposed, work, exact)
+    if not factorize(exact, factors[step], pivots[step]):
+        pivots[step, 0] = -1
+    states[step] = state
+    evaluations[step, 0] = eu
+    evaluations[step, 1] = ev
+    evaluations[step, 2] = ea
+    monos[step] = mono
+    activation_history[step] = activations
+
+
+@_jit
 def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
         n_steps, h, alpha_m, alpha_f, beta, gamma, tolerance, max_iterations, contraction, per_factorization,
         refresh_each_step, floor, units, distance_mask, amplitude_mask,
@@ -70,8 +98,12 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
         has_thrust, lagrangian, moving_rest, rows, own_node, other_node, rest_rows, length, rest_tangent,
         thrust_weights, tail_weight, thrust_weight_gradient, tail_weight_gradient,
         has_drag, drag_direction, drag_gradient, drag_row, tail_row,
-        sensitivities, amplitude_sensitivity, parameter_terms, transition_from, result, gradient_out, transition_out):
+        sensitivities, amplitude_sensitivity, parameter_terms, transition_from, adjoint, result, gradient_out,
+        transition_out):
     """Integrate one design; result = (distance, tail amplitude, status), gradient_out (columns,).
+
+    With ``adjoint`` the gradient comes from one reverse sweep over the stored steps (``kernel_adjoint``: each
+    step's exact Newton factors, tangents and evaluation point kept) instead of one forward column per parameter.
 
     ``transition_from`` = n > 0 (the step whose start t_{n-1} opens the window): instead of the sensitivities,
     transition_out (3, m, 3m) = Φ = ∂s(T)/∂s(t_{n-1}) of s = (η, η̇, η̈), the columns ∂s/∂s(t_{n-1}) started at
@@ -114,6 +146,15 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
     right = np.zeros((2 * n_points, columns))
     combination = np.zeros((m, columns))
     have_factors = False
+    backward = adjoint and columns > 0 and not transition
+    stored = n_steps + 1 if backward else 1
+    history_factors, history_pivots = np.empty((stored, m, m)), np.empty((stored, m), np.int64)   # steps 1 … N
+    history_tangents = np.empty((stored, 3, m, m))                # K_t, C_t, M_t at each converged point
+    history_banded = np.empty((stored, 3, n_points, 3, 2, 2))      # the thrust's K_J, C_J, M_J
+    history_state = np.empty((stored, halves, 10))
+    evaluations = np.zeros((stored, 3, m))                        # (η, η̇, η̈) at the evaluation point; row 0 zero
+    history_mono = np.zeros((stored, n_mono))
+    history_activations = np.zeros((stored, n_muscles))
     distance_sum, distance_count, amplitude_max = 0.0, 0, 0.0
     gradient_sum = np.zeros(columns)
     if distance_mask[0]:
@@ -182,7 +223,16 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
             for i in range(m):
                 for block in range(3):
                     sens[block, i, block * m + i] = 1.0
-        if columns and (not transition or step >= transition_from):
+        if backward:
+            record_step(step, eu, ev, ea, activations, tangent_mono, pairs, elastic_tangent, mass, damping,
+                        muscle_linear, has_drag, drag_direction, drag_row, has_thrust, state, length, thrust_weights,
+                        tail_weight, lagrangian, own_node, other_node, k_u, k_v, k_a, points, transposed, work,
+                        s_banded, exact, mono, history_tangents, history_banded, history_factors, history_pivots,
+                        history_state, evaluations, history_mono, history_activations)
+            if history_pivots[step, 0] < 0:
+                result[2] = FAILED
+                return
+        elif columns and (not transition or step >= transition_from):
             # the converged step differentiated (reduced_dynamics.propagate_sensitivity) at its evaluation point
             # (eu, ev, ea), where the last residual was evaluated: its monomials and thrust state are current
             tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass, damping, muscle_linear,
@@ -260,7 +310,8 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
             for c in range(columns):
                 total = 0.0
                 for i in range(m):
-                    total += com_weights[i] * sens[0, i, c]
+                    if not backward:
+                        total += com_weights[i] * sens[0, i, c]
                     if c < p and sensitivities:
                         total += com_gradient[c, i] * u[i]
                 gradient_sum[c] += total
@@ -269,6 +320,16 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
             for i in range(m):
                 tail += tail_row[i] * u[i]
             amplitude_max = max(amplitude_max, abs(tail))
+    if backward:
+        parameters = sensitivities and parameter_terms
+        moved_rest = moving_rest and parameters
+        reverse_sweep(
+            n_steps, h, alpha_m, alpha_f, beta, gamma, k_v, k_a, distance_mask, com_weights, units, history_factors,
+            history_pivots, history_tangents, history_banded, has_thrust, points, transposed, moved_rest, rest_points,
+            history_state, length, lagrangian, own_node, other_node, evaluations, history_activations, history_mono, force_coefficients, weight_derivatives, mass_gradient,
+            damping_gradient, muscle_constant, muscle_linear, muscle_constant_gradient, muscle_linear_gradient,
+            has_drag, drag_gradient, drag_row, thrust_weight_gradient, tail_weight_gradient,
+            parameters, amplitude_sensitivity, gradient_sum)
     result[0] = distance_sum / distance_count
     result[1] = amplitude_max
     if transition:
@@ -278,7 +339,7 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
 
 @_jit
 def integrate_all(scalars, settings, units, distance_mask, amplitude_mask, shared, per_design, flags, results,
-                  gradients, transitions):
+                  gradients, transitions, adjoint):
     """Every design of the batch in turn (``Packed``'s arrays; ``units`` (B, steps + 1, N): each design's unit
     activations at the steps' evaluation times); results (B, 3), gradients (B, columns); transitions
     (B, 3, m, 3m) if settings' ``transition_from`` > 0 (else unused)."""
@@ -302,7 +363,7 @@ def integrate_all(scalars, settings, units, distance_mask, amplitude_mask, share
             moving_rest, rows, own_node, other_node, rest_rows, length[b], rest_tangent[b], thrust_weights[b],
             tail_weight[b], thrust_weight_gradient[b], tail_weight_gradient[b], has_drag, drag_direction[b],
             drag_gradient[b], drag_row, tail_row, sensitivities, amplitude_sensitivity, parameter_terms,
-            transition_from, results[b], gradients[b], transitions[b])
+            transition_from, adjoint, results[b], gradients[b], transitions[b])
 
 
 LOCKSTEP_TAIL = 6
@@ -314,8 +375,12 @@ coefficients per lane (m = 24: 12 MB a block, out of the caches), and at m = 24 
 than one design at a time (docs/devlog.md)."""
 
 
-def integrate_packed(packed: Packed, lockstep: bool = True):
+def integrate_packed(packed: Packed, lockstep: bool = True, adjoint: bool = True):
     """(distance (B,), tail amplitude (B,), failed (B,) bool, distance gradient (B, columns) or None).
+
+    The designs integrated alone take their gradient from the adjoint's reverse sweep (``kernel_adjoint``) with
+    ``adjoint``, else from one forward sensitivity column per parameter (as the lockstep kernel does); the two
+    agree to rounding.
 
     With ``lockstep`` (and m ≤ ``LOCKSTEP_LARGEST``) the designs run in blocks of ``LANES`` (``lockstep_kernel``),
     a last block of fewer than ``LOCKSTEP_TAIL`` designs one by one; without, every design alone. The two agree to
@@ -330,7 +395,8 @@ def integrate_packed(packed: Packed, lockstep: bool = True):
                                                                         in_blocks, packed.columns)
     if in_blocks < packed.batch:
         alone = slice(in_blocks, packed.batch)
-        integrate_all(*part(packed.arguments, alone), results[alone], gradients[alone], np.zeros((0, 0, 0, 0)))
+        integrate_all(*part(packed.arguments, alone), results[alone], gradients[alone], np.zeros((0, 0, 0, 0)),
+                      adjoint)
     failed = results[:, 2] != OK
     distance, amplitude = results[:, 0].copy(), results[:, 1].copy()
     distance[failed] = amplitude[failed] = np.nan
@@ -343,7 +409,7 @@ def transition_packed(packed: Packed, m: int):
     results = np.zeros((packed.batch, 3))
     gradients = np.zeros((packed.batch, packed.columns))
     transitions = np.zeros((packed.batch, 3, m, 3 * m))
-    integrate_all(*packed.arguments, results, gradients, transitions)
+    integrate_all(*packed.arguments, results, gradients, transitions, False)
     return transitions.reshape(packed.batch, 3 * m, 3 * m), results[:, 2] != OK
 
 
