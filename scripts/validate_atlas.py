@@ -30,7 +30,9 @@ apart; `--sweep-only`, as `make bench` runs it, skips the FOM check and writes o
     .venv/bin/python scripts/validate_atlas.py --scene so3 --start-corners 6 --atlas-scale 0.5
                                                           # 13 FOM runs, 2 PROM builds
 
---atlas-scale s checks the scene with ``[reduction] atlas_scale`` = s (default: the scene's own).
+--atlas-scale s checks the scene with ``[reduction] atlas_scale`` = s (default: the scene's own); --atlas-check τ with
+``[reduction] atlas_check`` = τ (the atlas's own check of its cells; default: the scene's own), the corner PROMs it
+builds counted apart (``check_corner_builds``).
 """
 from __future__ import annotations
 
@@ -250,6 +252,8 @@ def start_corners(scene, count: int, seed: int, workers: int, folder: Path) -> d
             "cells_in_box": grid.box_cells(), "half_width": dict(zip(grid.names, grid.half_width.tolist())),
             "designs_checked": len(designs), "prom_answered": len(checked), "fom_completed": len(errors),
             "builds": atlas["totals"]["built"], "build_time_s": atlas["totals"]["build_time_s"],
+            "check_corner_builds": atlas["totals"].get("check_corner_builds", 0),
+            "leaves": sorted({row["prom_center"] for row in rows if row.get("prom_center")}),
             "largest_relative_error": worst.get("relative_error"), "largest_at": worst.get("design"),
             "largest_why": worst.get("why"), "limit": LIMIT,
             "within_limit": bool(errors) and len(errors) == len(designs) and max(errors) <= LIMIT, "designs": results}
@@ -349,6 +353,8 @@ def main() -> int:
                              "cell and of one other cell against the FOM (results/validation/atlas_start_corners.json)")
     parser.add_argument("--atlas-scale", type=float, default=None,
                         help="the scene's [reduction] atlas_scale s for this check (default: the scene's)")
+    parser.add_argument("--atlas-check", type=float, default=None,
+                        help="the scene's [reduction] atlas_check τ for this check (default: the scene's)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, default=REPOSITORY / "results" / "validation" / "atlas.json")
     parser.add_argument("--sweep-only", action="store_true",
@@ -375,6 +381,11 @@ def main() -> int:
             scene = scene.replace("reduction", atlas_scale=args.atlas_scale)
         except InputError as error:
             parser.error(f"--atlas-scale: {error}")
+    if args.atlas_check is not None:
+        try:
+            scene = scene.replace("reduction", atlas_check=args.atlas_check)
+        except InputError as error:
+            parser.error(f"--atlas-check: {error}")
     if args.start_corners:
         out = args.out.with_name("atlas_start_corners.json") if args.out.name == "atlas.json" else args.out
         load_before = os.getloadavg()
@@ -388,7 +399,8 @@ def main() -> int:
         write_json_atomic(out, report)
         largest = report["largest_relative_error"]
         print(f"start corners at s = {report['atlas_scale']:g}: {report['fom_completed']} of {report['designs_checked']} "
-              f"designs compared, {report['builds']} PROMs built, largest relative distance error "
+              f"designs compared, {report['builds']} PROMs built (and {report['check_corner_builds']} corner PROMs of the "
+              f"atlas check), largest relative distance error "
               f"{100 * (largest if largest is not None else np.nan):+.2f} % ({report['largest_why']}), "
               f"{report['wall_time_s']:.0f} s; wrote {out}")
         return 0 if report["within_limit"] else 1
@@ -419,7 +431,8 @@ def main() -> int:
         split = time_split(sweep["atlas"])
         print(f"atlas sweep: {len(designs)} designs, {counts}, {totals['centres']} centres used, "
               f"{totals['built']} PROMs built "
-              f"({totals['build_time_s']:.1f} s of builds), {sweep['wall_time']:.1f} s; worker time: builds "
+              f"({totals['build_time_s']:.1f} s of builds; {totals.get('check_corner_builds', 0)} corner PROMs of the "
+              f"atlas check, {totals.get('check_time_s', 0.0):.1f} s of checks), {sweep['wall_time']:.1f} s; worker time: builds "
               f"{split['build_wall_s']:.1f} s (CPU {split['build_cpu_s']:.1f} s; first per worker "
               f"{', '.join(f'{t:.2f}' for t in split['first_build_per_worker_s'])} s, others "
               f"{split['later_build_mean_s'] or 0.0:.3f} s each), solves {split['solve_wall_s']:.1f} s "
@@ -429,7 +442,8 @@ def main() -> int:
                   "scene": args.scene, "samples": args.samples, "seed": args.seed, "workers": args.workers,
                   "load_average_before": load_before, "load_average_after_sweep": load_after_sweep}
         sweep_record = {"wall_time_s": sweep["wall_time"], "counts": counts, "every_design_answered":
-                        counts["completed"] == len(designs), "centres": totals["centres"],
+                        counts["completed"] == len(designs), "centres": totals["centres"], "built": totals["built"],
+                        "check_corner_builds": totals.get("check_corner_builds", 0),
                         "build_time_s": totals["build_time_s"], "cells_in_box": sweep["atlas"]["cells_in_box"],
                         "seconds_per_design": sweep["wall_time"] / len(designs),
                         "atlas": cover_record(sweep["atlas"]), "where_the_time_goes": time_split(sweep["atlas"])}

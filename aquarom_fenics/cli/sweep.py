@@ -128,9 +128,16 @@ def atlas_line(out: Path) -> tuple[str, dict] | None:
     report = json.loads(path.read_text())
     totals, refined = report["totals"], report.get("refinement", {})
     split, limit = len(refined.get("split_centres", [])), refined.get("at_depth_limit", [])
+    failed = refined.get("check_failed_at_depth_limit", [])
+    checked = "check_corner_builds" in totals and any("check" in record for record in report["centres"])
     return (f"PROM atlas: {totals['centres']} centre(s) used, {totals['built']} built "
             f"({totals['build_time_s']:.1f} s of builds), {totals['from_the_cache']} from the PROM cache"
-            + (f"; {split} cell(s) bisected for their capped radius" if split else "")
+            + (f"; {split} cell(s) bisected for their capped radius" + (" or their check" if checked else "")
+               if split else "")
+            + (f"; atlas check: {totals['check_corner_builds']} corner PROM(s) built "
+               f"({totals['check_time_s']:.1f} s of checks)" if checked else "")
+            + (f"; {len(failed)} cell(s) failed their check at the depth limit (their PROMs answer, unchecked): "
+               f"{', '.join(failed[:5])}{' …' if len(failed) > 5 else ''}" if failed else "")
             + (f"; {len(limit)} cell(s) at the depth limit ({refined['max_depth']} bisections), whose PROMs "
                f"answer only within their radius: {', '.join(limit[:5])}{' …' if len(limit) > 5 else ''}"
                if limit else "")), \
@@ -208,17 +215,28 @@ def dry_run(args, scene, designs, source, kept, cluster, workers) -> int:
 
 
 def division_line(scene, designs: list[dict]) -> tuple[int, int]:
-    """Say what the capped atlas's divisions will build for ``designs`` as far as the PROM cache tells
-    (``studies.atlas_plan``: the ways down through its PROMs, read, none built); (builds at least, at most)."""
-    from aquarom_fenics.reduction.atlas_refine import MAX_DEPTH
+    """Say what the atlas's divisions (capped radii, the atlas check) will build for ``designs`` as far as the
+    PROM cache tells (``studies.atlas_plan``: the ways down through its PROMs, read, none built); (builds at
+    least, at most)."""
+    from aquarom_fenics.reduction.atlas_refine import MAX_DEPTH, capped, check_tolerance
     from aquarom_fenics.studies.atlas_plan import division_plan
 
     plan = division_plan(scene, designs)
-    say(f"  refinement: [reduction] validity_change caps each PROM's radius at its centre: a cell whose capped "
-        f"radius is below it is divided at once into the halvings that radius asks for, up to {MAX_DEPTH} per "
-        f"shape. Through the PROM cache ({plan.read} PROM(s) read, none built): {plan.answered_from_cache} of "
-        f"{plan.designs} designs reach a cached leaf ({plan.leaves_in_cache} leaves); the others stop at "
-        f"{plan.to_build} cell(s) not in the cache: {plan.to_build} to {plan.at_most} PROM builds (each of those "
-        "cells, and at most one per halving left below it for each of its designs)"
+    tolerance = check_tolerance(scene)
+    rule = ("[reduction] validity_change caps each PROM's radius at its centre: a cell whose capped radius is below "
+            "it is divided at once into the halvings that radius asks for" if capped(scene) else "")
+    if tolerance > 0:
+        rule += ("; " if rule else "") + (
+            f"[reduction] atlas_check = {tolerance:g}: each cell's PROM is compared with the PROMs at two of its "
+            f"corners (up to 2 more builds a cell), and a cell whose relative distance gap exceeds {tolerance:g} is "
+            "halved in every shape and its half checked again. The gaps are known only once those PROMs are built "
+            "and solved, which a dry run does not do: it cannot tell which cells will be halved")
+    say(f"  refinement: {rule}; up to {MAX_DEPTH} halvings per shape. Through the PROM cache ({plan.read} PROM(s) "
+        f"read, none built): {plan.answered_from_cache} of {plan.designs} designs reach a cached leaf "
+        f"({plan.leaves_in_cache} leaves)"
+        + (f", {plan.unchecked} reach a cached cell whose check is not known" if tolerance > 0 else "")
+        + f"; the others stop at {plan.to_build} cell(s) not in the cache: {plan.to_build} to {plan.at_most} PROM "
+        "builds (each of those cells, and at most one per halving left below it for each of its designs"
+        + (", three with the check's corners" if tolerance > 0 else "") + ")"
         + (f"; {plan.refused} design(s) meet a cell with no PROM" if plan.refused else ""))
     return plan.to_build, plan.at_most

@@ -154,13 +154,14 @@ class Scene:
         """The hash of what a PROM build reads: the FOM's sections, [reduction] (its "auto" values resolved:
         the stroke amplitude holds what it reads of [cooptimization]), the muscles, the gait and the shapes'
         names, bounds and radii; not the name, description, shape starts, constraints, [optimizer],
-        [cooptimization], [output] or [reduction] atlas_scale and atlas_change (where the atlas cuts its cells, not what a PROM
+        [cooptimization], [output] or [reduction] atlas_scale, atlas_change and atlas_check (where the atlas cuts its cells, not what a PROM
         is), so that scenes differing only there share their PROMs."""
         shapes = [{key: value for key, value in dataclasses.asdict(shape).items() if key != "start"}
                   for shape in self.shapes]
         selected = self._selected(PROM_SECTIONS, "gait")
         selected["reduction"].pop("atlas_scale", None)
         selected["reduction"].pop("atlas_change", None)
+        selected["reduction"].pop("atlas_check", None)
         return self._digest(selected | {"shapes": shapes})
 
     def _selected(self, sections: tuple[str, ...], *optional: str) -> dict[str, Any]:

@@ -16,7 +16,9 @@ h_k ≤ r_k of it, so the centre's PROM answers ξ. A centre's PROM is built thr
 How s is set (the PROM within 3 % of the FOM inside a cell) is told in :mod:`~aquarom_fenics.studies.atlas`:
 the default holds on SO1's box, not on every scene's (SO3's), so a scene sets its own.
 Where ``[reduction] validity_change`` caps a PROM's radius below its cell, the cell is bisected
-(:mod:`~aquarom_fenics.reduction.atlas_refine`); without the cap the cells are these.
+(:mod:`~aquarom_fenics.reduction.atlas_refine`); without the cap the cells are these. With ``[reduction]
+atlas_check`` > 0 a cell is also halved where its PROM's distance differs from its corners' PROMs' by more than
+that (:mod:`~aquarom_fenics.reduction.atlas_check`): a scene nobody checked need not trust s.
 """
 from __future__ import annotations
 

@@ -21,6 +21,13 @@ that would divide only shapes at that depth is a leaf *at the depth limit*; its 
 within its own radius R (``ReducedModel.refuse_outside_radius``), and callers report such leaves. On a scene
 whose radii are not capped (R = r ≥ h / s) every base cell is a leaf: the regular atlas, its cells, names and
 cache entries, unchanged.
+
+With ``[reduction] atlas_check`` = τ > 0 a node that its radius leaves whole is also checked
+(:mod:`~aquarom_fenics.reduction.atlas_check`): its PROM against the PROMs at two of its corners; where the gap
+exceeds τ the node is halved once in every shape with a width (D_k = 1, cut at :data:`MAX_DEPTH`) and the part
+holding the design is judged again. A node that fails the check with every shape at the depth limit is a leaf
+whose check failed (``Leaf.check``, ``met[node]["check"]``): its PROM still answers its cell (h ≤ s R), and
+callers report it.
 """
 from __future__ import annotations
 
@@ -30,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aquarom_fenics.errors import InputError
+from aquarom_fenics.reduction.atlas_check import CellCheck, check_cell, reduced_distances, vertex
 from aquarom_fenics.reduction.atlas_cover import BUILT_HERE, Cover, cell_of, center_id, center_prom
 
 MAX_DEPTH = 6
@@ -146,6 +154,7 @@ class Leaf:
     radius: np.ndarray
     path: list
     at_limit: bool
+    check: CellCheck | None = None      # the atlas check of the leaf (None: not checked); failed only at the depth limit
 
     def answers(self, grid: Cover, xi: np.ndarray) -> bool:
         """Whether the leaf's PROM answers ξ of its cell: always (h ≤ s R), unless the leaf is at the depth limit;
@@ -169,9 +178,12 @@ class Refiner:
     visit: its id, whether it was built, its split, its time. Without capped radii no PROM is needed to find a
     leaf (the base cell)."""
 
-    def __init__(self, scene, grid: Cover, fish=None, prom_at=None, max_depth: int = MAX_DEPTH):
+    def __init__(self, scene, grid: Cover, fish=None, prom_at=None, max_depth: int = MAX_DEPTH, distances=None):
         self.scene, self.grid, self.fish, self.max_depth = scene, grid, fish, max_depth
         self.prom_at = prom_at or (lambda center: center_prom(scene, center, fish))
+        self.distances = distances or reduced_distances
+        self.tolerance = check_tolerance(scene)
+        self.checks: dict[Node, CellCheck] = {}
         self.radii: dict[Node, np.ndarray] = {}
         self.refused: dict[Node, str] = {}
         self.met: dict[Node, dict] = {}
@@ -184,7 +196,7 @@ class Refiner:
     def capped(self) -> bool:
         """Whether PROM radii are capped at their centres (``[reduction] validity_change`` or ``atlas_change``
         > 0); if not, R = r."""
-        return divides(self.scene)
+        return capped(self.scene)
 
     def radius(self, node: Node) -> np.ndarray:
         """R of the PROM at the node's centre: the scene's r when radii are not capped (no build: every base cell
@@ -228,18 +240,63 @@ class Refiner:
             need = splits(radius, node.half_width(self.grid), self.grid.scale)
             down = halvings(radius, node.half_width(self.grid), self.grid.scale,
                             self.max_depth - np.asarray(node.levels))
+            check = None
+            if not down.any() and self.tolerance > 0:
+                check = self.check(node)
+                if not check.passed:
+                    down = self.check_halvings(node)
             if not down.any():
-                return Leaf(node, radius, path, bool(need.any()))
+                return Leaf(node, radius, path, bool(need.any()), check)
             self.met[node]["split"] = [name for name, d in zip(self.grid.names, down) if d]
             self.met[node]["halvings"] = {name: int(d) for name, d in zip(self.grid.names, down) if d}
             path.append(node)
             node = part(self.grid, node, down, xi)
 
 
-def divides(scene) -> bool:
-    """Whether the atlas's cells are divided where their PROMs' radii are capped: ``[reduction] validity_change``
-    or ``atlas_change`` > 0."""
+    def check(self, node: Node) -> CellCheck:
+        """The atlas check of a node (:func:`~aquarom_fenics.reduction.atlas_check.check_cell`), made once: its PROM
+        against the PROMs at its two corners along its distance gradient's signs, those read from the PROM cache
+        or built (``met[node]["check"]`` records it)."""
+        if node not in self.checks:
+            prom = self.prom(node)
+            depth = max(MAX_DEPTH, self.max_depth)       # one grid of vertices for every node
+
+            def corners_of(signs):
+                return np.array([vertex(self.grid.lower, self.grid.half_width, node.index, node.levels, sign * signs,
+                                        depth) for sign in (1, -1)])
+
+            def corner_prom(corner):
+                return self.prom_at(dict(zip(self.grid.names, corner.tolist())))
+
+            started = time.perf_counter()
+            self.checks[node] = check_cell(prom, self.scene, node.center(self.grid), corners_of, corner_prom,
+                                           self.tolerance, self.distances)
+            self.met[node]["check"] = self.checks[node].record(self.grid.names) | {
+                "time_s": time.perf_counter() - started}
+            self.last = (node, prom)
+        return self.checks[node]
+
+    def check_halvings(self, node: Node) -> np.ndarray:
+        """D_k = 1 in every shape with a width below the depth limit: a node that failed its check is halved
+        once everywhere it can be (0 everywhere at the limit: a leaf whose check failed)."""
+        room = (self.grid.half_width > 0) & (np.asarray(node.levels) < self.max_depth)
+        return room.astype(int)
+
+
+def check_tolerance(scene) -> float:
+    """τ of ``[reduction] atlas_check`` (0: off; a scene object without the key: off)."""
+    return float(getattr(scene.reduction, "atlas_check", 0.0))
+
+
+def capped(scene) -> bool:
+    """Whether PROM radii are capped for the atlas: ``[reduction] validity_change`` or ``atlas_change`` > 0."""
     return scene.reduction.validity_change > 0 or scene.reduction.atlas_change > 0
+
+
+def divides(scene) -> bool:
+    """Whether the atlas's cells may be divided: where their PROMs' radii are capped (:func:`capped`) or where the
+    atlas check finds a cell's PROM too far from its corners' (``[reduction] atlas_check`` > 0)."""
+    return capped(scene) or check_tolerance(scene) > 0
 
 
 def atlas_radius(scene, prom) -> np.ndarray:

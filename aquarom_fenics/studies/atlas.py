@@ -133,7 +133,7 @@ def evaluate_center(task: CenterTask) -> dict:
         answered[node] = {"size": prom.size, "prom_radius": dict(zip(prom.shape_names, prom.validity_radius.tolist())),
                           **({"at_depth_limit": True} if leaf.at_limit else {})}
         solves[node] = {"solve_time_s": time.perf_counter() - solve_at, "solve_cpu_s": time.thread_time() - solve_cpu}
-    records = [_node_record(grid, node, met, refiner.radii.get(node)) | answered.get(node, {})
+    records = [_node_record(grid, node, met, refiner.radii.get(node, grid.radius)) | answered.get(node, {})
                | solves.get(node, {"solve_time_s": 0.0, "solve_cpu_s": 0.0}) for node, met in refiner.met.items()]
     share = (time.perf_counter() - started) / len(rows)
     for row in rows:
@@ -152,6 +152,8 @@ def _node_record(grid: Cover, node, met: dict, radius=None) -> dict:
     if "split" in met:
         record.update(split=met["split"], halvings=met.get("halvings", {}),
                       prom_radius=dict(zip(grid.names, np.asarray(radius).tolist())))
+    if "check" in met:
+        record["check"] = met["check"]
     return record
 
 
@@ -232,13 +234,31 @@ def atlas_report(scene: Scene, grid: Cover, records: dict[str, dict], rows: list
             "box": {name: [lo, hi] for name, lo, hi in zip(names, grid.lower.tolist(), grid.upper.tolist())},
             "cells_in_box": grid.box_cells(), "centres": centres,
             "refinement": {"max_depth": MAX_DEPTH, "split_centres": split,
-                           "at_depth_limit": [record["id"] for record in centres if record.get("at_depth_limit")]},
+                           "at_depth_limit": [record["id"] for record in centres if record.get("at_depth_limit")],
+                           **check_failed(centres, split)},
             "totals": {"centres": len(centres), "built": statuses.count("built"),
                        "from_the_cache": statuses.count("from the cache"),
                        "build_time_s": _total(centres + split, "build_time_s", built_only=True),
                        "build_cpu_s": _total(centres + split, "build_cpu_s", built_only=True),
                        "solve_time_s": _total(centres, "solve_time_s"), "solve_cpu_s": _total(centres, "solve_cpu_s"),
-                       "designs": sum(designs.values())}}
+                       "designs": sum(designs.values()), **check_totals(centres + split)}}
+
+
+def check_failed(centres: list[dict], split: list[dict]) -> dict:
+    """With the atlas check (``[reduction] atlas_check``): the leaves whose check failed at the depth limit."""
+    if not any("check" in record for record in centres + split):
+        return {}
+    return {"check_failed_at_depth_limit": [record["id"] for record in centres
+                                            if not record.get("check", {}).get("passed", True)]}
+
+
+def check_totals(records: list[dict]) -> dict:
+    """With the atlas check: the corner PROMs its checks built and the checks' wall time [s]."""
+    checks = [record["check"] for record in records if "check" in record]
+    if not checks:
+        return {}
+    return {"checked": len(checks), "check_corner_builds": sum(check["corner_builds"] for check in checks),
+            "check_time_s": _total(checks, "time_s")}
 
 
 def _order(node) -> tuple:

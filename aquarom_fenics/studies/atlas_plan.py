@@ -11,6 +11,14 @@ already (read, never built) and stops each design's way at the first node not in
 
 N_stop the distinct stop nodes, n_stop the designs whose ways stop at one, L_k its halvings in shape k. Designs
 whose way ends at a leaf of the cache need no build.
+
+With ``[reduction] atlas_check`` > 0 (:mod:`~aquarom_fenics.reduction.atlas_check`) the plan cannot know the gaps
+without the corners' reduced solves, which it does not make: a way stops at the first node not in the cache, or
+at a cached node its radius leaves whole (its check unknown). Each node checked costs up to 3 builds (its own PROM
+and two corners', fewer where the cache holds them or cells share a corner), and a check that fails halves every
+shape, so
+
+    builds ≥ N_stop,    builds ≤ 3 Σ_stop (1 + n_stop Σ_k (D - L_k)) + Σ_unchecked (2 + 3 n Σ_k (D - L_k)).
 """
 from __future__ import annotations
 
@@ -19,7 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from aquarom_fenics.reduction.atlas_cover import cover
-from aquarom_fenics.reduction.atlas_refine import MAX_DEPTH, Refiner, RefusedNode, base_node, halvings, part
+from aquarom_fenics.reduction.atlas_refine import (MAX_DEPTH, Refiner, RefusedNode, base_node, check_tolerance,
+                                                   halvings, part)
 
 
 @dataclass
@@ -33,6 +42,7 @@ class DivisionPlan:
     refused: int                 # designs whose way meets a node the cache records as refused
     to_build: int                # distinct nodes not in the cache where ways stop: builds at least
     at_most: int                 # builds at most (module docstring)
+    unchecked: int = 0           # with the atlas check: designs whose way reaches a cached node whose check is not known
 
 
 class _NotStored(Exception):
@@ -55,7 +65,9 @@ def division_plan(scene, designs: list[dict], stored=None, max_depth: int = MAX_
         return prom, False
 
     refiner = Refiner(scene, grid, prom_at=prom_at, max_depth=max_depth)
+    checking = check_tolerance(scene) > 0
     stops: dict = {}
+    unchecked: dict = {}
     leaves, answered, refused = set(), 0, 0
     for design in designs:
         xi = np.array([design[name] for name in grid.names], dtype=float)
@@ -65,6 +77,8 @@ def division_plan(scene, designs: list[dict], stored=None, max_depth: int = MAX_
                 stops[node] += 1
                 break
             try:
+                if checking:
+                    refiner.prom(node)                      # the node's own PROM, cached or a stop
                 radius = refiner.radius(node)
             except _NotStored:
                 stops[node] = 1
@@ -73,10 +87,18 @@ def division_plan(scene, designs: list[dict], stored=None, max_depth: int = MAX_
                 refused += 1
                 break
             down = halvings(radius, node.half_width(grid), grid.scale, max_depth - np.asarray(node.levels))
+            if not down.any() and checking:
+                unchecked[node] = unchecked.get(node, 0) + 1
+                break
             if not down.any():
                 leaves.add(node)
                 answered += 1
                 break
             node = part(grid, node, down, xi)
-    bound = sum(1 + count * int(np.sum(max_depth - np.asarray(node.levels))) for node, count in stops.items())
-    return DivisionPlan(len(designs), answered, len(leaves), len(refiner.radii), refused, len(stops), bound)
+    below = lambda node, count: count * int(np.sum(max_depth - np.asarray(node.levels)))     # noqa: E731
+    bound = sum(1 + below(node, count) for node, count in stops.items())
+    if checking:
+        bound = 3 * bound + sum(2 + 3 * below(node, count) for node, count in unchecked.items())
+    read = len(refiner.radii) if not checking else len({node for node in refiner.met if "refused" not in refiner.met[node]})
+    return DivisionPlan(len(designs), answered, len(leaves), read, refused, len(stops), bound,
+                        sum(unchecked.values()))

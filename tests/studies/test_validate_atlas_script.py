@@ -103,3 +103,12 @@ def test_a_bad_atlas_scale_is_refused_before_any_run(monkeypatch, capsys):
     assert stop.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert "--atlas-scale" in err and "atlas_scale = 1.5 must be in (0, 1]" in err
+
+
+def test_a_bad_atlas_check_is_refused_before_any_run(monkeypatch, capsys):
+    monkeypatch.setattr("sys.argv", ["validate_atlas.py", "--atlas-check", "1.0", "--start-corners", "2"])
+    with pytest.raises(SystemExit) as stop:
+        script.main()
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "--atlas-check" in err and "atlas_check = 1.0 must be in [0, 1)" in err
