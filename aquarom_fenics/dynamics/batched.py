@@ -272,3 +272,12 @@ def _propagate(system: BatchedSystem, scheme: TimeScheme, time: float, old, new,
                 failed[b] = True
     v_new, a_new = scheme.correct(u_new, u_predicted, v_predicted)
     return u_new, v_new, a_new
+
+
+def reduced_distances(prom: ReducedModel, scene: Scene, xis: np.ndarray, gradient: bool = False):
+    """The PROM's distances d (B,) at the designs ``xis`` (B, p) (:func:`simulate_batch`) and, with ``gradient``,
+    ∂d/∂ξ (B, p); NaN where a solve stopped. What the atlas's check of its cells simulates
+    (``reduction.atlas_check``, which sits below this layer and is handed this function)."""
+    xis = np.atleast_2d(xis)
+    result = simulate_batch(prom, scene, xis, sensitivities=gradient)
+    return result.distance, (result.distance_gradient[:, :xis.shape[1]] if gradient else None)

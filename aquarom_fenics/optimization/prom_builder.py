@@ -7,6 +7,7 @@ import time
 
 import numpy as np
 
+from aquarom_fenics.dynamics.batched import reduced_distances
 from aquarom_fenics.dynamics.reduced_dynamics import reduced_stability
 from aquarom_fenics.errors import InputError
 from aquarom_fenics.geometry.fish import Fish
@@ -151,7 +152,7 @@ class PromBuilder:
 
     def _refiner(self) -> Refiner:
         if self._atlas is None:
-            self._atlas = Refiner(self.scene, cover(self.scene), self.fish)
+            self._atlas = Refiner(self.scene, cover(self.scene), self.fish, distances=reduced_distances)
         return self._atlas
 
     def _radius_fraction(self, xi: np.ndarray, other: np.ndarray) -> float:

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aquarom_fenics.dynamics.batched import simulate_batch
+from aquarom_fenics.dynamics.batched import reduced_distances, simulate_batch
 from aquarom_fenics.errors import SolverError
 from aquarom_fenics.io.scene import Scene
 from aquarom_fenics.optimization.cost import (CostWeights, DesignSpace, cost_value, counts_power, scene_at,
@@ -92,7 +92,8 @@ def screen_center(task: ScreenTask) -> dict:
     capped radius splits it: ``atlas_refine``), and a record per node met (a worker's task). A design at a leaf
     of the depth limit beyond its PROM's radius, or whose way meets a node without a PROM, costs +∞."""
     grid = cover(task.scene)
-    refiner = Refiner(task.scene, grid, prom_at=lambda center: center_prom(task.scene, center))
+    refiner = Refiner(task.scene, grid, prom_at=lambda center: center_prom(task.scene, center),
+                      distances=reduced_distances)
     costs, leaves = np.full(len(task.positions), np.inf), {}
     for k, z in enumerate(task.designs):
         try:

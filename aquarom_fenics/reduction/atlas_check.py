@@ -99,21 +99,12 @@ def relative_gaps(center_distances: np.ndarray, corner_distances: np.ndarray) ->
     return np.where(np.isfinite(gaps), gaps, np.inf)
 
 
-def reduced_distances(prom, scene, xis: np.ndarray, gradient: bool = False):
-    """The PROM's distances d (B,) at designs ``xis`` (B, p) (``simulate_batch``) and, with ``gradient``, ∂d/∂ξ
-    (B, p); NaN where a solve stopped."""
-    from aquarom_fenics.dynamics.batched import simulate_batch
-
-    result = simulate_batch(prom, scene, np.atleast_2d(xis), sensitivities=gradient)
-    grads = result.distance_gradient[:, :np.atleast_2d(xis).shape[1]] if gradient else None
-    return result.distance, grads
-
-
 def check_cell(center_prom, scene, center: np.ndarray, corners_of, corner_prom, tolerance: float,
-               distances=reduced_distances) -> CellCheck:
+               distances) -> CellCheck:
     """The check of a cell: the centre PROM's gradient at c gives σ, ``corners_of(σ)`` → the corners (2, p)
     v± = c ± σ ∘ h, ``corner_prom(v)`` → (PROM at v, built) or InputError, ``distances(prom, scene, xis,
-    gradient)`` → (d, ∂d/∂ξ) (:func:`reduced_distances` by default)."""
+    gradient)`` → (d, ∂d/∂ξ) (:func:`~aquarom_fenics.dynamics.batched.reduced_distances`: the reduced dynamics
+    sit above this layer, so the caller passes them)."""
     from aquarom_fenics.errors import InputError
 
     _, gradient = distances(center_prom, scene, np.asarray(center, dtype=float)[None, :], True)

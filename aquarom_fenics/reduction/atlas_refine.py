@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aquarom_fenics.errors import InputError
-from aquarom_fenics.reduction.atlas_check import CellCheck, check_cell, reduced_distances, vertex
+from aquarom_fenics.reduction.atlas_check import CellCheck, check_cell, vertex
 from aquarom_fenics.reduction.atlas_cover import BUILT_HERE, Cover, cell_of, center_id, center_prom
 
 MAX_DEPTH = 6
@@ -176,12 +176,14 @@ class Refiner:
     ``prom_at(center_dict)`` → (PROM, built): :func:`~aquarom_fenics.reduction.atlas_cover.center_prom` by
     default; the radius of every node met is kept (``radii``, by node), and ``met`` records each node's first
     visit: its id, whether it was built, its split, its time. Without capped radii no PROM is needed to find a
-    leaf (the base cell)."""
+    leaf (the base cell). ``distances(prom, scene, xis, gradient)`` → (d, ∂d/∂ξ): the reduced solves of the atlas
+    check (``dynamics.batched.reduced_distances``, handed down from the layers above; needed only with
+    ``[reduction] atlas_check`` > 0)."""
 
     def __init__(self, scene, grid: Cover, fish=None, prom_at=None, max_depth: int = MAX_DEPTH, distances=None):
         self.scene, self.grid, self.fish, self.max_depth = scene, grid, fish, max_depth
         self.prom_at = prom_at or (lambda center: center_prom(scene, center, fish))
-        self.distances = distances or reduced_distances
+        self.distances = distances      # the atlas check's reduced solves (dynamics.batched.reduced_distances)
         self.tolerance = check_tolerance(scene)
         self.checks: dict[Node, CellCheck] = {}
         self.radii: dict[Node, np.ndarray] = {}
@@ -258,6 +260,9 @@ class Refiner:
         against the PROMs at its two corners along its distance gradient's signs, those read from the PROM cache
         or built (``met[node]["check"]`` records it)."""
         if node not in self.checks:
+            if self.distances is None:
+                raise ValueError("the atlas check needs the reduced solves: Refiner(..., distances="
+                                 "dynamics.batched.reduced_distances)")
             prom = self.prom(node)
             depth = max(MAX_DEPTH, self.max_depth)       # one grid of vertices for every node
 

@@ -101,12 +101,12 @@ def evaluate_center(task: CenterTask) -> dict:
     record times the build (or cache read) and the solve, wall [s] and the worker thread's CPU [s], and names
     the worker and how many atlas PROMs it had built by then (``builds_in_worker`` 1: its first, which sets up
     its FOM)."""
-    from aquarom_fenics.dynamics.batched import simulate_batch
+    from aquarom_fenics.dynamics.batched import reduced_distances, simulate_batch
     from aquarom_fenics.reduction.prom import ReducedModel
 
     started = time.perf_counter()
     scene, grid = task.scene, cover(task.scene, task.scale)
-    refiner = Refiner(scene, grid, max_depth=MAX_DEPTH)
+    refiner = Refiner(scene, grid, max_depth=MAX_DEPTH, distances=reduced_distances)
     rows = [{"design": index, **design, "status": "completed", "distance_m": None, "tail_amplitude_m": None,
              "cached": False, "reason": "", "prom_center": center_id(task.cell)} for index, design in task.designs]
     leaves: dict = {}

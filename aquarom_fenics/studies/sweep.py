@@ -95,6 +95,7 @@ def reduced_model(scene: Scene, design: dict, model: str):
 
     InputError for a design beyond that PROM's validity radius."""
     from aquarom_fenics.reduction.cache import cached_prom
+    from aquarom_fenics.dynamics.batched import reduced_distances
     from aquarom_fenics.reduction.prom import ReducedModel
     from aquarom_fenics.reduction.reductor import build_prom
     from aquarom_fenics.studies import atlas
@@ -102,7 +103,7 @@ def reduced_model(scene: Scene, design: dict, model: str):
     fish = shared_fish(scene)
     shapes = {name: design[name] for name in scene.shape_names}
     if model == "prom":
-        refiner = atlas.Refiner(scene, atlas.cover(scene))
+        refiner = atlas.Refiner(scene, atlas.cover(scene), distances=reduced_distances)
         prom = refiner.prom(refiner.leaf(np.array([design[name] for name in scene.shape_names], dtype=float)).node)
         ReducedModel.refuse_outside_radius(prom.shape_names, fish.parameter_vector(shapes), prom.xi_center,
                                            prom.validity_radius)
