@@ -65,9 +65,9 @@ def trust_region(scene, space, builder, weights, history, checkpoint, state, saf
         iteration = state["iteration"] + 1
         if (np.abs(step).max() < settings.step_tolerance
                 or current.cost - predicted_cost <= settings.cost_tolerance * abs(current.cost)):
-            reason = "no predicted improvement inside the trust radius (stalled before optimality)"
             restarted = _on_own_basis(scene, space, builder, weights, prom, current, measure)
             if restarted is None:
+                reason = "no predicted improvement inside the trust radius (stalled before optimality)"
                 break
             prom, current, measure = restarted
             state.update(radius=settings.initial_radius)

@@ -244,3 +244,15 @@ def test_a_stall_on_a_prom_on_its_own_basis_stops_the_run(scene):
     assert not result.converged and "stalled before optimality" in result.stop_reason, result.stop_reason
     assert result.optimum == pytest.approx([0.0125, 0.00625], abs=1e-12)
     assert builder.own_basis_builds == 0
+
+
+def test_a_run_cut_by_max_iterations_after_a_rebuild_says_so(scene):
+    """After a stall rebuilt the centre's PROM on its own basis, a run that then uses up ``max_iterations`` stops on
+    that safeguard, not on the stall it recovered from (which the stop reason kept before)."""
+    for iterations in (6, 9, 12):
+        short = scene.replace("optimizer", initial_radius=0.25, max_iterations=iterations)
+        fish = load_fish(short)
+        space = optimize_module.optimization_space(short, fish)
+        result = optimize(short, fish=fish, builder=ReusedBasisErrorBuilder(short, fish, space))
+        assert not result.converged and result.iterations == iterations
+        assert result.stop_reason == "maximum number of iterations (safeguard)", (iterations, result.stop_reason)
