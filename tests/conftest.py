@@ -14,6 +14,7 @@ import time
 for _variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
     os.environ.setdefault(_variable, "1")
 
+import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 from aquarom_fenics.io.scene import scene_from_dict  # noqa: E402
@@ -95,6 +96,36 @@ def coarse_scene(**sections):
     for name, table in sections.items():
         data[name] = {**data.get(name, {}), **table}
     return scene_from_dict(data, source="<test>")
+
+
+MOVING_TAIL = {"xz_concave_tail": {"bounds": [-0.01, 0.2]}, "y_thin": {"bounds": [-0.15, 0.15]}}
+"""Two shape parameters, the first of which moves the tail's rest stations (x and z), the second only widths."""
+
+MOVING_TAIL_SWIM = {"duration": 0.3}
+
+THRUST_VARIANTS = pytest.mark.parametrize("fluid", [
+    {"spine_force": "lagrangian", "spine_rule": "rear"},
+    {"spine_force": "lagrangian", "spine_rule": "trapezoid", "drag": False},
+    {"spine_force": "source", "spine_rule": "rear", "drag": False},
+    {"thrust_factor": 1.3, "drag_factor": 0.7},
+], ids=["lagrangian-rear", "lagrangian-trapezoid-no-drag", "source-rear-no-drag", "fluid-factors"])
+"""The thrust's variants a reduced kernel must follow: both spine rules and forces, with and without drag, fluid
+factors (``@THRUST_VARIANTS`` on a test taking ``fluid``)."""
+
+
+def moving_tail_designs(fluid: dict):
+    """(scene, PROM, three designs ξ (3, 2), their amplitudes (3,)) of ``MOVING_TAIL`` with the thrust ``fluid``,
+    on the coarsest mesh: the centre and two designs near opposite corners of the validity box, amplitudes around
+    the scene's. The rest stations move with ξ (asserted)."""
+    from aquarom_fenics.geometry.fish import load_fish
+    from aquarom_fenics.reduction.reductor import build_prom
+
+    scene = coarse_scene(shapes=MOVING_TAIL, solver=MOVING_TAIL_SWIM, fluid=fluid)
+    prom = build_prom(scene, fish=load_fish(scene))
+    assert prom.thrust is not None and np.any(prom.thrust.rest_xy_gradient)        # the rest stations move
+    xis = prom.xi_center + prom.validity_radius * np.array([[0.0, 0.0], [0.9, -0.7], [-0.8, 0.6]])
+    amplitudes = scene.actuation.amplitude * np.array([1.0, 1.1, 0.9])
+    return scene, prom, xis, amplitudes
 
 
 @pytest.fixture

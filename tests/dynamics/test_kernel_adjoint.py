@@ -12,13 +12,9 @@ from aquarom_fenics.dynamics.kernel_terms import factorize
 from aquarom_fenics.dynamics.simulate import check_time_grid
 from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.reduction.reductor import build_prom
-from conftest import coarse_scene
+from conftest import MOVING_TAIL, MOVING_TAIL_SWIM, THRUST_VARIANTS, coarse_scene, moving_tail_designs
 
 pytestmark = pytest.mark.skipif(not reduced_kernel.available(), reason="numba is not installed")
-
-SHORT = {"duration": 0.3}
-MOVING_TAIL = {"xz_concave_tail": {"bounds": [-0.01, 0.2]}, "y_thin": {"bounds": [-0.15, 0.15]}}
-"""Two shape parameters, the first of which moves the tail's rest stations (x and z), the second only widths."""
 
 
 def both_gradients(prom, scene, xis, amplitudes, sensitivities=True, amplitude_sensitivity=True):
@@ -35,18 +31,9 @@ def relative_difference(a, b):
     return np.max(np.abs(a - b)) / np.max(np.abs(b))
 
 
-@pytest.mark.parametrize("fluid", [
-    {"spine_force": "lagrangian", "spine_rule": "rear"},
-    {"spine_force": "lagrangian", "spine_rule": "trapezoid", "drag": False},
-    {"spine_force": "source", "spine_rule": "rear", "drag": False},
-    {"thrust_factor": 1.3, "drag_factor": 0.7},
-], ids=["lagrangian-rear", "lagrangian-trapezoid-no-drag", "source-rear-no-drag", "fluid-factors"])
+@THRUST_VARIANTS
 def test_the_adjoint_gradient_equals_the_forward_columns(fluid):
-    scene = coarse_scene(shapes=MOVING_TAIL, solver=SHORT, fluid=fluid)
-    prom = build_prom(scene, fish=load_fish(scene))
-    assert prom.thrust is not None and np.any(prom.thrust.rest_xy_gradient)        # the rest stations move
-    xis = prom.xi_center + prom.validity_radius * np.array([[0.0, 0.0], [0.9, -0.7], [-0.8, 0.6]])
-    amplitudes = scene.actuation.amplitude * np.array([1.0, 1.1, 0.9])
+    scene, prom, xis, amplitudes = moving_tail_designs(fluid)
     adjoint, forward = both_gradients(prom, scene, xis, amplitudes)
     np.testing.assert_array_equal(adjoint[0], forward[0])                 # the same forward run
     for b in range(len(xis)):
@@ -55,7 +42,7 @@ def test_the_adjoint_gradient_equals_the_forward_columns(fluid):
 
 
 def test_the_adjoint_without_the_amplitude_or_without_the_shapes():
-    scene = coarse_scene(shapes=MOVING_TAIL, solver=SHORT)
+    scene = coarse_scene(shapes=MOVING_TAIL, solver=MOVING_TAIL_SWIM)
     prom = build_prom(scene, fish=load_fish(scene))
     xis = prom.xi_center + prom.validity_radius * np.array([[0.5, -0.4]])
     amplitudes = np.array([scene.actuation.amplitude])

@@ -9,27 +9,14 @@ from aquarom_fenics.dynamics.batched import simulate_batch
 from prom_checks import assert_batch_matches_single_runs
 from aquarom_fenics.geometry.fish import load_fish
 from aquarom_fenics.reduction.reductor import build_prom
-from conftest import coarse_scene
+from conftest import THRUST_VARIANTS, coarse_scene, moving_tail_designs
 
 pytestmark = pytest.mark.skipif(not reduced_kernel.available(), reason="numba is not installed")
 
-SHORT = {"duration": 0.3}
-MOVING_TAIL = {"xz_concave_tail": {"bounds": [-0.01, 0.2]}, "y_thin": {"bounds": [-0.15, 0.15]}}
-"""Two shape parameters, the first of which moves the tail's rest stations (x and z), the second only widths."""
 
-
-@pytest.mark.parametrize("fluid", [
-    {"spine_force": "lagrangian", "spine_rule": "rear"},
-    {"spine_force": "lagrangian", "spine_rule": "trapezoid", "drag": False},
-    {"spine_force": "source", "spine_rule": "rear", "drag": False},
-    {"thrust_factor": 1.3, "drag_factor": 0.7},
-], ids=["lagrangian-rear", "lagrangian-trapezoid-no-drag", "source-rear-no-drag", "fluid-factors"])
+@THRUST_VARIANTS
 def test_the_kernel_agrees_with_single_runs_on_each_thrust_variant(fluid):
-    scene = coarse_scene(shapes=MOVING_TAIL, solver=SHORT, fluid=fluid)
-    prom = build_prom(scene, fish=load_fish(scene))
-    assert prom.thrust is not None and np.any(prom.thrust.rest_xy_gradient)        # the rest stations move
-    xis = prom.xi_center + prom.validity_radius * np.array([[0.0, 0.0], [0.9, -0.7], [-0.8, 0.6]])
-    amplitudes = scene.actuation.amplitude * np.array([1.0, 1.1, 0.9])
+    scene, prom, xis, amplitudes = moving_tail_designs(fluid)
     batch = simulate_batch(prom, scene, xis, sensitivities=True, amplitudes=amplitudes, amplitude_sensitivity=True,
                            engine="compiled")
     assert_batch_matches_single_runs(prom, scene, xis, amplitudes, batch)

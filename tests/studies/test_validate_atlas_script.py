@@ -96,19 +96,14 @@ def test_the_start_corners_are_the_start_and_seeded_corners_of_its_cell_and_of_o
     assert designs != script.start_corner_designs(scene, grid, 4, seed=4)
 
 
-def test_a_bad_atlas_scale_is_refused_before_any_run(monkeypatch, capsys):
-    monkeypatch.setattr("sys.argv", ["validate_atlas.py", "--atlas-scale", "1.5", "--start-corners", "2"])
+@pytest.mark.parametrize("flag, value, refusal", [
+    ("--atlas-scale", "1.5", "atlas_scale = 1.5 must be in (0, 1]"),
+    ("--atlas-check", "1.0", "atlas_check = 1.0 must be in [0, 1)"),
+])
+def test_a_bad_atlas_key_is_refused_before_any_run(monkeypatch, capsys, flag, value, refusal):
+    monkeypatch.setattr("sys.argv", ["validate_atlas.py", flag, value, "--start-corners", "2"])
     with pytest.raises(SystemExit) as stop:
         script.main()
     assert stop.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()[-1]
-    assert "--atlas-scale" in err and "atlas_scale = 1.5 must be in (0, 1]" in err
-
-
-def test_a_bad_atlas_check_is_refused_before_any_run(monkeypatch, capsys):
-    monkeypatch.setattr("sys.argv", ["validate_atlas.py", "--atlas-check", "1.0", "--start-corners", "2"])
-    with pytest.raises(SystemExit) as stop:
-        script.main()
-    assert stop.value.code == 2
-    err = capsys.readouterr().err.strip().splitlines()[-1]
-    assert "--atlas-check" in err and "atlas_check = 1.0 must be in [0, 1)" in err
+    assert flag in err and refusal in err
