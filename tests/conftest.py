@@ -4,10 +4,15 @@
 worker, so its module-scoped meshes, FOM runs and PROMs are built once). Each worker has its own
 session, hence its own result cache; the tests marked ``mpi`` take turns (:func:`one_mpirun_at_a_time`).
 """
+import faulthandler
 import fcntl
 import os
+import shutil
 import signal
+import tempfile
+import threading
 import time
+from pathlib import Path
 
 # One BLAS thread per process, set before numpy loads OpenBLAS: the xdist workers (and the CLI
 # runs they start) already use both cores, and OpenBLAS threads waiting for a core spin in sched_yield.
@@ -24,11 +29,46 @@ os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
 os.environ.setdefault("OMPI_MCA_mpi_yield_when_idle", "1")   # a waiting rank yields its core to the other worker
 
 
+FAULTS = "AQUAROM_TEST_FAULTS"
+"""The folder where each xdist worker's fatal-error traceback goes (set by the controlling process)."""
+
+
+@pytest.hookimpl(trylast=True)
 def pytest_configure(config):
     """Ctrl-C as a terminal's foreground process gets it: the interrupt tests send SIGINT to the processes they
     start, and a shell starts background jobs with SIGINT ignored, which every process started after keeps
-    (an ignored signal stays ignored across exec). The suite must answer the same however it is launched."""
-    signal.signal(signal.SIGINT, signal.default_int_handler)
+    (an ignored signal stays ignored across exec). The suite must answer the same however it is launched.
+    Only the main thread may set a handler: an xdist worker configures in another thread under ``-v``.
+
+    A worker that dies (a segmentation fault, an abort) is reported by xdist as "crashed" with no traceback in
+    the summary; its faulthandler traceback went to the start of the output. Each worker writes it to a file of
+    its own instead (after pytest's faulthandler has set itself up), and the controller prints the files at the
+    end (:func:`pytest_terminal_summary`)."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if hasattr(config, "workerinput"):
+        if os.environ.get(FAULTS):
+            worker = os.environ.get("PYTEST_XDIST_WORKER", "worker")
+            config._fault_file = open(Path(os.environ[FAULTS]) / f"{worker}-{os.getpid()}.txt", "w")
+            faulthandler.enable(file=config._fault_file, all_threads=True)
+    elif config.pluginmanager.hasplugin("xdist") and (config.getoption("numprocesses", None) or 0):
+        config._fault_folder = Path(tempfile.mkdtemp(prefix="aquarom-test-faults-"))
+        os.environ[FAULTS] = str(config._fault_folder)
+
+
+def pytest_terminal_summary(terminalreporter, config):
+    """The tracebacks of the workers that died, if any (see :func:`pytest_configure`)."""
+    folder = getattr(config, "_fault_folder", None)
+    for report in sorted(folder.iterdir()) if folder is not None else ():
+        if report.stat().st_size:
+            terminalreporter.section(f"fatal error in test worker {report.stem}")
+            terminalreporter.write(report.read_text(errors="replace"))
+
+
+def pytest_unconfigure(config):
+    folder = getattr(config, "_fault_folder", None)
+    if folder is not None:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 @pytest.fixture(autouse=True, scope="session")
