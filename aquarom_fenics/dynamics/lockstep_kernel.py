@@ -28,6 +28,7 @@ from aquarom_fenics.dynamics.kernel_lanes_thrust import (LAGRANGIAN_ENTRIES, ban
                                                          force_gradients_lanes, half_blocks_lanes, newton_matrix_lanes)
 from aquarom_fenics.dynamics.kernel_terms import lu_factor, lu_solve
 from aquarom_fenics.dynamics.lane_lu import factor_lanes, solve_lanes
+from aquarom_fenics.machine_code import TypedCall
 
 OK, FAILED = 0, 1
 
@@ -348,11 +349,15 @@ def part(arguments: tuple, rows: slice) -> tuple:
             tuple(values[rows] for values in per_design), flags)
 
 
+_integrate_blocks = TypedCall(integrate_blocks)
+"""``integrate_blocks`` typed once per kind of arguments, not at every call (``machine_code.TypedCall``)."""
+
+
 def integrate_lockstep(arguments: tuple, batch: int, columns: int) -> tuple[np.ndarray, np.ndarray]:
     """(results (B, 3) = (distance, tail amplitude, status), gradients (B, columns)) of a batch's
     ``Packed.arguments``, its designs in blocks of ``LANES`` (the last block padded)."""
     blocks = -(-batch // LANES)
     results = np.zeros((blocks, LANES, 3))
     gradients = np.zeros((blocks, LANES, columns))
-    integrate_blocks(*lane_arguments(arguments, batch), results, gradients)
+    _integrate_blocks(*lane_arguments(arguments, batch), results, gradients)
     return results.reshape(blocks * LANES, 3)[:batch], gradients.reshape(blocks * LANES, columns)[:batch]

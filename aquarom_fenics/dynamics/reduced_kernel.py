@@ -26,6 +26,7 @@ import math
 import numpy as np
 
 from aquarom_fenics.dynamics.compiled import available, jit as _jit, refresh_stale_cache
+from aquarom_fenics.machine_code import TypedCall
 from aquarom_fenics.dynamics.kernel_adjoint import reverse_sweep
 from aquarom_fenics.dynamics.kernel_pack import Packed, pack, synthetic
 from aquarom_fenics.dynamics.kernel_terms import (between, derivative_at, design_elastic, factorize, lu_solve,
@@ -366,6 +367,10 @@ def integrate_all(scalars, settings, units, distance_mask, amplitude_mask, share
             transition_from, adjoint, results[b], gradients[b], transitions[b])
 
 
+_integrate_all = TypedCall(integrate_all)
+"""``integrate_all`` typed once per kind of arguments, not at every call (``machine_code.TypedCall``)."""
+
+
 LOCKSTEP_TAIL = 6
 """Designs that fill a block of the lockstep kernel (``lockstep_kernel``) only this far or more are integrated in
 one padded block; fewer, one by one (a block of 8 lanes costs about six designs integrated alone)."""
@@ -395,8 +400,8 @@ def integrate_packed(packed: Packed, lockstep: bool = True, adjoint: bool = True
                                                                         in_blocks, packed.columns)
     if in_blocks < packed.batch:
         alone = slice(in_blocks, packed.batch)
-        integrate_all(*part(packed.arguments, alone), results[alone], gradients[alone], np.zeros((0, 0, 0, 0)),
-                      adjoint)
+        _integrate_all(*part(packed.arguments, alone), results[alone], gradients[alone], np.zeros((0, 0, 0, 0)),
+                       adjoint)
     failed = results[:, 2] != OK
     distance, amplitude = results[:, 0].copy(), results[:, 1].copy()
     distance[failed] = amplitude[failed] = np.nan
@@ -409,7 +414,7 @@ def transition_packed(packed: Packed, m: int):
     results = np.zeros((packed.batch, 3))
     gradients = np.zeros((packed.batch, packed.columns))
     transitions = np.zeros((packed.batch, 3, m, 3 * m))
-    integrate_all(*packed.arguments, results, gradients, transitions, False)
+    _integrate_all(*packed.arguments, results, gradients, transitions, False)
     return transitions.reshape(packed.batch, 3 * m, 3 * m), results[:, 2] != OK
 
 
