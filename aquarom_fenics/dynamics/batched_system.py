@@ -139,17 +139,66 @@ def shared_elastic(tensors, m: int, p: int) -> SharedElastic:
     return shared
 
 
+class StackedTaylors:
+    """Several Taylor polynomials of one PROM as one matrix of their terms (J, Σ sizes): all their values at B designs
+    are one product c(Δξ_b) @ terms, all their ξ-derivatives one product ∂c/∂Δξ @ terms (c, ∂c: :func:`taylor_weights`
+    at :attr:`order`), instead of two small tensor contractions per polynomial (a batch of one design spent a
+    tenth of a millisecond on them). The products are taken design by design: BLAS rounds a product of B rows
+    otherwise than B products of one row, and a design's cost must not depend on the designs batched with it
+    (the multi-start screen reports the optimiser's own L)."""
+
+    def __init__(self, taylors: dict, p: int):
+        self.taylors = taylors
+        self.order = taylor_order(list(taylors.values()), p)
+        self.shapes = {name: np.shape(taylor.constant) for name, taylor in taylors.items()}
+        blocks = [taylor_terms(taylor, p, self.order) for taylor in taylors.values()]
+        self.n_terms = blocks[0].shape[0]
+        self.terms = np.concatenate([block.reshape(self.n_terms, -1) for block in blocks], axis=1)
+        ends = np.cumsum([block[0].size for block in blocks])
+        self.columns = {name: slice(end - block[0].size, end) for name, block, end in zip(taylors, blocks, ends)}
+
+    def at(self, weights: np.ndarray, weight_derivatives: np.ndarray) -> tuple[dict, dict]:
+        """({name: T(Δξ_b) (B, ...)}, {name: ∂T/∂ξ_k (B, p, ...)}) from the designs' weights (B, J) and their
+        derivatives (B, p, J)."""
+        batch, p, _ = weight_derivatives.shape
+        values, gradients = np.empty((batch, self.terms.shape[1])), np.empty((batch, p, self.terms.shape[1]))
+        for b in range(batch):          # one product per design: its numbers do not depend on the batch it is in
+            values[b] = weights[b] @ self.terms
+            gradients[b] = weight_derivatives[b] @ self.terms
+        return ({name: values[:, part].reshape((batch,) + self.shapes[name]) for name, part in self.columns.items()},
+                {name: gradients[:, :, part].reshape((batch, p) + self.shapes[name])
+                 for name, part in self.columns.items()})
+
+
+_STACKED: dict = {}
+"""(ids of the Taylors, p) -> StackedTaylors of the last few PROMs."""
+
+
+def stacked_taylors(taylors: dict, p: int) -> StackedTaylors:
+    """The :class:`StackedTaylors` of these polynomials, formed once (the last 8 kept)."""
+    key = (tuple(id(taylor) for taylor in taylors.values()), tuple(taylors), p)
+    kept = _STACKED.get(key)
+    if kept is not None and all(a is b for a, b in zip(kept.taylors.values(), taylors.values())):
+        return kept
+    stacked = StackedTaylors(dict(taylors), p)
+    if len(_STACKED) >= 8:
+        _STACKED.pop(next(iter(_STACKED)))
+    _STACKED[key] = stacked
+    return stacked
+
+
 class BatchedElastic:
     """f_int,r(η_b; ξ_b) = Σ_j c_j(Δξ_b) (T1_j η + T2_j η η + T3_j η η η) of B designs."""
 
-    def __init__(self, prom: ReducedModel, deltas: np.ndarray):
+    def __init__(self, prom: ReducedModel, deltas: np.ndarray, linear: np.ndarray | None = None):
         tensors = prom.elastic
         shared = shared_elastic(tensors, prom.size, deltas.shape[1])
         self.weights, self.weight_derivatives = taylor_weights(deltas, shared.order)  # (B, J), (B, p, J)
         self.n_terms, self.pairs, self.triples = shared.n_terms, shared.pairs, shared.triples
         self.force_coefficients, self.tangent_coefficients = shared.force_coefficients, shared.tangent_coefficients
         self.pair_of_triple = shared.pair_of_triple
-        self.linear = taylor_at(tensors.linear, deltas)                                     # K1 = K_0,r (B, m, m)
+        # K1 = K_0,r (B, m, m); ``linear``: already evaluated by the caller
+        self.linear = taylor_at(tensors.linear, deltas) if linear is None else linear
 
     def select(self, rows: np.ndarray) -> "BatchedElastic":
         """The term of the designs ``rows``."""
@@ -198,19 +247,25 @@ class BatchedSystem:
         xis = design_rows(xis, prom.n_parameters)
         self.deltas = d = np.array([prom.delta(xi) for xi in xis]).reshape(xis.shape)
         batch = d.shape[0]
-        self.elastic = BatchedElastic(prom, d)
-        inertia = prom.inertia
-        self.mass = taylor_at(inertia.mass, d)
+        inertia, muscle = prom.inertia, prom.muscle
+        taylors = {"mass": inertia.mass, "total_mass": inertia.total_mass, "moment": inertia.mass_moment_x,
+                   "stiffness": prom.elastic.linear, "muscle_constant": muscle.constant, "muscle_linear": muscle.linear}
+        if prom.drag is not None:
+            taylors["drag"] = prom.drag.direction
+        value, gradient = stacked_taylors(taylors, d.shape[1]).at(*taylor_weights(d, taylor_order(list(taylors.values()),
+                                                                                                 d.shape[1])))
+        self.elastic = BatchedElastic(prom, d, linear=value["stiffness"])
+        self.mass = value["mass"]
         self.damping = inertia.damping(self.mass, self.elastic.linear)
-        total_mass = taylor_at(inertia.total_mass, d)
-        self.com_weights = taylor_at(inertia.mass_moment_x, d) / total_mass[:, None]
-        self.mass_gradient = taylor_gradient(inertia.mass, d)                              # (B, p, m, m)
-        self.damping_gradient = inertia.damping(self.mass_gradient, taylor_gradient(prom.elastic.linear, d))
+        total_mass = value["total_mass"]
+        self.com_weights = value["moment"] / total_mass[:, None]
+        self.mass_gradient = gradient["mass"]                                              # (B, p, m, m)
+        self.damping_gradient = inertia.damping(self.mass_gradient, gradient["stiffness"])
         if inertia.mass_moment_x.first is None:
             self.com_gradient = np.zeros((batch, d.shape[1], prom.size))
         else:
-            self.com_gradient = (taylor_gradient(inertia.mass_moment_x, d) - taylor_gradient(inertia.total_mass, d)
-                                 [:, :, None] * self.com_weights[:, None, :]) / total_mass[:, None, None]
+            self.com_gradient = (gradient["moment"] - gradient["total_mass"][:, :, None] * self.com_weights[:, None, :]) \
+                / total_mass[:, None, None]
         amplitude = np.full(batch, scene.actuation.amplitude) if amplitudes is None else np.asarray(amplitudes, float)
         self.amplitudes, self.law = amplitude.reshape(batch), ActivationLaw.of(scene)
         self.laws = None                        # (B,) ActivationLaw: a gait per design, else the scene's law
@@ -218,16 +273,14 @@ class BatchedSystem:
             self.laws = np.empty(batch, dtype=object)
             for b, law in enumerate(laws):
                 self.laws[b] = law
-        muscle = prom.muscle
-        self.muscle_constant = taylor_at(muscle.constant, d)                               # (B, N, m)
-        self.muscle_linear = taylor_at(muscle.linear, d)                                   # (B, N, m, m)
-        self.muscle_constant_gradient = taylor_gradient(muscle.constant, d)                 # (B, p, N, m)
-        self.muscle_linear_gradient = taylor_gradient(muscle.linear, d)                     # (B, p, N, m, m)
+        self.muscle_constant = value["muscle_constant"]                                    # (B, N, m)
+        self.muscle_linear = value["muscle_linear"]                                        # (B, N, m, m)
+        self.muscle_constant_gradient = gradient["muscle_constant"]                        # (B, p, N, m)
+        self.muscle_linear_gradient = gradient["muscle_linear"]                            # (B, p, N, m, m)
         self.thrust = BatchedThrust(prom.thrust, d, scene.fluid.spine_force) if prom.thrust is not None else None
         self.drag = None
         if prom.drag is not None:
-            self.drag = (taylor_at(prom.drag.direction, d), taylor_gradient(prom.drag.direction, d),
-                         prom.drag.velocity_row)
+            self.drag = (value["drag"], gradient["drag"], prom.drag.velocity_row)
         self.tail_row, self.head_row = prom.observation.tail_y_row, prom.observation.head_x_row
 
     @property
