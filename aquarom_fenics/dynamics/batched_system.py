@@ -140,12 +140,12 @@ def shared_elastic(tensors, m: int, p: int) -> SharedElastic:
 
 
 class StackedTaylors:
-    """Several Taylor polynomials of one PROM as one matrix of their terms (J, Σ sizes): all their values at B designs
-    are one product c(Δξ_b) @ terms, all their ξ-derivatives one product ∂c/∂Δξ @ terms (c, ∂c: :func:`taylor_weights`
-    at :attr:`order`), instead of two small tensor contractions per polynomial (a batch of one design spent a
-    tenth of a millisecond on them). The products are taken design by design: BLAS rounds a product of B rows
-    otherwise than B products of one row, and a design's cost must not depend on the designs batched with it
-    (the multi-start screen reports the optimiser's own L)."""
+    """Several Taylor polynomials of one PROM as one matrix of their terms (J, Σ sizes): all their values at B
+    designs are one product c(Δξ_b) @ terms, all their ξ-derivatives one product ∂c/∂Δξ @ terms (c, ∂c:
+    :func:`taylor_weights` at :attr:`order`), instead of two small tensor contractions per polynomial (a batch of
+    one design spent a tenth of a millisecond on them). The products are taken design by design: BLAS rounds a
+    product of B rows otherwise than B products of one row, and a design's cost must not depend on the designs
+    batched with it (the multi-start screen reports the optimiser's own L)."""
 
     def __init__(self, taylors: dict, p: int):
         self.taylors = taylors
@@ -252,8 +252,8 @@ class BatchedSystem:
                    "stiffness": prom.elastic.linear, "muscle_constant": muscle.constant, "muscle_linear": muscle.linear}
         if prom.drag is not None:
             taylors["drag"] = prom.drag.direction
-        value, gradient = stacked_taylors(taylors, d.shape[1]).at(*taylor_weights(d, taylor_order(list(taylors.values()),
-                                                                                                 d.shape[1])))
+        stacked = stacked_taylors(taylors, d.shape[1])
+        value, gradient = stacked.at(*taylor_weights(d, stacked.order))
         self.elastic = BatchedElastic(prom, d, linear=value["stiffness"])
         self.mass = value["mass"]
         self.damping = inertia.damping(self.mass, self.elastic.linear)
@@ -264,8 +264,8 @@ class BatchedSystem:
         if inertia.mass_moment_x.first is None:
             self.com_gradient = np.zeros((batch, d.shape[1], prom.size))
         else:
-            self.com_gradient = (gradient["moment"] - gradient["total_mass"][:, :, None] * self.com_weights[:, None, :]) \
-                / total_mass[:, None, None]
+            moment, total = gradient["moment"], gradient["total_mass"][:, :, None]
+            self.com_gradient = (moment - total * self.com_weights[:, None, :]) / total_mass[:, None, None]
         amplitude = np.full(batch, scene.actuation.amplitude) if amplitudes is None else np.asarray(amplitudes, float)
         self.amplitudes, self.law = amplitude.reshape(batch), ActivationLaw.of(scene)
         self.laws = None                        # (B,) ActivationLaw: a gait per design, else the scene's law

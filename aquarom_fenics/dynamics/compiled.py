@@ -1,8 +1,8 @@
-"""The compiled reduced kernel's modules and their numba cache; its ``jit`` decorator and ``available`` are those
-of :mod:`aquarom_fenics.machine_code` (one for every compiled kernel)."""
+"""The compiled reduced kernel's modules and their numba cache; its ``jit`` decorator, ``available`` and ``TypedCall``
+are those of :mod:`aquarom_fenics.machine_code` (one for every compiled kernel)."""
 from __future__ import annotations
 
-from aquarom_fenics.machine_code import available, jit  # noqa: F401  (the kernel modules import them from here)
+from aquarom_fenics.machine_code import TypedCall, available, jit  # noqa: F401  (the kernel modules' imports)
 
 
 KERNEL_MODULES = ("compiled", "kernel_pack", "kernel_terms", "kernel_thrust", "reduced_kernel", "lane_values",

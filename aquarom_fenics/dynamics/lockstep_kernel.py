@@ -21,14 +21,13 @@ import math
 
 import numpy as np
 
-from aquarom_fenics.dynamics.compiled import jit as _jit
+from aquarom_fenics.dynamics.compiled import TypedCall, jit as _jit
 from aquarom_fenics.dynamics.kernel_lanes import (LANES, between_lanes, derivative_lanes, elastic_lanes,
                                                   residual_lanes, sensitivity_terms_lanes, tangents_lanes)
 from aquarom_fenics.dynamics.kernel_lanes_thrust import (LAGRANGIAN_ENTRIES, banded_tangents_lanes,
                                                          force_gradients_lanes, half_blocks_lanes, newton_matrix_lanes)
 from aquarom_fenics.dynamics.kernel_terms import lu_factor, lu_solve
 from aquarom_fenics.dynamics.lane_lu import factor_lanes, solve_lanes
-from aquarom_fenics.machine_code import TypedCall
 
 OK, FAILED = 0, 1
 

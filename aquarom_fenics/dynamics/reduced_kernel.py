@@ -25,8 +25,7 @@ import math
 
 import numpy as np
 
-from aquarom_fenics.dynamics.compiled import available, jit as _jit, refresh_stale_cache
-from aquarom_fenics.machine_code import TypedCall
+from aquarom_fenics.dynamics.compiled import TypedCall, available, jit as _jit, refresh_stale_cache
 from aquarom_fenics.dynamics.kernel_adjoint import reverse_sweep
 from aquarom_fenics.dynamics.kernel_pack import Packed, pack, synthetic
 from aquarom_fenics.dynamics.kernel_terms import (between, derivative_at, design_elastic, factorize, lu_solve,
