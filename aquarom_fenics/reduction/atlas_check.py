@@ -28,6 +28,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from aquarom_fenics.errors import InputError
+
 CORNERS = 2
 """Corners checked per cell: v+ and v- along the centre PROM's distance gradient signs."""
 
@@ -105,8 +107,6 @@ def check_cell(center_prom, scene, center: np.ndarray, corners_of, corner_prom, 
     v± = c ± σ ∘ h, ``corner_prom(v)`` → (PROM at v, built) or InputError, ``distances(prom, scene, xis,
     gradient)`` → (d, ∂d/∂ξ) (:func:`~aquarom_fenics.dynamics.batched.reduced_distances`: the reduced dynamics
     sit above this layer, so the caller passes them)."""
-    from aquarom_fenics.errors import InputError
-
     _, gradient = distances(center_prom, scene, np.asarray(center, dtype=float)[None, :], True)
     corners = np.asarray(corners_of(gradient_signs(gradient[0])), dtype=float)
     from_center, _ = distances(center_prom, scene, corners, False)

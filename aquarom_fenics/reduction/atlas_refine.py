@@ -278,7 +278,6 @@ class Refiner:
                                            self.tolerance, self.distances)
             self.met[node]["check"] = self.checks[node].record(self.grid.names) | {
                 "time_s": time.perf_counter() - started}
-            self.last = (node, prom)
         return self.checks[node]
 
     def check_halvings(self, node: Node) -> np.ndarray:
