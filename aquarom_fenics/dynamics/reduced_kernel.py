@@ -64,6 +64,24 @@ def newton_matrix_into(k_u, k_v, k_a, stiffness, damping, mass, has_thrust, k_ba
 
 
 @_jit
+def exact_newton_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass, damping, muscle_linear, has_drag,
+                    drag_direction, drag_row, has_thrust, state, length, thrust_weights, tail_weight, lagrangian,
+                    own_node, other_node, k_u, k_v, k_a, points, transposed, work, s_banded, stiffness, damping_t,
+                    mass_t, k_banded, c_banded, m_banded, exact, factors, pivots):
+    """At a converged step's evaluation point: the tangents K_t, C_t, M_t and the thrust's K_J, C_J, M_J (into the
+    given arrays), the exact S = k_u K + k_v C + k_a M of the full tangents and its LU; False when S is singular.
+    What the forward sensitivity step and the adjoint's stores both need."""
+    tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass, damping, muscle_linear, has_drag,
+                drag_direction, drag_row, stiffness, damping_t, mass_t)
+    if has_thrust:
+        half_blocks(state, length, thrust_weights, tail_weight, lagrangian, own_node, other_node, k_banded, c_banded,
+                    m_banded)
+    newton_matrix_into(k_u, k_v, k_a, stiffness, damping_t, mass_t, has_thrust, k_banded, c_banded, m_banded,
+                       s_banded, points, transposed, work, exact)
+    return factorize(exact, factors, pivots)
+
+
+@_jit
 def record_step(step, eu, ev, ea, activations, tangent_mono, pairs, elastic_tangent, mass, damping, muscle_linear,
                 has_drag, drag_direction, drag_row, has_thrust, state, length, thrust_weights, tail_weight, lagrangian,
                 own_node, other_node, k_u, k_v, k_a, points, transposed, work, s_banded, exact, mono, tangents,
@@ -71,14 +89,11 @@ def record_step(step, eu, ev, ea, activations, tangent_mono, pairs, elastic_tang
     """What the adjoint's reverse sweep reads of a converged step, stored at ``step``: the tangents K_t, C_t, M_t and
     the thrust's K_J, C_J, M_J at the evaluation point, the LU of the exact S = k_u K + k_v C + k_a M (pivots[step, 0]
     = -1 when singular), the half-segments' state, (η, η̇, η̈), the monomials and the activations."""
-    tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass, damping, muscle_linear, has_drag,
-                drag_direction, drag_row, tangents[step, 0], tangents[step, 1], tangents[step, 2])
-    if has_thrust:
-        half_blocks(state, length, thrust_weights, tail_weight, lagrangian, own_node, other_node, banded[step, 0],
-                    banded[step, 1], banded[step, 2])
-    newton_matrix_into(k_u, k_v, k_a, tangents[step, 0], tangents[step, 1], tangents[step, 2], has_thrust,
-                       banded[step, 0], banded[step, 1], banded[step, 2], s_banded, points, transposed, work, exact)
-    if not factorize(exact, factors[step], pivots[step]):
+    if not exact_newton_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass, damping, muscle_linear,
+                           has_drag, drag_direction, drag_row, has_thrust, state, length, thrust_weights, tail_weight,
+                           lagrangian, own_node, other_node, k_u, k_v, k_a, points, transposed, work, s_banded,
+                           tangents[step, 0], tangents[step, 1], tangents[step, 2], banded[step, 0], banded[step, 1],
+                           banded[step, 2], exact, factors[step], pivots[step]):
         pivots[step, 0] = -1
     states[step] = state
     evaluations[step, 0] = eu
@@ -235,11 +250,13 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
         elif columns and (not transition or step >= transition_from):
             # the converged step differentiated (reduced_dynamics.propagate_sensitivity) at its evaluation point
             # (eu, ev, ea), where the last residual was evaluated: its monomials and thrust state are current
-            tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass, damping, muscle_linear,
-                        has_drag, drag_direction, drag_row, stiffness, damping_t, mass_t)
-            if has_thrust:
-                half_blocks(state, length, thrust_weights, tail_weight, lagrangian, own_node, other_node, k_banded,
-                            c_banded, m_banded)
+            if not exact_newton_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass, damping,
+                                   muscle_linear, has_drag, drag_direction, drag_row, has_thrust, state, length,
+                                   thrust_weights, tail_weight, lagrangian, own_node, other_node, k_u, k_v, k_a, points,
+                                   transposed, work, s_banded, stiffness, damping_t, mass_t, k_banded, c_banded,
+                                   m_banded, exact, exact_factors, exact_pivots):
+                result[2] = FAILED
+                return
             if transition:
                 rhs[:] = 0.0
             else:
@@ -285,11 +302,6 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
                 for i in range(m):
                     for c in range(columns):
                         thrust_rhs[i, c] += projected[i, c]
-            newton_matrix_into(k_u, k_v, k_a, stiffness, damping_t, mass_t, has_thrust, k_banded, c_banded, m_banded,
-                               s_banded, points, transposed, work, exact)
-            if not factorize(exact, exact_factors, exact_pivots):
-                result[2] = FAILED
-                return
             lu_solve(exact_factors, exact_pivots, thrust_rhs)
             for i in range(m):
                 for c in range(columns):
