@@ -92,6 +92,49 @@ def set_quadrature_values(function, values: np.ndarray) -> None:
     function.x.array.reshape(-1, 9)[blocks] = values.reshape(-1, 9)
 
 
+def quadrature_values(function) -> np.ndarray:
+    """(n_local_cells, n_q, 3, 3) values of a quadrature tensor function (``set_quadrature_values``' layout)."""
+    blocks = function.function_space.dofmap.list.array
+    return function.x.array.reshape(-1, 9)[blocks].reshape(local_cells(function.function_space.mesh).size, -1, 3, 3)
+
+
+def point_tensor_space(mesh):
+    """3×3 tensors held at one point per cell: a quadrature tensor field's stand-in for
+    :func:`evaluate_point_by_point`."""
+    return quadrature_tensor_space(mesh, 1)
+
+
+def evaluate_point_by_point(compiled, fields: list, values: list[np.ndarray], cells: np.ndarray) -> np.ndarray:
+    """(n_cells, n_q, value size) values of an expression of ``fields`` (of :func:`point_tensor_space`),
+    compiled at one point (``compile_quadrature_expression(…, 1)``), at each of a rule's n_q points in turn,
+    the fields set to their ``values`` (each (n_local_cells, n_q, 3, 3)) at that point.
+
+    FFCx 0.5 forms a quadrature field's value at each of a cell's n_q points as a sum over all n_q of its
+    values (an identity table, n_q² products per component), so an expression of such fields at the 24
+    points of a degree-6 rule spends most of its time there. Point by point, the same arithmetic at each
+    point gives the same values (bit for bit in tests/fem/test_point_by_point.py and for the sampled
+    inertia) in about a third of the time. The meshes are linear (``create_tet_mesh``): the Jacobian of
+    the expression is the cell's at every point.
+    """
+    by_point = [np.ascontiguousarray(np.moveaxis(array.reshape(array.shape[0], array.shape[1], 9), 1, 0))
+                for array in values]
+    targets = [field.x.array.reshape(-1, 9) for field in fields]
+    blocks = fields[0].function_space.dofmap.list.array
+    in_order = np.array_equal(blocks, np.arange(blocks.size))
+    result = None
+    for q in range(by_point[0].shape[0]):
+        for target, array in zip(targets, by_point):
+            if in_order:
+                target[:blocks.size] = array[q]
+            else:
+                target[blocks] = array[q]
+        at_point = compiled.eval(cells).reshape(cells.size, -1)
+        if result is None:
+            result = np.empty((cells.size, by_point[0].shape[0], at_point.shape[1]))
+        result[:, q] = at_point
+    return result
+
+
 def cellwise_constant_space(mesh):
     return function_space(mesh, ufl.FiniteElement("DG", mesh.ufl_cell(), 0))
 

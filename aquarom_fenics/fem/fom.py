@@ -44,10 +44,9 @@ class FullOrderModel:
         self.scene, self.fish, self.comm = scene, fish, comm
         self.xi = fish.parameter_vector(xi)
         self.moved_mesh = moved_mesh
-        rest_points = fish.design(self.xi)
+        self.rest_points = rest_points = fish.design(self.xi)
         shape_displacement = np.zeros_like(rest_points) if moved_mesh else rest_points - fish.nodes.points
         mesh_points = rest_points[:fish.nodes.n_vertices] if moved_mesh else fish.mesh.points
-        self.rest_points = rest_points
 
         self.mesh = fx.create_tet_mesh(comm, mesh_points, fish.mesh.cells)
         self.space = fx.vector_space(self.mesh, fish.degree)
@@ -87,7 +86,7 @@ class FullOrderModel:
         self.rest_points, self.xi = self.fish.design(xi), xi
         fx.set_nodal_values(self.shape_displacement, self.layout, self.rest_points - self.fish.nodes.points)
         for family, gradient in self.shape_gradients.items():
-            fx.set_quadrature_values(gradient, self.fish.shape_gradient(self.xi, self.quadrature_points[family].reshape(-1, 3)))
+            fx.set_quadrature_values(gradient, self._design_gradient(family, xi))
         self.elastic.rest_stiffness(self.rest_stiffness)
         self.inertia.assemble(self.rest_stiffness)
         if self.drag is not None:
@@ -119,13 +118,16 @@ class FullOrderModel:
         self.shape_gradients = {}
         for family, degree in self.quadrature_degrees.items():
             gradient = fx.new_function(fx.quadrature_tensor_space(self.mesh, degree), f"shape_gradient_{family}")
-            points = self.quadrature_points[family]
-            fx.set_quadrature_values(gradient, self.fish.shape_gradient(xi, points.reshape(-1, 3)))
+            fx.set_quadrature_values(gradient, self._design_gradient(family, xi))
             self.shape_gradients[family] = gradient
 
+    def _design_gradient(self, family: str, xi: np.ndarray) -> np.ndarray:
+        """∇u_ξ at the points of the ``family``'s quadrature rule, (n, 3, 3), from the ∇U_k kept on the model."""
+        return self.fish.shape_gradient(xi, self.quadrature_points[family].reshape(-1, 3),
+                                        lambda k: self.shape_direction_gradient(family, k))
+
     def shape_direction_gradient(self, family: str, k: int) -> np.ndarray:
-        """∇U_k at the points of the ``family``'s quadrature rule, (n, 3, 3); computed once per model
-        (a PROM build sets each direction a few dozen times)."""
+        """∇U_k at the points of the ``family``'s rule, (n, 3, 3), kept on the model (a build sets it often)."""
         key = (family, k)
         if key not in self._direction_gradients:
             points = self.quadrature_points[family].reshape(-1, 3)
@@ -133,10 +135,8 @@ class FullOrderModel:
         return self._direction_gradients[key]
 
     def shape_direction(self, name: str) -> ShapeDirection:
-        """A design direction δξ as coefficients of this model's forms (see ``shape_derivative``).
-
-        Only on the pulled-back model: ∇U_k is the gradient with respect to nominal coordinates.
-        """
+        """A design direction δξ as coefficients of this model's forms (see ``shape_derivative``); only on the
+        pulled-back model, where ∇U_k is the gradient with respect to nominal coordinates."""
         if self.moved_mesh:
             raise ValueError("shape derivatives need the design pulled back to the nominal mesh (moved_mesh=False)")
         return ShapeDirection(self, name)

@@ -91,14 +91,18 @@ class Fish:
         """u_ξ = U ξ as an (n_nodes, 3) array [m]."""
         return (self.shape_matrix @ self.parameter_vector(xi)).reshape(-1, 3)
 
-    def shape_gradient(self, xi, points: np.ndarray) -> np.ndarray:
-        """∇u_ξ = Σ_k ξ_k ∇U_k, exact, at (n, 3) nominal positions: (n, 3, 3)."""
+    def shape_gradient(self, xi, points: np.ndarray, direction_gradient=None) -> np.ndarray:
+        """∇u_ξ = Σ_k ξ_k ∇U_k, exact, at (n, 3) nominal positions: (n, 3, 3). ``direction_gradient(k)``,
+        where given, is ∇U_k at those points already computed (``shape_direction_gradient``)."""
         xi = self.parameter_vector(xi)
         gradient = np.zeros((len(points), 3, 3))
         active = [k for k in range(len(xi)) if xi[k] != 0.0]
         if active:
-            names = [self.shape_names[k] for k in active]
-            fields = shape_gradients(names, self.tags.box.relative(points), self.tags.box)
+            if direction_gradient is None:
+                names = [self.shape_names[k] for k in active]
+                fields = shape_gradients(names, self.tags.box.relative(points), self.tags.box)
+            else:
+                fields = np.stack([direction_gradient(k) for k in active])
             gradient += np.einsum("k,knij->nij", xi[active], fields)
         return gradient
 

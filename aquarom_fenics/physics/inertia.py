@@ -76,19 +76,39 @@ class InertiaTerm:
         self.assemble(rest_stiffness)
 
     def assemble(self, rest_stiffness: PETSc.Mat) -> None:
-        """M, C = α_R M + β_R K_0, the mass moment and the total mass at the FOM's design (again after
-        the design moved)."""
-        mass, moment, total, moment_y = self._compiled
-        fx.assemble_matrix_into(self.mass_matrix, mass)
+        """M and C = α_R M + β_R K_0 at the FOM's design (again after the design moved); the mass moments
+        and the total mass at their first use."""
+        fx.assemble_matrix_into(self.mass_matrix, self._compiled[0])
         if self.lumped:
             lump(self.mass_matrix)
         if self.damping_matrix is not None:
             self.damping_matrix.destroy()
         self.damping_matrix = rayleigh_damping(self.alpha, self.mass_matrix, self.beta, rest_stiffness,
                                                petsc_linear_combination)
-        self.mass_moment_x = fx.assemble_vector_into(self._moment_vector, moment).copy()
-        self.mass_moment_y = fx.assemble_vector_into(self._moment_y_vector, moment_y).copy()
-        self.total_mass = fx.assemble_scalar(total, self.fom.comm)
+        self._observed = {}
+
+    # The moments and the total mass serve the FOM's centre of mass; a PROM build samples its own
+    # (``sampled_inertia``): each is assembled at its first use after the design moved. Every rank
+    # asks for them together (the observations are collective), so the assembly stays collective.
+    @property
+    def mass_moment_x(self) -> np.ndarray:
+        """m_x,i = ∫ρ φ_i·e_x dV_ξ (owned dofs) [kg]."""
+        return self._observe("moment_x", lambda: fx.assemble_vector_into(self._moment_vector, self._compiled[1]).copy())
+
+    @property
+    def mass_moment_y(self) -> np.ndarray:
+        """m_y,i = ∫ρ φ_i·e_y dV_ξ (owned dofs) [kg]."""
+        return self._observe("moment_y", lambda: fx.assemble_vector_into(self._moment_y_vector, self._compiled[3]).copy())
+
+    @property
+    def total_mass(self) -> float:
+        """∫ρ dV_ξ [kg]."""
+        return self._observe("total", lambda: fx.assemble_scalar(self._compiled[2], self.fom.comm))
+
+    def _observe(self, name: str, assemble):
+        if name not in self._observed:
+            self._observed[name] = assemble()
+        return self._observed[name]
 
     def destroy(self) -> None:
         """Release the mass and damping matrices."""
@@ -116,9 +136,9 @@ def sampled_inertia(fom, projector, density) -> tuple[Taylor, Taylor, Taylor, Ta
 
     ρ_s = ρ det F_1 (``mass_density`` of ``forms/inertia.py``) and w_s = ω_q |det J_c| at the points
     of the FOM's mass rule. Only ρ_s depends on ξ: its UFL derivatives along every parameter's direction (and
-    pair of them at Taylor order 2) are one stacked expression, evaluated once with the basis evaluated once,
-    the route of the internal force and the muscles. The same sums as the assembled forms projected, to
-    rounding, in a fraction of their time.
+    pair of them at Taylor order 2) are one stacked expression, evaluated point by point
+    (``fx.evaluate_point_by_point``), with the basis evaluated once, the route of the internal force and the
+    muscles. The same sums as the assembled forms projected, to rounding, in a fraction of their time.
     """
     mesh, comm = fom.mesh, fom.comm
     degree = fom.quadrature_degrees["mass"]
@@ -132,21 +152,24 @@ def sampled_inertia(fom, projector, density) -> tuple[Taylor, Taylor, Taylor, Ta
 
     def compile_sampling():        # kept on the model: the sample's field, its values, ρ_s and its ξ-derivatives
         field = fx.new_function(fom.space, "inertia_sample")
-        directions = [fom.shape_direction(f"inertia_direction_{k}") for k in range(p)]
-        for k, direction in enumerate(directions):
-            direction.set_parameter(k)
-        derivatives = {(): abs(ufl.JacobianDeterminant(mesh)) * mass_density(fom.shape_gradients["mass"], density)}
+        # ρ_s and its derivatives along the directions ∇U_k, of fields held at one point per cell: they are
+        # evaluated point by point (``evaluate_point_by_point``), the same values as at the rule's points
+        gradient, *directions = [fx.new_function(fx.point_tensor_space(mesh), f"inertia_{name}")
+                                 for name in ["gradient"] + [f"direction_{k}" for k in range(p)]]
+        derivatives = {(): abs(ufl.JacobianDeterminant(mesh)) * mass_density(gradient, density)}
         for index in indices[1:]:
-            derivatives[index] = fom.shape_derivative(derivatives[index[:-1]], directions[index[-1]])
-        stacked = fx.compile_quadrature_expression(ufl.as_vector([derivatives[index] for index in indices]), degree)
-        return field, fx.compile_quadrature_expression(field, degree), stacked
+            derivatives[index] = ufl.derivative(derivatives[index[:-1]], gradient, directions[index[-1]])
+        stacked = fx.compile_quadrature_expression(ufl.as_vector([derivatives[index] for index in indices]), 1)
+        return field, fx.compile_quadrature_expression(field, degree), stacked, [gradient] + directions
 
-    field, at_points, stacked = fom.keep(("inertia_sampling", p, projector.order), compile_sampling)
+    field, at_points, stacked, point_fields = fom.keep(("inertia_sampling", p, projector.order), compile_sampling)
     values = np.empty((n_samples, 3, vectors.shape[1]))
     for j in range(vectors.shape[1]):
         fx.set_owned_values(field, vectors[:, j])
         values[:, :, j] = fx.evaluate_expression(at_points, cells).reshape(n_samples, 3)
-    weights = (fx.evaluate_expression(stacked, cells).reshape(cells.size, reference_weights.size, len(indices))
+    point_values = [fx.quadrature_values(fom.shape_gradients["mass"])] + [
+        fom.shape_direction_gradient("mass", k).reshape(-1, reference_weights.size, 3, 3) for k in range(p)]
+    weights = (fx.evaluate_point_by_point(stacked, point_fields, point_values, cells)
                * reference_weights[:, None]).reshape(n_samples, len(indices))
     column = {index: n for n, index in enumerate(indices)}
     m = vectors.shape[1]

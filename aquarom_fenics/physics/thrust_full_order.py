@@ -251,7 +251,14 @@ def station_sections(fish, stations: np.ndarray) -> StationSections:
 
     An end station whose line misses the skin (a body tapering to a point off the line) has depth 0;
     InputError when the line of an inner station misses it (the body does not cross its mid-plane
-    y = y_axis there)."""
+    y = y_axis there). Kept on the fish (its nominal skin's): a model moved to another design asks again."""
+    key = ("station_sections", np.asarray(stations, dtype=float).tobytes())
+    if key not in fish.derived:
+        fish.derived[key] = _station_sections(fish, stations)
+    return fish.derived[key]
+
+
+def _station_sections(fish, stations: np.ndarray) -> StationSections:
     tags = fish.tags
     relative = tags.box.relative(fish.mesh.points)
     station_x = np.asarray(stations, dtype=float) - tags.box.x_head
@@ -264,4 +271,6 @@ def station_sections(fish, stations: np.ndarray) -> StationSections:
                          "crosses its mid-plane y = y_axis along its whole length")
     top[missed] = bottom[missed] = 0.0
     zeros = np.zeros_like(station_x)
-    return StationSections(np.column_stack([station_x, zeros, top]), np.column_stack([station_x, zeros, bottom]))
+    sections = StationSections(np.column_stack([station_x, zeros, top]), np.column_stack([station_x, zeros, bottom]))
+    sections.top.flags.writeable = sections.bottom.flags.writeable = False
+    return sections
