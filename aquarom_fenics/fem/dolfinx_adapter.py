@@ -24,6 +24,7 @@ from dolfinx import mesh as dolfinx_mesh
 from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
+from ufl.algorithms import extract_coefficients, extract_type
 
 from aquarom_fenics.fem.jit_cache import JitCacheError, claimed, is_complete
 from aquarom_fenics.io.paths import forms_cache
@@ -104,10 +105,21 @@ def point_tensor_space(mesh):
     return quadrature_tensor_space(mesh, 1)
 
 
+def compile_point_expression(expression, fields: list):
+    """``expression`` compiled at one point per cell for :func:`evaluate_point_by_point`. ValueError unless
+    its only coefficients are ``fields`` (of :func:`point_tensor_space`) and it does not read the position x:
+    anything else would be taken at that one point, not at each point of the rule."""
+    others = [c for c in extract_coefficients(expression) if not any(c is field for field in fields)]
+    if others or extract_type(expression, ufl.SpatialCoordinate):
+        raise ValueError("an expression evaluated point by point may depend on the given point fields, constants and "
+                         f"the cell's Jacobian only; it reads {[str(c) for c in others] or 'the position x'}")
+    return compile_quadrature_expression(expression, 1)
+
+
 def evaluate_point_by_point(compiled, fields: list, values: list[np.ndarray], cells: np.ndarray) -> np.ndarray:
     """(n_cells, n_q, value size) values of an expression of ``fields`` (of :func:`point_tensor_space`),
-    compiled at one point (``compile_quadrature_expression(…, 1)``), at each of a rule's n_q points in turn,
-    the fields set to their ``values`` (each (n_local_cells, n_q, 3, 3)) at that point.
+    compiled by :func:`compile_point_expression`, at each of a rule's n_q points in turn, the fields set to
+    their ``values`` (each (n_local_cells, n_q, 3, 3)) at that point.
 
     FFCx 0.5 forms a quadrature field's value at each of a cell's n_q points as a sum over all n_q of its
     values (an identity table, n_q² products per component), so an expression of such fields at the 24

@@ -159,7 +159,8 @@ def sampled_inertia(fom, projector, density) -> tuple[Taylor, Taylor, Taylor, Ta
         derivatives = {(): abs(ufl.JacobianDeterminant(mesh)) * mass_density(gradient, density)}
         for index in indices[1:]:
             derivatives[index] = ufl.derivative(derivatives[index[:-1]], gradient, directions[index[-1]])
-        stacked = fx.compile_quadrature_expression(ufl.as_vector([derivatives[index] for index in indices]), 1)
+        stacked = fx.compile_point_expression(ufl.as_vector([derivatives[index] for index in indices]),
+                                              [gradient] + directions)
         return field, fx.compile_quadrature_expression(field, degree), stacked, [gradient] + directions
 
     field, at_points, stacked, point_fields = fom.keep(("inertia_sampling", p, projector.order), compile_sampling)

@@ -1,6 +1,7 @@
 """An expression of quadrature fields evaluated point by point (fem/dolfinx_adapter.py): the values at the
 rule's points, bit for bit."""
 import numpy as np
+import pytest
 import ufl
 from dolfinx.mesh import create_unit_cube
 from mpi4py import MPI
@@ -28,9 +29,20 @@ def test_point_by_point_values_are_the_rules_bit_for_bit():
         fx.set_quadrature_values(field, array)
     expected = fx.evaluate_expression(fx.compile_quadrature_expression(expression(*at_rule), degree), cells)
     at_a_point = [fx.new_function(fx.point_tensor_space(mesh), name) for name in ("g", "d")]
-    by_point = fx.evaluate_point_by_point(fx.compile_quadrature_expression(expression(*at_a_point), 1),
+    by_point = fx.evaluate_point_by_point(fx.compile_point_expression(expression(*at_a_point), at_a_point),
                                           at_a_point, values, cells)
     assert by_point.shape == (cells.size, n_points, 2)
     assert np.array_equal(by_point, expected.reshape(cells.size, n_points, 2))
     assert np.abs(by_point[..., 1]).max() > 0
     assert np.array_equal(fx.quadrature_values(at_rule[0]), values[0])
+
+
+def test_an_expression_of_other_fields_or_of_x_is_refused():
+    """A field that varies in the cell (or x) would be taken at the one point: refused before compiling."""
+    mesh = create_unit_cube(MPI.COMM_WORLD, 1, 1, 1)
+    point_field = fx.new_function(fx.point_tensor_space(mesh), "g")
+    displacement = fx.new_function(fx.vector_space(mesh, 2), "u")
+    with pytest.raises(ValueError, match="u"):
+        fx.compile_point_expression(ufl.det(point_field) + ufl.div(displacement), [point_field])
+    with pytest.raises(ValueError, match="position"):
+        fx.compile_point_expression(ufl.det(point_field) * ufl.SpatialCoordinate(mesh)[0], [point_field])
