@@ -86,7 +86,7 @@ class FullOrderModel:
         self.rest_points, self.xi = self.fish.design(xi), xi
         fx.set_nodal_values(self.shape_displacement, self.layout, self.rest_points - self.fish.nodes.points)
         for family, gradient in self.shape_gradients.items():
-            fx.set_quadrature_values(gradient, self._design_gradient(family, xi))
+            fx.set_quadrature_values(gradient, self._moved_gradient(family, xi))
         self.elastic.rest_stiffness(self.rest_stiffness)
         self.inertia.assemble(self.rest_stiffness)
         if self.drag is not None:
@@ -118,11 +118,11 @@ class FullOrderModel:
         self.shape_gradients = {}
         for family, degree in self.quadrature_degrees.items():
             gradient = fx.new_function(fx.quadrature_tensor_space(self.mesh, degree), f"shape_gradient_{family}")
-            fx.set_quadrature_values(gradient, self._design_gradient(family, xi))
+            fx.set_quadrature_values(gradient, self.fish.shape_gradient(xi, self.quadrature_points[family].reshape(-1, 3)))
             self.shape_gradients[family] = gradient
 
-    def _design_gradient(self, family: str, xi: np.ndarray) -> np.ndarray:
-        """∇u_ξ at the points of the ``family``'s quadrature rule, (n, 3, 3), from the ∇U_k kept on the model."""
+    def _moved_gradient(self, family: str, xi: np.ndarray) -> np.ndarray:
+        """∇u_ξ at the ``family``'s points, (n, 3, 3), from the ∇U_k a moved model keeps (its builds set them)."""
         return self.fish.shape_gradient(xi, self.quadrature_points[family].reshape(-1, 3),
                                         lambda k: self.shape_direction_gradient(family, k))
 
