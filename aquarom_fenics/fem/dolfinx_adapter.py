@@ -8,6 +8,7 @@ FFCx, the form compiler: every form, element and expression is compiled here, in
 from __future__ import annotations
 
 import logging
+import threading
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
@@ -243,25 +244,53 @@ def ffcx_module_name(ufl_object, kind: str, jit_params: dict) -> str:
     return f"libffcx_{kind}_" + ffcx.naming.compute_signature([ufl_object], tag)
 
 
+_LOADED: dict[tuple[str, str], tuple] = {}
+"""What dolfinx's JIT returned in this process, by (cache folder, module name). Loading a module again costs
+FFCx a listing of the cache folder and a second hash of the object, about 3 ms: 16 loads a FOM set-up."""
+_PENDING = threading.local()
+_FFCX_JIT = dolfinx_jit.ffcx_jit
+
+
+def _ffcx_jit_once(comm, ufl_object, *args, **kwargs):
+    """``dolfinx.jit.ffcx_jit`` for the module ``_guarded`` named (this thread's pending key): loaded once a process
+    and kept in ``_LOADED``. Every rank holds the same keys (the ranks compile together), so they all skip
+    dolfinx's collective JIT or all enter it."""
+    key, _PENDING.key = getattr(_PENDING, "key", None), None
+    if key is None:
+        return _FFCX_JIT(comm, ufl_object, *args, **kwargs)
+    if key not in _LOADED:
+        _LOADED[key] = _FFCX_JIT(comm, ufl_object, *args, **kwargs)
+    return _LOADED[key]
+
+
+dolfinx_jit.ffcx_jit = _ffcx_jit_once       # dolfinx.fem looks it up at each call
+
+
 def _guarded(comm: MPI.Comm, ufl_object, kind: str, what: str, compile_function):
     """``compile_function(jit_params)`` with the module's claim held by rank 0, which compiles first
     (dolfinx's MPI JIT) while the other ranks wait to load it. The ranks agree whether the claim was
-    taken before any of them enters dolfinx's collective compile, so none waits for a failed one."""
+    taken before any of them enters dolfinx's collective compile, so none waits for a failed one.
+    A module this process loaded before is not loaded again (``_LOADED``)."""
     jit_params = jit_parameters()
     with ExitStack() as held:
-        failure = None
+        failure, module = None, None
         if comm.rank == 0:
             module = ffcx_module_name(ufl_object, kind, jit_params)
             try:
-                if not is_complete(Path(jit_params["cache_dir"]), module):   # a finished module is only loaded
+                loaded = (jit_params["cache_dir"], module) in _LOADED
+                if not loaded and not is_complete(Path(jit_params["cache_dir"]), module):   # a finished one is loaded
                     held.enter_context(claimed(jit_params["cache_dir"], module, what))
             except JitCacheError as error:
                 failure = str(error)
         if comm.size > 1:
-            failure = comm.bcast(failure, root=0)
+            failure, module = comm.bcast((failure, module), root=0)
         if failure is not None:
             raise JitCacheError(failure)
-        return _quietly(compile_function, jit_params)
+        _PENDING.key = (jit_params["cache_dir"], module)
+        try:
+            return _quietly(compile_function, jit_params)
+        finally:
+            _PENDING.key = None
 
 
 def compile_form(form):
