@@ -141,13 +141,32 @@ def times_lanes(matrix, right, out):
 
 
 @_jit
-def thrust_force_lanes(eu, ev, ea, points, transposed, own_node, other_node, length, inverse_length, rest_tangent,
-                       weights, tail_weight, lagrangian, state, kinematics, force, out):
-    """out (m, LANES) += Wᵀ f_thrust per lane (``kernel_thrust.thrust_force``); state (10, H, LANES) kept for
-    the blocks; kinematics (3, 2 n_points, LANES) and force (2 n_points, LANES) are work arrays."""
-    times_lanes(points, eu, kinematics[0])
-    times_lanes(points, ev, kinematics[1])
-    times_lanes(points, ea, kinematics[2])
+def point_kinematics_lanes(at_new, at_step, h, alpha_m, alpha_f, beta, gamma, out):
+    """out (3, 2 n_points, LANES) = W (η, η̇, η̈) per lane at a Newton iterate's evaluation point, from W u_{n+1}
+    (``at_new`` (2 n_points, LANES)) and W (u_n, v_n, a_n) (``at_step`` (3, 2 n_points, LANES)), all three affine
+    in u_{n+1} (``kernel_thrust.point_kinematics``, on lane values)."""
+    inverse, step, predicted = splat(1.0 / (beta * h * h)), splat(h), splat(h * h * (0.5 - beta))
+    carried, corrected = splat(h * (1.0 - gamma)), splat(gamma * h)
+    new_f, old_f, new_m, old_m = splat(1.0 - alpha_f), splat(alpha_f), splat(1.0 - alpha_m), splat(alpha_m)
+    for r in range(at_new.shape[0]):
+        u, v, a, u_new = load3(at_step, 0, r), load3(at_step, 1, r), load3(at_step, 2, r), load(at_new, r)
+        a_new = mul(sub(u_new, add(add(u, mul(step, v)), mul(predicted, a))), inverse)
+        v_new = add(add(v, mul(carried, a)), mul(corrected, a_new))
+        if alpha_f == 0.0:
+            store3(out, 0, r, u_new)
+            store3(out, 1, r, v_new)
+        else:
+            store3(out, 0, r, add(mul(new_f, u_new), mul(old_f, u)))
+            store3(out, 1, r, add(mul(new_f, v_new), mul(old_f, v)))
+        store3(out, 2, r, a_new if alpha_m == 0.0 else add(mul(new_m, a_new), mul(old_m, a)))
+
+
+@_jit
+def thrust_force_lanes(kinematics, transposed, own_node, other_node, length, inverse_length, rest_tangent, weights,
+                       tail_weight, lagrangian, state, force, out):
+    """out (m, LANES) += Wᵀ f_thrust per lane (``kernel_thrust.thrust_force``) from the points' kinematics
+    (3, 2 n_points, LANES) (``point_kinematics_lanes``); state (10, H, LANES) kept for the blocks; force
+    (2 n_points, LANES) a work array."""
     force[:] = 0.0
     for h in range(own_node.size):             # eight lanes as values (``lane_values``): run as vectors
         o, x = 2 * own_node[h], 2 * other_node[h]
@@ -209,17 +228,17 @@ def muscle_lanes(activations, muscle_constant, muscle_linear, eta, out):
 
 @_jit
 def residual_lanes(eu, ev, ea, out, activations, mono, tangent_mono, pairs, pair_of_triple, triples, elastic_force,
-                   mass, damping, muscle_constant, muscle_linear, has_thrust, lagrangian, points, transposed,
+                   mass, damping, muscle_constant, muscle_linear, has_thrust, lagrangian, transposed,
                    own_node, other_node, length, inverse_length, rest_tangent, thrust_weights, tail_weight, state,
                    has_drag, drag_direction, drag_row, kinematics, force, norm, scale):
     """out (m, LANES) = r_r per lane, norm and scale (LANES,) Newton's ‖r‖ and force scale
-    (``kernel_terms.residual_at``)."""
+    (``kernel_terms.residual_at``); kinematics (3, 2 n_points, LANES) the thrust points' (η, η̇, η̈)."""
     m = eu.shape[0]
     monomials_lanes(eu, pairs, pair_of_triple, triples, mono, tangent_mono)
     external = np.zeros((m, LANES))
     if has_thrust:
-        thrust_force_lanes(eu, ev, ea, points, transposed, own_node, other_node, length, inverse_length,
-                           rest_tangent, thrust_weights, tail_weight, lagrangian, state, kinematics, force, external)
+        thrust_force_lanes(kinematics, transposed, own_node, other_node, length, inverse_length, rest_tangent,
+                           thrust_weights, tail_weight, lagrangian, state, force, external)
     speed = np.zeros(LANES)
     if has_drag:
         for k in range(m):

@@ -155,17 +155,17 @@ def muscle_force(activations, muscle_constant, muscle_linear, eta, i):
 
 @_jit
 def residual_at(eu, ev, ea, out, activations, mono, tangent_mono, pairs, pair_of_triple, triples, elastic_force,
-                mass, damping, muscle_constant, muscle_linear, has_thrust, lagrangian, points, transposed, own_node,
+                mass, damping, muscle_constant, muscle_linear, has_thrust, lagrangian, kinematics, transposed, own_node,
                 other_node, length, inverse_length, rest_tangent, thrust_weights, tail_weight, state, has_drag,
                 drag_direction, drag_row):
     """out = r_r = M η̈ + C η̇ + f_int(η) - f_ext at the evaluation point; (‖r‖, the force scale of Newton's
-    test max(‖f_int‖, ‖f_ext‖, ‖M η̈‖)). f_ext = -Σ_j a_j (b_j + B_j η) + f_thrust + f_drag; ``points`` = W
-    (2 n_points, m) of the thrust's points, ``transposed`` = Wᵀ."""
+    test max(‖f_int‖, ‖f_ext‖, ‖M η̈‖)). f_ext = -Σ_j a_j (b_j + B_j η) + f_thrust + f_drag; ``kinematics`` =
+    W (η, η̇, η̈) (2 n_points, 3) of the thrust's points (``kernel_thrust.point_kinematics``), ``transposed`` = Wᵀ."""
     m = eu.size
     monomials(eu, pairs, pair_of_triple, triples, mono, tangent_mono)
     external = np.zeros(m)
     if has_thrust:
-        thrust_force(eu, ev, ea, points, transposed, own_node, other_node, length, inverse_length, rest_tangent,
+        thrust_force(kinematics, transposed, own_node, other_node, length, inverse_length, rest_tangent,
                      thrust_weights, tail_weight, lagrangian, state, external)
     speed = 0.0
     if has_drag:

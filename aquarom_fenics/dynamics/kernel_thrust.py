@@ -17,18 +17,42 @@ from aquarom_fenics.dynamics.compiled import jit as _jit
 
 
 @_jit
-def thrust_force(eta, eta_dot, eta_ddot, points, transposed, own_node, other_node, length, inverse_length,
-                 rest_tangent, weights, tail_weight, lagrangian, state, out):
+def step_points(points, u, v, a, out):
+    """out (2 n_points, 3) = W (u, v, a): the points' state at a step's start, one BLAS product."""
+    stacked = np.empty((u.size, 3))
+    for k in range(u.size):
+        stacked[k, 0], stacked[k, 1], stacked[k, 2] = u[k], v[k], a[k]
+    out[:] = np.dot(points, stacked)
+
+
+@_jit
+def point_kinematics(at_new, at_step, h, alpha_m, alpha_f, beta, gamma, out):
+    """out (2 n_points, 3) = W (η, η̇, η̈) at a Newton iterate's evaluation point, from W u_{n+1} (``at_new``) and
+    W (u_n, v_n, a_n) (``at_step``, (2 n_points, 3)). The generalized-α relations of ``reduced_kernel`` make all
+    three affine in u_{n+1}: u_p = u_n + h v_n + h² (½ - β) a_n, v_p = v_n + h (1 - γ) a_n, a_{n+1} = (u_{n+1} -
+    u_p) / (β h²), v_{n+1} = v_p + γ h a_{n+1}, then x_{n+1-α} = (1 - α) x_{n+1} + α x_n. So an iterate costs one
+    product with W, not three."""
+    inverse = 1.0 / (beta * h * h)
+    for r in range(at_new.size):
+        u, v, a = at_step[r, 0], at_step[r, 1], at_step[r, 2]
+        u_p = u + h * v + h * h * (0.5 - beta) * a
+        v_p = v + h * (1.0 - gamma) * a
+        a_new = (at_new[r] - u_p) * inverse
+        v_new = v_p + gamma * h * a_new
+        out[r, 0] = at_new[r] if alpha_f == 0.0 else (1.0 - alpha_f) * at_new[r] + alpha_f * u
+        out[r, 1] = v_new if alpha_f == 0.0 else (1.0 - alpha_f) * v_new + alpha_f * v
+        out[r, 2] = a_new if alpha_m == 0.0 else (1.0 - alpha_m) * a_new + alpha_m * a
+
+
+@_jit
+def thrust_force(kinematics, transposed, own_node, other_node, length, inverse_length, rest_tangent, weights,
+                 tail_weight, lagrangian, state, out):
     """out += Wᵀ f_thrust: per half-segment h its state[h] = (t, n, ṅ, v, a) (10 numbers, x and y each; kept for
-    the Jacobian blocks at this point) from the points' kinematics (W η, W η̇, W η̈), and its weighted forces
-    assembled on the points in the same pass (the module's law; ``force_gradients`` weights the same per-mass
-    forces by their ξ-derivatives). ``points`` = W as (2 n_points, m), rows (x, y) of each point, ``transposed`` =
+    the Jacobian blocks at this point) from the points' kinematics (W η, W η̇, W η̈) as (2 n_points, 3), rows (x, y)
+    of each point (``point_kinematics``), and its weighted forces assembled on the points in the same pass (the
+    module's law; ``force_gradients`` weights the same per-mass forces by their ξ-derivatives). ``transposed`` =
     Wᵀ; ``inverse_length`` 1/ℓ₀ per half-segment."""
-    m, n_rows = eta.size, points.shape[0]
-    stacked = np.empty((m, 3))
-    for k in range(m):
-        stacked[k, 0], stacked[k, 1], stacked[k, 2] = eta[k], eta_dot[k], eta_ddot[k]
-    kinematics = np.dot(points, stacked)              # BLAS: (2 n_points, 3) = (position, velocity, acceleration)
+    m, n_rows = transposed.shape[0], kinematics.shape[0]
     force = np.zeros(n_rows)
     for h in range(own_node.size):
         o, x = 2 * own_node[h], 2 * other_node[h]
@@ -201,3 +225,28 @@ def banded_tangents(stiffness, damping, mass, right, out):
             x2, y2 = x[2 * r + j], y[2 * r + j]
             top[j] -= m00 * x2 + m01 * y2
             bottom[j] -= m10 * x2 + m11 * y2
+
+
+@_jit
+def newton_matrix_into(k_u, k_v, k_a, stiffness, damping, mass, has_thrust, k_banded, c_banded, m_banded, s_banded,
+                       points, transposed, work, out):
+    """out = S = k_u K_t + k_v C_t + k_a M_t (``reduced_dynamics.newton_matrix``): the dense tangents of every term
+    but the thrust, and the thrust's point matrices (``half_blocks``) combined before their one projection
+    -Wᵀ J W (J W banded, then one BLAS product with Wᵀ; ``work`` (2 n_points, m))."""
+    m = out.shape[0]
+    for i in range(m):
+        for k in range(m):
+            out[i, k] = k_u * stiffness[i, k] + k_v * damping[i, k] + k_a * mass[i, k]
+    if has_thrust:
+        for a in range(k_banded.shape[0]):
+            for d in range(3):
+                for i in range(2):
+                    for j in range(2):
+                        s_banded[a, d, i, j] = (k_u * k_banded[a, d, i, j] + k_v * c_banded[a, d, i, j]
+                                                + k_a * m_banded[a, d, i, j])
+        work[:] = 0.0
+        banded_times(s_banded, points, 0, 1.0, work)
+        projected = np.dot(transposed, work)
+        for i in range(m):
+            for k in range(m):
+                out[i, k] -= projected[i, k]

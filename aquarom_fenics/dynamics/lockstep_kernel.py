@@ -23,7 +23,8 @@ import numpy as np
 
 from aquarom_fenics.dynamics.compiled import TypedCall, jit as _jit
 from aquarom_fenics.dynamics.kernel_lanes import (LANES, between_lanes, derivative_lanes, elastic_lanes,
-                                                  residual_lanes, sensitivity_terms_lanes, tangents_lanes)
+                                                  point_kinematics_lanes, residual_lanes, sensitivity_terms_lanes,
+                                                  tangents_lanes, times_lanes)
 from aquarom_fenics.dynamics.kernel_lanes_thrust import (LAGRANGIAN_ENTRIES, banded_tangents_lanes,
                                                          force_gradients_lanes, half_blocks_lanes, newton_matrix_lanes)
 from aquarom_fenics.dynamics.kernel_terms import lu_factor, lu_solve
@@ -78,6 +79,7 @@ def integrate_block(  # noqa: PLR0913, PLR0915 (the block's arrays; one routine 
     m_banded, s_banded = np.zeros((n_points, 3, 2, 2, LANES)), np.zeros((n_points, 3, 2, 2, LANES))
     work = np.zeros((2 * n_points, m, LANES))
     kinematics, force = np.zeros((3, 2 * n_points, LANES)), np.zeros((2 * n_points, LANES))
+    at_step, at_new = np.zeros((3, 2 * n_points, LANES)), np.zeros((2 * n_points, LANES))
     thrust_forces = np.zeros((2 * n_points, p, LANES))
     inverse_length = 1.0 / length
     u, v, a = np.zeros((m, LANES)), np.zeros((m, LANES)), np.zeros((m, LANES))
@@ -118,6 +120,10 @@ def integrate_block(  # noqa: PLR0913, PLR0915 (the block's arrays; one routine 
                 u_pred[i, l] = u[i, l] + h * v[i, l] + h * h * (0.5 - beta) * a[i, l]
                 v_pred[i, l] = v[i, l] + h * (1.0 - gamma) * a[i, l]
                 u_new[i, l] = u_pred[i, l]
+        if has_thrust:                    # W (u_n, v_n, a_n): each iterate's kinematics from W u_{n+1} alone
+            times_lanes(points, u, at_step[0])
+            times_lanes(points, v, at_step[1])
+            times_lanes(points, a, at_step[2])
         for l in range(LANES):
             pending[l] = status[l] == OK
             with_factors[l] = 0
@@ -130,9 +136,12 @@ def integrate_block(  # noqa: PLR0913, PLR0915 (the block's arrays; one routine 
             between_lanes(u, u_new, alpha_f, eu)
             between_lanes(v, v_new, alpha_f, ev)
             between_lanes(a, a_new, alpha_m, ea)
+            if has_thrust:
+                times_lanes(points, u_new, at_new)
+                point_kinematics_lanes(at_new, at_step, h, alpha_m, alpha_f, beta, gamma, kinematics)
             residual_lanes(eu, ev, ea, residual, activations, mono, tangent_mono, pairs, pair_of_triple, triples,
                            elastic_force, mass, damping, muscle_constant, muscle_linear, has_thrust, lagrangian,
-                           points, transposed, own_node, other_node, length, inverse_length, rest_tangent,
+                           transposed, own_node, other_node, length, inverse_length, rest_tangent,
                            thrust_weights, tail_weight, state, has_drag, drag_direction, drag_row, kinematics, force,
                            norm, scale)
             any_pending, any_refresh = False, False

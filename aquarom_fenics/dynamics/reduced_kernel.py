@@ -30,37 +30,13 @@ from aquarom_fenics.dynamics.kernel_adjoint import reverse_sweep
 from aquarom_fenics.dynamics.kernel_pack import Packed, pack, synthetic
 from aquarom_fenics.dynamics.kernel_terms import (between, derivative_at, design_elastic, factorize, lu_solve,
                                                   residual_at, tangents_at)
-from aquarom_fenics.dynamics.kernel_thrust import banded_tangents, banded_times, half_blocks
+from aquarom_fenics.dynamics.kernel_thrust import (banded_tangents, half_blocks, newton_matrix_into,
+                                                   point_kinematics, step_points)
 from aquarom_fenics.dynamics.lockstep_kernel import LANES, integrate_lockstep, part
 
 __all__ = ["available", "integrate_all", "integrate_packed", "transition_packed", "pack", "Packed", "synthetic", "warm_up", "OK", "FAILED"]
 
 OK, FAILED = 0, 1
-
-
-@_jit
-def newton_matrix_into(k_u, k_v, k_a, stiffness, damping, mass, has_thrust, k_banded, c_banded, m_banded, s_banded,
-                       points, transposed, work, out):
-    """out = S = k_u K_t + k_v C_t + k_a M_t (``reduced_dynamics.newton_matrix``): the dense tangents of every term
-    but the thrust, and the thrust's point matrices (``half_blocks``) combined before their one projection
-    -Wᵀ J W (J W banded, then one BLAS product with Wᵀ; ``work`` (2 n_points, m))."""
-    m = out.shape[0]
-    for i in range(m):
-        for k in range(m):
-            out[i, k] = k_u * stiffness[i, k] + k_v * damping[i, k] + k_a * mass[i, k]
-    if has_thrust:
-        for a in range(k_banded.shape[0]):
-            for d in range(3):
-                for i in range(2):
-                    for j in range(2):
-                        s_banded[a, d, i, j] = (k_u * k_banded[a, d, i, j] + k_v * c_banded[a, d, i, j]
-                                                + k_a * m_banded[a, d, i, j])
-        work[:] = 0.0
-        banded_times(s_banded, points, 0, 1.0, work)
-        projected = np.dot(transposed, work)
-        for i in range(m):
-            for k in range(m):
-                out[i, k] -= projected[i, k]
 
 
 @_jit
@@ -143,6 +119,7 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
     k_banded, c_banded = np.zeros((n_points, 3, 2, 2)), np.zeros((n_points, 3, 2, 2))
     m_banded, s_banded = np.zeros((n_points, 3, 2, 2)), np.zeros((n_points, 3, 2, 2))
     work = np.zeros((2 * n_points, m))
+    at_step, kinematics = np.zeros((2 * n_points, 3)), np.zeros((2 * n_points, 3))
     inverse_length = 1.0 / length
     u, v, a = np.zeros(m), np.zeros(m), np.zeros(m)
     u_new, v_new, a_new = np.zeros(m), np.zeros(m), np.zeros(m)
@@ -184,6 +161,8 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
             u_pred[i] = u[i] + h * v[i] + h * h * (0.5 - beta) * a[i]
             v_pred[i] = v[i] + h * (1.0 - gamma) * a[i]
             u_new[i] = u_pred[i]
+        if has_thrust:                    # W (u_n, v_n, a_n): each iterate's kinematics from W u_{n+1} alone
+            step_points(points, u, v, a, at_step)
         with_factors = 0
         previous_norm = np.inf
         converged = False
@@ -194,11 +173,13 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
             between(u, u_new, alpha_f, eu)
             between(v, v_new, alpha_f, ev)
             between(a, a_new, alpha_m, ea)
+            if has_thrust:
+                point_kinematics(np.dot(points, u_new), at_step, h, alpha_m, alpha_f, beta, gamma, kinematics)
             norm, scale = residual_at(eu, ev, ea, residual[:, 0], activations, mono, tangent_mono, pairs,
                                       pair_of_triple, triples, elastic_force, mass, damping, muscle_constant,
-                                      muscle_linear, has_thrust, lagrangian, points, transposed, own_node, other_node,
-                                      length, inverse_length, rest_tangent, thrust_weights, tail_weight, state,
-                                      has_drag, drag_direction, drag_row)
+                                      muscle_linear, has_thrust, lagrangian, kinematics, transposed, own_node,
+                                      other_node, length, inverse_length, rest_tangent, thrust_weights, tail_weight,
+                                      state, has_drag, drag_direction, drag_row)
             if not math.isfinite(norm):
                 result[2] = FAILED
                 return
