@@ -44,9 +44,9 @@ def exact_newton_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, m
                     drag_direction, drag_row, has_thrust, state, length, thrust_weights, tail_weight, lagrangian,
                     own_node, other_node, k_u, k_v, k_a, points, transposed, work, s_banded, stiffness, damping_t,
                     mass_t, k_banded, c_banded, m_banded, exact, factors, pivots):
-    """At a converged step's evaluation point: the tangents K_t, C_t, M_t and the thrust's K_J, C_J, M_J (into the
-    given arrays), the exact S = k_u K + k_v C + k_a M of the full tangents and its LU; False when S is singular.
-    What the forward sensitivity step and the adjoint's stores both need."""
+    """At an evaluation point: the tangents K_t, C_t, M_t and the thrust's K_J, C_J, M_J (into the given arrays), the
+    exact S = k_u K + k_v C + k_a M of the full tangents and its LU; False when S is singular. What a Newton refresh,
+    the forward sensitivity step and the adjoint's stores (at a converged step's point) all need."""
     tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass, damping, muscle_linear, has_drag,
                 drag_direction, drag_row, stiffness, damping_t, mass_t)
     if has_thrust:
@@ -191,14 +191,11 @@ def integrate_design(  # noqa: PLR0913 (the packed arrays of one design)
             slow = norm > contraction * previous_norm
             worn = with_factors >= per_factorization or (iteration == 0 and refresh_each_step)
             if not have_factors or slow or worn:
-                tangents_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass, damping, muscle_linear,
-                            has_drag, drag_direction, drag_row, stiffness, damping_t, mass_t)
-                if has_thrust:
-                    half_blocks(state, length, thrust_weights, tail_weight, lagrangian, own_node, other_node,
-                                k_banded, c_banded, m_banded)
-                newton_matrix_into(k_u, k_v, k_a, stiffness, damping_t, mass_t, has_thrust, k_banded, c_banded,
-                                   m_banded, s_banded, points, transposed, work, matrix)
-                if not factorize(matrix, factors, pivots):
+                if not exact_newton_at(eu, ev, activations, tangent_mono, pairs, elastic_tangent, mass, damping,
+                                       muscle_linear, has_drag, drag_direction, drag_row, has_thrust, state, length,
+                                       thrust_weights, tail_weight, lagrangian, own_node, other_node, k_u, k_v, k_a,
+                                       points, transposed, work, s_banded, stiffness, damping_t, mass_t, k_banded,
+                                       c_banded, m_banded, matrix, factors, pivots):
                     result[2] = FAILED
                     return
                 have_factors = True
